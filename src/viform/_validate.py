@@ -1,0 +1,76 @@
+"""Parameter checks used at every public boundary.
+
+Each check raises :class:`ValueError` whose message names the parameter, the value given
+and what is allowed, so the CLI can print it as a single line.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+
+class ViformError(ValueError):
+    """Bad input to viform; the message is a complete one-line explanation."""
+
+
+def _as_float(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise ViformError(f"{name} must be a number, got {value!r}") from None
+    value = float(value)
+    if math.isnan(value):
+        raise ViformError(f"{name} is NaN; a finite number is required")
+    return value
+
+
+def check_positive(name: str, value, *, allow_inf: bool = False) -> float:
+    """``value`` > 0 (finite unless ``allow_inf``)."""
+    v = _as_float(name, value)
+    if not v > 0 or (math.isinf(v) and not allow_inf):
+        raise ViformError(f"{name} = {value!r} is not allowed: it must be a finite number > 0")
+    return v
+
+
+def check_non_negative(name: str, value) -> float:
+    """``value`` ≥ 0 and finite."""
+    v = _as_float(name, value)
+    if not (v >= 0) or math.isinf(v):
+        raise ViformError(f"{name} = {value!r} is not allowed: it must be a finite number ≥ 0")
+    return v
+
+
+def check_range(name: str, value, low: float, high: float, *, low_open: bool = False,
+                high_open: bool = False) -> float:
+    """``low ≤ value ≤ high`` (open ends on request)."""
+    v = _as_float(name, value)
+    ok_low = v > low if low_open else v >= low
+    ok_high = v < high if high_open else v <= high
+    if not (ok_low and ok_high):
+        left = "(" if low_open else "["
+        right = ")" if high_open else "]"
+        raise ViformError(f"{name} = {value!r} is not allowed: it must lie in {left}{low:g}, {high:g}{right}")
+    return v
+
+
+def check_int(name: str, value, low: int | None = None, high: int | None = None) -> int:
+    """An integer within [low, high]."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        if isinstance(value, numbers.Real) and float(value).is_integer():
+            value = int(value)
+        else:
+            raise ViformError(f"{name} = {value!r} is not allowed: it must be a whole number")
+    value = int(value)
+    if (low is not None and value < low) or (high is not None and value > high):
+        bounds = f"[{'-inf' if low is None else low}, {'inf' if high is None else high}]"
+        raise ViformError(f"{name} = {value} is not allowed: it must be a whole number in {bounds}")
+    return value
+
+
+def check_choice(name: str, value, choices) -> str:
+    """One of ``choices``."""
+    if value not in choices:
+        raise ViformError(f"{name} = {value!r} is not allowed: choose one of {', '.join(map(str, choices))}")
+    return value

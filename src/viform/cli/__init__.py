@@ -1,0 +1,65 @@
+"""Command-line interface: ``viform COMMAND``.
+
+Each processing family registers its commands in its own module under ``viform.cli``
+(listed in :data:`COMMAND_MODULES`) on the shared :data:`viform.cli.app.cli` group.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+
+import click
+
+from viform._validate import ViformError
+from viform.cli.app import cli
+
+#: Modules that add commands to :data:`cli` (imported on start).
+COMMAND_MODULES = [
+    "viform.cli.spike",  # simulate, reconstruct, info, demo (issue 2)
+    "viform.cli.frame",  # characterize (issue 3)
+    "viform.cli.highspeed",  # highspeed (issue 4)
+    "viform.cli.gated",  # gated (issue 5)
+    "viform.cli.coding",  # encode, decode, dr (issue 6)
+    "viform.cli.display",  # lightcomm, display (issue 7)
+]
+
+
+def _load_commands() -> None:
+    for module in COMMAND_MODULES:
+        importlib.import_module(module)
+
+
+def main(argv=None) -> int:
+    """Entry point: bad input prints one line on stderr and exits 2; no traceback."""
+    _load_commands()
+    try:
+        cli.main(args=argv, prog_name="viform", standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except click.ClickException as exc:
+        click.echo(f"viform: error: {exc.format_message()}", err=True)
+        return exc.exit_code if exc.exit_code else 2
+    except click.Abort:
+        click.echo("viform: interrupted", err=True)
+        return 130
+    except KeyboardInterrupt:
+        click.echo("viform: interrupted; no partial output was left", err=True)
+        return 130
+    except (ViformError, ValueError, OSError) as exc:
+        if os.environ.get("VIFORM_DEBUG"):
+            raise
+        click.echo(f"viform: error: {exc}", err=True)
+        return 2
+    except Exception as exc:  # last resort: still one line, exit non-zero
+        if os.environ.get("VIFORM_DEBUG"):
+            raise
+        click.echo(f"viform: internal error ({type(exc).__name__}): {exc}; "
+                   "set VIFORM_DEBUG=1 for the traceback", err=True)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

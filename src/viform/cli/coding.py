@@ -1,0 +1,1 @@
+"""CLI commands: coding (registered on viform.cli.app.cli)."""

@@ -1,0 +1,1 @@
+"""CLI commands: display (registered on viform.cli.app.cli)."""

@@ -1,0 +1,1 @@
+"""CLI commands: frame (registered on viform.cli.app.cli)."""

@@ -1,0 +1,1 @@
+"""CLI commands: gated (registered on viform.cli.app.cli)."""

@@ -1,0 +1,1 @@
+"""CLI commands: highspeed (registered on viform.cli.app.cli)."""

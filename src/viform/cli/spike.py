@@ -1,0 +1,1 @@
+"""CLI commands: spike (registered on viform.cli.app.cli)."""

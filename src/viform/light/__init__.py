@@ -1,0 +1,1 @@
+"""Light: radiometry (lux → photons → electrons) and scenes (light per pixel over time)."""

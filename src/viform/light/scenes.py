@@ -1,0 +1,451 @@
+"""Scenes: illuminance on the sensor plane (lux) per pixel, as a function of time (seconds).
+
+Every sensor model in viform captures a :class:`Scene`, so one scene can be shot by every
+sensor and the results compared on the same light. A scene answers two questions:
+
+* :meth:`Scene.illuminance_lux` — the light at an instant t (the analytic ground truth
+  for the synthetic scenes), shape ``(height, width)``;
+* :meth:`Scene.mean_illuminance_lux` — the mean light over a window [t0, t1], what an
+  exposure integrates (exact for the step and flicker scenes, a midpoint rule otherwise).
+
+Illuminance is on the *sensor plane* (after the lens). Mapping from stored pixel values to
+lux is explicit: integer images map linearly from 0 to ``max_lux`` at full scale; float
+images are taken as lux already (``max_lux=None``).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from pathlib import Path
+
+import numpy as np
+
+from viform._validate import ViformError, check_choice, check_int, check_non_negative, check_positive
+from viform.light.radiometry import check_lux
+
+
+class Scene(ABC):
+    """Light per pixel over time.
+
+    Subclasses implement :meth:`illuminance_lux`; the rest has generic defaults.
+    """
+
+    #: Name shown in reports.
+    name: str = "scene"
+
+    def __init__(self, height: int, width: int, duration_s: float | None = None):
+        self.height = check_int("height", height, 1)
+        self.width = check_int("width", width, 1)
+        self.duration_s = None if duration_s is None else check_positive("duration_s", duration_s)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.height, self.width)
+
+    @abstractmethod
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        """Illuminance (lux) of every pixel at instant ``t_s`` (seconds), shape (H, W), float64."""
+
+    def illuminance_lux_many(self, times_s) -> np.ndarray:
+        """Illuminance at several instants, shape (N, H, W)."""
+        times_s = np.asarray(times_s, dtype=np.float64).ravel()
+        out = np.empty((times_s.size, self.height, self.width), dtype=np.float64)
+        for i, t in enumerate(times_s):
+            out[i] = self.illuminance_lux(float(t))
+        return out
+
+    def mean_illuminance_lux(self, t0_s: float, t1_s: float, samples: int = 32) -> np.ndarray:
+        """Mean illuminance over [t0_s, t1_s] (lux), by the midpoint rule with ``samples`` points.
+
+        Subclasses with an analytic integral override this.
+        """
+        if not t1_s >= t0_s:
+            raise ViformError(f"window end t1_s={t1_s!r} must be ≥ start t0_s={t0_s!r}")
+        if t1_s == t0_s:
+            return self.illuminance_lux(t0_s)
+        samples = check_int("samples", samples, 1)
+        times = t0_s + (np.arange(samples) + 0.5) * (t1_s - t0_s) / samples
+        acc = np.zeros(self.shape)
+        for t in times:
+            acc += self.illuminance_lux(float(t))
+        return acc / samples
+
+    def describe(self) -> dict:
+        """Metadata saved with captures."""
+        return {"name": self.name, "height": self.height, "width": self.width,
+                "duration_s": self.duration_s}
+
+
+# --------------------------------------------------------------------------- images
+
+def image_to_lux(image, max_lux: float | None) -> np.ndarray:
+    """Map stored pixel values to lux, explicitly.
+
+    Integer images (uint8, uint16, …) map linearly: 0 → 0 lux, the dtype's full scale →
+    ``max_lux``. Float images are lux already when ``max_lux`` is None; with ``max_lux``
+    given they are taken as [0, 1] relative values. Colour images are reduced to luminance
+    with the Rec. 709 weights.
+    """
+    arr = np.asarray(image)
+    if arr.ndim == 3 and arr.shape[-1] in (3, 4):
+        weights = np.array([0.2126, 0.7152, 0.0722])
+        rgb = arr[..., :3]
+        dtype = arr.dtype
+        arr = (rgb.astype(np.float64) @ weights)
+        if np.issubdtype(dtype, np.integer):
+            arr = arr / np.iinfo(dtype).max
+            if max_lux is None:
+                raise ViformError("max_lux is required for integer images: give the lux of full scale")
+            return check_lux(arr * check_positive("max_lux", max_lux), "image")
+    if arr.ndim != 2:
+        raise ViformError(f"image must be 2-D (H, W) or colour (H, W, 3|4); got shape {arr.shape}")
+    if np.issubdtype(arr.dtype, np.integer) or arr.dtype == bool:
+        if max_lux is None:
+            raise ViformError("max_lux is required for integer images: give the lux of full scale")
+        full = 1 if arr.dtype == bool else np.iinfo(arr.dtype).max
+        return check_lux(arr.astype(np.float64) / full * check_positive("max_lux", max_lux), "image")
+    arr = arr.astype(np.float64)
+    if max_lux is not None:
+        arr = arr * check_positive("max_lux", max_lux)
+    return check_lux(arr, "image")
+
+
+def _resize(image: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:
+    if shape is None or tuple(shape) == image.shape:
+        return image
+    from skimage.transform import resize
+
+    return resize(image, shape, order=1, anti_aliasing=True, preserve_range=True)
+
+
+class StillScene(Scene):
+    """A still image; the light does not change with time."""
+
+    name = "still"
+
+    def __init__(self, lux_image, duration_s: float | None = None):
+        lux_image = check_lux(lux_image, "lux_image")
+        if lux_image.ndim != 2:
+            raise ViformError(f"lux_image must be 2-D (H, W); got shape {lux_image.shape}")
+        super().__init__(*lux_image.shape, duration_s=duration_s)
+        self._lux = np.ascontiguousarray(lux_image, dtype=np.float64)
+
+    @classmethod
+    def from_file(cls, path, max_lux: float | None = 1000.0, shape=None, **kw) -> StillScene:
+        """Load an image file (anything imageio reads); pixel values map to lux by :func:`image_to_lux`."""
+        import imageio.v3 as iio
+
+        try:
+            image = iio.imread(path)
+        except Exception as exc:  # imageio raises many types
+            raise ViformError(f"image file {str(path)!r} could not be read: {exc}") from None
+        return cls(_resize(image_to_lux(image, max_lux), shape), **kw)
+
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        return self._lux
+
+    def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
+        return self._lux
+
+
+class VideoScene(Scene):
+    """An image sequence at a declared frame rate.
+
+    Frame k is the light at instant k / frame_rate_hz. Between frames the light is held
+    (``interpolation="hold"``: frame k stands for [k/f, (k+1)/f)) or interpolated linearly
+    (``"linear"``). Past the last frame the last frame is held.
+    """
+
+    name = "video"
+
+    def __init__(self, lux_frames, frame_rate_hz: float, interpolation: str = "linear"):
+        frames = check_lux(lux_frames, "lux_frames")
+        if frames.ndim != 3 or frames.shape[0] < 1:
+            raise ViformError(f"lux_frames must have shape (N, H, W) with N ≥ 1; got {frames.shape}")
+        self.frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
+        self.interpolation = check_choice("interpolation", interpolation, ("hold", "linear"))
+        super().__init__(frames.shape[1], frames.shape[2], duration_s=frames.shape[0] / self.frame_rate_hz)
+        self._frames = frames
+
+    @classmethod
+    def from_file(cls, path, frame_rate_hz: float | None = None, max_lux: float = 1000.0,
+                  interpolation: str = "linear", shape=None, max_frames: int | None = None) -> VideoScene:
+        """Load a video file or a folder of images (sorted by name).
+
+        ``frame_rate_hz`` defaults to the file's own rate when it declares one.
+        """
+        import imageio.v3 as iio
+
+        path = Path(path)
+        frames = []
+        declared = None
+        try:
+            if path.is_dir():
+                files = sorted(p for p in path.iterdir() if p.suffix.lower() in
+                               (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"))
+                if not files:
+                    raise ViformError(f"image folder {str(path)!r} holds no images")
+                for f in files[:max_frames]:
+                    frames.append(_resize(image_to_lux(iio.imread(f), max_lux), shape))
+            else:
+                try:
+                    declared = iio.immeta(path).get("fps")
+                except Exception:
+                    declared = None
+                for i, frame in enumerate(iio.imiter(path)):
+                    if max_frames is not None and i >= max_frames:
+                        break
+                    frames.append(_resize(image_to_lux(frame, max_lux), shape))
+        except ViformError:
+            raise
+        except Exception as exc:
+            raise ViformError(f"video {str(path)!r} could not be read: {exc}") from None
+        if not frames:
+            raise ViformError(f"video {str(path)!r} holds no frames")
+        rate = frame_rate_hz if frame_rate_hz is not None else declared
+        if rate is None:
+            raise ViformError(f"frame_rate_hz is required: {str(path)!r} declares no frame rate")
+        return cls(np.stack(frames), rate, interpolation)
+
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        position = max(0.0, t_s * self.frame_rate_hz)
+        last = self._frames.shape[0] - 1
+        k = min(int(math.floor(position)), last)
+        if self.interpolation == "hold" or k == last:
+            return self._frames[k]
+        w = position - k
+        return (1 - w) * self._frames[k] + w * self._frames[k + 1]
+
+
+# ----------------------------------------------------------------- synthetic scenes
+
+def texture(x, y, period_px: float = 48.0) -> np.ndarray:
+    """An analytic test texture in [0, 1] defined on the whole plane.
+
+    A checkerboard with sharp edges (period ``period_px``) mixed with two oblique
+    gratings, so both edges and smooth gradients move with the pattern.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    checker = ((np.floor(x / period_px) + np.floor(y / period_px)) % 2.0)
+    g1 = 0.5 + 0.5 * np.sin(2 * np.pi * (0.8 * x + 0.6 * y) / (0.7 * period_px))
+    g2 = 0.5 + 0.5 * np.cos(2 * np.pi * (-0.5 * x + 0.87 * y) / (1.9 * period_px))
+    return 0.55 * checker + 0.25 * g1 + 0.20 * g2
+
+
+def edge(x, y, period_px: float = 48.0) -> np.ndarray:
+    """A single vertical step edge at x = 0 (bright for x ≥ 0), in [0, 1]."""
+    return (np.asarray(x, dtype=np.float64) >= 0).astype(np.float64) + 0 * np.asarray(y)
+
+
+def bars(x, y, period_px: float = 48.0) -> np.ndarray:
+    """Vertical square-wave bars of period ``period_px``, in [0, 1]."""
+    return ((np.floor(np.asarray(x, dtype=np.float64) / (period_px / 2)) % 2.0)
+            + 0 * np.asarray(y))
+
+
+PATTERNS = {"texture": texture, "edge": edge, "bars": bars}
+
+
+class _PatternScene(Scene):
+    def __init__(self, height, width, pattern, min_lux, max_lux, period_px, duration_s):
+        super().__init__(height, width, duration_s)
+        self.pattern = check_choice("pattern", pattern, tuple(PATTERNS))
+        self.min_lux = check_non_negative("min_lux", min_lux)
+        self.max_lux = check_positive("max_lux", max_lux)
+        if self.max_lux <= self.min_lux:
+            raise ViformError(f"max_lux = {max_lux!r} must exceed min_lux = {min_lux!r}")
+        self.period_px = check_positive("period_px", period_px)
+        self._y, self._x = np.mgrid[0:height, 0:width].astype(np.float64)
+
+    def _lux(self, u, v):
+        value = PATTERNS[self.pattern](u, v, self.period_px)
+        return self.min_lux + (self.max_lux - self.min_lux) * value
+
+
+class TranslatingScene(_PatternScene):
+    """A pattern translating at a constant velocity (pixels per second).
+
+    Ground truth at t: L(x, y, t) = P(x − x0 − vx·t, y − y0 − vy·t), pixel centres at
+    integer coordinates. ``x0`` defaults to the image centre for the ``edge`` pattern.
+    """
+
+    name = "translating"
+
+    def __init__(self, height=250, width=400, velocity_px_per_s=(2000.0, 0.0), pattern="texture",
+                 min_lux=0.2, max_lux=4.0, period_px=48.0, origin_px=None, duration_s=None):
+        super().__init__(height, width, pattern, min_lux, max_lux, period_px, duration_s)
+        vx, vy = velocity_px_per_s
+        self.velocity_px_per_s = (float(vx), float(vy))
+        if not all(math.isfinite(v) for v in self.velocity_px_per_s):
+            raise ViformError(f"velocity_px_per_s = {velocity_px_per_s!r} must be finite")
+        if origin_px is None:
+            origin_px = (width / 2.0, height / 2.0) if pattern == "edge" else (0.0, 0.0)
+        self.origin_px = (float(origin_px[0]), float(origin_px[1]))
+
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        vx, vy = self.velocity_px_per_s
+        return self._lux(self._x - self.origin_px[0] - vx * t_s, self._y - self.origin_px[1] - vy * t_s)
+
+
+class RotatingScene(_PatternScene):
+    """A pattern rotating about the image centre at ``angular_speed_rad_per_s``."""
+
+    name = "rotating"
+
+    def __init__(self, height=250, width=400, angular_speed_rad_per_s=2 * np.pi * 5, pattern="texture",
+                 min_lux=0.2, max_lux=4.0, period_px=48.0, duration_s=None):
+        super().__init__(height, width, pattern, min_lux, max_lux, period_px, duration_s)
+        self.angular_speed_rad_per_s = float(angular_speed_rad_per_s)
+        self._cx, self._cy = (width - 1) / 2.0, (height - 1) / 2.0
+
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        a = -self.angular_speed_rad_per_s * t_s
+        dx, dy = self._x - self._cx, self._y - self._cy
+        u = math.cos(a) * dx - math.sin(a) * dy
+        v = math.sin(a) * dx + math.cos(a) * dy
+        return self._lux(u, v)
+
+
+class HDRScene(StillScene):
+    """A static scene spanning ``decades`` decades of illuminance.
+
+    A horizontal logarithmic ramp from ``min_lux`` to ``min_lux·10^decades`` in the upper
+    half and a row of uniform patches, one per decade, in the lower half.
+    """
+
+    name = "hdr"
+
+    def __init__(self, height=250, width=400, min_lux=0.1, decades=6.0, duration_s=None):
+        check_positive("min_lux", min_lux)
+        decades = check_positive("decades", decades)
+        height = check_int("height", height, 2)
+        width = check_int("width", width, 2)
+        x = np.linspace(0.0, 1.0, width)
+        ramp = min_lux * 10.0 ** (decades * x)
+        patches = min_lux * 10.0 ** np.floor(x * (math.floor(decades) + 1) - 1e-9).clip(0, math.floor(decades))
+        lux = np.empty((height, width))
+        lux[: height // 2] = ramp
+        lux[height // 2:] = patches
+        super().__init__(lux, duration_s)
+        self.min_lux, self.decades = float(min_lux), decades
+
+
+class StepScene(Scene):
+    """A base image whose illuminance jumps by ``factor`` at ``step_time_s``.
+
+    L(t) = base for t < step_time_s, base·factor after. The window mean is exact.
+    """
+
+    name = "step"
+
+    def __init__(self, base: Scene | None = None, step_time_s=0.01, factor=10.0, height=64, width=64,
+                 lux=1.0):
+        if base is None:
+            base = StillScene(np.full((height, width), check_non_negative("lux", lux)))
+        super().__init__(base.height, base.width, base.duration_s)
+        self.base = base
+        self.step_time_s = float(step_time_s)
+        self.factor = check_non_negative("factor", factor)
+
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        lux = self.base.illuminance_lux(t_s)
+        return lux * self.factor if t_s >= self.step_time_s else lux
+
+    def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
+        if t1_s <= self.step_time_s or t0_s >= self.step_time_s or t1_s == t0_s:
+            return super().mean_illuminance_lux(t0_s, t1_s, samples)
+        before = (self.step_time_s - t0_s) / (t1_s - t0_s)
+        return (self.base.mean_illuminance_lux(t0_s, t1_s, samples)
+                * (before + (1 - before) * self.factor))
+
+
+class FlickerScene(Scene):
+    """A source modulated periodically: L(t) = base·(1 + depth·w(2π f t)).
+
+    ``waveform`` is ``"sine"`` (w = sin) or ``"square"`` (w = sign of sin). With a
+    still base the window mean is exact.
+    """
+
+    name = "flicker"
+
+    def __init__(self, base: Scene | None = None, frequency_hz=100.0, depth=1.0, waveform="sine",
+                 height=64, width=64, lux=1.0):
+        if base is None:
+            base = StillScene(np.full((height, width), check_non_negative("lux", lux)))
+        super().__init__(base.height, base.width, base.duration_s)
+        self.base = base
+        self.frequency_hz = check_positive("frequency_hz", frequency_hz)
+        if not 0 <= depth <= 1:
+            raise ViformError(f"depth = {depth!r} is not allowed: it must lie in [0, 1]")
+        self.depth = float(depth)
+        self.waveform = check_choice("waveform", waveform, ("sine", "square"))
+
+    def modulation(self, t_s: float) -> float:
+        phase = 2 * math.pi * self.frequency_hz * t_s
+        w = math.sin(phase)
+        if self.waveform == "square":
+            w = 1.0 if w >= 0 else -1.0
+        return 1.0 + self.depth * w
+
+    def _mean_modulation(self, t0, t1):
+        if t1 == t0:
+            return self.modulation(t0)
+        w = 2 * math.pi * self.frequency_hz
+        if self.waveform == "sine":
+            return 1.0 + self.depth * (math.cos(w * t0) - math.cos(w * t1)) / (w * (t1 - t0))
+
+        def square_integral(t):  # ∫0^t sign(sin(w s)) ds, period P
+            period = 1.0 / self.frequency_hz
+            n, r = divmod(t, period)
+            half = period / 2
+            return n * 0.0 + (r if r <= half else half - (r - half))
+
+        return 1.0 + self.depth * (square_integral(t1) - square_integral(t0)) / (t1 - t0)
+
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        return self.base.illuminance_lux(t_s) * self.modulation(t_s)
+
+    def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
+        if isinstance(self.base, StillScene):
+            return self.base.illuminance_lux(t0_s) * self._mean_modulation(t0_s, t1_s)
+        return super().mean_illuminance_lux(t0_s, t1_s, samples)
+
+
+# ------------------------------------------------------------------ registry, loading
+
+def builtin_scene(name: str, height: int = 250, width: int = 400, **kw) -> Scene:
+    """A built-in synthetic scene by name (see :data:`BUILTIN_SCENES`)."""
+    check_choice("scene", name, tuple(BUILTIN_SCENES))
+    return BUILTIN_SCENES[name](height=height, width=width, **kw)
+
+
+BUILTIN_SCENES = {
+    "translating": lambda height, width, **kw: TranslatingScene(height, width, **kw),
+    "moving-edge": lambda height, width, **kw: TranslatingScene(height, width, pattern="edge", **kw),
+    "rotating": lambda height, width, **kw: RotatingScene(height, width, **kw),
+    "hdr": lambda height, width, **kw: HDRScene(height, width, **kw),
+    "step": lambda height, width, **kw: StepScene(height=height, width=width, **kw),
+    "flicker": lambda height, width, **kw: FlickerScene(height=height, width=width, **kw),
+}
+
+_VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".gif", ".webm")
+
+
+def load_scene(spec: str, height: int = 250, width: int = 400, max_lux: float = 4.0,
+               frame_rate_hz: float | None = None, interpolation: str = "linear") -> Scene:
+    """A scene from a built-in name, an image file, a video file or a folder of images.
+
+    Image and video pixel values map linearly to [0, ``max_lux``] lux.
+    """
+    if spec in BUILTIN_SCENES:
+        return builtin_scene(spec, height, width)
+    path = Path(spec)
+    if not path.exists():
+        raise ViformError(f"scene {spec!r} is neither a built-in scene ({', '.join(BUILTIN_SCENES)}) "
+                          "nor an existing file or folder")
+    if path.is_dir() or path.suffix.lower() in _VIDEO_SUFFIXES:
+        return VideoScene.from_file(path, frame_rate_hz=frame_rate_hz, max_lux=max_lux,
+                                    interpolation=interpolation)
+    return StillScene.from_file(path, max_lux=max_lux)

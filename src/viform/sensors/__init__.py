@@ -1,0 +1,1 @@
+"""Sensor models, one module per architecture, behind :class:`viform.sensors.base.Sensor`."""

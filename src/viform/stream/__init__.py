@@ -1,0 +1,1 @@
+"""Spike-stream (viform) data: container, .dat files, zarr stores, events view."""
