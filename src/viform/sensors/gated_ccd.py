@@ -1,0 +1,379 @@
+"""Range gating with an interline-transfer CCD, no image intensifier (seed 004).
+
+Seed 004, "Control in an undocumented way": instead of one readout pulse per frame, each
+laser pulse is followed, 2R/c later, by the end of the SUB (substrate) erase pulse; the
+photodiodes integrate for t_нак and the V2/V3 readout pulse moves their charge into the
+vertical CCD (the shielded buffer register). Because the buffer is isolated from the
+photodiodes, the next SUB erases only the photodiodes, and the next transfer *adds* its
+charge to what the buffer already holds. After X pulses the frame is read out once, so
+read noise and ADC quantization are paid once per frame (seed 004, Fig. 3;
+t_экспозиции = X·t_нак).
+
+Gate timing (seed 004, Fig. 3):
+
+* delay t_откл = 2R/c, R the gate's near range (the "minimum illumination distance");
+* t_нак = τ_pulse + t_min, t_min the sensor's minimum time between the SUB falling edge
+  and the V2/V3 transfer pulse (a datasheet figure; 1 µs assumed for the ICX618 here);
+* a return from range r lasts [2r/c, 2r/c + τ]; it is (partly) recorded for
+  R − cτ/2 < r < R + c·t_нак/2.
+
+Three ways of using X pulses are compared (seed 004, "Requirements"):
+
+``"ungated"``
+    The documented shutter: SUB ends 2R/c after the first pulse and the photodiodes then
+    integrate until the single transfer after the X-th pulse. Only the first return is
+    gated; the other X − 1 bring everything back, fog included, plus ambient light for
+    the whole (X − 1)/f_rep.
+``"sum"``
+    One gated pulse per frame, X frames each read out and digitized, summed digitally: read
+    noise and quantization X times, and the frame rate divided by X.
+``"accumulate"``
+    The seed's method: X gated exposures summed in the vertical register, one readout.
+
+Noise chain (reuses :class:`viform.sensors.frame.FramePixelArray`): Poisson photo, ambient
+and dark electrons (the sum of X independent Poisson counts is Poisson with the summed
+mean, so a frame's count is drawn at once — exact, not an approximation), PRNU on the
+photo-signal, then ``FramePixelArray.digitize`` (full-well clip, DSNU, Gaussian read
+noise, gain, offset, ADC) once per readout.
+
+The shutter is not perfect: a fraction ``shutter_leak_ratio`` of the light arriving while
+SUB holds the photodiodes empty still reaches the buffer (the smear path; ICX-series smear
+is ≈ −100 dB). This is what lets a very strong close reflector leave a trace.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from viform._validate import (
+    ViformError,
+    check_choice,
+    check_int,
+    check_non_negative,
+    check_positive,
+)
+from viform.light.active import ActiveImagingGeometry, ActiveScene
+from viform.light.laser import PulsedLaser, Receiver, range_from_delay_m, round_trip_time_s
+from viform.light.radiometry import PixelOptics
+from viform.sensors.base import FrameStack, Sensor
+from viform.sensors.frame import FramePixelArray, FramePixelParameters
+
+MODES = ("ungated", "sum", "accumulate")
+
+
+def icx618_pixel_parameters() -> FramePixelParameters:
+    """ICX618ALA-like pixel and readout (assumed values, seed 004 names only the part).
+
+    1/4-type progressive interline CCD, 659 × 494 effective pixels of 5.6 µm; QE at 905 nm
+    ≈ 0.25 (EXview HAD NIR response ≈ 40 % of a ≈ 60 % peak); 12 000 e⁻ full well; 12 e⁻
+    read noise through a 12-bit CCD AFE; 64 DN black level.
+    """
+    return FramePixelParameters(optics=PixelOptics(pixel_pitch_m=5.6e-6, fill_factor=1.0,
+                                                   quantum_efficiency=0.25, wavelength_m=905e-9),
+                                full_well_electrons=12_000.0, conversion_gain_v_per_e=40e-6,
+                                read_noise_electrons=12.0, dark_current_e_per_s=20.0, dsnu_electrons=2.0,
+                                prnu_fraction=0.01, analog_gain=1.0, adc_bits=12, black_offset_dn=64.0)
+
+
+@dataclass(frozen=True)
+class InterlineCCDParameters:
+    """An interline-transfer CCD used as a gated receiver.
+
+    Attributes
+    ----------
+    pixel : FramePixelParameters
+        Pixel and readout chain (optics.quantum_efficiency is the QE at the laser line).
+    sensor_height_px, sensor_width_px : int
+        Full format (ICX618: 494 × 659).
+    min_transfer_time_s : float
+        Shortest SUB-fall → V2/V3 transfer interval, s (seed: t_нак = pulse + this).
+    readout_time_s : float
+        Time to shift the whole frame out, s (ICX618: 60 frames/s progressive → 1/60 s).
+    shutter_leak_ratio : float
+        Fraction of the light arriving outside the gate that still reaches the buffer.
+    """
+
+    pixel: FramePixelParameters = field(default_factory=icx618_pixel_parameters)
+    sensor_height_px: int = 494
+    sensor_width_px: int = 659
+    min_transfer_time_s: float = 1.0e-6
+    readout_time_s: float = 1.0 / 60.0
+    shutter_leak_ratio: float = 1e-5
+
+    def __post_init__(self):
+        check_int("sensor_height_px", self.sensor_height_px, 1)
+        check_int("sensor_width_px", self.sensor_width_px, 1)
+        check_positive("min_transfer_time_s", self.min_transfer_time_s)
+        check_positive("readout_time_s", self.readout_time_s)
+        check_non_negative("shutter_leak_ratio", self.shutter_leak_ratio)
+        if self.shutter_leak_ratio > 1:
+            raise ViformError(f"shutter_leak_ratio = {self.shutter_leak_ratio!r} must be ≤ 1")
+
+
+@dataclass(frozen=True)
+class GateTiming:
+    """Gate of one laser pulse (seed 004, Fig. 3): opens 2R/c after the pulse, lasts τ + t_min.
+
+    Raises :class:`ViformError` if the gate is not inside one pulse period (range beyond
+    the unambiguous range c/(2 f_rep)).
+    """
+
+    gate_range_m: float
+    laser: PulsedLaser
+    min_transfer_time_s: float
+
+    def __post_init__(self):
+        r = self.gate_range_m
+        if isinstance(r, (int, float)) and r < 0:
+            raise ViformError(f"gate_range_m = {r!r} is not allowed: the gate range must be ≥ 0 m")
+        check_non_negative("gate_range_m", r)
+        check_positive("min_transfer_time_s", self.min_transfer_time_s)
+        if self.close_s >= self.laser.period_s:
+            raise ViformError(
+                f"gate_range_m = {r:g} m is beyond the unambiguous range: the gate would close "
+                f"{self.close_s * 1e6:.2f} µs after the pulse, after the next pulse "
+                f"({self.laser.period_s * 1e6:.1f} µs at {self.laser.repetition_hz:g} Hz); the largest "
+                f"gate range is {self.max_gate_range_m(self.laser, self.min_transfer_time_s):.0f} m")
+
+    @staticmethod
+    def max_gate_range_m(laser: PulsedLaser, min_transfer_time_s: float) -> float:
+        return range_from_delay_m(laser.period_s - laser.pulse_width_s - min_transfer_time_s)
+
+    @property
+    def open_s(self) -> float:
+        """Gate delay t_откл = 2R/c (end of SUB), s."""
+        return round_trip_time_s(self.gate_range_m)
+
+    @property
+    def width_s(self) -> float:
+        """t_нак = pulse width + minimum transfer time, s."""
+        return self.laser.pulse_width_s + self.min_transfer_time_s
+
+    @property
+    def close_s(self) -> float:
+        """Transfer (V2/V3) instant, s after the pulse start."""
+        return self.open_s + self.width_s
+
+    @property
+    def range_window_m(self) -> tuple[float, float]:
+        """Ranges with some return inside the gate: (R − cτ/2, R + c·t_нак/2)."""
+        c_half = range_from_delay_m(1.0)
+        return (max(0.0, self.gate_range_m - c_half * self.laser.pulse_width_s),
+                self.gate_range_m + c_half * self.width_s)
+
+    @property
+    def full_range_window_m(self) -> tuple[float, float]:
+        """Ranges whose whole return lies inside the gate: [R, R + c·t_min/2]."""
+        return (self.gate_range_m, self.gate_range_m + range_from_delay_m(self.min_transfer_time_s))
+
+    def to_dict(self) -> dict:
+        return {"gate_range_m": self.gate_range_m, "open_s": self.open_s, "width_s": self.width_s,
+                "close_s": self.close_s, "range_window_m": list(self.range_window_m),
+                "full_range_window_m": list(self.full_range_window_m)}
+
+
+@dataclass
+class GatedFrame:
+    """One output frame of a gated camera.
+
+    Attributes
+    ----------
+    dn : ndarray (H, W) float64
+        The frame in DN (for ``"sum"`` the digital sum of X frames).
+    black_dn : float
+        Black level contained in ``dn`` (offset × number of readouts).
+    system_gain_dn_per_e : float
+    mean_electrons : ndarray (H, W)
+        Expected electrons (before noise), for reference.
+    mode : str
+    pulses : int
+    frame_time_s : float
+    readouts : int
+    """
+
+    dn: np.ndarray
+    black_dn: float
+    system_gain_dn_per_e: float
+    mean_electrons: np.ndarray
+    mode: str
+    pulses: int
+    frame_time_s: float
+    readouts: int
+
+    @property
+    def electrons(self) -> np.ndarray:
+        """Black-subtracted frame converted back to electrons."""
+        return (self.dn - self.black_dn) / self.system_gain_dn_per_e
+
+
+class GatedInterlineCCD(Sensor):
+    """ICX618-like interline CCD driven as a range-gated receiver (seed 004).
+
+    Parameters
+    ----------
+    pulses : int
+        X, laser pulses per output frame.
+    gate_range_m : float
+        Near edge of the gate, m (delay 2R/c).
+    mode : {"accumulate", "sum", "ungated"}
+    frame_rate_hz : float
+        Required output frame rate; X must fit (X/f_rep + readout ≤ 1/frame_rate).
+    geometry : ActiveImagingGeometry or None
+        Laser, receiver, pixel pitch and QE; built from ``laser``/``receiver`` and the CCD if None.
+    noise : bool
+        False returns expected values through the same digitizer without random noise.
+    """
+
+    name = "gated-interline-ccd"
+
+    def __init__(self, pulses: int = 20, gate_range_m: float = 150.0, mode: str = "accumulate",
+                 frame_rate_hz: float = 25.0, parameters: InterlineCCDParameters | None = None,
+                 laser: PulsedLaser | None = None, receiver: Receiver | None = None,
+                 noise: bool = True, fixed_pattern_seed: int = 618):
+        self.parameters = parameters or InterlineCCDParameters()
+        self.laser = laser or PulsedLaser()
+        self.receiver = receiver or Receiver()
+        self.mode = check_choice("mode", mode, MODES)
+        self.pulses = check_int("pulses", pulses, 1)
+        self.frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
+        self.timing = GateTiming(gate_range_m, self.laser, self.parameters.min_transfer_time_s)
+        px = self.parameters.pixel
+        self.geometry = ActiveImagingGeometry(self.laser, self.receiver, px.optics.pixel_pitch_m,
+                                              px.optics.quantum_efficiency * px.optics.fill_factor,
+                                              self.parameters.sensor_height_px,
+                                              self.parameters.sensor_width_px)
+        self.noise = bool(noise)
+        self.fixed_pattern_seed = int(fixed_pattern_seed)
+        limit = self.max_pulses(self.frame_rate_hz, self.mode)
+        if self.pulses > limit:
+            raise ViformError(
+                f"pulses = {self.pulses} does not fit in a frame at frame_rate_hz = {frame_rate_hz:g}: "
+                f"{self.mode} mode allows at most {limit} pulses (frame time "
+                f"{self.frame_time_s(self.pulses) * 1e3:.1f} ms > {1e3 / self.frame_rate_hz:.1f} ms; "
+                f"f_rep = {self.laser.repetition_hz:g} Hz, readout {self.parameters.readout_time_s * 1e3:.1f} ms)")
+        self._arrays: dict[tuple[int, int], FramePixelArray] = {}
+
+    # ------------------------------------------------------------------ timing
+    def frame_time_s(self, pulses: int | None = None, mode: str | None = None) -> float:
+        """Time for one output frame: X pulse periods + readout(s)."""
+        x = self.pulses if pulses is None else pulses
+        mode = mode or self.mode
+        t_read = self.parameters.readout_time_s
+        if mode == "sum":  # every pulse needs its own full readout
+            return x * max(t_read, self.laser.period_s)
+        return x * self.laser.period_s + t_read
+
+    def max_pulses(self, frame_rate_hz: float, mode: str | None = None) -> int:
+        """Largest X whose frame fits in 1/frame_rate_hz."""
+        mode = mode or self.mode
+        period = 1.0 / frame_rate_hz
+        t_read = self.parameters.readout_time_s
+        if mode == "sum":
+            return int(math.floor(period / max(t_read, self.laser.period_s) + 1e-9))
+        return max(0, int(math.floor((period - t_read) * self.laser.repetition_hz + 1e-9)))
+
+    # ------------------------------------------------------------------ physics
+    def pixel_array(self, height: int, width: int) -> FramePixelArray:
+        key = (height, width)
+        if key not in self._arrays:
+            self._arrays[key] = FramePixelArray(self.parameters.pixel, height, width, self.fixed_pattern_seed)
+        return self._arrays[key]
+
+    def per_pulse_electrons(self, scene: ActiveScene) -> dict:
+        """Expected electrons of one pulse: ``gated`` and ``all`` laser parts (dicts by source) and
+        the ambient rate ``ambient_per_s`` (e⁻/s); independent of X and of the mode."""
+        g, t = self.geometry, self.timing
+        return {"gated": g.laser_electrons(scene, t.open_s, t.close_s), "all": g.laser_electrons(scene),
+                "ambient_per_s": g.ambient_electrons_per_s(scene)}
+
+    def electron_budget(self, scene: ActiveScene, per_pulse: dict | None = None,
+                        pulses: int | None = None, mode: str | None = None) -> dict:
+        """Expected electrons per frame for X pulses in a mode (no noise, no PRNU).
+
+        Keys: ``photo`` (per frame), ``dark`` (per frame), ``readouts``, ``per_readout_photo``,
+        ``per_readout_dark``, ``per_pulse`` (see :meth:`per_pulse_electrons`).
+        """
+        pp = per_pulse or self.per_pulse_electrons(scene)
+        x = self.pulses if pulses is None else check_int("pulses", pulses, 1)
+        mode = mode or self.mode
+        t = self.timing
+        gated, all_, amb = pp["gated"]["total"], pp["all"]["total"], pp["ambient_per_s"]
+        dark_rate = self.parameters.pixel.dark_current_e_per_s
+        leak = self.parameters.shutter_leak_ratio
+        period = self.laser.period_s
+        if mode == "accumulate":
+            outside = (all_ - gated) + amb * (period - t.width_s)
+            photo = x * (gated + amb * t.width_s + leak * outside)
+            dark = dark_rate * x * period  # photodiode + vertical register while charge is held
+            readouts = 1
+        elif mode == "sum":
+            photo = x * (gated + amb * t.width_s)
+            dark = dark_rate * x * t.width_s
+            readouts = x
+        else:  # ungated: SUB before pulse 1 only, single transfer after pulse X
+            exposure = t.width_s + (x - 1) * period
+            # pulse 1 is gated; pulses 2..X return whole (fog and close objects included)
+            photo = gated + (x - 1) * all_ + amb * exposure
+            dark = dark_rate * exposure
+            readouts = 1
+        return {"per_pulse": pp, "photo": photo, "dark": dark, "readouts": readouts,
+                "per_readout_photo": photo / readouts, "per_readout_dark": dark / readouts,
+                "pulses": x, "mode": mode}
+
+    def capture_frame(self, scene: ActiveScene, *, seed: int = 0, frame_index: int = 0,
+                      budget: dict | None = None) -> GatedFrame:
+        """One output frame of ``scene`` in this sensor's mode."""
+        h, w = scene.shape
+        pixels = self.pixel_array(h, w)
+        p = self.parameters.pixel
+        b = budget or self.electron_budget(scene)
+        rng = pixels.rng(seed, frame_index)
+        mean_per_readout = b["per_readout_photo"] * pixels.prnu_gain + b["per_readout_dark"]
+        total = np.zeros((h, w))
+        for _ in range(b["readouts"]):
+            e = rng.poisson(mean_per_readout).astype(np.float64) if self.noise else mean_per_readout
+            total += pixels.digitize(e, rng, self.noise)
+        return GatedFrame(dn=total, black_dn=p.black_offset_dn * b["readouts"],
+                          system_gain_dn_per_e=p.system_gain_dn_per_e,
+                          mean_electrons=b["photo"] + b["dark"], mode=b["mode"], pulses=b["pulses"],
+                          frame_time_s=self.frame_time_s(b["pulses"], b["mode"]), readouts=b["readouts"])
+
+    def expected_frame_stats(self, scene: ActiveScene | None = None,
+                             budget: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Expected black-subtracted signal and temporal noise variance per pixel, in electrons.
+
+        var = Poisson mean + readouts × (σ_read² + 1/(12 K²)); full-well clipping applied to
+        the mean. The spatial fixed pattern (DSNU, PRNU) is added by the CNR code.
+        """
+        if budget is None and scene is None:
+            raise ViformError("expected_frame_stats needs a scene or a budget")
+        b = budget or self.electron_budget(scene)
+        p = self.parameters.pixel
+        n = b["readouts"]
+        per = np.minimum(b["per_readout_photo"] + b["per_readout_dark"], p.full_well_electrons)
+        mean = n * per
+        k = p.system_gain_dn_per_e
+        var = n * per * (per < p.full_well_electrons) + n * (p.read_noise_electrons ** 2 + 1.0 / (12 * k * k))
+        return mean, var
+
+    def capture(self, scene: ActiveScene, duration_s: float, *, seed: int = 0) -> FrameStack:
+        """Frames at ``frame_rate_hz`` over ``duration_s`` (scene static), DN as float64."""
+        check_positive("duration_s", duration_s)
+        n = max(1, int(math.floor(duration_s * self.frame_rate_hz + 1e-9)))
+        b = self.electron_budget(scene)
+        frames = np.stack([self.capture_frame(scene, seed=seed, frame_index=i, budget=b).dn for i in range(n)])
+        return FrameStack(frames, np.arange(n) / self.frame_rate_hz, np.full(n, self.pulses * self.timing.width_s),
+                          {"sensor": self.describe(), "scene": scene.describe(), "seed": seed})
+
+    def describe(self) -> dict:
+        par = self.parameters
+        return {"model": self.name, "mode": self.mode, "pulses": self.pulses,
+                "frame_rate_hz": self.frame_rate_hz, "frame_time_s": self.frame_time_s(),
+                "max_pulses_at_frame_rate": self.max_pulses(self.frame_rate_hz),
+                "gate": self.timing.to_dict(), "geometry": self.geometry.to_dict(),
+                "min_transfer_time_s": par.min_transfer_time_s, "readout_time_s": par.readout_time_s,
+                "shutter_leak_ratio": par.shutter_leak_ratio, "noise": self.noise,
+                "pixel": par.pixel.to_dict()}
