@@ -1,0 +1,358 @@
+"""Conditional-overflow multi-integration pixel with a column-shared capacitor (seed 003).
+
+Each frame period (33.33 ms at 30 fps) holds three integrations: long t1 = 32.8 ms,
+medium t2 = 0.5 ms, short t3 = 0.03 ms (seed 003, §3). The photodiode is reset to
+V_res (the PMOS reset PM1 pulls it to VCC = 3.3 V) and discharges as
+``V = V_i0 − (I_ph + I_dark)·t / C_PD``, floored at the saturation voltage V_sat
+(seed 003, eq. 3). At the end of t1 and of t2 the row borrows its column's shared unit:
+the overflow capacitor C_F (500 fF) is reset to VF = 2.2 V and compared with the
+photodiode; if V_PD < V_CF they share charge (seed 003, eq. 1)::
+
+    V'_PD = V_PD                                     if V_PD > V_CF
+    V'_PD = (V_PD·C_PD + V_CF·C_F) / (C_F + C_PD)    if V_PD < V_CF
+
+which sets the start of the next integration (eqs. 4–6: V10 = V_res,
+V20 = (V1·C_PD + V_CF·C_F)/(C_F + C_PD), V30 = (V2·C_PD + V_CF·C_F)/(C_F + C_PD)).
+After t3 the pixel is read with correlated double sampling: signal = V_res − V3
+(the reset sample removes the pixel offset, seed 003 §3).
+
+The resulting output-vs-photocurrent curve has four parts (seed 003, §6, fig. 6):
+AB no overflow (identical to a plain 4T APS integrating the whole frame), BC overflow
+without saturation, CD saturated at the end of t1 only, DE saturated at the end of t1
+and t2; the curve ends where the photodiode saturates inside t3.
+
+Column-shared unit timing (seed 003, §5): each row holds its column's unit from the end
+of t1 to the end of t2, i.e. t2 plus two uses of < 0.01 ms each ≈ 0.51 ms; rows take
+turns, so rows × 0.51 ms must fit in the frame period. Rows are staggered by
+frame period / rows (row-by-row exposure, seed 003 §2).
+
+Noise model: Poisson photo + dark charge per integration window (exact at small counts),
+PRNU/DSNU, read noise and ADC from :class:`~viform.sensors.frame.FramePixelArray`.
+Charge is tracked as the photodiode voltage drop in electrons, ``n = (V_res − V)·C_PD/q``,
+so the pixel's full well is ``(V_res − V_sat)·C_PD/q`` and its conversion gain q/C_PD.
+The kTC noise of resetting C_F is not modelled (the seed gives no figure for it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from viform._validate import ViformError, check_int, check_positive, check_range
+from viform.light.radiometry import ELEMENTARY_CHARGE_C
+from viform.light.scenes import Scene, StillScene
+from viform.sensors.frame import FramePixelParameters, FrameSensor
+
+#: Seed 003 §3 integration times: long, medium, short (s), in a 33.33 ms frame.
+SEED003_INTEGRATIONS_S = (32.8e-3, 0.5e-3, 0.03e-3)
+
+
+def share_charge_v(v_pd_v, v_cf_v: float, c_pd_f: float, c_f_f: float):
+    """Photodiode voltage after the conditional overflow (seed 003, eq. 1).
+
+    >>> round(float(share_charge_v(0.3, 2.2, 100e-15, 500e-15)), 4)
+    1.8833
+    >>> float(share_charge_v(2.5, 2.2, 100e-15, 500e-15))
+    2.5
+    """
+    v = np.asarray(v_pd_v, dtype=np.float64)
+    shared = (v * c_pd_f + v_cf_v * c_f_f) / (c_f_f + c_pd_f)
+    return np.where(v < v_cf_v, shared, v)
+
+
+def overflow_voltages_v(
+    photocurrent_a,
+    c_pd_f: float,
+    c_f_f: float = 500e-15,
+    v_reset_v: float = 3.3,
+    v_f_v: float = 2.2,
+    v_sat_v: float = 0.3,
+    integration_times_s=SEED003_INTEGRATIONS_S,
+    dark_current_a: float = 0.0,
+):
+    """Noise-free photodiode voltages (V1, V2, V3) at the end of t1, t2, t3 (seed 003, eqs. 1–6).
+
+    V1, V2 are before the charge sharing; the next integration starts from eq. 1's V'.
+    """
+    i = np.asarray(photocurrent_a, dtype=np.float64) + dark_current_a
+    t1, t2, t3 = integration_times_s
+    v1 = np.maximum(v_reset_v - i * t1 / c_pd_f, v_sat_v)  # eq. 3 from V10 = V_res (eq. 4)
+    v20 = share_charge_v(v1, v_f_v, c_pd_f, c_f_f)  # eq. 5
+    v2 = np.maximum(v20 - i * t2 / c_pd_f, v_sat_v)
+    v30 = share_charge_v(v2, v_f_v, c_pd_f, c_f_f)  # eq. 6
+    v3 = np.maximum(v30 - i * t3 / c_pd_f, v_sat_v)
+    return v1, v2, v3
+
+
+def segment_boundaries_a(
+    c_pd_f: float,
+    c_f_f: float = 500e-15,
+    v_reset_v: float = 3.3,
+    v_f_v: float = 2.2,
+    v_sat_v: float = 0.3,
+    integration_times_s=SEED003_INTEGRATIONS_S,
+) -> dict:
+    """Photocurrents (A) at the seed's points B, C, D, E (seed 003, §6, fig. 6), from eqs. 1–6.
+
+    B: first overflow (V_PD reaches V_F by the end of t1 + t2 — the later check, since the
+    photodiode keeps discharging through t2); C: saturation within t1; D: saturation within
+    t2 after the first sharing; E: saturation within t3 after the second sharing.
+    """
+    t1, t2, t3 = integration_times_s
+    b = (v_reset_v - v_f_v) * c_pd_f / (t1 + t2)
+    c = (v_reset_v - v_sat_v) * c_pd_f / t1
+    v20_sat = float(share_charge_v(v_sat_v, v_f_v, c_pd_f, c_f_f))
+    d = (v20_sat - v_sat_v) * c_pd_f / t2
+    e = (v20_sat - v_sat_v) * c_pd_f / t3
+    return {"B": b, "C": c, "D": d, "E": e, "v20_after_saturation_v": v20_sat}
+
+
+class OverflowSensor(FrameSensor):
+    """Conditional-overflow, triple-integration HDR camera (seed 003).
+
+    Parameters
+    ----------
+    parameters : FramePixelParameters
+        The pixel. Its conversion gain gives C_PD = q / CG, and its full well the
+        photodiode swing V_res − V_sat = FW · CG.
+    integration_times_s : (t1, t2, t3)
+        Long, medium, short integrations, s (seed 003: 32.8 ms, 0.5 ms, 0.03 ms).
+    overflow_capacitance_f : float
+        Column-shared capacitor C_F, F (seed 003: 500 fF).
+    v_f_v : float
+        Reset voltage of C_F, V (seed 003: VF = 2.2 V).
+    v_reset_v : float
+        Photodiode reset voltage, V (seed 003: VCC = 3.3 V).
+    share_use_time_s : float
+        Duration of one use of the column unit (reset + compare + share), s (< 0.01 ms).
+    frame_rate_hz : float
+        Frames per second (seed 003: 30).
+    height, width, noise, fixed_pattern_seed
+        As :class:`~viform.sensors.frame.FrameSensor`.
+    """
+
+    name = "overflow"
+
+    def __init__(
+        self,
+        parameters: FramePixelParameters | None = None,
+        integration_times_s=SEED003_INTEGRATIONS_S,
+        overflow_capacitance_f: float = 500e-15,
+        v_f_v: float = 2.2,
+        v_reset_v: float = 3.3,
+        share_use_time_s: float = 5e-6,
+        frame_rate_hz: float = 30.0,
+        height: int | None = None,
+        width: int | None = None,
+        noise: bool = True,
+        fixed_pattern_seed: int = 1288,
+    ):
+        parameters = parameters or seed003_pixel_parameters()
+        frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
+        period = 1.0 / frame_rate_hz
+        times = tuple(np.atleast_1d(np.asarray(integration_times_s, dtype=np.float64)).tolist())
+        if len(times) != 3:
+            raise ViformError(
+                f"integration_times_s must give three durations (long, medium, short); "
+                f"got {len(times)}"
+            )
+        for name, t in zip(("long", "medium", "short"), times, strict=True):
+            check_positive(f"integration_times_s ({name})", t)
+        if sum(times) > period * (1 + 1e-9):
+            raise ViformError(
+                f"integration_times_s sum to {sum(times) * 1e3:g} ms, which exceeds the "
+                f"frame period {period * 1e3:g} ms at frame_rate_hz = {frame_rate_hz:g}"
+            )
+        self.integration_times_s = times
+        self.overflow_capacitance_f = check_positive(
+            "overflow_capacitance_f", overflow_capacitance_f
+        )
+        self.v_reset_v = check_positive("v_reset_v", v_reset_v)
+        self.v_f_v = check_range("v_f_v", v_f_v, 0.0, self.v_reset_v, low_open=True, high_open=True)
+        self.share_use_time_s = check_positive("share_use_time_s", share_use_time_s)
+        self.c_pd_f = ELEMENTARY_CHARGE_C / parameters.conversion_gain_v_per_e
+        self.v_sat_v = (
+            self.v_reset_v - parameters.full_well_electrons * parameters.conversion_gain_v_per_e
+        )
+        if not self.v_sat_v < self.v_f_v:
+            raise ViformError(
+                f"the photodiode swing full_well_electrons × conversion_gain_v_per_e = "
+                f"{self.v_reset_v - self.v_sat_v:g} V does not reach below v_f_v = {v_f_v:g} V "
+                f"from v_reset_v = {v_reset_v:g} V; the overflow could never trigger"
+            )
+        super().__init__(
+            parameters,
+            exposure_s=sum(times),
+            frame_rate_hz=frame_rate_hz,
+            height=height,
+            width=width,
+            noise=noise,
+            fixed_pattern_seed=fixed_pattern_seed,
+        )
+        if height is not None:
+            self.check_row_timing(height)
+
+    # ------------------------------------------------------------------ column-shared unit timing
+    @property
+    def row_share_time_s(self) -> float:
+        """Time one row holds the column unit: t2 plus two uses (seed 003, §5: ≈ 0.51 ms)."""
+        return self.integration_times_s[1] + 2 * self.share_use_time_s
+
+    def max_rows(self) -> int:
+        """Most rows whose turns at the column unit fit in one frame period (seed 003, §5)."""
+        return int(np.floor((1.0 / self.frame_rate_hz) / self.row_share_time_s * (1 + 1e-12)))
+
+    def check_row_timing(self, rows: int) -> None:
+        """Refuse an array whose rows cannot all use the column-shared unit within a frame."""
+        rows = check_int("height", rows, 1)
+        need = rows * self.row_share_time_s
+        period = 1.0 / self.frame_rate_hz
+        if need > period * (1 + 1e-12):
+            raise ViformError(
+                f"height = {rows} rows do not fit the column-shared overflow unit: rows × "
+                f"per-row use time = {rows} × {self.row_share_time_s * 1e3:.3f} ms = "
+                f"{need * 1e3:.2f} ms exceeds the frame period {period * 1e3:.2f} ms "
+                f"(seed 003 §5); at most {self.max_rows()} rows at "
+                f"{self.frame_rate_hz:g} fps"
+            )
+
+    # ------------------------------------------------------------------ pixel physics
+    def _share_electrons(self, n):
+        """Eq. 1 in electrons of photodiode discharge: n = (V_res − V)·C_PD/q."""
+        cg = self.parameters.conversion_gain_v_per_e
+        v = self.v_reset_v - n * cg
+        v = share_charge_v(v, self.v_f_v, self.c_pd_f, self.overflow_capacitance_f)
+        return (self.v_reset_v - v) / cg
+
+    def capture_frame(
+        self,
+        scene: Scene,
+        start_s: float,
+        exposure_s: float | None = None,
+        *,
+        seed: int = 0,
+        frame_index: int = 0,
+    ) -> np.ndarray:
+        """One frame: t1, share, t2, share, t3, CDS read (seed 003, §3).
+
+        ``exposure_s`` scales the three integrations together (default: their seed sum).
+        Row r starts r · (frame period / rows) after ``start_s`` (row-by-row exposure).
+        """
+        height, width = self.check_scene(scene, self.height, self.width)
+        self.check_row_timing(height)
+        pixels = self.pixel_array(height, width)
+        rng = pixels.rng(seed, frame_index)
+        scale = (
+            1.0
+            if exposure_s is None
+            else check_positive("exposure_s", exposure_s) / self.exposure_s
+        )
+        times = [t * scale for t in self.integration_times_s]
+        fw = self.parameters.full_well_electrons
+        row_offset_s = (1.0 / self.frame_rate_hz) / height
+        static = isinstance(scene, StillScene)
+        n = np.zeros((height, width))
+        t0 = float(start_s)
+        for k, t in enumerate(times):
+            lux = self._window_lux(scene, t0, t, row_offset_s, static)
+            n = np.minimum(
+                n + pixels.collect_electrons(lux, t, rng, self.noise), fw
+            )  # eq. 3, V ≥ V_sat
+            if k < 2:
+                n = self._share_electrons(n)  # eqs. 1, 5, 6
+            t0 += t
+        # CDS: V_res − V3 is the signal; offsets cancel (seed 003, §3).
+        return pixels.digitize(n, rng, self.noise)
+
+    @staticmethod
+    def _window_lux(scene: Scene, t0: float, t: float, row_offset_s: float, static: bool):
+        if static:
+            return scene.mean_illuminance_lux(t0, t0 + t)
+        rows = [
+            scene.mean_illuminance_lux(t0 + r * row_offset_s, t0 + r * row_offset_s + t)[r]
+            for r in range(scene.height)
+        ]
+        return np.stack(rows)
+
+    # ------------------------------------------------------------------ analytic helpers
+    def photocurrent_a(self, lux):
+        """Photocurrent (A) of one pixel at illuminance ``lux`` (signal only)."""
+        return self.parameters.optics.electrons_per_s(lux) * ELEMENTARY_CHARGE_C
+
+    def lux_from_photocurrent(self, current_a):
+        return self.parameters.optics.lux_from_electrons_per_s(
+            np.asarray(current_a) / ELEMENTARY_CHARGE_C
+        )
+
+    def expected_voltages_v(self, photocurrent_a, exposure_s: float | None = None):
+        """Noise-free (V1, V2, V3) for a photocurrent (A), eqs. 1–6 (dark current included)."""
+        scale = 1.0 if exposure_s is None else exposure_s / self.exposure_s
+        return overflow_voltages_v(
+            photocurrent_a,
+            self.c_pd_f,
+            self.overflow_capacitance_f,
+            self.v_reset_v,
+            self.v_f_v,
+            self.v_sat_v,
+            [t * scale for t in self.integration_times_s],
+            self.parameters.dark_current_e_per_s * ELEMENTARY_CHARGE_C,
+        )
+
+    def expected_signal_electrons(self, photocurrent_a) -> np.ndarray:
+        """Noise-free CDS signal V_res − V3 in electrons at the photodiode."""
+        v3 = self.expected_voltages_v(photocurrent_a)[2]
+        return (self.v_reset_v - v3) / self.parameters.conversion_gain_v_per_e
+
+    def segment_boundaries_a(self) -> dict:
+        """Photocurrents at the seed's points B, C, D, E (see :func:`segment_boundaries_a`)."""
+        return segment_boundaries_a(
+            self.c_pd_f,
+            self.overflow_capacitance_f,
+            self.v_reset_v,
+            self.v_f_v,
+            self.v_sat_v,
+            self.integration_times_s,
+        )
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(
+            model=self.name,
+            integration_times_s=list(self.integration_times_s),
+            overflow_capacitance_f=self.overflow_capacitance_f,
+            v_f_v=self.v_f_v,
+            v_reset_v=self.v_reset_v,
+            v_sat_v=self.v_sat_v,
+            c_pd_f=self.c_pd_f,
+            share_use_time_s=self.share_use_time_s,
+            row_share_time_s=self.row_share_time_s,
+        )
+        return d
+
+
+def seed003_pixel_parameters(**overrides) -> FramePixelParameters:
+    """The seed 003 pixel: 25 µm pitch, 20 × 20 µm photodiode, 0.35 µm CMOS (seed 003, §1).
+
+    The seed gives no photodiode capacitance; C_PD is set so that a plain 4T APS
+    integrating the whole 33.33 ms frame saturates at 8 pA (seed 003, §6), with a
+    3.0 V swing (V_res = 3.3 V to V_sat = 0.3 V): C_PD = 8 pA · 33.33 ms / 3.0 V ≈ 88.9 fF.
+    """
+    from viform.light.radiometry import PixelOptics
+
+    c_pd_f = 8e-12 * (1 / 30.0) / 3.0
+    cg = ELEMENTARY_CHARGE_C / c_pd_f
+    fw = 3.0 / cg
+    kw = dict(
+        optics=PixelOptics(pixel_pitch_m=25e-6, fill_factor=(20 / 25) ** 2, quantum_efficiency=0.5),
+        full_well_electrons=fw,
+        conversion_gain_v_per_e=cg,
+        read_noise_electrons=60.0,
+        dark_current_e_per_s=2000.0,
+        dsnu_electrons=20.0,
+        prnu_fraction=0.01,
+        analog_gain=1.0,
+        adc_bits=12,
+        black_offset_dn=64.0,
+        adc_range_v=3.2,
+    )
+    kw.update(overrides)
+    return FramePixelParameters(**kw)
