@@ -1,0 +1,374 @@
+"""End-to-end high-frame-rate camera (seed 002).
+
+sensor → auto-exposure → DDR ring → decimation → equalization → link.
+
+Data path of the seed's camera (seed 002 Fig. 2): the LUX13HS (reduced mode, 100 MHz,
+1280 × 720 → 1 666.7 fps) feeds the FPGA, which meters every frame for auto-exposure
+(§3.2.4), writes every frame into a DDR4 ring (§3.2.5), reads one frame in N for the link
+(3:1 for CameraLink Full, §3.3) and equalizes it with a histogram (§3.2.2-§3.2.3).
+
+The pixel physics is :class:`viform.sensors.frame.FramePixelArray` with LUX13HS-like
+parameters (:func:`lux13hs_pixel_parameters`). Timing, links and the ring are computed for
+the *readout window* (``roi``); the image itself may be *rendered* on a coarser grid
+(``render_shape``) so a run takes seconds: each rendered pixel is one real pixel of the
+window (every k-th pixel), so its noise statistics are those of a real pixel, and the
+histogram of the rendered grid estimates the window's histogram.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from viform._validate import ViformError, check_int, check_positive
+from viform.isp.auto_exposure import AutoExposure, make_meter, settle_frames
+from viform.isp.histogram import StreamEqualizer, to_gray8
+from viform.isp.link import RingBuffer, link_plan
+from viform.light.radiometry import PixelOptics
+from viform.light.scenes import Scene
+from viform.sensors.frame import FramePixelParameters, FrameSensor
+from viform.sensors.highspeed_timing import ReadoutTiming, Window, lux13hs_timing
+
+
+def lux13hs_pixel_parameters(**overrides) -> FramePixelParameters:
+    """LUX13HS-like pixel (seed 002, Table 1).
+
+    QE 45 % (at 550 nm), 13.7 µm pitch, full well 30 ke⁻, read noise 15 e⁻, conversion gain
+    40 µV/e⁻, 10-bit column ADC. Mapping of the datasheet's relative figures:
+
+    * PRNU 1.5 % rms → ``prnu_fraction = 0.015`` (relative gain spread, as defined);
+    * DSNU 0.5 % rms → ``dsnu_electrons = 0.005 × 30 000 = 150 e⁻``: datasheets quote DSNU
+      as a fraction of the saturation (full-swing) signal;
+    * ADC input range = full well × conversion gain = 1.2 V, so K = 40 µV/e⁻ · 1023 / 1.2 V
+      = 0.0341 DN/e⁻; black offset 8 DN (2 gray levels in 8 bit) so DSNU and read noise
+      are not clipped at zero;
+    * dark current 1 000 e⁻/s (not in the seed; negligible at sub-millisecond exposures).
+
+    The datasheet's 25 V/(lux·s) responsivity is not imposed: our 555 nm monochromatic lux
+    conversion gives 13.8 V/(lux·s) for this pixel (white light has more photons per lux).
+    """
+    base = dict(optics=PixelOptics(pixel_pitch_m=13.7e-6, fill_factor=1.0, quantum_efficiency=0.45),
+                full_well_electrons=30_000.0, conversion_gain_v_per_e=40e-6,
+                read_noise_electrons=15.0, dark_current_e_per_s=1_000.0,
+                dsnu_electrons=0.005 * 30_000.0, prnu_fraction=0.015, analog_gain=1.0, adc_bits=10,
+                black_offset_dn=8.0, adc_range_v=30_000.0 * 40e-6)
+    base.update(overrides)
+    return FramePixelParameters(**base)
+
+
+@dataclass
+class HighSpeedConfig:
+    """Settings of one run (defaults: the seed's operating point).
+
+    Attributes
+    ----------
+    roi : str or Window
+        Readout window on the 1280 × 864 sensor ("WxH" centred or "X,Y,W,H").
+    mode, pixel_clock_hz : sensor readout mode and clock (see :func:`lux13hs_timing`).
+    interface : str
+        Link name (:data:`viform.isp.link.INTERFACES`).
+    decimation : int or None
+        N of N:1 frame sampling; None chooses it (:func:`viform.isp.link.choose_decimation`).
+    ae : bool
+        Auto-exposure on.
+    meter : str
+        "mean" (the seed), "weighted" or "percentile".
+    target_gray, band_gray : float
+        R_i and the dead band half-width (128 and 15).
+    ae_latency_frames : int
+        Frames between the metered frame and the one that gets the new exposure; 1 because
+        frame k+1 is already exposing while frame k is read out (seed 002 §3.2.4).
+    equalize : bool
+    eq_source, eq_method, eq_compensate : see :class:`viform.isp.histogram.StreamEqualizer`.
+    exposure_s : float
+        Initial (or fixed, without AE) exposure.
+    n_frames : int
+        Sensor frames to capture.
+    scene_samples : int
+        Points of the midpoint rule for the light during one exposure.
+    """
+
+    roi: str | Window = "1280x720"
+    mode: str = "reduced"
+    pixel_clock_hz: float | None = None
+    interface: str = "cameralink"
+    decimation: int | None = None
+    max_decimation: int = 64
+    ae: bool = True
+    meter: str = "mean"
+    target_gray: float = 128.0
+    band_gray: float = 15.0
+    ae_latency_frames: int = 1
+    equalize: bool = True
+    eq_source: str = "previous"
+    eq_method: str = "shift"
+    eq_compensate: bool = True
+    exposure_s: float = 100e-6
+    n_frames: int = 200
+    scene_samples: int = 4
+    seed: int = 0
+    pixel_parameters: FramePixelParameters = field(default_factory=lux13hs_pixel_parameters)
+
+
+@dataclass
+class HighSpeedResult:
+    """Output of :func:`run_highspeed`."""
+
+    gray8: np.ndarray            # (N, h, w) every sensor frame, 8-bit
+    exposure_cycles: np.ndarray  # (N,)
+    exposure_s: np.ndarray       # (N,)
+    metered_gray: np.ndarray     # (N,) what the AE meter saw
+    mean_gray: np.ndarray        # (N,) plain mean gray
+    frame_times_s: np.ndarray    # (N,) end of each exposure (frame transfer)
+    transmitted_indices: np.ndarray
+    output_frames: np.ndarray    # (M, h, w) frames leaving the link (equalized if on)
+    timing: dict
+    plan: dict
+    account: dict
+    equalizer: dict
+    config: dict
+
+
+def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None,
+                  timing: ReadoutTiming | None = None, progress=None) -> HighSpeedResult:
+    """Shoot ``scene`` with the LUX13HS-like camera and return every stage's output.
+
+    The scene is rendered at its own resolution (the rendered grid); the window's size sets
+    the timing, the link and the buffer.
+    """
+    cfg = config or HighSpeedConfig()
+    timing = timing or lux13hs_timing(cfg.mode, cfg.pixel_clock_hz)
+    window = timing.window(cfg.roi)
+    n = check_int("n_frames", cfg.n_frames, 1)
+    period_s = timing.frame_period_s(window)
+    rate_hz = timing.frame_rate_hz(window)
+    plan = link_plan(rate_hz, window.height, window.width, cfg.interface, 8, cfg.decimation,
+                     cfg.max_decimation)
+    n_cycles = timing.exposure_cycles(check_positive("exposure_s", cfg.exposure_s), window)
+    params = cfg.pixel_parameters
+    sensor = FrameSensor(params, exposure_s=period_s * 0.5, frame_rate_hz=rate_hz)
+    pixels = sensor.pixel_array(scene.height, scene.width)
+    black_gray = params.black_offset_dn / (1 << (params.adc_bits - 8))
+    controller = AutoExposure(timing.max_exposure_cycles(window), cfg.target_gray, cfg.band_gray,
+                              make_meter(cfg.meter), black_level_gray=black_gray)
+    latency = check_int("ae_latency_frames", cfg.ae_latency_frames, 0, 8)
+
+    gray = np.empty((n, scene.height, scene.width), dtype=np.uint8)
+    cycles = np.empty(n, dtype=np.int64)
+    metered = np.empty(n)
+    ends = (np.arange(n) + 1) * period_s
+    scheduled: dict[int, int] = {}
+    for k in range(n):
+        cycles[k] = scheduled.pop(k, n_cycles)
+        n_cycles = int(cycles[k])
+        t_exp = n_cycles * timing.clock_period_s
+        lux = scene.mean_illuminance_lux(ends[k] - t_exp, ends[k], samples=cfg.scene_samples)
+        rng = pixels.rng(cfg.seed, k)
+        dn = pixels.digitize(pixels.collect_electrons(lux, t_exp, rng), rng)
+        gray[k] = to_gray8(dn, params.adc_bits)
+        metered[k], nxt = controller.update(gray[k], n_cycles)
+        if cfg.ae:
+            # Frames k+1 … k+latency already have their exposure; the new N starts after them.
+            for j in range(k + 1, k + 1 + latency):
+                scheduled.setdefault(j, n_cycles)
+            scheduled[k + 1 + latency] = nxt
+            n_cycles = nxt if latency == 0 else n_cycles
+        if progress is not None:
+            progress(1)
+
+    ring = RingBuffer(plan["buffer_capacity_frames"], rate_hz, plan["link_max_frame_rate_hz"],
+                      plan["decimation"])
+    account = ring.run(n)
+    sent = account.transmitted_indices
+    eq = StreamEqualizer(cfg.eq_source, cfg.eq_method, cfg.eq_compensate)
+    if cfg.equalize:
+        out = np.stack([eq(gray[i]) for i in sent]) if sent.size else gray[:0]
+    else:
+        out = gray[sent]
+    exposure_s = cycles * timing.clock_period_s
+    return HighSpeedResult(
+        gray8=gray, exposure_cycles=cycles, exposure_s=exposure_s, metered_gray=metered,
+        mean_gray=gray.reshape(n, -1).mean(axis=1), frame_times_s=ends, transmitted_indices=sent,
+        output_frames=out, timing=timing.summary(window), plan=plan, account=account.to_dict(),
+        equalizer={"on": cfg.equalize, "source": cfg.eq_source, "method": cfg.eq_method,
+                   "compensate": cfg.eq_compensate},
+        config={k: v for k, v in cfg.__dict__.items() if k != "pixel_parameters"}
+        | {"pixel_parameters": params.to_dict(), "render_shape": [scene.height, scene.width],
+           "scene": scene.describe()})
+
+
+# ----------------------------------------------------------------------------- scenes
+
+class ScaledScene(Scene):
+    """``base`` with its illuminance multiplied by ``gain`` (lux → lux)."""
+
+    name = "scaled"
+
+    def __init__(self, base: Scene, gain: float):
+        super().__init__(base.height, base.width, base.duration_s)
+        self.base = base
+        self.gain = check_positive("gain", gain)
+
+    def illuminance_lux(self, t_s):
+        return self.base.illuminance_lux(t_s) * self.gain
+
+    def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
+        return self.base.mean_illuminance_lux(t0_s, t1_s, samples) * self.gain
+
+    def describe(self):
+        return {**super().describe(), "gain": self.gain, "base": self.base.describe()}
+
+
+class StepsScene(Scene):
+    """``base`` multiplied by a piecewise-constant factor: ×f_j from t_j on (exact window mean)."""
+
+    name = "steps"
+
+    def __init__(self, base: Scene, steps):
+        super().__init__(base.height, base.width, base.duration_s)
+        self.base = base
+        steps = sorted((float(t), check_positive("step factor", f)) for t, f in steps)
+        self.times_s = np.array([t for t, _ in steps])
+        self.levels = np.cumprod([1.0] + [f for _, f in steps])
+
+    def factor(self, t_s: float) -> float:
+        return float(self.levels[np.searchsorted(self.times_s, t_s, side="right")])
+
+    def illuminance_lux(self, t_s):
+        return self.base.illuminance_lux(t_s) * self.factor(t_s)
+
+    def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
+        if t1_s <= t0_s:
+            return self.illuminance_lux(t0_s)
+        edges = np.concatenate([[t0_s], self.times_s[(self.times_s > t0_s) & (self.times_s < t1_s)],
+                                [t1_s]])
+        acc = 0.0
+        for a, b in zip(edges[:-1], edges[1:], strict=True):
+            acc = acc + self.base.mean_illuminance_lux(a, b, samples) * self.factor(a) * (b - a)
+        return acc / (t1_s - t0_s)
+
+    def describe(self):
+        return {**super().describe(), "step_times_s": self.times_s.tolist(),
+                "levels": self.levels.tolist(), "base": self.base.describe()}
+
+
+def parse_steps(text: str | None):
+    """``"0.03:10,0.07:0.1"`` → [(0.03, 10.0), (0.07, 0.1)] (time_s:factor pairs)."""
+    if not text:
+        return []
+    out = []
+    for part in str(text).split(","):
+        try:
+            t, f = part.split(":")
+            out.append((float(t), float(f)))
+        except ValueError:
+            raise ViformError(f"steps = {text!r} is not allowed: write "
+                              "TIME_S:FACTOR[,TIME_S:FACTOR…]") from None
+    return out
+
+
+def backlit_scene(height: int = 90, width: int = 160, background_lux: float = 2_000.0,
+                  target_lux: float = 40.0, target_fraction: float = 0.3) -> Scene:
+    """A dark central target (``target_fraction`` of each side) in front of a bright background.
+
+    The seed's failure case for mean metering (§4): background and target differ strongly.
+    """
+    from viform.light.scenes import StillScene
+
+    lux = np.full((height, width), float(background_lux))
+    h0, w0 = int(height * (1 - target_fraction) / 2), int(width * (1 - target_fraction) / 2)
+    lux[h0:height - h0, w0:width - w0] = target_lux
+    return StillScene(lux)
+
+
+def target_mask(height: int, width: int, target_fraction: float = 0.3) -> np.ndarray:
+    m = np.zeros((height, width), dtype=bool)
+    h0, w0 = int(height * (1 - target_fraction) / 2), int(width * (1 - target_fraction) / 2)
+    m[h0:height - h0, w0:width - w0] = True
+    return m
+
+
+def ae_settling(result: HighSpeedResult, step_times_s, target_gray: float,
+                band_gray: float) -> list:
+    """Per step: frames from the first frame the step touches until the meter stays in band."""
+    out = []
+    for t in step_times_s:
+        first = int(np.searchsorted(result.frame_times_s, t, side="right"))
+        if first >= len(result.frame_times_s):
+            continue
+        nxt = [s for s in step_times_s if s > t]
+        stop = (int(np.searchsorted(result.frame_times_s, nxt[0], side="right")) if nxt
+                else len(result.frame_times_s))
+        frames = settle_frames(result.metered_gray[:stop], target_gray, band_gray, first)
+        period = result.timing["frame_period_s"]
+        out.append({"step_time_s": float(t), "first_frame": first, "settle_frames": frames,
+                    "settle_s": None if frames is None else frames * period})
+    return out
+
+
+# ----------------------------------------------------------------------------- outputs
+
+def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", step_times_s=(),
+                  playback_fps: float = 25.0) -> dict:
+    """Write ``video.<fmt>``, ``exposure.png`` and ``report.json`` atomically; return the report."""
+    from pathlib import Path
+
+    import imageio.v3 as iio
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from viform._io import atomic_path, save_figure, write_json
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    video = out / f"video.{video_format}"
+    frames = result.output_frames if len(result.output_frames) else result.gray8[:1]
+    with atomic_path(video) as tmp:
+        if video_format == "gif":
+            iio.imwrite(tmp, frames, extension=".gif", duration=1000.0 / playback_fps, loop=0)
+        else:
+            iio.imwrite(tmp, frames, extension=".mp4", fps=playback_fps, macro_block_size=1)
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    k = np.arange(len(result.exposure_s))
+    ax1.plot(k, result.exposure_s * 1e6, drawstyle="steps-post", color="C0")
+    ax1.set_ylabel("exposure (µs)")
+    ax1.set_title(f"{result.timing['frame_rate_hz']:.1f} fps, meter={result.config['meter']}, "
+                  f"AE {'on' if result.config['ae'] else 'off'}")
+    cfg = result.config
+    ax2.axhspan(cfg["target_gray"] - cfg["band_gray"], cfg["target_gray"] + cfg["band_gray"],
+                color="C2", alpha=0.2, label="dead band")
+    ax2.plot(k, result.mean_gray, color="C1", label="mean gray")
+    if cfg["meter"] != "mean":
+        ax2.plot(k, result.metered_gray, color="C3", label=f"{cfg['meter']} meter")
+    sent = result.transmitted_indices
+    ax2.plot(sent, result.mean_gray[sent], "k.", ms=3, label="transmitted")
+    for t in step_times_s:
+        idx = np.searchsorted(result.frame_times_s, t)
+        for ax in (ax1, ax2):
+            ax.axvline(idx, color="0.5", ls=":")
+    ax2.set_ylim(0, 260)
+    ax2.set_xlabel("sensor frame")
+    ax2.set_ylabel("gray (0–255)")
+    ax2.legend(loc="best", fontsize=8)
+    save_figure(out / "exposure.png", fig)
+
+    report = {
+        "frames_captured": result.account["frames_captured"],
+        "frames_buffered_at_end": result.account["frames_buffered_at_end"],
+        "frames_transmitted": result.account["frames_transmitted"],
+        "frames_dropped": result.account["frames_dropped"],
+        "selected_but_overwritten": result.account["selected_but_overwritten"],
+        "sensor_frame_rate_hz": result.timing["frame_rate_hz"],
+        "link": {k: v for k, v in result.plan.items() if k != "link"},
+        "timing": result.timing,
+        "ae_settling": ae_settling(result, step_times_s, cfg["target_gray"], cfg["band_gray"]),
+        "equalizer": result.equalizer,
+        "config": result.config,
+        "files": {"video": video.name, "plot": "exposure.png", "report": "report.json"},
+    }
+    write_json(out / "report.json", report)
+    return report
