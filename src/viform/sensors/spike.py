@@ -1,0 +1,448 @@
+"""The spike camera: pulse-sequence modulation pixels read on a synchronous clock (seed 000 §3.2).
+
+Each pixel integrates photoelectrons (signal + dark current) until its charge reaches the
+threshold Q electrons, fires a spike and resets itself; the spikes are read out on a
+synchronous clock (40 kHz by default, seed 000 §6), one bit per pixel per tick.
+
+Photon statistics are exact (seed 000 §5.1). Photoelectrons arrive as a Poisson process
+of rate λ(t), so in *integrated-charge time* Λ(t) = ∫λ dt the arrivals form a unit-rate
+Poisson process and the charge needed for the next spike is Gamma(Q, 1) — the
+time-rescaling theorem. The simulator therefore adds the expected charge of each tick,
+∫λ over the tick, to a per-pixel accumulator and fires when it passes a Gamma(Q, 1)
+target; no per-tick Poisson draw and no Gaussian approximation is made. With
+``photon_noise=False`` the target is Q itself (the deterministic, noise-free model).
+
+Saturation: readout allows at most one spike per pixel per tick, so light above
+Q·clock_hz electrons/s (τ̌ = 1/clock_hz, seed 000 §4.3) gives a spike every tick; the
+extra threshold crossings inside a tick are lost (self-reset pixel) or the charge after
+the crossing is drained at readout (``reset="readout"``). The expected firing rate of the
+self-reset pixel is therefore 1 − P(no crossing in a tick), which tends to one per tick.
+
+Reproducibility: the k-th interval of pixel p is drawn by a counter-based generator from
+(seed, p, k) (:mod:`viform.sensors._gamma`), and the light of each tick is computed from
+absolute tick indices, so the same seed gives the same bits whatever the block size.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+from numba import get_num_threads, njit, prange
+
+from viform._validate import (
+    ViformError,
+    check_choice,
+    check_int,
+    check_non_negative,
+    check_positive,
+)
+from viform.light.radiometry import PixelOptics
+from viform.light.scenes import Scene
+from viform.sensors._gamma import (
+    build_tables,
+    gamma_draw,
+    splitmix64,
+    stream_keys,
+    uniform_from_hash,
+)
+from viform.sensors.base import Sensor
+from viform.stream.container import SpikeSource, SpikeStream
+
+#: The chip's 16 selectable threshold levels, e⁻. Seed 000 §6 says the threshold "supports
+#: 16 levels of adjustment" without listing them; viform assumes √2 steps from 25 e⁻
+#: (so Q = 100, the seed's worked example, is level 4). Any other positive value is allowed.
+CHIP_THRESHOLD_LEVELS_ELECTRONS = tuple(int(round(25 * math.sqrt(2) ** k)) for k in range(16))
+
+#: Readout clocks of the chips (seed 000 §6): 40 kHz, and the 20 kHz mode.
+CLOCK_40KHZ = 40_000.0
+CLOCK_20KHZ = 20_000.0
+
+_TILE = 256  # pixels per work item
+_WINDOW = 64  # ticks per window: the tile's output (16 KB) stays in L1 while it is written
+
+
+@dataclass(frozen=True)
+class SpikeSensorParameters:
+    """Parameters of a spike-camera pixel array (units in the names).
+
+    Attributes
+    ----------
+    optics : PixelOptics
+        Pitch (10 µm: the seed's 100 µm² pixel), fill factor, QE (0.7, seed 000 §4.3).
+    threshold_electrons : float
+        Accumulation threshold Q, e⁻ (rounded to a whole number of electrons per pixel).
+        ``CHIP_THRESHOLD_LEVELS_ELECTRONS`` lists the chip's 16 levels.
+    clock_hz : float
+        Synchronous readout clock, Hz (40 kHz; 20 kHz mode).
+    dark_current_e_per_s : float
+        Dark current, e⁻/s (< 100 e⁻/s in modern CMOS, seed 000 §4.4).
+    threshold_spread_fraction : float
+        Fixed-pattern spread of Q across pixels (std / mean).
+    random_initial_charge : bool
+        Start each pixel a uniformly random fraction of the way through its first interval
+        (True), or empty (False).
+    reset : {"self", "readout"}
+        Self-reset at the threshold crossing (charge after it is kept), or reset at the next
+        readout tick (charge collected after the crossing is drained).
+    photon_noise : bool
+        Exact Poisson photon/dark statistics (True) or the deterministic model (False).
+    fixed_pattern_seed : int
+        Seed of the sensor's own threshold pattern.
+    """
+
+    optics: PixelOptics = field(default_factory=lambda: PixelOptics(pixel_pitch_m=10e-6,
+                                                                    quantum_efficiency=0.7))
+    threshold_electrons: float = 100.0
+    clock_hz: float = CLOCK_40KHZ
+    dark_current_e_per_s: float = 20.0
+    threshold_spread_fraction: float = 0.0
+    random_initial_charge: bool = True
+    reset: str = "self"
+    photon_noise: bool = True
+    fixed_pattern_seed: int = 2015
+
+    def __post_init__(self):
+        check_positive("threshold_electrons", self.threshold_electrons)
+        if round(self.threshold_electrons) < 1:
+            raise ViformError(f"threshold_electrons = {self.threshold_electrons!r} is not allowed: "
+                              "it must be at least 1 electron")
+        check_positive("clock_hz", self.clock_hz)
+        check_non_negative("dark_current_e_per_s", self.dark_current_e_per_s)
+        spread = check_non_negative("threshold_spread_fraction", self.threshold_spread_fraction)
+        if spread >= 0.5:
+            raise ViformError(f"threshold_spread_fraction = {spread!r} is not allowed: it must be < 0.5")
+        check_choice("reset", self.reset, ("self", "readout"))
+
+    @property
+    def shortest_interval_s(self) -> float:
+        """τ̌: the readout period, the shortest representable interval (seed 000 §4.3)."""
+        return 1.0 / self.clock_hz
+
+    @property
+    def longest_signal_interval_s(self) -> float:
+        """τ̂ = Q / Id: intervals longer than this are dark current (seed 000 §4.4)."""
+        if self.dark_current_e_per_s == 0:
+            return math.inf
+        return self.threshold_electrons / self.dark_current_e_per_s
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class SpikeSimulationState:
+    """Per-pixel state carried between time blocks: charge and target (fixed point, 2^-32 e⁻), interval counter."""
+
+    def __init__(self, charge, target, counter, keys, next_tick: int = 0):
+        self.charge = charge
+        self.target = target
+        self.counter = counter
+        self.keys = keys  # per-pixel random-stream keys derived from the seed
+        self.next_tick = next_tick
+
+
+class SpikeSensor(Sensor):
+    """A spike camera (pulse-sequence modulation, seed 000 §3.2) of a given resolution.
+
+    Parameters
+    ----------
+    parameters : SpikeSensorParameters, optional
+    height, width : int, optional
+        Resolution; None takes the scene's.
+    **overrides
+        Any :class:`SpikeSensorParameters` field, e.g. ``threshold_electrons=400``.
+
+    Examples
+    --------
+    >>> from viform.light.scenes import StillScene
+    >>> sensor = SpikeSensor(threshold_electrons=100)
+    >>> stream = sensor.capture(StillScene(np.full((4, 4), 2.0)), 0.01, seed=1)
+    >>> stream.shape
+    (400, 4, 4)
+    """
+
+    name = "spike"
+
+    def __init__(self, parameters: SpikeSensorParameters | None = None, height: int | None = None,
+                 width: int | None = None, **overrides):
+        parameters = parameters or SpikeSensorParameters()
+        if overrides:
+            try:
+                parameters = replace(parameters, **overrides)
+            except TypeError as exc:
+                raise ViformError(f"unknown spike-sensor parameter: {exc}") from None
+        self.parameters = parameters
+        self.height, self.width = height, width
+        self._tables: dict[tuple[int, int], tuple] = {}
+
+    # ------------------------------------------------------------------ fixed pattern
+    def threshold_map_electrons(self, height: int, width: int) -> np.ndarray:
+        """Per-pixel threshold Q (whole electrons) including the fixed-pattern spread."""
+        p = self.parameters
+        q = np.full((height, width), float(round(p.threshold_electrons)))
+        if p.threshold_spread_fraction > 0:
+            rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([p.fixed_pattern_seed, 0x51])))
+            q = np.rint(p.threshold_electrons * (1 + p.threshold_spread_fraction
+                                                 * rng.standard_normal((height, width))))
+        return np.maximum(q, 1.0)
+
+    def _pixel_tables(self, height: int, width: int):
+        key = (height, width)
+        if key not in self._tables:
+            q = self.threshold_map_electrons(height, width).ravel()
+            shapes, index = np.unique(q, return_inverse=True)
+            tables = build_tables(shapes) if self.parameters.photon_noise else \
+                tuple(np.zeros((1, 1)) for _ in range(4))
+            self._tables[key] = (q, shapes, index.astype(np.int32), tables)
+        return self._tables[key]
+
+    # ------------------------------------------------------------------ light
+    def electrons_per_tick(self, lux) -> np.ndarray:
+        """Expected electrons (signal + dark) collected per tick at illuminance ``lux``."""
+        p = self.parameters
+        return (p.optics.electrons_per_s(lux) + p.dark_current_e_per_s) / p.clock_hz
+
+    def expected_firing_rate_per_tick(self, lux) -> np.ndarray:
+        """Mean spikes per tick of a steady pixel (deterministic model, self-reset).
+
+        min(λ·dt / Q, 1): the clock caps the rate at one spike per tick.
+        """
+        return np.minimum(self.electrons_per_tick(lux) / round(self.parameters.threshold_electrons), 1.0)
+
+    # ------------------------------------------------------------------ simulation
+    def initial_state(self, height: int, width: int, seed: int) -> SpikeSimulationState:
+        """State at t = 0: first targets and (optionally) a random initial charge."""
+        q, shapes, index, tables = self._pixel_tables(height, width)
+        n = q.size
+        counter = np.zeros(n, dtype=np.int64)
+        target = np.empty(n, dtype=np.int64)
+        charge = np.zeros(n, dtype=np.int64)
+        keys = stream_keys(seed, n)
+        _initial_targets(target, charge, counter, q, index, *tables, keys,
+                         self.parameters.photon_noise, self.parameters.random_initial_charge)
+        return SpikeSimulationState(charge, target, counter, keys, 0)
+
+    def simulate(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
+                 light_sample_ticks: int = 1, progress: bool = False,
+                 state: SpikeSimulationState | None = None) -> Iterator[tuple[int, np.ndarray]]:
+        """Simulate tick by tick in time blocks; yields ``(first_tick, spikes)`` with bool (T, H, W).
+
+        Memory is bounded by the block (default: about 64 MB of light samples and bits).
+
+        Parameters
+        ----------
+        scene : Scene
+            The light.
+        duration_s : float
+            Length of the stream, seconds (rounded to whole ticks).
+        seed : int
+            Photon-noise seed. Same seed, same bits, whatever ``block_ticks``.
+        block_ticks : int, optional
+            Ticks per block.
+        light_sample_ticks : int
+            The scene is evaluated at the middle of every interval of ``light_sample_ticks``
+            ticks and held over it; 1 (default) evaluates it at the middle of every tick.
+        """
+        check_positive("duration_s", duration_s)
+        p = self.parameters
+        n_ticks = max(1, int(round(duration_s * p.clock_hz)))
+        height, width = self.check_scene(scene, self.height, self.width)
+        pixels = height * width
+        sample = check_int("light_sample_ticks", light_sample_ticks, 1)
+        if block_ticks is None:
+            block_ticks = max(sample, (64 << 20) // max(1, pixels * (1 + 8 // sample)))
+        block_ticks = check_int("block_ticks", block_ticks, 1)
+        q, shapes, index, tables = self._pixel_tables(height, width)
+        if state is None:
+            state = self.initial_state(height, width, seed)
+        reset_readout = p.reset == "readout"
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=n_ticks, unit="tick", desc="simulate", leave=False, unit_scale=True)
+        try:
+            for first in range(0, n_ticks, block_ticks):
+                last = min(first + block_ticks, n_ticks)
+                j0, j1 = first // sample, -(-last // sample)
+                # light sampled at the middle of each interval of `sample` ticks, held over it
+                times = (np.arange(j0, j1) + 0.5) * (sample / p.clock_hz)
+                lux = scene.illuminance_lux_many(times).reshape(times.size, pixels)
+                rates = np.rint(self.electrons_per_tick(lux) * FIXED_POINT_SCALE).astype(np.int64)
+                out = np.empty((last - first, pixels), dtype=np.bool_)
+                _run_block(out, rates, first, sample, j0, state.charge, state.target, state.counter,
+                           q, index, *tables, state.keys, p.photon_noise, reset_readout)
+                state.next_tick = last
+                if bar is not None:
+                    bar.update(last - first)
+                yield first, out.reshape(last - first, height, width)
+        finally:
+            if bar is not None:
+                bar.close()
+
+    def capture(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
+                light_sample_ticks: int = 1, progress: bool = False) -> SpikeStream:
+        """Simulate into memory and return the :class:`SpikeStream`."""
+        blocks = [b for _, b in self.simulate(scene, duration_s, seed=seed, block_ticks=block_ticks,
+                                              light_sample_ticks=light_sample_ticks, progress=progress)]
+        return SpikeStream(np.concatenate(blocks), self.parameters.clock_hz, self.parameters.threshold_electrons,
+                           0.0, self.capture_metadata(scene, seed, light_sample_ticks))
+
+    def stream(self, scene: Scene, duration_s: float, *, seed: int = 0, light_sample_ticks: int = 1,
+               progress: bool = False) -> SimulatedSpikes:
+        """A lazy :class:`SpikeSource` that simulates as it is read (bounded memory)."""
+        return SimulatedSpikes(self, scene, duration_s, seed, light_sample_ticks, progress)
+
+    def capture_metadata(self, scene: Scene, seed: int, light_sample_ticks: int) -> dict:
+        return {"sensor": self.describe(), "scene": scene.describe(), "seed": seed,
+                "light_sample_ticks": light_sample_ticks}
+
+    def describe(self) -> dict:
+        d = self.parameters.to_dict()
+        d["model"] = self.name
+        d["shortest_interval_s"] = self.parameters.shortest_interval_s
+        d["longest_signal_interval_s"] = self.parameters.longest_signal_interval_s
+        return d
+
+
+class SimulatedSpikes(SpikeSource):
+    """A spike stream simulated on demand, block by block, for files longer than memory.
+
+    Reading is sequential: ``iter_blocks`` simulates from the start each time;
+    ``read_ticks`` does so up to the requested ticks (simple, not fast).
+    """
+
+    def __init__(self, sensor: SpikeSensor, scene: Scene, duration_s: float, seed: int,
+                 light_sample_ticks: int = 1, progress: bool = False):
+        p = sensor.parameters
+        self.sensor, self.scene, self.seed = sensor, scene, seed
+        self.light_sample_ticks, self.progress = light_sample_ticks, progress
+        self.height, self.width = sensor.check_scene(scene, sensor.height, sensor.width)
+        self.n_ticks = max(1, int(round(check_positive("duration_s", duration_s) * p.clock_hz)))
+        self.clock_hz = p.clock_hz
+        self.threshold_electrons = p.threshold_electrons
+        self.start_time_s = 0.0
+        self.metadata = sensor.capture_metadata(scene, seed, light_sample_ticks)
+
+    def iter_blocks(self, block_ticks: int = 1024, start: int = 0, stop: int | None = None):
+        stop = self.n_ticks if stop is None else min(stop, self.n_ticks)
+        sim = self.sensor.simulate(self.scene, self.n_ticks / self.clock_hz, seed=self.seed,
+                                   block_ticks=block_ticks, light_sample_ticks=self.light_sample_ticks,
+                                   progress=self.progress)
+        for first, block in sim:
+            if first + block.shape[0] <= start:
+                continue
+            if first >= stop:
+                break
+            a, b = max(start - first, 0), min(stop - first, block.shape[0])
+            yield first + a, block[a:b]
+
+    def read_ticks(self, start: int, stop: int) -> np.ndarray:
+        parts = [b for _, b in self.iter_blocks(max(1, stop - start), start, stop)]
+        return np.concatenate(parts) if parts else np.zeros((0, self.height, self.width), bool)
+
+
+# ---------------------------------------------------------------------- kernels
+# Charge is kept in fixed point (2^-32 e⁻ units, int64): integer sums are exact and
+# associative, so the event-driven kernel below, which jumps straight to the next
+# threshold crossing, gives the same bits as tick-by-tick summation, whatever the block size.
+FIXED_POINT_SCALE = float(1 << 32)
+
+
+@njit(cache=True)
+def _initial_targets(target, charge, counter, q, index, edges, widths, log_peak, squeeze, keys,
+                     noise, random_initial):
+    scale = 4294967296.0
+    for p in range(q.size):
+        if noise:
+            t = gamma_draw(q[p], index[p], edges, widths, log_peak, squeeze, keys[p], 0)
+        else:
+            t = q[p]
+        target[p] = max(np.int64(1), np.int64(t * scale + 0.5))
+        counter[p] = 1
+        if random_initial:
+            # an independent hash places the pixel inside its first interval
+            u = uniform_from_hash(splitmix64(keys[p] ^ np.uint64(0x5EED5EED5EED5EED)))
+            charge[p] = np.int64(u * target[p])
+
+
+@njit(cache=True, inline="always")
+def _next_target(p, q, index, edges, widths, log_peak, squeeze, keys, noise, counter):
+    if noise:
+        t = gamma_draw(q[p], index[p], edges, widths, log_peak, squeeze, keys[p], counter[p])
+    else:
+        t = q[p]
+    counter[p] += 1
+    return max(np.int64(1), np.int64(t * 4294967296.0 + 0.5))
+
+
+@njit(cache=True, parallel=True)
+def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter, q, index,
+               edges, widths, log_peak, squeeze, keys, noise, reset_readout):
+    """Integrate-and-fire over one block of ticks, event-driven per pixel.
+
+    ``rates[j, p]`` is the fixed-point charge per tick of pixel p in light-sample interval
+    j (ticks [(sample0 + j)·sample, (sample0 + j + 1)·sample)). Within an interval the
+    charge grows linearly, so the tick of the next crossing is one integer division.
+    Work goes in tiles of pixels × windows of ticks so the output being written stays in
+    cache; ``out`` need not be zeroed beforehand.
+    """
+    n_ticks, n_pixels = out.shape
+    n_tiles = (n_pixels + _TILE - 1) // _TILE
+    for tile in prange(n_tiles):
+        p0 = tile * _TILE
+        p1 = min(p0 + _TILE, n_pixels)
+        for w0 in range(0, n_ticks, _WINDOW):
+            w1 = min(w0 + _WINDOW, n_ticks)
+            for row in range(w0, w1):
+                out[row, p0:p1] = False
+            j_first = (first_tick + w0) // sample  # the sample grid is shared by all pixels
+            for p in range(p0, p1):
+                c = charge[p]
+                t = target[p]
+                k = w0
+                j = j_first
+                j_end = (j + 1) * sample - first_tick
+                while k < w1:
+                    end = min(j_end, w1)
+                    e = rates[j - sample0, p]
+                    inv_e = 1.0 / e if e > 0 else 0.0
+                    while e > 0:
+                        # ticks until the charge reaches the target, ceil((t − c)/e), by a float
+                        # product (division is slow) corrected to the exact integer
+                        steps = np.int64((t - c) * inv_e)
+                        if c + steps * e < t:
+                            steps += 1
+                        elif steps > 1 and c + (steps - 1) * e >= t:
+                            steps -= 1
+                        if steps < 1:
+                            steps = 1
+                        if k + steps > end:
+                            break
+                        c += steps * e
+                        k += steps
+                        out[k - 1, p] = True
+                        if reset_readout:
+                            c = 0
+                            t = _next_target(p, q, index, edges, widths, log_peak, squeeze, keys, noise,
+                                             counter)
+                        else:
+                            # further crossings inside the same tick are lost to the one-bit readout
+                            while c >= t:
+                                c -= t
+                                t = _next_target(p, q, index, edges, widths, log_peak, squeeze, keys,
+                                                 noise, counter)
+                    c += (end - k) * e
+                    k = end
+                    if k == j_end:
+                        j += 1
+                        j_end += sample
+                charge[p] = c
+                target[p] = t
+
+
+def simulation_threads() -> int:
+    """Threads numba uses for the simulation kernel."""
+    return get_num_threads()
