@@ -47,7 +47,7 @@ class WeightedMeter:
 
     name = "weighted"
 
-    def __init__(self, weights=None, sigma_fraction: float = 0.2):
+    def __init__(self, weights=None, sigma_fraction: float = 0.12):
         self.weights = None if weights is None else np.asarray(weights, dtype=np.float64)
         if self.weights is not None and (self.weights.min() < 0 or self.weights.sum() <= 0):
             raise ViformError("weights must be ≥ 0 with a positive sum")

@@ -159,6 +159,7 @@ def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None,
     metered = np.empty(n)
     ends = (np.arange(n) + 1) * period_s
     scheduled: dict[int, int] = {}
+    command = n_cycles  # the latest exposure sent to the sensor
     for k in range(n):
         cycles[k] = scheduled.pop(k, n_cycles)
         n_cycles = int(cycles[k])
@@ -172,8 +173,11 @@ def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None,
             # Frames k+1 … k+latency already have their exposure; the new N starts after them.
             for j in range(k + 1, k + 1 + latency):
                 scheduled.setdefault(j, n_cycles)
-            scheduled[k + 1 + latency] = nxt
-            n_cycles = nxt if latency == 0 else n_cycles
+            # A frame exposed with a superseded N (the command was sent while it was
+            # already exposing) is not fed back: otherwise two interleaved loops form.
+            if n_cycles != command:
+                nxt = command
+            scheduled[k + 1 + latency] = command = nxt
         if progress is not None:
             progress(1)
 
@@ -268,25 +272,63 @@ def parse_steps(text: str | None):
     return out
 
 
-def backlit_scene(height: int = 90, width: int = 160, background_lux: float = 2_000.0,
-                  target_lux: float = 40.0, target_fraction: float = 0.3) -> Scene:
-    """A dark central target (``target_fraction`` of each side) in front of a bright background.
+def backlit_scene(height: int = 90, width: int = 160, background_lux: float = 3_000.0,
+                  target_lux: float = 150.0, target_fraction: float = 0.4) -> Scene:
+    """A dark central target (``target_fraction`` of each side) before a bright background.
 
-    The seed's failure case for mean metering (§4): background and target differ strongly.
+    The seed's failure case for mean metering (§4): background and target differ strongly
+    (here 20×, the target covering 16 % of the frame).
     """
     from viform.light.scenes import StillScene
 
     lux = np.full((height, width), float(background_lux))
-    h0, w0 = int(height * (1 - target_fraction) / 2), int(width * (1 - target_fraction) / 2)
-    lux[h0:height - h0, w0:width - w0] = target_lux
+    lux[target_mask(height, width, target_fraction)] = target_lux
     return StillScene(lux)
 
 
-def target_mask(height: int, width: int, target_fraction: float = 0.3) -> np.ndarray:
+def spot_scene(height: int = 90, width: int = 160, background_lux: float = 150.0,
+               spot_lux: float = 5_000.0, spot_px: int = 16) -> Scene:
+    """A small bright square (``spot_px`` wide) on a dim background: mean metering saturates it."""
+    from viform.light.scenes import StillScene
+
+    lux = np.full((height, width), float(background_lux))
+    r0, c0 = (height - spot_px) // 2, (width - spot_px) // 2
+    lux[r0:r0 + spot_px, c0:c0 + spot_px] = spot_lux
+    return StillScene(lux)
+
+
+def target_mask(height: int, width: int, target_fraction: float = 0.4) -> np.ndarray:
+    """The central target region of :func:`backlit_scene`."""
     m = np.zeros((height, width), dtype=bool)
     h0, w0 = int(height * (1 - target_fraction) / 2), int(width * (1 - target_fraction) / 2)
     m[h0:height - h0, w0:width - w0] = True
     return m
+
+
+def metering_demo(render_shape=(90, 160), n_frames: int = 30, seed: int = 0) -> dict:
+    """Mean versus weighted metering on :func:`backlit_scene`, mean versus percentile on
+    :func:`spot_scene` (seed 002 §4-§5: mean-gray feedback fails when target and background
+    differ strongly). Returns the target's gray and saturated fraction after settling."""
+    h, w = render_shape
+    out = {}
+    cases = (("backlit", backlit_scene(h, w), target_mask(h, w), (("mean", 128.0),
+                                                                  ("weighted", 128.0))),
+             ("spot", spot_scene(h, w), None, (("mean", 128.0), ("percentile", 200.0))))
+    for name, scene, mask, meters in cases:
+        if mask is None:
+            mask = scene.illuminance_lux(0.0) > scene.illuminance_lux(0.0).min()
+        for meter, target in meters:
+            r = run_highspeed(scene, HighSpeedConfig(n_frames=n_frames, meter=meter,
+                                                     target_gray=target, equalize=False,
+                                                     seed=seed))
+            g = r.gray8[-1]
+            out[f"{name}/{meter}"] = {
+                "target_gray_setting": target, "exposure_s": float(r.exposure_s[-1]),
+                "metered_gray": float(r.metered_gray[-1]),
+                "target_mean_gray": float(g[mask].mean()),
+                "target_saturated_fraction": float((g[mask] >= 255).mean()),
+                "background_mean_gray": float(g[~mask].mean())}
+    return out
 
 
 def ae_settling(result: HighSpeedResult, step_times_s, target_gray: float,
