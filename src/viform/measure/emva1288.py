@@ -77,21 +77,12 @@ def pair_statistics(frame_a, frame_b) -> tuple[float, float]:
 def photons_per_pixel(sensor: FrameSensor, lux, exposure_s) -> np.ndarray:
     """Mean photons on the whole pixel area (pitch²) during ``exposure_s`` at ``lux``."""
     optics = sensor.parameters.optics
-    return (
-        np.asarray(optics.photons_per_s(lux), dtype=np.float64)
-        / optics.fill_factor
-        * np.asarray(exposure_s)
-    )
+    return np.asarray(optics.photons_per_s(lux), dtype=np.float64) / optics.fill_factor * np.asarray(exposure_s)
 
 
-def _frames(
-    sensor: FrameSensor, lux: float, exposure_s: float, shape, seed: int, index: int, count: int
-):
+def _frames(sensor: FrameSensor, lux: float, exposure_s: float, shape, seed: int, index: int, count: int):
     scene = StillScene(np.full(shape, float(lux)))
-    return [
-        sensor.capture_frame(scene, 0.0, float(exposure_s), seed=seed, frame_index=index + k)
-        for k in range(count)
-    ]
+    return [sensor.capture_frame(scene, 0.0, float(exposure_s), seed=seed, frame_index=index + k) for k in range(count)]
 
 
 def saturation_lux(sensor: FrameSensor, exposure_s: float | None = None) -> float:
@@ -152,9 +143,7 @@ def acquire_exposure_sweep(
         "exposure_s": t50,
         "mu_p": float(photons_per_pixel(sensor, lux, t50)),
         "bright": np.stack(_frames(sensor, lux, t50, shape, seed, base, spatial_frames)),
-        "dark": np.stack(
-            _frames(sensor, 0.0, t50, shape, seed, base + spatial_frames, spatial_frames)
-        ),
+        "dark": np.stack(_frames(sensor, 0.0, t50, shape, seed, base + spatial_frames, spatial_frames)),
     }
     return series
 
@@ -191,15 +180,9 @@ def analyze_linear(series: FlatFieldSeries) -> dict:
     mu_e_sat = eta * mu_p_sat
     dr = mu_p_sat / mu_p_min
     # Linearity (R4.0 §6.6): 1/y-weighted line between 5 % and 95 % of saturation.
-    sel = np.flatnonzero(
-        (y >= 0.05 * y[i_sat]) & (y <= 0.95 * y[i_sat]) & (np.arange(y.size) <= i_sat)
-    )
-    slope, offset = np.polynomial.polynomial.polyfit(series.mu_p[sel], y[sel], 1, w=1.0 / y[sel])[
-        ::-1
-    ]
-    dev = (
-        100.0 * (y[sel] - (slope * series.mu_p[sel] + offset)) / (slope * series.mu_p[sel] + offset)
-    )
+    sel = np.flatnonzero((y >= 0.05 * y[i_sat]) & (y <= 0.95 * y[i_sat]) & (np.arange(y.size) <= i_sat))
+    slope, offset = np.polynomial.polynomial.polyfit(series.mu_p[sel], y[sel], 1, w=1.0 / y[sel])[::-1]
+    dev = 100.0 * (y[sel] - (slope * series.mu_p[sel] + offset)) / (slope * series.mu_p[sel] + offset)
     snr_measured = y / np.sqrt(np.maximum(series.sigma2_y, 1e-12))
     snr_model = eta * series.mu_p / np.sqrt(sigma_d**2 + SIGMA2_Q_DN2 / k**2 + eta * series.mu_p)
     out = {
@@ -235,7 +218,22 @@ def analyze_linear(series: FlatFieldSeries) -> dict:
     }
     if series.spatial:
         out.update(spatial_nonuniformity(series, k, series.spatial))
+    out["warnings"] = _clipping_warnings(series)
     return out
+
+
+def _clipping_warnings(series: FlatFieldSeries) -> list[str]:
+    """R4.0 requires the dark signal to sit clear of the ADC's zero; say so when it does not."""
+    if not series.pairs:
+        return []
+    darks = np.stack([d for _, pair in series.pairs for d in pair])
+    zero = float(np.mean(darks == 0))
+    if zero > 1e-3:
+        return [
+            f"{100 * zero:.2f} % of dark pixel values are clipped at 0 DN: raise black_offset_dn; "
+            "the dark noise (hence σ_d, μ_p.min and DR) is underestimated"
+        ]
+    return []
 
 
 def spatial_nonuniformity(series: FlatFieldSeries, k: float, spatial: dict) -> dict:
@@ -294,9 +292,7 @@ def characterize_frame_sensor(
 ) -> dict:
     """Full EMVA 1288 R4.0 linear characterization of a timed-exposure frame sensor."""
     if not isinstance(sensor, FrameSensor):
-        raise ViformError(
-            f"EMVA 1288 linear characterization needs a frame sensor, got {type(sensor).__name__}"
-        )
+        raise ViformError(f"EMVA 1288 linear characterization needs a frame sensor, got {type(sensor).__name__}")
     series = acquire_exposure_sweep(
         sensor,
         height=height,
@@ -329,13 +325,9 @@ def emva1288_package_results(
         from emva1288.process import Data1288, Results1288
         from emva1288.process.routines import get_int_imgs
     except ImportError:  # pragma: no cover - optional
-        raise ViformError(
-            "the optional package 'emva1288' is not installed (pip install emva1288)"
-        ) from None
+        raise ViformError("the optional package 'emva1288' is not installed (pip install emva1288)") from None
     temporal: dict = {}
-    for t, mu_p, ((a, b), (da, db)) in zip(
-        series.exposure_s, series.mu_p, series.pairs, strict=True
-    ):
+    for t, mu_p, ((a, b), (da, db)) in zip(series.exposure_s, series.mu_p, series.pairs, strict=True):
         entry = {}
         for photons, imgs in ((0.0, (da, db)), (float(mu_p), (a, b))):
             d = get_int_imgs(list(imgs))
@@ -359,9 +351,7 @@ def emva1288_package_results(
         {"temporal": temporal, "spatial": spatial, "height": h, "width": w},
         loglevel=logging.WARNING,
     )
-    res = Results1288(
-        data.data, pixel_area=pixel_area_um2, index_u_ysat=index_u_ysat, loglevel=logging.WARNING
-    )
+    res = Results1288(data.data, pixel_area=pixel_area_um2, index_u_ysat=index_u_ysat, loglevel=logging.WARNING)
     with _numpy2_shim():
         return {
             "system_gain_dn_per_e": float(res.K),
@@ -432,6 +422,8 @@ def measure_response(
         raise ViformError("lux_values must be a 1-D list of at least two illuminances")
     if not np.all(np.diff(lux_values) > 0):
         raise ViformError("lux_values must increase")
+    if getattr(sensor, "height", None) is not None and getattr(sensor, "width", None) is not None:
+        height, width = sensor.height, sensor.width  # a sensor with a fixed array size wins
     shape = (check_int("height", height, 1), check_int("width", width, 1))
     t = sensor.exposure_s if exposure_s is None else exposure_s
     mu, s2 = [], []
@@ -480,16 +472,12 @@ def dynamic_range_from_response(resp: dict, fraction: float = 0.999) -> dict:
     mu_p, snr = resp["mu_p"], resp["snr"]
     above = np.flatnonzero(snr >= 1.0)
     if above.size == 0:
-        raise ViformError(
-            "the SNR never reaches 1 over the swept illuminances; extend the sweep upwards"
-        )
+        raise ViformError("the SNR never reaches 1 over the swept illuminances; extend the sweep upwards")
     j = int(above[0])
     if j == 0:
         lo = float(mu_p[0])
     else:
-        f = (np.log(1.0) - np.log(max(snr[j - 1], 1e-9))) / (
-            np.log(snr[j]) - np.log(max(snr[j - 1], 1e-9))
-        )
+        f = (np.log(1.0) - np.log(max(snr[j - 1], 1e-9))) / (np.log(snr[j]) - np.log(max(snr[j - 1], 1e-9)))
         lo = float(np.exp(np.log(mu_p[j - 1]) + f * (np.log(mu_p[j]) - np.log(mu_p[j - 1]))))
     hi = plateau_onset(mu_p, resp["signal_dn"], fraction)
     return {
