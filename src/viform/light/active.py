@@ -64,13 +64,20 @@ KOSCHMIEDER = 3.912
 #: Black-body temperature used for the solar spectral shape, K.
 SUN_TEMPERATURE_K = 5778.0
 #: Ambient illuminance presets, lux (scene illuminance, not on the sensor).
-AMBIENT_PRESETS_LUX = {"night": 1e-3, "full-moon": 0.25, "twilight": 10.0, "overcast": 1e3,
-                       "daylight": 1e4, "sunny": 1e5}
+AMBIENT_PRESETS_LUX = {
+    "night": 1e-3,
+    "full-moon": 0.25,
+    "twilight": 10.0,
+    "overcast": 1e3,
+    "daylight": 1e4,
+    "sunny": 1e5,
+}
 _BOLTZMANN_J_PER_K = 1.380649e-23
 
 
-def extinction_per_m(visibility_m: float, wavelength_m: float = LASER_WAVELENGTH_M,
-                     model: str = "koschmieder") -> float:
+def extinction_per_m(
+    visibility_m: float, wavelength_m: float = LASER_WAVELENGTH_M, model: str = "koschmieder"
+) -> float:
     """Extinction coefficient σ (1/m) from meteorological visibility (Koschmieder σ = 3.912/V).
 
     ``model="kim"`` applies Kim, Mcarthur & Korevaar (2001), σ = 3.912/V·(λ/550 nm)^−q,
@@ -111,8 +118,14 @@ class Medium:
         check_positive("lidar_ratio_sr", self.lidar_ratio_sr)
 
     @classmethod
-    def from_visibility(cls, visibility_m: float, lidar_ratio_sr: float = 18.0, name: str | None = None,
-                        wavelength_m: float = LASER_WAVELENGTH_M, model: str = "koschmieder") -> Medium:
+    def from_visibility(
+        cls,
+        visibility_m: float,
+        lidar_ratio_sr: float = 18.0,
+        name: str | None = None,
+        wavelength_m: float = LASER_WAVELENGTH_M,
+        model: str = "koschmieder",
+    ) -> Medium:
         """Medium with σ = 3.912/V (visibility_m may be ``inf`` for vacuum)."""
         sigma = extinction_per_m(visibility_m, wavelength_m, model)
         label = name or (f"visibility {visibility_m:g} m" if math.isfinite(float(visibility_m)) else "clear")
@@ -143,7 +156,7 @@ def solar_spectral_irradiance_per_lux(wavelength_m: float = LASER_WAVELENGTH_M) 
     c, h, k, t = SPEED_OF_LIGHT_M_PER_S, PLANCK_J_S, _BOLTZMANN_J_PER_K, SUN_TEMPERATURE_K
 
     def planck(lam):
-        return 2 * h * c ** 2 / lam ** 5 / np.expm1(h * c / (lam * k * t))
+        return 2 * h * c**2 / lam**5 / np.expm1(h * c / (lam * k * t))
 
     lam = np.linspace(360e-9, 830e-9, 4000)
     v = 1.019 * np.exp(-285.4 * (lam * 1e6 - 0.559) ** 2)
@@ -178,14 +191,13 @@ class PointRetroreflector:
         check_non_negative("range_m", self.range_m)
         check_positive("diameter_m", self.diameter_m)
         check_range("efficiency", self.efficiency, 0.0, 1.0, low_open=True)
-        check_range("divergence_half_angle_rad", self.divergence_half_angle_rad, 0.0, math.pi / 2,
-                    low_open=True)
+        check_range("divergence_half_angle_rad", self.divergence_half_angle_rad, 0.0, math.pi / 2, low_open=True)
 
     @property
     def cil_m2_per_sr(self) -> float:
         """Coefficient of luminous intensity (radiometric equivalent), m²/sr."""
-        area = math.pi * self.diameter_m ** 2 / 4
-        return self.efficiency * area / (math.pi * self.divergence_half_angle_rad ** 2)
+        area = math.pi * self.diameter_m**2 / 4
+        return self.efficiency * area / (math.pi * self.divergence_half_angle_rad**2)
 
 
 def window_overlap_s(range_m, pulse_width_s: float, open_s: float, close_s: float):
@@ -237,21 +249,20 @@ class ActiveScene:
             raise ViformError(f"range_m must be a 2-D (H, W) array, got shape {self.range_m.shape}")
         if np.any(np.isnan(self.range_m)) or np.any(self.range_m < 0):
             raise ViformError("range_m has negative or NaN values; ranges must be ≥ 0 m (inf = sky)")
-        self.reflectance = np.broadcast_to(np.asarray(self.reflectance, dtype=np.float64),
-                                           self.range_m.shape).copy()
+        self.reflectance = np.broadcast_to(np.asarray(self.reflectance, dtype=np.float64), self.range_m.shape).copy()
         if np.any(~np.isfinite(self.reflectance)) or self.reflectance.min() < 0 or self.reflectance.max() > 1:
             raise ViformError("reflectance must lie in [0, 1] for every pixel")
         ra = 0.0 if self.retro_coefficient_per_sr is None else self.retro_coefficient_per_sr
-        self.retro_coefficient_per_sr = np.broadcast_to(np.asarray(ra, dtype=np.float64),
-                                                        self.range_m.shape).copy()
+        self.retro_coefficient_per_sr = np.broadcast_to(np.asarray(ra, dtype=np.float64), self.range_m.shape).copy()
         if np.any(~np.isfinite(self.retro_coefficient_per_sr)) or self.retro_coefficient_per_sr.min() < 0:
             raise ViformError("retro_coefficient_per_sr must be finite and ≥ 0 sr⁻¹")
         check_non_negative("ambient_lux", self.ambient_lux)
         check_non_negative("sky_radiance_factor", self.sky_radiance_factor)
         for r in self.retroreflectors:
             if not (0 <= r.row < self.height and 0 <= r.col < self.width):
-                raise ViformError(f"retroreflector at row {r.row}, col {r.col} lies outside the "
-                                  f"{self.height}x{self.width} scene")
+                raise ViformError(
+                    f"retroreflector at row {r.row}, col {r.col} lies outside the {self.height}x{self.width} scene"
+                )
 
     @property
     def height(self) -> int:
@@ -267,23 +278,40 @@ class ActiveScene:
 
     def with_(self, **changes) -> ActiveScene:
         """A copy with some attributes replaced (e.g. ``medium`` or ``ambient_lux``)."""
-        kw = {k: getattr(self, k) for k in ("range_m", "reflectance", "retro_coefficient_per_sr",
-                                            "retroreflectors", "medium", "ambient_lux",
-                                            "sky_radiance_factor", "name")}
+        kw = {
+            k: getattr(self, k)
+            for k in (
+                "range_m",
+                "reflectance",
+                "retro_coefficient_per_sr",
+                "retroreflectors",
+                "medium",
+                "ambient_lux",
+                "sky_radiance_factor",
+                "name",
+            )
+        }
         kw.update(changes)
         return ActiveScene(**kw)
 
     def describe(self) -> dict:
         finite = self.range_m[np.isfinite(self.range_m)]
-        return {"name": self.name, "height": self.height, "width": self.width,
-                "range_min_m": float(finite.min()) if finite.size else None,
-                "range_max_m": float(finite.max()) if finite.size else None,
-                "medium": self.medium.name, "extinction_per_m": self.medium.extinction_per_m,
-                "visibility_m": self.medium.visibility_m, "lidar_ratio_sr": self.medium.lidar_ratio_sr,
-                "ambient_lux": self.ambient_lux,
-                "retroreflectors": [{"range_m": r.range_m, "row": r.row, "col": r.col,
-                                     "cil_m2_per_sr": r.cil_m2_per_sr, "label": r.label}
-                                    for r in self.retroreflectors]}
+        return {
+            "name": self.name,
+            "height": self.height,
+            "width": self.width,
+            "range_min_m": float(finite.min()) if finite.size else None,
+            "range_max_m": float(finite.max()) if finite.size else None,
+            "medium": self.medium.name,
+            "extinction_per_m": self.medium.extinction_per_m,
+            "visibility_m": self.medium.visibility_m,
+            "lidar_ratio_sr": self.medium.lidar_ratio_sr,
+            "ambient_lux": self.ambient_lux,
+            "retroreflectors": [
+                {"range_m": r.range_m, "row": r.row, "col": r.col, "cil_m2_per_sr": r.cil_m2_per_sr, "label": r.label}
+                for r in self.retroreflectors
+            ],
+        }
 
 
 @dataclass(frozen=True)
@@ -322,10 +350,12 @@ class ActiveImagingGeometry:
     @property
     def beam_solid_angle_sr(self) -> float:
         """Ω_b of the top-hat beam: the laser's divergence, or the full-sensor FOV if unset."""
-        dx = self.laser.divergence_x_rad or 2 * math.atan(self.sensor_width_px * self.pixel_pitch_m
-                                                          / (2 * self.receiver.focal_length_m))
-        dy = self.laser.divergence_y_rad or 2 * math.atan(self.sensor_height_px * self.pixel_pitch_m
-                                                          / (2 * self.receiver.focal_length_m))
+        dx = self.laser.divergence_x_rad or 2 * math.atan(
+            self.sensor_width_px * self.pixel_pitch_m / (2 * self.receiver.focal_length_m)
+        )
+        dy = self.laser.divergence_y_rad or 2 * math.atan(
+            self.sensor_height_px * self.pixel_pitch_m / (2 * self.receiver.focal_length_m)
+        )
         return 4 * math.asin(math.sin(dx / 2) * math.sin(dy / 2))  # rectangular pyramid
 
     @property
@@ -336,11 +366,11 @@ class ActiveImagingGeometry:
     def _camera_factor_m2(self) -> float:
         """A_p·π·τ_r/(4N²): pixel power per unit scene radiance (eq. 3), m²·sr."""
         r = self.receiver
-        return self.pixel_pitch_m ** 2 * math.pi * r.transmission / (4 * r.f_number ** 2)
+        return self.pixel_pitch_m**2 * math.pi * r.transmission / (4 * r.f_number**2)
 
     def overlap(self, range_m):
         """Biaxial overlap O(r) = 1 − exp(−(r/r_o)²)."""
-        return -np.expm1(-(np.asarray(range_m, dtype=np.float64) / self.receiver.overlap_range_m) ** 2)
+        return -np.expm1(-((np.asarray(range_m, dtype=np.float64) / self.receiver.overlap_range_m) ** 2))
 
     # ------------------------------------------------------------------ per pulse
     def surface_electrons(self, scene: ActiveScene, open_s: float = -np.inf, close_s: float = np.inf):
@@ -349,15 +379,23 @@ class ActiveImagingGeometry:
         finite = np.isfinite(r) & (r > 0)
         rr = np.where(finite, r, 1.0)
         t = scene.medium.transmission(rr)
-        radiance_per_w = (t * t / (self.beam_solid_angle_sr * rr ** 2)
-                          * (scene.reflectance / math.pi + scene.retro_coefficient_per_sr))
+        radiance_per_w = (
+            t * t / (self.beam_solid_angle_sr * rr**2) * (scene.reflectance / math.pi + scene.retro_coefficient_per_sr)
+        )
         w = window_overlap_s(rr, self.laser.pulse_width_s, open_s, close_s)
-        joules = (self.laser.peak_power_w * self.laser.transmitter_efficiency * w
-                  * self._camera_factor_m2 * radiance_per_w * self.overlap(rr))
+        joules = (
+            self.laser.peak_power_w
+            * self.laser.transmitter_efficiency
+            * w
+            * self._camera_factor_m2
+            * radiance_per_w
+            * self.overlap(rr)
+        )
         return np.where(finite, joules * self._electrons_per_joule, 0.0)
 
-    def retroreflector_electrons(self, scene: ActiveScene, open_s: float = -np.inf,
-                                 close_s: float = np.inf, psf_sigma_px: float = 0.5):
+    def retroreflector_electrons(
+        self, scene: ActiveScene, open_s: float = -np.inf, close_s: float = np.inf, psf_sigma_px: float = 0.5
+    ):
         """Expected photoelectrons per pulse from the sub-pixel retroreflectors (eq. 4), (H, W).
 
         Each image is spread by a Gaussian blur of ``psf_sigma_px`` (lens + defocus), integrated
@@ -369,17 +407,19 @@ class ActiveImagingGeometry:
             if rr.range_m <= 0:
                 continue
             t = float(scene.medium.transmission(rr.range_m))
-            e_t = p * t / (self.beam_solid_angle_sr * rr.range_m ** 2)
-            watts = (rr.cil_m2_per_sr * e_t * t * self.receiver.aperture_area_m2 * self.receiver.transmission
-                     / rr.range_m ** 2) * float(self.overlap(rr.range_m))
+            e_t = p * t / (self.beam_solid_angle_sr * rr.range_m**2)
+            watts = (
+                rr.cil_m2_per_sr * e_t * t * self.receiver.aperture_area_m2 * self.receiver.transmission / rr.range_m**2
+            ) * float(self.overlap(rr.range_m))
             w = float(window_overlap_s(rr.range_m, self.laser.pulse_width_s, open_s, close_s))
             size_px = rr.diameter_m / rr.range_m / self.ifov_rad
             sigma = math.hypot(psf_sigma_px, size_px / 4.0)  # disc of diameter d ≈ Gaussian σ = d/4
             out += watts * w * self._electrons_per_joule * _gaussian_spot(scene.shape, rr.row, rr.col, sigma)
         return out
 
-    def backscatter_electrons(self, scene: ActiveScene, open_s: float = -np.inf, close_s: float = np.inf,
-                              n_grid: int = 1500):
+    def backscatter_electrons(
+        self, scene: ActiveScene, open_s: float = -np.inf, close_s: float = np.inf, n_grid: int = 1500
+    ):
         """Expected photoelectrons per pulse from the medium between the receiver and the surface (eq. 5).
 
         Integrated numerically over r, up to each pixel's range (the surface hides what is
@@ -394,7 +434,7 @@ class ActiveImagingGeometry:
         finite = scene.range_m[np.isfinite(scene.range_m)]
         r_max = min(far, float(finite.max()) if finite.size else far)
         r_max = max(r_max, 1.0)
-        lo, hi = 0.05 * self.receiver.overlap_range_m, r_max
+        lo, hi = 1e-3 * self.receiver.overlap_range_m, r_max
         grid = [np.geomspace(lo, hi, n_grid)]
         if np.isfinite(open_s) or np.isfinite(close_s):
             g0 = max(lo, (open_s * c / 2 - c * tau / 2) if np.isfinite(open_s) else lo)
@@ -404,18 +444,27 @@ class ActiveImagingGeometry:
         r = np.unique(np.concatenate(grid))
         t2 = m.transmission(r) ** 2
         w = window_overlap_s(r, tau, open_s, close_s)
-        integrand = t2 * self.overlap(r) * w / r ** 2
-        cumulative = np.concatenate([[0.0], np.cumsum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(r))])
+        integrand = t2 * self.overlap(r) * w / r**2
+        cumulative = integrand[0] * r[0] + np.concatenate(
+            [[0.0], np.cumsum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(r))]
+        )
         per_pixel = np.interp(np.where(np.isfinite(scene.range_m), scene.range_m, hi), r, cumulative)
-        k = (self.laser.peak_power_w * self.laser.transmitter_efficiency * self._camera_factor_m2
-             * m.backscatter_per_m_sr / self.beam_solid_angle_sr)
+        k = (
+            self.laser.peak_power_w
+            * self.laser.transmitter_efficiency
+            * self._camera_factor_m2
+            * m.backscatter_per_m_sr
+            / self.beam_solid_angle_sr
+        )
         return k * per_pixel * self._electrons_per_joule
 
     def laser_electrons(self, scene: ActiveScene, open_s: float = -np.inf, close_s: float = np.inf) -> dict:
         """All laser contributions per pulse in a window: surface, retroreflectors, backscatter, total."""
-        parts = {"surface": self.surface_electrons(scene, open_s, close_s),
-                 "retroreflectors": self.retroreflector_electrons(scene, open_s, close_s),
-                 "backscatter": self.backscatter_electrons(scene, open_s, close_s)}
+        parts = {
+            "surface": self.surface_electrons(scene, open_s, close_s),
+            "retroreflectors": self.retroreflector_electrons(scene, open_s, close_s),
+            "backscatter": self.backscatter_electrons(scene, open_s, close_s),
+        }
         parts["total"] = parts["surface"] + parts["retroreflectors"] + parts["backscatter"]
         return parts
 
@@ -432,10 +481,16 @@ class ActiveImagingGeometry:
         return watts * self._electrons_per_joule
 
     def to_dict(self) -> dict:
-        return {"laser": self.laser.to_dict(), "receiver": self.receiver.to_dict(),
-                "pixel_pitch_m": self.pixel_pitch_m, "quantum_efficiency": self.quantum_efficiency,
-                "sensor_height_px": self.sensor_height_px, "sensor_width_px": self.sensor_width_px,
-                "ifov_rad": self.ifov_rad, "beam_solid_angle_sr": self.beam_solid_angle_sr}
+        return {
+            "laser": self.laser.to_dict(),
+            "receiver": self.receiver.to_dict(),
+            "pixel_pitch_m": self.pixel_pitch_m,
+            "quantum_efficiency": self.quantum_efficiency,
+            "sensor_height_px": self.sensor_height_px,
+            "sensor_width_px": self.sensor_width_px,
+            "ifov_rad": self.ifov_rad,
+            "beam_solid_angle_sr": self.beam_solid_angle_sr,
+        }
 
 
 def _gaussian_spot(shape, row: float, col: float, sigma_px: float) -> np.ndarray:
@@ -451,10 +506,16 @@ def _gaussian_spot(shape, row: float, col: float, sigma_px: float) -> np.ndarray
 
 
 # ---------------------------------------------------------------------- scenes
-def field_test_scene(height: int = 64, width: int = 96, ranges_m=(50.0, 100.0, 200.0, 300.0),
-                     background_range_m: float = 1000.0, background_reflectance: float = 0.3,
-                     ambient_lux: float = 1e5, visibility_m: float = 20e3,
-                     retro: dict | None = None) -> ActiveScene:
+def field_test_scene(
+    height: int = 64,
+    width: int = 96,
+    ranges_m=(50.0, 100.0, 200.0, 300.0),
+    background_range_m: float = 1000.0,
+    background_reflectance: float = 0.3,
+    ambient_lux: float = 1e5,
+    visibility_m: float = 20e3,
+    retro: dict | None = None,
+) -> ActiveScene:
     """Seed 004 field test: retroreflectors at 50, 100, 200, 300 m in front of a distant background.
 
     The background (vegetation/ground, ρ = 0.3 at 905 nm) is put far behind the gate so
@@ -466,17 +527,29 @@ def field_test_scene(height: int = 64, width: int = 96, ranges_m=(50.0, 100.0, 2
     ranges = [check_non_negative("ranges_m", r) for r in ranges_m]
     n = len(ranges)
     cols = (np.arange(n) + 0.5) * width / n
-    retros = [PointRetroreflector(range_m=r, row=height / 2, col=float(c), label=f"{r:g} m", **(retro or {}))
-              for r, c in zip(ranges, cols, strict=True)]
-    return ActiveScene(range_m=np.full((height, width), float(background_range_m)),
-                       reflectance=background_reflectance, retroreflectors=retros,
-                       medium=Medium.from_visibility(visibility_m), ambient_lux=ambient_lux,
-                       name="field test (seed 004)")
+    retros = [
+        PointRetroreflector(range_m=r, row=height / 2, col=float(c), label=f"{r:g} m", **(retro or {}))
+        for r, c in zip(ranges, cols, strict=True)
+    ]
+    return ActiveScene(
+        range_m=np.full((height, width), float(background_range_m)),
+        reflectance=background_reflectance,
+        retroreflectors=retros,
+        medium=Medium.from_visibility(visibility_m),
+        ambient_lux=ambient_lux,
+        name="field test (seed 004)",
+    )
 
 
-def fog_scene(height: int = 64, width: int = 96, visibility_m: float = 150.0, ambient_lux: float = 1e-3,
-              sign_ranges_m=(60.0, 90.0, 120.0), sign_retro_per_sr: float = 50.0,
-              background_range_m: float = 400.0) -> ActiveScene:
+def fog_scene(
+    height: int = 64,
+    width: int = 96,
+    visibility_m: float = 150.0,
+    ambient_lux: float = 1e-3,
+    sign_ranges_m=(60.0, 90.0, 120.0),
+    sign_retro_per_sr: float = 50.0,
+    background_range_m: float = 400.0,
+) -> ActiveScene:
     """Road scene in fog: retroreflective sign panels (R_A sheeting) at several ranges behind fog.
 
     Panels are square, ~1.2 m wide at their range; the rest is a Lambertian background
@@ -499,6 +572,11 @@ def fog_scene(height: int = 64, width: int = 96, visibility_m: float = 150.0, am
         rng_m[rs, cs] = r
         refl[rs, cs] = 0.6
         ra[rs, cs] = sign_retro_per_sr
-    return ActiveScene(range_m=rng_m, reflectance=refl, retro_coefficient_per_sr=ra,
-                       medium=Medium.from_visibility(visibility_m, name=f"fog, V = {visibility_m:g} m"),
-                       ambient_lux=ambient_lux, name="signs in fog")
+    return ActiveScene(
+        range_m=rng_m,
+        reflectance=refl,
+        retro_coefficient_per_sr=ra,
+        medium=Medium.from_visibility(visibility_m, name=f"fog, V = {visibility_m:g} m"),
+        ambient_lux=ambient_lux,
+        name="signs in fog",
+    )

@@ -69,8 +69,10 @@ class PulsedLaser:
             if value is not None:
                 check_range(name, value, 0.0, math.pi, low_open=True)
         if self.pulse_width_s >= 1.0 / self.repetition_hz:
-            raise ViformError(f"pulse_width_s = {self.pulse_width_s!r} must be shorter than the pulse "
-                              f"period 1/repetition_hz = {1.0 / self.repetition_hz:g} s")
+            raise ViformError(
+                f"pulse_width_s = {self.pulse_width_s!r} must be shorter than the pulse "
+                f"period 1/repetition_hz = {1.0 / self.repetition_hz:g} s"
+            )
 
     @property
     def period_s(self) -> float:
@@ -139,7 +141,7 @@ class Receiver:
 
     @property
     def aperture_area_m2(self) -> float:
-        return math.pi * self.aperture_diameter_m ** 2 / 4.0
+        return math.pi * self.aperture_diameter_m**2 / 4.0
 
     def ifov_rad(self, pixel_pitch_m: float) -> float:
         """Instantaneous field of view of one pixel, rad (small angle)."""

@@ -71,11 +71,18 @@ def icx618_pixel_parameters() -> FramePixelParameters:
     ≈ 0.25 (EXview HAD NIR response ≈ 40 % of a ≈ 60 % peak); 12 000 e⁻ full well; 12 e⁻
     read noise through a 12-bit CCD AFE; 64 DN black level.
     """
-    return FramePixelParameters(optics=PixelOptics(pixel_pitch_m=5.6e-6, fill_factor=1.0,
-                                                   quantum_efficiency=0.25, wavelength_m=905e-9),
-                                full_well_electrons=12_000.0, conversion_gain_v_per_e=40e-6,
-                                read_noise_electrons=12.0, dark_current_e_per_s=20.0, dsnu_electrons=2.0,
-                                prnu_fraction=0.01, analog_gain=1.0, adc_bits=12, black_offset_dn=64.0)
+    return FramePixelParameters(
+        optics=PixelOptics(pixel_pitch_m=5.6e-6, fill_factor=1.0, quantum_efficiency=0.25, wavelength_m=905e-9),
+        full_well_electrons=12_000.0,
+        conversion_gain_v_per_e=40e-6,
+        read_noise_electrons=12.0,
+        dark_current_e_per_s=20.0,
+        dsnu_electrons=2.0,
+        prnu_fraction=0.01,
+        analog_gain=1.0,
+        adc_bits=12,
+        black_offset_dn=64.0,
+    )
 
 
 @dataclass(frozen=True)
@@ -136,7 +143,8 @@ class GateTiming:
                 f"gate_range_m = {r:g} m is beyond the unambiguous range: the gate would close "
                 f"{self.close_s * 1e6:.2f} µs after the pulse, after the next pulse "
                 f"({self.laser.period_s * 1e6:.1f} µs at {self.laser.repetition_hz:g} Hz); the largest "
-                f"gate range is {self.max_gate_range_m(self.laser, self.min_transfer_time_s):.0f} m")
+                f"gate range is {self.max_gate_range_m(self.laser, self.min_transfer_time_s):.0f} m"
+            )
 
     @staticmethod
     def max_gate_range_m(laser: PulsedLaser, min_transfer_time_s: float) -> float:
@@ -161,8 +169,10 @@ class GateTiming:
     def range_window_m(self) -> tuple[float, float]:
         """Ranges with some return inside the gate: (R − cτ/2, R + c·t_нак/2)."""
         c_half = range_from_delay_m(1.0)
-        return (max(0.0, self.gate_range_m - c_half * self.laser.pulse_width_s),
-                self.gate_range_m + c_half * self.width_s)
+        return (
+            max(0.0, self.gate_range_m - c_half * self.laser.pulse_width_s),
+            self.gate_range_m + c_half * self.width_s,
+        )
 
     @property
     def full_range_window_m(self) -> tuple[float, float]:
@@ -170,9 +180,14 @@ class GateTiming:
         return (self.gate_range_m, self.gate_range_m + range_from_delay_m(self.min_transfer_time_s))
 
     def to_dict(self) -> dict:
-        return {"gate_range_m": self.gate_range_m, "open_s": self.open_s, "width_s": self.width_s,
-                "close_s": self.close_s, "range_window_m": list(self.range_window_m),
-                "full_range_window_m": list(self.full_range_window_m)}
+        return {
+            "gate_range_m": self.gate_range_m,
+            "open_s": self.open_s,
+            "width_s": self.width_s,
+            "close_s": self.close_s,
+            "range_window_m": list(self.range_window_m),
+            "full_range_window_m": list(self.full_range_window_m),
+        }
 
 
 @dataclass
@@ -229,10 +244,18 @@ class GatedInterlineCCD(Sensor):
 
     name = "gated-interline-ccd"
 
-    def __init__(self, pulses: int = 20, gate_range_m: float = 150.0, mode: str = "accumulate",
-                 frame_rate_hz: float = 25.0, parameters: InterlineCCDParameters | None = None,
-                 laser: PulsedLaser | None = None, receiver: Receiver | None = None,
-                 noise: bool = True, fixed_pattern_seed: int = 618):
+    def __init__(
+        self,
+        pulses: int = 20,
+        gate_range_m: float = 150.0,
+        mode: str = "accumulate",
+        frame_rate_hz: float = 25.0,
+        parameters: InterlineCCDParameters | None = None,
+        laser: PulsedLaser | None = None,
+        receiver: Receiver | None = None,
+        noise: bool = True,
+        fixed_pattern_seed: int = 618,
+    ):
         self.parameters = parameters or InterlineCCDParameters()
         self.laser = laser or PulsedLaser()
         self.receiver = receiver or Receiver()
@@ -241,10 +264,14 @@ class GatedInterlineCCD(Sensor):
         self.frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
         self.timing = GateTiming(gate_range_m, self.laser, self.parameters.min_transfer_time_s)
         px = self.parameters.pixel
-        self.geometry = ActiveImagingGeometry(self.laser, self.receiver, px.optics.pixel_pitch_m,
-                                              px.optics.quantum_efficiency * px.optics.fill_factor,
-                                              self.parameters.sensor_height_px,
-                                              self.parameters.sensor_width_px)
+        self.geometry = ActiveImagingGeometry(
+            self.laser,
+            self.receiver,
+            px.optics.pixel_pitch_m,
+            px.optics.quantum_efficiency * px.optics.fill_factor,
+            self.parameters.sensor_height_px,
+            self.parameters.sensor_width_px,
+        )
         self.noise = bool(noise)
         self.fixed_pattern_seed = int(fixed_pattern_seed)
         limit = self.max_pulses(self.frame_rate_hz, self.mode)
@@ -253,7 +280,8 @@ class GatedInterlineCCD(Sensor):
                 f"pulses = {self.pulses} does not fit in a frame at frame_rate_hz = {frame_rate_hz:g}: "
                 f"{self.mode} mode allows at most {limit} pulses (frame time "
                 f"{self.frame_time_s(self.pulses) * 1e3:.1f} ms > {1e3 / self.frame_rate_hz:.1f} ms; "
-                f"f_rep = {self.laser.repetition_hz:g} Hz, readout {self.parameters.readout_time_s * 1e3:.1f} ms)")
+                f"f_rep = {self.laser.repetition_hz:g} Hz, readout {self.parameters.readout_time_s * 1e3:.1f} ms)"
+            )
         self._arrays: dict[tuple[int, int], FramePixelArray] = {}
 
     # ------------------------------------------------------------------ timing
@@ -286,11 +314,15 @@ class GatedInterlineCCD(Sensor):
         """Expected electrons of one pulse: ``gated`` and ``all`` laser parts (dicts by source) and
         the ambient rate ``ambient_per_s`` (e⁻/s); independent of X and of the mode."""
         g, t = self.geometry, self.timing
-        return {"gated": g.laser_electrons(scene, t.open_s, t.close_s), "all": g.laser_electrons(scene),
-                "ambient_per_s": g.ambient_electrons_per_s(scene)}
+        return {
+            "gated": g.laser_electrons(scene, t.open_s, t.close_s),
+            "all": g.laser_electrons(scene),
+            "ambient_per_s": g.ambient_electrons_per_s(scene),
+        }
 
-    def electron_budget(self, scene: ActiveScene, per_pulse: dict | None = None,
-                        pulses: int | None = None, mode: str | None = None) -> dict:
+    def electron_budget(
+        self, scene: ActiveScene, per_pulse: dict | None = None, pulses: int | None = None, mode: str | None = None
+    ) -> dict:
         """Expected electrons per frame for X pulses in a mode (no noise, no PRNU).
 
         Keys: ``photo`` (per frame), ``dark`` (per frame), ``readouts``, ``per_readout_photo``,
@@ -319,12 +351,20 @@ class GatedInterlineCCD(Sensor):
             photo = gated + (x - 1) * all_ + amb * exposure
             dark = dark_rate * exposure
             readouts = 1
-        return {"per_pulse": pp, "photo": photo, "dark": dark, "readouts": readouts,
-                "per_readout_photo": photo / readouts, "per_readout_dark": dark / readouts,
-                "pulses": x, "mode": mode}
+        return {
+            "per_pulse": pp,
+            "photo": photo,
+            "dark": dark,
+            "readouts": readouts,
+            "per_readout_photo": photo / readouts,
+            "per_readout_dark": dark / readouts,
+            "pulses": x,
+            "mode": mode,
+        }
 
-    def capture_frame(self, scene: ActiveScene, *, seed: int = 0, frame_index: int = 0,
-                      budget: dict | None = None) -> GatedFrame:
+    def capture_frame(
+        self, scene: ActiveScene, *, seed: int = 0, frame_index: int = 0, budget: dict | None = None
+    ) -> GatedFrame:
         """One output frame of ``scene`` in this sensor's mode."""
         h, w = scene.shape
         pixels = self.pixel_array(h, w)
@@ -336,13 +376,20 @@ class GatedInterlineCCD(Sensor):
         for _ in range(b["readouts"]):
             e = rng.poisson(mean_per_readout).astype(np.float64) if self.noise else mean_per_readout
             total += pixels.digitize(e, rng, self.noise)
-        return GatedFrame(dn=total, black_dn=p.black_offset_dn * b["readouts"],
-                          system_gain_dn_per_e=p.system_gain_dn_per_e,
-                          mean_electrons=b["photo"] + b["dark"], mode=b["mode"], pulses=b["pulses"],
-                          frame_time_s=self.frame_time_s(b["pulses"], b["mode"]), readouts=b["readouts"])
+        return GatedFrame(
+            dn=total,
+            black_dn=p.black_offset_dn * b["readouts"],
+            system_gain_dn_per_e=p.system_gain_dn_per_e,
+            mean_electrons=b["photo"] + b["dark"],
+            mode=b["mode"],
+            pulses=b["pulses"],
+            frame_time_s=self.frame_time_s(b["pulses"], b["mode"]),
+            readouts=b["readouts"],
+        )
 
-    def expected_frame_stats(self, scene: ActiveScene | None = None,
-                             budget: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def expected_frame_stats(
+        self, scene: ActiveScene | None = None, budget: dict | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Expected black-subtracted signal and temporal noise variance per pixel, in electrons.
 
         var = Poisson mean + readouts × (σ_read² + 1/(12 K²)); full-well clipping applied to
@@ -356,7 +403,7 @@ class GatedInterlineCCD(Sensor):
         per = np.minimum(b["per_readout_photo"] + b["per_readout_dark"], p.full_well_electrons)
         mean = n * per
         k = p.system_gain_dn_per_e
-        var = n * per * (per < p.full_well_electrons) + n * (p.read_noise_electrons ** 2 + 1.0 / (12 * k * k))
+        var = n * per * (per < p.full_well_electrons) + n * (p.read_noise_electrons**2 + 1.0 / (12 * k * k))
         return mean, var
 
     def capture(self, scene: ActiveScene, duration_s: float, *, seed: int = 0) -> FrameStack:
@@ -365,15 +412,27 @@ class GatedInterlineCCD(Sensor):
         n = max(1, int(math.floor(duration_s * self.frame_rate_hz + 1e-9)))
         b = self.electron_budget(scene)
         frames = np.stack([self.capture_frame(scene, seed=seed, frame_index=i, budget=b).dn for i in range(n)])
-        return FrameStack(frames, np.arange(n) / self.frame_rate_hz, np.full(n, self.pulses * self.timing.width_s),
-                          {"sensor": self.describe(), "scene": scene.describe(), "seed": seed})
+        return FrameStack(
+            frames,
+            np.arange(n) / self.frame_rate_hz,
+            np.full(n, self.pulses * self.timing.width_s),
+            {"sensor": self.describe(), "scene": scene.describe(), "seed": seed},
+        )
 
     def describe(self) -> dict:
         par = self.parameters
-        return {"model": self.name, "mode": self.mode, "pulses": self.pulses,
-                "frame_rate_hz": self.frame_rate_hz, "frame_time_s": self.frame_time_s(),
-                "max_pulses_at_frame_rate": self.max_pulses(self.frame_rate_hz),
-                "gate": self.timing.to_dict(), "geometry": self.geometry.to_dict(),
-                "min_transfer_time_s": par.min_transfer_time_s, "readout_time_s": par.readout_time_s,
-                "shutter_leak_ratio": par.shutter_leak_ratio, "noise": self.noise,
-                "pixel": par.pixel.to_dict()}
+        return {
+            "model": self.name,
+            "mode": self.mode,
+            "pulses": self.pulses,
+            "frame_rate_hz": self.frame_rate_hz,
+            "frame_time_s": self.frame_time_s(),
+            "max_pulses_at_frame_rate": self.max_pulses(self.frame_rate_hz),
+            "gate": self.timing.to_dict(),
+            "geometry": self.geometry.to_dict(),
+            "min_transfer_time_s": par.min_transfer_time_s,
+            "readout_time_s": par.readout_time_s,
+            "shutter_leak_ratio": par.shutter_leak_ratio,
+            "noise": self.noise,
+            "pixel": par.pixel.to_dict(),
+        }
