@@ -21,7 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from viform._validate import ViformError, check_choice, check_int, check_non_negative, check_positive
+from viform._validate import (
+    ViformError,
+    check_choice,
+    check_int,
+    check_non_negative,
+    check_positive,
+)
 from viform.light.radiometry import check_lux
 
 

@@ -1,0 +1,1 @@
+"""Reports: the demo, response plots and other figures."""
