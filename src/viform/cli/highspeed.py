@@ -1,1 +1,153 @@
-"""CLI commands: highspeed (registered on viform.cli.app.cli)."""
+"""CLI commands: highspeed (registered on viform.cli.app.cli) — seed 002, issue 4.
+
+``viform highspeed SCENE``: the LUX13HS-like camera shoots SCENE with auto-exposure and
+histogram equalization, buffers in DDR, decimates for the link and writes the video, a plot
+of exposure and gray per frame and a report. ``viform highspeed-figures`` prints the seed's
+numbers next to the model's.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from viform._validate import ViformError, check_choice, check_positive, check_range
+from viform.cli.app import cli
+
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+
+
+def _parse_size(text: str, name: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise ViformError(f"{name} = {text!r} is not allowed: write WxH, e.g. 320x180") from None
+    if w < 1 or h < 1:
+        raise ViformError(f"{name} = {text!r} is not allowed: width and height must be ≥ 1")
+    return h, w
+
+
+def _load(spec: str, height: int, width: int, scene_fps: float | None):
+    from viform.light.scenes import BUILTIN_SCENES, StillScene, VideoScene, builtin_scene
+
+    if spec in BUILTIN_SCENES:
+        return builtin_scene(spec, height, width)
+    path = Path(spec)
+    if not path.exists():
+        raise ViformError(f"scene {spec!r} is neither a built-in scene ({', '.join(BUILTIN_SCENES)}) "
+                          "nor an existing file or folder")
+    if path.is_file() and path.suffix.lower() in _IMAGE_SUFFIXES:
+        return StillScene.from_file(path, max_lux=1.0, shape=(height, width))
+    return VideoScene.from_file(path, frame_rate_hz=scene_fps, max_lux=1.0, shape=(height, width))
+
+
+@cli.command("highspeed")
+@click.argument("scene")
+@click.option("--roi", default="1280x720", show_default=True,
+              help="Readout window on the 1280x864 sensor: WxH (centred) or X,Y,W,H. Sets the frame rate.")
+@click.option("--mode", type=click.Choice(["reduced", "normal"]), default="reduced", show_default=True,
+              help="LUX13HS readout mode (reduced: 4 px/clock; normal: 8 px/clock).")
+@click.option("--clock-mhz", type=float, default=None, help="Sensor clock (default 100 reduced, 133 normal).")
+@click.option("--interface", default="cameralink", show_default=True,
+              help="coaxpress, cameralink-hs, cameralink, usb3 or gige.")
+@click.option("--decimation", type=int, default=None, help="N of N:1 frame sampling (default: fit the link).")
+@click.option("--max-decimation", type=int, default=64, show_default=True,
+              help="Largest N the frame-sampling counter allows; a link that needs more is refused.")
+@click.option("--ae/--no-ae", default=True, show_default=True, help="Auto-exposure.")
+@click.option("--meter", type=click.Choice(["mean", "weighted", "percentile"]), default="mean",
+              show_default=True, help="AE feedback: the seed's mean gray, centre-weighted, or 99th percentile.")
+@click.option("--target", "target_gray", type=float, default=128.0, show_default=True,
+              help="AE target gray R_i (0-255); dead band ±--band.")
+@click.option("--band", "band_gray", type=float, default=15.0, show_default=True)
+@click.option("--equalize/--no-equalize", default=True, show_default=True, help="Histogram equalization.")
+@click.option("--eq-source", type=click.Choice(["previous", "same"]), default="previous", show_default=True,
+              help="Histogram of the previous transmitted frame or of the frame itself.")
+@click.option("--eq-method", type=click.Choice(["shift", "float"]), default="shift", show_default=True)
+@click.option("--frames", "n_frames", type=int, default=200, show_default=True, help="Sensor frames to capture.")
+@click.option("--exposure-us", type=float, default=100.0, show_default=True,
+              help="Initial exposure (fixed with --no-ae), µs.")
+@click.option("--render", default="320x180", show_default=True,
+              help="Simulated pixel grid WxH (every k-th pixel of the window; timing uses the full window).")
+@click.option("--lux", type=float, default=200.0, show_default=True,
+              help="Mean illuminance of the scene at t = 0 on the sensor plane, lux (the scene is scaled).")
+@click.option("--steps", default="0.03:10,0.07:0.1", show_default=True,
+              help="Illuminance steps TIME_S:FACTOR,... applied to the scene ('none' for none).")
+@click.option("--scene-fps", type=float, default=None, help="Frame rate of a video SCENE (if it declares none).")
+@click.option("--video", "video_format", type=click.Choice(["gif", "mp4"]), default="gif", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="highspeed_out", show_default=True)
+def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray, band_gray,
+              equalize, eq_source, eq_method, n_frames, exposure_us, render, lux, steps, scene_fps, video_format, seed,
+              out_dir):
+    """Shoot SCENE with a LUX13HS-like high-speed camera (seed 002).
+
+    SCENE is a built-in scene (translating, moving-edge, rotating, hdr, step, flicker), an
+    image or a video. Writes OUT/video.gif|mp4 (the frames leaving the link), OUT/exposure.png
+    and OUT/report.json (frames captured, buffered, transmitted, dropped).
+    """
+    from tqdm import tqdm
+
+    from viform.isp.highspeed_pipeline import (
+        HighSpeedConfig,
+        ScaledScene,
+        StepsScene,
+        parse_steps,
+        run_highspeed,
+        write_outputs,
+    )
+    from viform.isp.link import INTERFACES, link_plan
+    from viform.sensors.highspeed_timing import lux13hs_timing
+
+    check_choice("interface", interface, tuple(INTERFACES))
+    check_positive("lux", lux)
+    timing = lux13hs_timing(mode, None if clock_mhz is None else check_positive("clock_mhz", clock_mhz) * 1e6)
+    window = timing.window(roi)
+    rh, rw = _parse_size(render, "render")
+    rh, rw = min(rh, window.height), min(rw, window.width)
+    base = _load(scene, rh, rw, scene_fps)
+    mean0 = float(base.illuminance_lux(0.0).mean())
+    if mean0 <= 0:
+        raise ViformError(f"scene {scene!r} is black at t = 0; cannot scale it to --lux")
+    step_list = [] if str(steps).lower() == "none" else parse_steps(steps)
+    sc = ScaledScene(base, lux / mean0)
+    if step_list:
+        sc = StepsScene(sc, step_list)
+    cfg = HighSpeedConfig(roi=window, mode=mode, pixel_clock_hz=timing.pixel_clock_hz, interface=interface,
+                          decimation=decimation, max_decimation=max_decimation, ae=ae, meter=meter,
+                          target_gray=target_gray, band_gray=band_gray, equalize=equalize,
+                          eq_source=eq_source, eq_method=eq_method,
+                          exposure_s=check_positive("exposure_us", exposure_us) * 1e-6, n_frames=n_frames,
+                          seed=seed)
+    # Check everything before the progress bar starts, so an error is a single clean line.
+    check_range("target", target_gray, 0, 255)
+    timing.exposure_cycles(cfg.exposure_s, window)
+    plan = link_plan(timing.frame_rate_hz(window), window.height, window.width, interface, 8, decimation,
+                     max_decimation)
+    if decimation is not None and decimation < plan["decimation_strict"]:
+        click.echo(f"note: {decimation}:1 over {interface} is faster than the link ({plan['decimation_strict']}:1 "
+                   "fits); the DDR ring will overflow and frames will be lost", err=True)
+    with tqdm(total=n_frames, desc="frames", file=sys.stderr, leave=False) as bar:
+        result = run_highspeed(sc, cfg, timing, progress=bar.update)
+    report = write_outputs(result, out_dir, video_format, [t for t, _ in step_list])
+    lk = report["link"]
+    click.echo(f"sensor: {window.width}x{window.height} {mode} @ {timing.pixel_clock_hz / 1e6:g} MHz -> "
+               f"{report['sensor_frame_rate_hz']:.1f} fps ({report['timing']['cycles_per_frame']} cycles/frame)")
+    click.echo(f"link: {interface} max {lk['link_max_frame_rate_hz']:.1f} fps, decimation {lk['decimation']}:1 "
+               f"-> {lk['transmitted_frame_rate_hz']:.1f} fps; DDR ring {lk['buffer_capacity_frames']} frames "
+               f"({lk['buffer_record_s']:.3f} s); first overrun after {lk['time_to_first_overrun_s']:.4g} s")
+    click.echo(f"frames: captured {report['frames_captured']}, buffered {report['frames_buffered_at_end']}, "
+               f"transmitted {report['frames_transmitted']}, dropped {report['frames_dropped']}")
+    for s in report["ae_settling"]:
+        click.echo(f"AE: step at {s['step_time_s']:g} s settled in {s['settle_frames']} frames")
+    click.echo(f"wrote {Path(out_dir) / report['files']['video']}, exposure.png, report.json")
+
+
+@cli.command("highspeed-figures")
+def highspeed_figures():
+    """Print the seed-002 figures next to the model's (timing, link, buffer, equalization)."""
+    from viform.isp.highspeed_pipeline import seed_figures
+
+    click.echo(json.dumps(seed_figures(), indent=2))

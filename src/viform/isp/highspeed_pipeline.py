@@ -17,7 +17,7 @@ histogram of the rendered grid estimates the window's histogram.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -197,9 +197,9 @@ def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None,
         output_frames=out, timing=timing.summary(window), plan=plan, account=account.to_dict(),
         equalizer={"on": cfg.equalize, "source": cfg.eq_source, "method": cfg.eq_method,
                    "compensate": cfg.eq_compensate},
-        config={k: v for k, v in cfg.__dict__.items() if k != "pixel_parameters"}
-        | {"pixel_parameters": params.to_dict(), "render_shape": [scene.height, scene.width],
-           "scene": scene.describe()})
+        config={k: v for k, v in cfg.__dict__.items() if k not in ("pixel_parameters", "roi")}
+        | {"roi": asdict(window), "pixel_parameters": params.to_dict(),
+           "render_shape": [scene.height, scene.width], "scene": scene.describe()})
 
 
 # ----------------------------------------------------------------------------- scenes
@@ -404,6 +404,10 @@ def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", s
         "frames_transmitted": result.account["frames_transmitted"],
         "frames_dropped": result.account["frames_dropped"],
         "selected_but_overwritten": result.account["selected_but_overwritten"],
+        # Not sent in real time but still in the DDR ring: can be read out after the recording.
+        "frames_only_in_buffer": (result.account["frames_captured"] - result.account["frames_transmitted"]
+                                  - result.account["frames_dropped"]),
+        "fraction_sent_in_real_time": result.account["frames_transmitted"] / result.account["frames_captured"],
         "sensor_frame_rate_hz": result.timing["frame_rate_hz"],
         "link": {k: v for k, v in result.plan.items() if k != "link"},
         "timing": result.timing,
@@ -414,3 +418,43 @@ def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", s
     }
     write_json(out / "report.json", report)
     return report
+
+
+# ----------------------------------------------------------------------------- figures
+
+def seed_figures(include_simulation: bool = True) -> dict:
+    """The seed-002 numbers next to this model's (``viform highspeed-figures``)."""
+    from viform.isp.histogram import shift_error
+    from viform.isp.link import INTERFACES, DDRBuffer
+    from viform.light.scenes import TranslatingScene
+    from viform.sensors.highspeed_timing import SEED_ROI
+
+    red = lux13hs_timing("reduced")
+    nor = lux13hs_timing("normal")
+    red166 = lux13hs_timing("reduced", 166e6)
+    rate = red.frame_rate_hz(SEED_ROI)
+    plan = link_plan(rate, 720, 1280, "cameralink")
+    eq = shift_error(1280 * 720)
+    fig = {
+        "reduced_1280x720_100MHz": {"cycles_per_frame": red.cycles_per_frame(SEED_ROI),
+                                    "data_cycles": red.data_cycles(SEED_ROI), "fps": rate,
+                                    "seed": "57 600 data + overhead = 60 000 cycles, 1 666 fps"},
+        "normal_full_1280x864_133MHz": {"fps": nor.frame_rate_hz(), "seed": "3 500 fps at full frame"},
+        "reduced_166MHz": {"fps_1280x720": red166.frame_rate_hz(SEED_ROI),
+                           "fps_1280x864": red166.frame_rate_hz(), "seed": "reduced mode up to 2 500 fps"},
+        "links_fps_1280x720x8": {k: v.max_frame_rate_hz(720, 1280, 8) for k, v in INTERFACES.items()},
+        "cameralink_seed": "555 fps",
+        "ddr": {"capacity_frames": DDRBuffer().capacity_frames(720, 1280, 8),
+                "record_s_at_sensor_rate": plan["buffer_record_s"], "seed": "2 330 frames"},
+        "decimation": {"strict": plan["decimation_strict"], "with_ring_1h": plan["decimation_with_buffer"],
+                       "time_to_first_overrun_s_at_3to1": plan["time_to_first_overrun_s"], "seed": "3:1"},
+        "equalization_shift": {**eq, "seed": "<<8, >>20 (net >>12); error 0.00003*c; + >>15; "
+                                             "compensated error 'close to 0'"},
+    }
+    if include_simulation:
+        base = TranslatingScene(36, 64, velocity_px_per_s=(0.0, 0.0), min_lux=50.0, max_lux=400.0)
+        scene = StepsScene(base, [(0.02, 10.0), (0.05, 0.1)])
+        r = run_highspeed(scene, HighSpeedConfig(n_frames=130, exposure_s=200e-6, equalize=False))
+        fig["ae_10x_steps_latency1"] = ae_settling(r, [0.02, 0.05], 128.0, 15.0)
+        fig["metering_demo"] = metering_demo()
+    return fig

@@ -277,9 +277,9 @@ class RingBuffer:
     at a time at ``link_rate_hz``. A queued frame whose slot would be rewritten (frame
     i + C written) before its transmission ends is skipped: it is lost.
 
-    At the end of the recording the ring still holds the last min(n, C) frames, which can be
-    read out afterwards; a frame is *dropped* when it was neither sent nor is still in the
-    ring.
+    *Transmitted* frames are those whose transfer ends within the recording (n frames). At
+    the end the ring still holds the last min(n, C) frames, which can be read out afterwards;
+    a frame is *dropped* when it was neither sent nor is still in the ring.
     """
 
     def __init__(self, capacity_frames: int, sensor_rate_hz: float, link_rate_hz: float,
@@ -296,8 +296,11 @@ class RingBuffer:
         send_time = 1.0 / self.link_rate_hz
         link_free = 0.0
         sent, lost, ends = [], [], []
+        t_end = n / self.sensor_rate_hz
         for i in range(0, n, d):
             start = max(written[i], link_free)
+            if start + send_time > t_end:
+                break  # the recording is over: the rest stays in the ring (read out later)
             # Slot i is rewritten when frame i + C is written; that may lie beyond the record.
             overwrite = (i + c + 1) / self.sensor_rate_hz
             if start + send_time > overwrite:

@@ -1,0 +1,92 @@
+"""End to end: LUX13HS-like sensor → AE → DDR ring → decimation → equalization → link, and the CLI."""
+
+import json
+
+import numpy as np
+import pytest
+
+from viform.cli import main
+from viform.isp.highspeed_pipeline import (
+    HighSpeedConfig,
+    ScaledScene,
+    StepsScene,
+    lux13hs_pixel_parameters,
+    run_highspeed,
+)
+from viform.light.scenes import StillScene, TranslatingScene
+
+
+def test_lux13hs_pixel_mapping():
+    p = lux13hs_pixel_parameters()
+    assert p.optics.quantum_efficiency == 0.45
+    assert p.full_well_electrons == 30_000 and p.read_noise_electrons == 15
+    assert p.prnu_fraction == 0.015
+    assert p.dsnu_electrons == pytest.approx(0.005 * 30_000)       # 0.5 % of full scale
+    assert p.adc_bits == 10
+    assert p.system_gain_dn_per_e == pytest.approx(40e-6 * 1023 / 1.2)
+
+
+def test_steps_scene_window_mean_is_exact():
+    base = StillScene(np.full((2, 2), 10.0))
+    sc = StepsScene(base, [(1.0, 10.0), (2.0, 0.1)])
+    assert sc.mean_illuminance_lux(0.5, 1.5)[0, 0] == pytest.approx(0.5 * 10 + 0.5 * 100)
+    assert sc.mean_illuminance_lux(1.5, 2.5)[0, 0] == pytest.approx(0.5 * 100 + 0.5 * 10)
+    assert ScaledScene(base, 3).illuminance_lux(0)[0, 0] == 30
+
+
+def test_run_at_seed_rate_with_decimation_and_equalization():
+    scene = ScaledScene(TranslatingScene(36, 64), 60.0)
+    r = run_highspeed(scene, HighSpeedConfig(n_frames=30))
+    assert r.timing["frame_rate_hz"] == pytest.approx(1e8 / 6e4)
+    assert r.plan["decimation"] == 3
+    # Frames 0, 3, …, 24: the transfer of frame 27 (3.0006 frame periods) ends after the record.
+    np.testing.assert_array_equal(r.transmitted_indices, np.arange(0, 27, 3))
+    assert r.output_frames.shape == (9, 36, 64)
+    assert r.account["frames_transmitted"] == 9 and r.account["frames_dropped"] == 0
+    assert np.all(r.exposure_cycles >= 1) and np.all(r.exposure_cycles <= 59_999)
+    assert abs(r.metered_gray[-1] - 128) <= 15
+    # Exposure start/end inside the frame period: the exposure is whole cycles.
+    assert np.allclose(r.exposure_s * 1e8, r.exposure_cycles)
+
+
+def test_slow_link_forced_decimation_loses_frames():
+    """GigE carries 129 fps at 1280 × 720; forcing 2:1 (833 fps) overflows the ring, whose
+    2 330 frames last ≈ 1.6 s at that backlog: a 1.6 s window shows the first losses."""
+    scene = ScaledScene(TranslatingScene(4, 4), 60.0)
+    r = run_highspeed(scene, HighSpeedConfig(n_frames=3000, interface="gige", decimation=2, ae=False,
+                                             equalize=False))
+    assert r.account["selected_but_overwritten"] > 0
+    assert r.account["frames_dropped"] > 0
+    sent_rate = r.account["frames_transmitted"] / (3000 / r.timing["frame_rate_hz"])
+    assert sent_rate <= r.plan["link_max_frame_rate_hz"] * 1.01
+
+
+def test_cli_writes_video_plot_report(tmp_path):
+    out = tmp_path / "hs"
+    rc = main(["highspeed", "translating", "--frames", "40", "--render", "64x36", "--steps", "0.01:10",
+               "--out", str(out)])
+    assert rc == 0
+    assert (out / "video.gif").stat().st_size > 0 and (out / "exposure.png").stat().st_size > 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["frames_captured"] == 40
+    # Frames 0, 3, …, 33: each 3.0006-frame transfer must end within the 40-frame recording.
+    assert rep["frames_transmitted"] == 12
+    assert rep["frames_captured"] == (rep["frames_transmitted"] + rep["frames_dropped"]
+                                      + rep["frames_only_in_buffer"])
+    assert rep["link"]["decimation"] == 3
+    assert not list(out.glob(".*"))  # no temporary files left
+
+
+@pytest.mark.parametrize("args, name", [
+    (["--roi", "1400x720"], "roi"),
+    (["--interface", "gige", "--max-decimation", "8"], "interface"),
+    (["--target", "300"], "target"),
+    (["--exposure-us", "700"], "exposure"),
+    (["--interface", "firewire"], "interface"),
+])
+def test_cli_bad_input_one_line_exit_2(tmp_path, capsys, args, name):
+    extra = ["--frames", "2", "--render", "16x9", "--out", str(tmp_path / "x")]
+    rc = main(["highspeed", "translating", *args, *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    assert name in err[-1] and err[-1].startswith("viform: error:")
