@@ -1,1 +1,255 @@
-"""CLI commands: frame (registered on viform.cli.app.cli)."""
+"""CLI commands: frame sensors (issue 3) — ``viform characterize SENSOR [--out DIR] [--json FILE]``.
+
+Registered on :data:`viform.cli.app.cli`.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+import numpy as np
+
+from viform.cli.app import cli
+
+
+def _db(x):
+    return float(20 * np.log10(x))
+
+
+def _seed_figures(name: str, size: int, seed: int) -> dict:
+    """The seed's measured figures next to this model's, for the seed presets."""
+    from viform.measure.emva1288 import measure_response, plateau_onset
+    from viform.sensors import presets
+
+    if name in ("seed001-2seg", "seed001-3seg"):
+        two = name == "seed001-2seg"
+        unit = presets.SEED001_FIG8_UNIT_LUX if two else presets.SEED001_FIG9_UNIT_LUX
+        units = np.geomspace(1.0, 1000.0, 360)
+        sat = {}
+        for key in ("seed001-normal", name):
+            r = measure_response(presets.make_sensor(key), units * unit, height=size, width=size, seed=seed)
+            sat[key] = plateau_onset(units, r["signal_dn"])
+        hdr = presets.make_sensor(name, noise=False)
+        knees = hdr.knee_lux()
+        knee_dn = hdr.expected_charge_electrons(knees[:-1]) * hdr.parameters.system_gain_dn_per_e
+        seed_vals = (
+            {
+                "normal_saturation": 30,
+                "hdr_saturation": 105,
+                "extension_db": 10.88,
+                "knee_intensity": 15,
+                "knee_dn": [374],
+            }
+            if two
+            else {"normal_saturation": 35, "hdr_saturation": 440, "extension_db": 21.99, "knee_dn": [348, 669.8]}
+        )
+        return {
+            "source": "seed 001 fig. 8" if two else "seed 001 fig. 9",
+            "intensity_unit_lux": unit,
+            "seed": seed_vals,
+            "model": {
+                "normal_saturation": sat["seed001-normal"],
+                "hdr_saturation": sat[name],
+                "extension_db": _db(sat[name] / sat["seed001-normal"]),
+                "knee_intensity": (knees[:-1] / unit).tolist(),
+                "knee_dn": knee_dn.tolist(),
+            },
+        }
+    if name == "seed003-overflow":
+        from viform.light.radiometry import ELEMENTARY_CHARGE_C
+
+        over = presets.make_sensor(name, height=size, width=size)
+        four_t = presets.make_sensor("seed003-4t")
+        currents = np.geomspace(1e-14, 3e-8, 260)
+        lux = over.parameters.optics.lux_from_electrons_per_s(currents / ELEMENTARY_CHARGE_C)
+        sat = {}
+        for key, s in (("4t", four_t), ("overflow", over)):
+            r = measure_response(s, lux, height=size, width=size, seed=seed)
+            sat[key] = plateau_onset(currents, r["signal_dn"])
+        b = over.segment_boundaries_a()
+        return {
+            "source": "seed 003 §5–6, fig. 6",
+            "seed": {
+                "4t_saturation_a": 8e-12,
+                "DE_start_a": 270e-12,
+                "max_usable_a": 10e-9,
+                "dr_gain_db": 62.0,
+                "row_share_time_s": 0.51e-3,
+            },
+            "model": {
+                "4t_saturation_a": sat["4t"],
+                "B_a": b["B"],
+                "C_a": b["C"],
+                "D_a": b["D"],
+                "E_a": b["E"],
+                "max_usable_a": sat["overflow"],
+                "dr_gain_db": _db(sat["overflow"] / sat["4t"]),
+                "row_share_time_s": over.row_share_time_s,
+                "max_rows": over.max_rows(),
+            },
+            "note": "the 62 dB gain is bounded here by (T_frame/t3)(V30 − V_sat)/(V_res − "
+            "V_sat) ≈ 55.5 dB; see docs/frame-sensors.md",
+        }
+    return {}
+
+
+def _comparison_curves(size: int, seed: int) -> dict:
+    """Normal, segmented, overflow (and spike) responses on a common illuminance axis."""
+    from viform.report.response_plots import frame_response_curve, spike_response_curve
+    from viform.sensors import presets
+
+    lux = np.geomspace(0.01, 1e6, 120)
+    curves = {}
+    for key, label in (
+        ("seed001-normal", "normal (seed 001, 130 µs)"),
+        ("seed001-3seg", "segmented, 3 segments (seed 001)"),
+        ("seed003-4t", "plain 4T APS (seed 003, 33 ms)"),
+        ("seed003-overflow", "conditional overflow (seed 003)"),
+    ):
+        kw = {"height": size, "width": size} if key == "seed003-overflow" else {}
+        curves[label] = frame_response_curve(presets.make_sensor(key, **kw), lux, size=size, seed=seed)
+    if presets.spike_available():
+        curves["spike camera (seed 000, Q = 100 e⁻)"] = spike_response_curve(
+            presets.make_sensor("spike"), np.geomspace(0.01, 1e4, 60), seed=seed
+        )
+    return curves
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+@cli.command("characterize")
+@click.argument("sensor")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Folder for the PNG figures (response, SNR, photon transfer).",
+)
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Write the figures (EMVA 1288 / seed comparison) as JSON here.",
+)
+@click.option(
+    "--size",
+    default=64,
+    show_default=True,
+    type=int,
+    help="Flat-field size in pixels (square) for the EMVA 1288 sweep.",
+)
+@click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
+def characterize(sensor, out_dir, json_path, size, seed):
+    """Characterize a preset SENSOR (EMVA 1288 R4.0 for frame sensors; seed 000 §4 for spikes).
+
+    SENSOR is one of: cmos, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
+    seed003-overflow, spike.
+    """
+    from viform._io import save_figure, write_json
+    from viform._validate import ViformError, check_int
+    from viform.measure import emva1288 as emva
+    from viform.report import response_plots as plots
+    from viform.sensors import presets
+    from viform.sensors.frame import FrameSensor
+
+    size = check_int("--size", size, 4, 512)
+    presets.describe_preset(sensor)  # clear error for an unknown name
+    result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
+    figures = {}
+    if sensor == "spike":
+        from viform.measure.spike_characterization import characterize_spike_sensor
+
+        dev = presets.make_sensor(sensor)
+        # 2·τ̂ of dark on 16×16 pixels: ~500 dark spikes, τ̂ to ±5 % (0.4 dB).
+        r = characterize_spike_sensor(
+            dev,
+            height=min(size, 16),
+            width=min(size, 16),
+            seed=seed,
+            dark_duration_s=2 * dev.parameters.longest_signal_interval_s,
+        )
+        result["spike"] = r
+        c = r["snr_curve"]
+        figures["snr.png"] = plots.snr_figure({"spike (interval SNR)": {"lux": c["lux"], "snr": c["snr"]}})
+        lines = [
+            f"interval DR  {r['dynamic_range_db']:.2f} dB (expected "
+            f"{r['expected']['dynamic_range_db']:.2f} dB: τ̂ = Q/I_d = "
+            f"{r['longest_interval_s']:.3g} s, τ̌ = {r['shortest_interval_s']:.3g} s)"
+        ]
+    else:
+        kw = {"height": min(size, 64), "width": min(size, 64)} if sensor == "seed003-overflow" else {}
+        dev = presets.make_sensor(sensor, **kw)
+        lines = []
+        if type(dev) is FrameSensor:
+            r = emva.characterize_frame_sensor(dev, height=size, width=size, seed=seed)
+            result["emva1288"] = r
+            figures["ptc.png"] = plots.ptc_figure(r)
+            e = r["expected"]
+            lines += [
+                f"K            {r['system_gain_dn_per_e']:.4g} DN/e-  (parameters {e['system_gain_dn_per_e']:.4g})",
+                f"QE           {r['quantum_efficiency']:.3f}",
+                f"dark noise   {r['temporal_dark_noise_electrons']:.3g} e-",
+                f"saturation   {r['saturation_capacity_electrons']:.4g} e-",
+                f"threshold    {r['absolute_sensitivity_threshold_photons']:.3g} photons",
+                f"DR           {r['dynamic_range_db']:.2f} dB  (parameters {e['dynamic_range_db']:.2f} dB)",
+                f"DSNU         {r['dsnu_electrons']:.3g} e-   PRNU {r['prnu_percent']:.3g} %",
+                f"linearity    {r['linearity_error_percent']:.3g} %",
+            ]
+            lines += [f"warning: {w}" for w in r["warnings"]]
+        lux = np.geomspace(1e-5, 1e6, 200)
+        own = plots.frame_response_curve(dev, lux, size=min(size, 32), seed=seed)
+        dr = emva.dynamic_range_from_response(own["raw"])
+        result["response_dynamic_range"] = dr
+        lines.append(
+            f"response DR  {dr['dynamic_range_db']:.2f} dB (SNR = 1 at "
+            f"{dr['lux_min']:.3g} lux to plateau at {dr['lux_sat']:.3g} lux)"
+        )
+        figures["snr.png"] = plots.snr_figure({sensor: own})
+        seed_fig = _seed_figures(sensor, min(size, 32), seed)
+        if seed_fig:
+            result["seed_comparison"] = seed_fig
+            for k, v in seed_fig["model"].items():
+                ref = seed_fig["seed"].get(k)
+                lines.append(
+                    f"{k:<18} model {json.dumps(_jsonable(v))}"
+                    + (f"   seed {json.dumps(ref)}" if ref is not None else "")
+                )
+    if out_dir is not None:
+        figures["response.png"] = plots.response_figure(
+            _comparison_curves(16, seed), "Response of the frame and spike sensors"
+        )
+        out = Path(out_dir)
+        for fname, fig in figures.items():
+            save_figure(out / fname, fig)
+        result["figures"] = sorted(str(out / f) for f in figures)
+    else:
+        import matplotlib.pyplot as plt
+
+        for fig in figures.values():
+            plt.close(fig)
+    if json_path is not None:
+        for key in ("emva1288", "spike"):
+            if key in result:
+                result[key] = {k: v for k, v in result[key].items() if k not in ("curves",)}
+        write_json(json_path, _jsonable(result))
+    click.echo(f"{sensor}: {result['description']}")
+    for line in lines:
+        click.echo("  " + line)
+    if not lines:
+        raise ViformError(f"nothing was measured for {sensor!r}")
