@@ -132,3 +132,17 @@ def gamma_draw(shape, table, edges, widths, log_peak, squeeze, key, counter):
             x = q - np.log(u1) / rate
             if np.log(u2) <= (shape - 1.0) * (np.log(x / q) - (x - q) / q):
                 return x
+
+
+def gamma_samples(shape: float, n: int, key: int = 0) -> np.ndarray:
+    """``n`` draws of Gamma(shape, 1) from the stream ``key`` (the sampler the simulator uses)."""
+    tables = build_tables([shape])
+    return _draw_many(float(shape), *tables, np.uint64(key), int(n))
+
+
+@njit(cache=True)
+def _draw_many(shape, edges, widths, log_peak, squeeze, key, n):
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = gamma_draw(shape, 0, edges, widths, log_peak, squeeze, key, i)
+    return out

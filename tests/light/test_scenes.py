@@ -1,0 +1,102 @@
+"""Scenes: analytic ground truth, exact window means, explicit pixel → lux mapping."""
+
+import numpy as np
+import pytest
+
+from viform._validate import ViformError
+from viform.light.scenes import (
+    FlickerScene,
+    HDRScene,
+    RotatingScene,
+    StepScene,
+    StillScene,
+    TranslatingScene,
+    VideoScene,
+    image_to_lux,
+    load_scene,
+)
+
+
+def test_translating_pattern_moves_at_its_speed():
+    scene = TranslatingScene(32, 64, velocity_px_per_s=(1000.0, 0.0), pattern="bars", period_px=16)
+    a = scene.illuminance_lux(0.0)
+    b = scene.illuminance_lux(0.004)  # 4 px later
+    assert np.array_equal(b[:, 4:], a[:, :-4])
+
+
+def test_rotating_pattern_returns_after_a_turn():
+    scene = RotatingScene(33, 33, angular_speed_rad_per_s=2 * np.pi * 10)
+    # after a whole turn only the centre row and column, on a checker edge, may differ (rounding)
+    assert np.mean(~np.isclose(scene.illuminance_lux(0.0), scene.illuminance_lux(0.1))) < 0.07
+    assert np.mean(~np.isclose(scene.illuminance_lux(0.0), scene.illuminance_lux(0.0125))) > 0.3
+
+
+def test_hdr_scene_spans_six_decades():
+    scene = HDRScene(20, 200, min_lux=0.01, decades=6)
+    lux = scene.illuminance_lux(0.0)
+    assert lux.max() / lux.min() >= 1e6 * 0.999
+
+
+def test_step_scene_window_mean_is_exact():
+    scene = StepScene(step_time_s=0.01, factor=10.0, height=4, width=4, lux=2.0)
+    mean = scene.mean_illuminance_lux(0.005, 0.015)
+    assert np.allclose(mean, 2.0 * 0.5 + 20.0 * 0.5)
+    assert np.allclose(scene.illuminance_lux(0.0099), 2.0)
+    assert np.allclose(scene.illuminance_lux(0.01), 20.0)
+
+
+@pytest.mark.parametrize("waveform", ["sine", "square"])
+def test_flicker_mean_over_whole_periods_is_the_base(waveform):
+    scene = FlickerScene(frequency_hz=100.0, depth=0.8, waveform=waveform, height=2, width=2, lux=3.0)
+    assert np.allclose(scene.mean_illuminance_lux(0.0013, 0.0013 + 0.03), 3.0)
+    # exact mean agrees with a fine midpoint rule over a partial period
+    numeric = np.mean([scene.illuminance_lux(t)[0, 0] for t in np.linspace(0.001, 0.004, 30001)[:-1] + 5e-8])
+    assert scene.mean_illuminance_lux(0.001, 0.004)[0, 0] == pytest.approx(numeric, rel=2e-3)
+
+
+def test_video_hold_and_linear_interpolation():
+    frames = np.stack([np.full((2, 3), 1.0), np.full((2, 3), 3.0)])
+    hold = VideoScene(frames, frame_rate_hz=100.0, interpolation="hold")
+    linear = VideoScene(frames, frame_rate_hz=100.0, interpolation="linear")
+    assert np.allclose(hold.illuminance_lux(0.005), 1.0)
+    assert np.allclose(linear.illuminance_lux(0.005), 2.0)
+    assert np.allclose(linear.illuminance_lux(1.0), 3.0)  # past the end: last frame held
+
+
+def test_integer_images_map_linearly_to_max_lux():
+    image = np.array([[0, 255]], dtype=np.uint8)
+    assert np.allclose(image_to_lux(image, 500.0), [[0.0, 500.0]])
+    assert np.allclose(image_to_lux(np.array([[0.5]]), None), [[0.5]])  # float: lux already
+    with pytest.raises(ViformError, match="max_lux"):
+        image_to_lux(image, None)
+
+
+def test_still_scene_refuses_nan_and_negative_lux():
+    with pytest.raises(ViformError, match="NaN"):
+        StillScene(np.array([[1.0, np.nan]]))
+    with pytest.raises(ViformError, match="negative"):
+        StillScene(np.array([[1.0, -2.0]]))
+
+
+def test_image_and_video_files_load(tmp_path):
+    import imageio.v3 as iio
+
+    image = (np.arange(12, dtype=np.uint8).reshape(3, 4) * 20)
+    iio.imwrite(tmp_path / "a.png", image)
+    still = load_scene(str(tmp_path / "a.png"), max_lux=255.0)
+    assert np.allclose(still.illuminance_lux(0.0), image)
+    folder = tmp_path / "seq"
+    folder.mkdir()
+    for i in range(3):
+        iio.imwrite(folder / f"{i:02d}.png", np.full((3, 4), 50 * i, np.uint8))
+    video = load_scene(str(folder), max_lux=255.0, frame_rate_hz=10.0, interpolation="hold")
+    assert np.allclose(video.illuminance_lux(0.15), 50.0)
+
+
+def test_unreadable_video_and_unknown_scene_give_clear_errors(tmp_path):
+    bad = tmp_path / "broken.mp4"
+    bad.write_bytes(b"not a video")
+    with pytest.raises(ViformError, match="could not be read"):
+        load_scene(str(bad), frame_rate_hz=30.0)
+    with pytest.raises(ViformError, match="neither a built-in scene"):
+        load_scene("no-such-scene")
