@@ -74,3 +74,10 @@ def check_choice(name: str, value, choices) -> str:
     if value not in choices:
         raise ViformError(f"{name} = {value!r} is not allowed: choose one of {', '.join(map(str, choices))}")
     return value
+
+
+def one_line(exc: BaseException, limit: int = 300) -> str:
+    """A short one-line summary of a third-party exception (its last non-empty line)."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    text = lines[-1] if lines else type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 1] + "…"

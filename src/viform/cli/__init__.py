@@ -31,6 +31,11 @@ def _load_commands() -> None:
         importlib.import_module(module)
 
 
+def _first_line(exc: BaseException) -> str:
+    lines = [line for line in str(exc).splitlines() if line.strip()]
+    return lines[0] if lines else type(exc).__name__
+
+
 def main(argv=None) -> int:
     """Entry point: bad input prints one line on stderr and exits 2; no traceback."""
     _load_commands()
@@ -50,12 +55,12 @@ def main(argv=None) -> int:
     except (ViformError, ValueError, OSError) as exc:
         if os.environ.get("VIFORM_DEBUG"):
             raise
-        click.echo(f"viform: error: {exc}", err=True)
+        click.echo(f"viform: error: {_first_line(exc)}", err=True)
         return 2
     except Exception as exc:  # last resort: still one line, exit non-zero
         if os.environ.get("VIFORM_DEBUG"):
             raise
-        click.echo(f"viform: internal error ({type(exc).__name__}): {exc}; "
+        click.echo(f"viform: internal error ({type(exc).__name__}): {_first_line(exc)}; "
                    "set VIFORM_DEBUG=1 for the traceback", err=True)
         return 1
     return 0

@@ -27,6 +27,7 @@ from viform._validate import (
     check_int,
     check_non_negative,
     check_positive,
+    one_line,
 )
 from viform.light.radiometry import check_lux
 
@@ -145,7 +146,7 @@ class StillScene(Scene):
         try:
             image = iio.imread(path)
         except Exception as exc:  # imageio raises many types
-            raise ViformError(f"image file {str(path)!r} could not be read: {exc}") from None
+            raise ViformError(f"image file {str(path)!r} could not be read: {one_line(exc)}") from None
         return cls(_resize(image_to_lux(image, max_lux), shape), **kw)
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
@@ -206,7 +207,7 @@ class VideoScene(Scene):
         except ViformError:
             raise
         except Exception as exc:
-            raise ViformError(f"video {str(path)!r} could not be read: {exc}") from None
+            raise ViformError(f"video {str(path)!r} could not be read: {one_line(exc)}") from None
         if not frames:
             raise ViformError(f"video {str(path)!r} holds no frames")
         rate = frame_rate_hz if frame_rate_hz is not None else declared

@@ -1,0 +1,7 @@
+"""``python -m viform.cli``: the same as the ``viform`` command."""
+
+import sys
+
+from viform.cli import main
+
+sys.exit(main())
