@@ -129,7 +129,7 @@ def test_threshold_spread_is_fixed_pattern():
 def test_chip_threshold_levels():
     assert len(CHIP_THRESHOLD_LEVELS_ELECTRONS) == 16
     assert 100 in CHIP_THRESHOLD_LEVELS_ELECTRONS
-    assert all(b > a for a, b in zip(CHIP_THRESHOLD_LEVELS_ELECTRONS, CHIP_THRESHOLD_LEVELS_ELECTRONS[1:]))
+    assert np.all(np.diff(CHIP_THRESHOLD_LEVELS_ELECTRONS) > 0)
 
 
 def test_lazy_stream_equals_capture():
