@@ -56,11 +56,49 @@ def test_meters():
     assert settle_frames([0, 0, 128, 128, 128, 0], 128, 15, 0) is None
 
 
-def _step_run(latency):
+def _step_run(latency, saturated_cut=None):
     base = TranslatingScene(36, 64, velocity_px_per_s=(0.0, 0.0), min_lux=50.0, max_lux=400.0)
     scene = StepsScene(base, [(T_UP, 10.0), (T_DOWN, 0.1)])
-    cfg = HighSpeedConfig(n_frames=130, exposure_s=200e-6, equalize=False, ae_latency_frames=latency)
+    cfg = HighSpeedConfig(n_frames=130, exposure_s=200e-6, equalize=False, ae_latency_frames=latency,
+                          ae_saturated_cut=saturated_cut)
     return run_highspeed(scene, cfg)
+
+
+def test_saturated_step_only_when_mostly_saturated():
+    """(A2): N·k only when ≥ half the pixels sit at 255 and the gray is above the band;
+    never a smaller cut than eq. (6) would make; invalid k named."""
+    ae = AutoExposure(59_999, target_gray=128, saturated_cut=0.125)
+    full = np.full((4, 4), 255, dtype=np.uint8)
+    assert ae.update(full, 16_000) == (255.0, 2_000)
+    half = full.copy()
+    half[:2] = 200                                    # 50 % saturated: cut
+    assert ae.update(half, 16_000)[1] == 2_000
+    few = full.copy()
+    few[:3] = 200                                     # 25 % saturated: eq. (6) only
+    assert ae.update(few, 16_000)[1] == round(16_000 * 128 / few.mean())
+    assert AutoExposure(59_999, target_gray=128).update(full, 16_000)[1] == round(16_000 * 128 / 255)
+    for bad in (0, 1, 1.5):
+        with pytest.raises(ViformError, match="saturated_cut"):
+            AutoExposure(59_999, saturated_cut=bad)
+
+
+@pytest.mark.parametrize("latency", [0, 1])
+def test_saturated_step_settles_in_two_updates_without_oscillating(latency):
+    """With (A2), k = 1/8: the cut frame is unsaturated (10/8 of the target exposure), so the
+    next eq. (6) update lands in the band: ≤ 2 updates = 2 (1 + latency) frames after the step
+    (the seed's eq. (6) alone needs 4 updates here); then N stays constant."""
+    r = _step_run(latency, saturated_cut=0.125)
+    up = int(math.floor(T_UP * 1e8 / 6e4))
+    down = int(math.floor(T_DOWN * 1e8 / 6e4))
+    g, n = r.metered_gray, r.exposure_cycles
+    s_up = settle_frames(g[:down], 128, 15, up)
+    assert s_up is not None and s_up <= 2 * (1 + latency)
+    seed_only = settle_frames(_step_run(latency).metered_gray[:down], 128, 15, up)
+    assert seed_only > s_up
+    assert g[up:down].min() >= 128 - 15
+    assert np.all(np.diff(n[up:down + 1]) <= 0)
+    assert np.all(n[up + s_up + 1 + latency:down] == n[down - 1])
+    assert n[down - 1] / n[up - 1] == pytest.approx(0.1, rel=0.15)
 
 
 @pytest.mark.parametrize("latency", [0, 1])

@@ -83,10 +83,13 @@ def test_cli_writes_video_plot_report(tmp_path):
     (["--target", "300"], "target"),
     (["--exposure-us", "700"], "exposure"),
     (["--interface", "firewire"], "interface"),
+    (["--ae-saturated-cut", "1.5"], "ae_saturated_cut"),
 ])
 def test_cli_bad_input_one_line_exit_2(tmp_path, capsys, args, name):
     extra = ["--frames", "2", "--render", "16x9", "--out", str(tmp_path / "x")]
     rc = main(["highspeed", "translating", *args, *extra])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2
+    assert len(err) == 1 and "Traceback" not in err[0]
     assert name in err[-1] and err[-1].startswith("viform: error:")
+    assert not (tmp_path / "x").exists()  # no partial output

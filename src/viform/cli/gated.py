@@ -123,7 +123,9 @@ def run_gated(
         gp.plot_images(
             out / "fog_gated_vs_ungated.png",
             fog_imgs,
-            f"signs at {', '.join(f'{r:g}' for r in (60, 90, 120))} m in fog V = {fog_visibility_m:g} m",
+            f"signs at {', '.join(f'{r:g}' for r in (60, 90, 120))} m in fog V = {fog_visibility_m:g} m"
+            " (one grey scale for both)",
+            shared_scale=True,
         )
         gp.plot_images(
             out / "modes.png",

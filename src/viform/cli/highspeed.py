@@ -62,6 +62,9 @@ def _load(spec: str, height: int, width: int, scene_fps: float | None):
 @click.option("--target", "target_gray", type=float, default=128.0, show_default=True,
               help="AE target gray R_i (0-255); dead band ±--band.")
 @click.option("--band", "band_gray", type=float, default=15.0, show_default=True)
+@click.option("--ae-saturated-cut", type=float, default=None,
+              help="Optional saturation-aware AE step k (0<k<1, e.g. 0.125): N×k while most pixels "
+                   "are at 255. Default: the seed's eq. (6) alone.")
 @click.option("--equalize/--no-equalize", default=True, show_default=True, help="Histogram equalization.")
 @click.option("--eq-source", type=click.Choice(["previous", "same"]), default="previous", show_default=True,
               help="Histogram of the previous transmitted frame or of the frame itself.")
@@ -80,8 +83,8 @@ def _load(spec: str, height: int, width: int, scene_fps: float | None):
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="highspeed_out", show_default=True)
 def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray, band_gray,
-              equalize, eq_source, eq_method, n_frames, exposure_us, render, lux, steps, scene_fps, video_format, seed,
-              out_dir):
+              ae_saturated_cut, equalize, eq_source, eq_method, n_frames, exposure_us, render, lux, steps, scene_fps,
+              video_format, seed, out_dir):
     """Shoot SCENE with a LUX13HS-like high-speed camera (seed 002).
 
     SCENE is a built-in scene (translating, moving-edge, rotating, hdr, step, flicker), an
@@ -117,12 +120,15 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         sc = StepsScene(sc, step_list)
     cfg = HighSpeedConfig(roi=window, mode=mode, pixel_clock_hz=timing.pixel_clock_hz, interface=interface,
                           decimation=decimation, max_decimation=max_decimation, ae=ae, meter=meter,
-                          target_gray=target_gray, band_gray=band_gray, equalize=equalize,
+                          target_gray=target_gray, band_gray=band_gray, ae_saturated_cut=ae_saturated_cut,
+                          equalize=equalize,
                           eq_source=eq_source, eq_method=eq_method,
                           exposure_s=check_positive("exposure_us", exposure_us) * 1e-6, n_frames=n_frames,
                           seed=seed)
     # Check everything before the progress bar starts, so an error is a single clean line.
     check_range("target", target_gray, 0, 255)
+    if ae_saturated_cut is not None:
+        check_range("ae_saturated_cut", ae_saturated_cut, 0, 1, low_open=True, high_open=True)
     timing.exposure_cycles(cfg.exposure_s, window)
     plan = link_plan(timing.frame_rate_hz(window), window.height, window.width, interface, 8, decimation,
                      max_decimation)

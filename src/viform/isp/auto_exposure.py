@@ -16,6 +16,21 @@ background differ strongly, proposing a weighted gray as future work. Besides
 region-weighted metering of the seed's refs. [13-14]) and :class:`PercentileMeter` (meter a
 high percentile, which protects small bright targets from saturating).
 
+Saturation (optional, off by default). While most pixels sit at the top level the mean is
+≤ 255, so (A1) can cut N by at most R_i/255 ≈ ½ per update, and with the one-frame latency of
+the global shutter (§3.2.4: the next frame exposes while this one is read out) a 10× step
+takes 4 updates = 8 frames. The true (unclipped) mean is not observable — the full well and
+the ADC clip before the FPGA sees the data — so no reading of R_p can do better. The seed's
+own histogram (§3.2.2) does give the saturated fraction n_255/N, and the seed asks only that
+N be reduced while the gray lies right of the band ("逐渐减小 N"). With ``saturated_cut`` = k
+the controller uses
+
+    T_i = T_p · min(k, (R_i − b)/(R_p − b))   while n_255/N ≥ ``saturated_fraction``     (A2)
+
+(k = 1/8 is a 3-bit shift in the FPGA). The frame after such a cut is mostly unsaturated, so
+(A1) then lands in the band: a 10× step settles in 4 frames instead of 8; a cut that
+overshoots low is undone by one linear (A1) update, with no oscillation.
+
 Black level: (A1) assumes gray ∝ exposure; with a black offset b the controller uses
 T_i = T_p · (R_i − b) / (R_p − b) (b = 0 gives the seed's form exactly).
 """
@@ -111,6 +126,12 @@ class AutoExposure:
     black_level_gray : float
         Gray of a dark frame, subtracted before (A1).
     min_exposure_cycles : int
+    saturated_cut : float or None
+        k of (A2), 0 < k < 1; None (default) is the seed's (A1) alone.
+    saturated_fraction : float
+        Fraction of pixels at ``saturation_gray`` that triggers (A2).
+    saturation_gray : float
+        Gray level counted as saturated (255: the top of the 8-bit path).
     """
 
     max_exposure_cycles: int
@@ -119,6 +140,9 @@ class AutoExposure:
     meter: object = None
     black_level_gray: float = 0.0
     min_exposure_cycles: int = 1
+    saturated_cut: float | None = None
+    saturated_fraction: float = 0.5
+    saturation_gray: float = 255.0
 
     def __post_init__(self):
         check_int("max_exposure_cycles", self.max_exposure_cycles, 1)
@@ -131,6 +155,12 @@ class AutoExposure:
         check_int("min_exposure_cycles", self.min_exposure_cycles, 1, self.max_exposure_cycles)
         if self.meter is None:
             self.meter = MeanMeter()
+        if self.saturated_cut is not None:
+            self.saturated_cut = check_range("saturated_cut", self.saturated_cut, 0, 1, low_open=True,
+                                             high_open=True)
+        self.saturated_fraction = check_range("saturated_fraction", self.saturated_fraction, 0, 1,
+                                              low_open=True)
+        self.saturation_gray = check_range("saturation_gray", self.saturation_gray, 1, 255)
 
     def in_band(self, metered_gray: float) -> bool:
         return abs(metered_gray - self.target_gray) <= self.band_gray
@@ -146,9 +176,17 @@ class AutoExposure:
         return int(np.clip(round(n * ratio), self.min_exposure_cycles, self.max_exposure_cycles))
 
     def update(self, gray8, exposure_cycles: int) -> tuple[float, int]:
-        """Meter ``gray8`` and return (metered gray, next exposure cycles)."""
+        """Meter ``gray8`` and return (metered gray, next exposure cycles): (A1), or (A2) when
+        ``saturated_cut`` is set and the frame is mostly saturated."""
         r = self.meter(gray8)
-        return r, self.next_exposure(r, exposure_cycles)
+        nxt = self.next_exposure(r, exposure_cycles)
+        if self.saturated_cut is not None and r > self.target_gray + self.band_gray:
+            saturated = float(np.mean(np.asarray(gray8) >= self.saturation_gray))
+            if saturated >= self.saturated_fraction:
+                cut = int(np.clip(round(exposure_cycles * self.saturated_cut), self.min_exposure_cycles,
+                                  self.max_exposure_cycles))
+                nxt = min(nxt, cut)
+        return r, nxt
 
 
 def settle_frames(metered_gray, target_gray: float, band_gray: float, start: int) -> int | None:

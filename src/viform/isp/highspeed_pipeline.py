@@ -79,6 +79,9 @@ class HighSpeedConfig:
     ae_latency_frames : int
         Frames between the metered frame and the one that gets the new exposure; 1 because
         frame k+1 is already exposing while frame k is read out (seed 002 §3.2.4).
+    ae_saturated_cut : float or None
+        k of the optional saturation-aware step (A2) of :mod:`viform.isp.auto_exposure`;
+        None (default) runs the seed's eq. (6) alone.
     equalize : bool
     eq_source, eq_method, eq_compensate : see :class:`viform.isp.histogram.StreamEqualizer`.
     exposure_s : float
@@ -100,6 +103,7 @@ class HighSpeedConfig:
     target_gray: float = 128.0
     band_gray: float = 15.0
     ae_latency_frames: int = 1
+    ae_saturated_cut: float | None = None
     equalize: bool = True
     eq_source: str = "previous"
     eq_method: str = "shift"
@@ -151,7 +155,8 @@ def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None,
     pixels = sensor.pixel_array(scene.height, scene.width)
     black_gray = params.black_offset_dn / (1 << (params.adc_bits - 8))
     controller = AutoExposure(timing.max_exposure_cycles(window), cfg.target_gray, cfg.band_gray,
-                              make_meter(cfg.meter), black_level_gray=black_gray)
+                              make_meter(cfg.meter), black_level_gray=black_gray,
+                              saturated_cut=cfg.ae_saturated_cut)
     latency = check_int("ae_latency_frames", cfg.ae_latency_frames, 0, 8)
 
     gray = np.empty((n, scene.height, scene.width), dtype=np.uint8)

@@ -64,17 +64,27 @@ def plot_range_intensity(path, profile: dict, title: str = "") -> None:
     save_figure(path, fig)
 
 
-def plot_images(path, images: dict, title: str = "", percentile: float = 99.5) -> None:
-    """Side-by-side images (electrons), each stretched to its own [0.5, 99.5] percentile range."""
+def plot_images(path, images: dict, title: str = "", percentile: float = 99.5, shared_scale: bool = False) -> None:
+    """Side-by-side images (electrons) stretched to the [100 − p, p] percentile range.
+
+    With ``shared_scale`` one range, taken over all images together, is used for every
+    panel, so a brighter background (e.g. the fog veil of an un-gated frame, seed 004
+    introduction) shows as brighter instead of being stretched away; otherwise each
+    image gets its own range.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     n = len(images)
+    common = None
+    if shared_scale:
+        common = np.percentile(np.concatenate([np.ravel(im) for im in images.values()]),
+                               [100 - percentile, percentile])
     fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.2), squeeze=False)
     for ax, (name, img) in zip(axes[0], images.items(), strict=True):
-        lo, hi = np.percentile(img, [100 - percentile, percentile])
+        lo, hi = common if common is not None else np.percentile(img, [100 - percentile, percentile])
         ax.imshow(img, cmap="gray", vmin=lo, vmax=hi if hi > lo else lo + 1)
         ax.set_title(name, fontsize=9)
         ax.axis("off")
