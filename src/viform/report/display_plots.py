@@ -1,0 +1,86 @@
+"""Figures for the spike continuous display, pass-through and light communication (seed 000 §7).
+
+All files are written through :func:`viform._io.save_figure`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from viform._io import save_figure
+
+
+def _figure(*args, **kw):
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(*args, **kw)
+
+
+# ------------------------------------------------------------------ light communication
+
+def plot_ber_sweeps(path, sweeps: dict, modulation: str) -> None:
+    """BER against bit rate, distance (received light) and ambient light, one panel each."""
+    fig, axes = _figure(1, 3, figsize=(13, 3.8))
+    floor = None
+    for ax, (name, rows) in zip(axes, sweeps.items(), strict=False):
+        x = np.array([r[name] for r in rows], float)
+        y = np.array([r["ber"] for r in rows], float)
+        n = rows[0]["n_bits"] if rows else 1
+        floor = 0.5 / n
+        ax.plot(np.where(x > 0, x, np.nan) if name != "ambient_lux" else np.maximum(x, 1e-3),
+                np.maximum(y, floor), "o-", label=f"{modulation} (0 errors plotted at ½/n)")
+        ax.set_yscale("log")
+        ax.set_xscale("log")
+        ax.set_ylim(floor / 2, 1)
+        ax.set_xlabel({"bitrate_bps": "bit rate (bit/s)", "distance_m": "distance (m)",
+                       "ambient_lux": "ambient on sensor (lux; 0 drawn at 1e-3)"}[name])
+        ax.set_ylabel("bit-error rate")
+        ax.grid(True, which="both", alpha=0.3)
+        if name != "bitrate_bps":
+            ax2 = ax.twinx()
+            key = "expected_spikes_per_on_slot_pixel" if name == "distance_m" else "background_spikes_per_slot_pixel"
+            ax2.plot(np.maximum(x, 1e-3), [r[key] for r in rows], "s--", color="tab:gray", alpha=0.6)
+            ax2.set_yscale("log")
+            ax2.set_ylabel("signal spikes / on slot" if name == "distance_m" else "background spikes / slot")
+        else:
+            ax2 = ax.twinx()
+            ax2.plot(x, [r["expected_spikes_per_on_slot_pixel"] for r in rows], "s--", color="tab:gray", alpha=0.6)
+            ax2.set_yscale("log")
+            ax2.set_ylabel("signal spikes / on slot")
+        ax.legend(fontsize=7, loc="lower right")
+    fig.suptitle("Spike-camera light link: BER (circles) and spikes per slot (grey squares)")
+    fig.tight_layout()
+    save_figure(path, fig)
+
+
+def plot_link_raster(path, result, spikes: np.ndarray, clock_hz: float, max_slots: int = 60) -> None:
+    """The LED's slot levels, the brightest pixel's spikes and the per-slot counts with the decisions."""
+    fig, axes = _figure(2, 1, figsize=(11, 4.6), sharex=True)
+    slots = result.slot_levels[:max_slots]
+    slot_s = result.slot_s
+    t_slots = np.arange(slots.size) * slot_s
+    flat = spikes.reshape(spikes.shape[0], -1)
+    best = int(np.argmax(flat.sum(axis=0)))
+    n_ticks = int(np.ceil((slots.size * slot_s) * clock_hz))
+    # spikes of the payload, on payload time (tick k read at its end, drawn at its middle)
+    k0 = int(np.floor(result.payload_start_s * clock_hz))
+    k = np.nonzero(flat[k0:k0 + n_ticks + 1, best])[0] + k0
+    t_spk = (k + 0.5) / clock_hz - result.payload_start_s
+    axes[0].step(t_slots * 1e3, slots, where="post", label="LED on/off (payload)")
+    axes[0].vlines(t_spk * 1e3, 1.1, 1.5, color="k", lw=0.8,
+                   label="spikes, brightest pixel")
+    axes[0].set_ylabel("level")
+    axes[0].legend(fontsize=7, loc="upper right")
+    counts = result.counts[:max_slots]
+    axes[1].bar(t_slots * 1e3, counts, width=slot_s * 1e3 * 0.9, align="edge", label="spikes per slot (pixels used)")
+    axes[1].axhline(result.threshold, color="r", ls="--", lw=0.8, label="OOK threshold")
+    axes[1].set_xlabel("time from payload start (ms)")
+    axes[1].set_ylabel("spikes")
+    axes[1].legend(fontsize=7, loc="upper right")
+    fig.suptitle(f"{result.modulation} at {result.bitrate_bps:g} bit/s: {result.bit_errors} errors "
+                 f"in {result.n_bits} bits")
+    fig.tight_layout()
+    save_figure(path, fig)
