@@ -26,6 +26,24 @@ of t1 to the end of t2, i.e. t2 plus two uses of < 0.01 ms each ≈ 0.51 ms; row
 turns, so rows × 0.51 ms must fit in the frame period. Rows are staggered by
 frame period / rows (row-by-row exposure, seed 003 §2).
 
+Dynamic-range gain over the plain 4T APS (seed 003, §6 claims ≈ 62 dB = 20·lg(10 nA / 8 pA)).
+Both pixels share the low end (segment AB is the 4T response), so the gain is the ratio of
+the largest usable photocurrents. The 4T (same photodiode, whole frame T = t1 + t2 + t3)
+saturates at I_4T = (V_res − V_sat)·C_PD/T. The overflow pixel's curve ends at E, where the
+photodiode saturates within t3 after the second sharing; in segment DE, V1 = V2 = V_sat and
+C_F is reset to VF before each use, so eqs. 5–6 give V30 = V20 = (V_sat·C_PD + VF·C_F)/(C_F + C_PD)
+and E = (V30 − V_sat)·C_PD/t3. The charge moved onto C_F is never read (only V_PD is), so
+C_F does not add to the well that t3 fills. Hence (:func:`dynamic_range_gain_db`)::
+
+    E / I_4T = (T / t3) · (VF − V_sat)/(V_res − V_sat) · C_F/(C_F + C_PD)
+             < (T / t3) · VF / V_res = 1111 × 2.2/3.3 = 741   (57.4 dB, any C_PD, C_F, V_sat ≥ 0)
+
+With the calibrated C_PD = 88.9 fF and V_sat = 0.3 V this is 55.5 dB (E = 4.78 nA). The
+seed's own figures say the same: eqs. 5–6 make D (saturation within t2) and E share the
+starting voltage V20, so E/D = t2/t3 = 16.7, and the seed's D = 270 pA gives E = 4.5 nA
+(55.0 dB), not 10 nA (10 nA / 270 pA = 37). 62 dB would need 1250 > T/t3 = 1111, i.e. more
+swing in t3 than the 4T has in the whole frame, or t3 ≈ 14 µs instead of the seed's 30 µs.
+
 Noise model: Poisson photo + dark charge per integration window (exact at small counts),
 PRNU/DSNU, read noise and ADC from :class:`~viform.sensors.frame.FramePixelArray`.
 Charge is tracked as the photodiode voltage drop in electrons, ``n = (V_res − V)·C_PD/q``,
@@ -106,6 +124,30 @@ def segment_boundaries_a(
     return {"B": b, "C": c, "D": d, "E": e, "v20_after_saturation_v": v20_sat}
 
 
+def dynamic_range_gain_db(
+    c_pd_f: float,
+    c_f_f: float = 500e-15,
+    v_reset_v: float = 3.3,
+    v_f_v: float = 2.2,
+    v_sat_v: float = 0.3,
+    integration_times_s=SEED003_INTEGRATIONS_S,
+) -> float:
+    """Noise-free DR gain over the plain 4T APS, 20·lg(E / I_4T), dB (seed 003, §6, eqs. 3–6).
+
+    I_4T = (V_res − V_sat)·C_PD/(t1 + t2 + t3) is where the 4T (same photodiode, whole
+    frame) saturates; E is :func:`segment_boundaries_a`'s end of segment DE. The low ends
+    coincide (segment AB), so this ratio is the gain. In closed form
+    ``(T/t3)·(VF − V_sat)/(V_res − V_sat)·C_F/(C_F + C_PD)``, below ``20·lg((T/t3)·VF/V_res)``.
+
+    >>> round(dynamic_range_gain_db(8e-12 * 33.33e-3 / 3.0), 2)
+    55.53
+    """
+    times = tuple(integration_times_s)
+    e = segment_boundaries_a(c_pd_f, c_f_f, v_reset_v, v_f_v, v_sat_v, times)["E"]
+    i_4t = (v_reset_v - v_sat_v) * c_pd_f / sum(times)
+    return float(20 * np.log10(e / i_4t))
+
+
 class OverflowSensor(FrameSensor):
     """Conditional-overflow, triple-integration HDR camera (seed 003).
 
@@ -173,6 +215,12 @@ class OverflowSensor(FrameSensor):
         self.v_sat_v = (
             self.v_reset_v - parameters.full_well_electrons * parameters.conversion_gain_v_per_e
         )
+        if self.v_sat_v < 0:
+            raise ViformError(
+                f"full_well_electrons × conversion_gain_v_per_e = "
+                f"{self.v_reset_v - self.v_sat_v:g} V exceeds v_reset_v = {v_reset_v:g} V: the "
+                f"photodiode would have to swing below 0 V (forward bias) to hold that charge"
+            )
         if not self.v_sat_v < self.v_f_v:
             raise ViformError(
                 f"the photodiode swing full_well_electrons × conversion_gain_v_per_e = "
@@ -301,6 +349,17 @@ class OverflowSensor(FrameSensor):
         """Noise-free CDS signal V_res − V3 in electrons at the photodiode."""
         v3 = self.expected_voltages_v(photocurrent_a)[2]
         return (self.v_reset_v - v3) / self.parameters.conversion_gain_v_per_e
+
+    def dynamic_range_gain_db(self) -> float:
+        """Noise-free DR gain over the plain 4T APS (see :func:`dynamic_range_gain_db`)."""
+        return dynamic_range_gain_db(
+            self.c_pd_f,
+            self.overflow_capacitance_f,
+            self.v_reset_v,
+            self.v_f_v,
+            self.v_sat_v,
+            self.integration_times_s,
+        )
 
     def segment_boundaries_a(self) -> dict:
         """Photocurrents at the seed's points B, C, D, E (see :func:`segment_boundaries_a`)."""
