@@ -22,13 +22,15 @@ def test_gated_cli_writes_json_and_figures(tmp_path, capsys):
     }
 
 
-def test_gated_cli_bad_input_one_line(capsys):
+def test_gated_cli_bad_input_one_line(capsys, tmp_path):
     for args, name in (
         (["--visibility-m", "-5"], "visibility_m"),
         (["--gate-m", "-1"], "gate_m"),
         (["--pulses", "1000"], "pulses"),
         (["--gate-m", "20000"], "gate_range_m"),
     ):
-        assert main(["gated", *args]) == 2
+        out, js = tmp_path / "figs", tmp_path / "r.json"
+        assert main(["gated", *args, "--out", str(out), "--json", str(js)]) == 2
         err = capsys.readouterr().err.strip()
-        assert name in err and "\n" not in err
+        assert name in err and "\n" not in err and err.startswith("viform: error:")
+        assert not out.exists() and not js.exists()  # no partial output
