@@ -145,3 +145,25 @@ def test_lazy_stream_equals_capture():
 def test_bad_parameters_name_themselves(field, value):
     with pytest.raises(ViformError, match=field):
         SpikeSensor(**{field: value})
+
+
+@pytest.mark.parametrize("reset", ["self", "readout"])
+def test_vectorized_noise_free_kernel_matches_the_event_kernel(reset):
+    """The noise-free model runs a SIMD tick loop; it must give the event-driven kernel's bits."""
+    from viform.sensors import spike as module
+
+    sensor = SpikeSensor(photon_noise=False, reset=reset)
+    scene = builtin_scene("hdr", 20, 50)  # includes pixels above the one-spike-per-tick limit
+    vectorized = sensor.capture(scene, 0.01, seed=3).spikes
+    q, _, index, tables = sensor._pixel_tables(20, 50)
+    state = sensor.initial_state(20, 50, 3)
+    blocks = []
+    for first, last in ((0, 123), (123, 400)):
+        out = np.empty((last - first, 1000), dtype=bool)
+        lux = scene.illuminance_lux_many((np.arange(first, last) + 0.5) / sensor.parameters.clock_hz)
+        rates = np.rint(sensor.electrons_per_tick(lux.reshape(last - first, -1)) * module.FIXED_POINT_SCALE)
+        module._run_block(out, rates.astype(np.int64), first, 1, first, state.charge, state.target, state.counter,
+                          q, index, *tables, state.keys, False, reset == "readout")
+        blocks.append(out.reshape(-1, 20, 50))
+    assert np.array_equal(vectorized, np.concatenate(blocks))
+    assert 0.05 < vectorized.mean() < 1.0
