@@ -38,3 +38,33 @@ def test_unknown_sensor_is_one_line_error(capsys):
 def test_bad_size(size, capsys):
     assert main(["characterize", "cmos", "--size", size]) == 2
     assert "--size" in capsys.readouterr().err
+
+
+def test_unwritable_json_fails_before_any_figure_is_written(tmp_path, capsys):
+    """A --json path under a regular file is refused up front: one line, exit 2, no PNGs."""
+    blocker = tmp_path / "not_a_dir"
+    blocker.write_text("x")
+    out = tmp_path / "figs"
+    rc = main(["characterize", "cmos", "--size", "8", "--out", str(out), "--json", str(blocker / "r.json")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--json" in err
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["not_a_dir"]
+
+
+def test_out_under_a_file_is_refused(tmp_path, capsys):
+    blocker = tmp_path / "f"
+    blocker.write_text("x")
+    assert main(["characterize", "cmos", "--size", "8", "--out", str(blocker / "figs")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--out" in err
+
+
+def test_seed003_preset_reports_equation_gain(tmp_path):
+    """The seed-003 comparison carries the measured gain and the closed form (55.5 dB)."""
+    rc = main(["characterize", "seed003-overflow", "--json", str(tmp_path / "o.json"), "--size", "8"])
+    assert rc == 0
+    model = json.loads((tmp_path / "o.json").read_text())["seed_comparison"]["model"]
+    assert model["dr_gain_equations_db"] == pytest.approx(55.53, abs=0.01)
+    assert abs(model["dr_gain_db"] - model["dr_gain_equations_db"]) < 0.6  # grid step + PRNU

@@ -86,11 +86,13 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
                 "E_a": b["E"],
                 "max_usable_a": sat["overflow"],
                 "dr_gain_db": _db(sat["overflow"] / sat["4t"]),
+                "dr_gain_equations_db": over.dynamic_range_gain_db(),
                 "row_share_time_s": over.row_share_time_s,
                 "max_rows": over.max_rows(),
             },
-            "note": "the 62 dB gain is bounded here by (T_frame/t3)(V30 − V_sat)/(V_res − "
-            "V_sat) ≈ 55.5 dB; see docs/frame-sensors.md",
+            "note": "not reproduced: eqs. 1-6 give E/I_4T = (T/t3)(VF - V_sat)/(V_res - V_sat)"
+            "·C_F/(C_F + C_PD) = 55.5 dB, below 20 lg((T/t3)·VF/V_res) = 57.4 dB for any "
+            "C_PD, C_F, V_sat; see docs/frame-sensors.md",
         }
     return {}
 
@@ -131,6 +133,21 @@ def _jsonable(obj):
     return obj
 
 
+def _check_output_folder(option: str, folder: Path) -> None:
+    """Refuse, before any work, an output folder that cannot be created or written."""
+    import os
+
+    from viform._validate import ViformError
+
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ViformError(f"{option}: {existing} is not a folder, so {folder} cannot be created")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ViformError(f"{option}: the folder {existing} is not writable")
+
+
 @cli.command("characterize")
 @click.argument("sensor")
 @click.option(
@@ -169,6 +186,13 @@ def characterize(sensor, out_dir, json_path, size, seed):
     from viform.sensors.frame import FrameSensor
 
     size = check_int("--size", size, 4, 512)
+    # Check the outputs first, so a bad path fails at once and leaves no figures behind.
+    if out_dir is not None:
+        _check_output_folder("--out", Path(out_dir))
+    if json_path is not None:
+        if Path(json_path).is_dir():
+            raise ViformError(f"--json: {json_path} is a folder; give a file name")
+        _check_output_folder("--json", Path(json_path).resolve().parent)
     presets.describe_preset(sensor)  # clear error for an unknown name
     result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
     figures = {}
