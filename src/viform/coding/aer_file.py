@@ -1,0 +1,783 @@
+"""The ``.vfc`` file: a first-spike coded viform as an asynchronous (i, j, t, τ) stream (seed 000 §5.2).
+
+Seed 000 §5.2 ends with pixels sharing one asynchronous output channel, each first spike
+sent as a quadruple (i, j, t, τ). A ``.vfc`` file stores exactly those quadruples (plus the
+repeat counts the strict mode needs to be lossless, see :mod:`viform.coding.first_spike`),
+in compact integer form with zstd as the last stage.
+
+Layout (version 1, little-endian)::
+
+    magic   8 bytes  b"VIFC\\x89\\r\\n\\x1a"
+    u16 version, u32 header length, u32 CRC-32 of the header, header (UTF-8 JSON:
+        height, width, clock_hz, threshold_electrons, start_time_s, mode, k, slack_ticks,
+        segment_ticks, metadata)
+    segments, each: b"SG", u32 payload length, u32 CRC-32 of the payload, payload
+    trailer: b"EN", u64 n_ticks, u64 n_segments, u64 spikes, u32 CRC-32 of the segment CRCs
+
+A segment payload is: u64 start tick, u32 ticks, u32 records, u8 model, u64 spikes, then
+eight columns, each u32 length + one zstd frame (content checksum on): per-pixel record
+counts, first offsets of pixels that had not fired, the context-sorted record symbols,
+the context table, escapes, span residuals (lossy modes), tail deficits, tail span
+residuals (lossy modes). Records are coded as one byte symbol combining the repeat count m
+and the width change, split by a context (the previous symbol of the pixel and its
+current width, or its previous two symbols — whichever is smaller is kept per segment);
+contexts are recomputed by the decoder as it goes, so only the per-context counts are
+stored. Values that do not fit a symbol go to the escape column as LEB128 varints.
+
+Corrupt or truncated files raise :class:`~viform._validate.ViformError` with the byte
+offset and what was wrong; every length, count, value and spike position is checked
+before use, so no input can crash, hang or silently decode to garbage (the CRCs and zstd
+checksums catch the rest).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+import zstandard
+from numba import njit
+
+from viform._io import atomic_open
+from viform._validate import ViformError, check_int
+from viform.coding.first_spike import (
+    CodingParameters,
+    FirstSpikeDecoder,
+    FirstSpikeEncoder,
+    Segment,
+)
+from viform.stream.container import SpikeSource
+
+#: File magic (PNG-style: catches text-mode and truncation damage).
+MAGIC = b"VIFC\x89\r\n\x1a"
+#: Format version written; readers refuse newer ones.
+VERSION = 1
+#: File extension of first-spike coded viforms.
+EXTENSION = ".vfc"
+#: zstd level of the last stage.
+ZSTD_LEVEL = 19
+
+_SEG_HEAD = struct.Struct("<2sII")
+_TRAILER = struct.Struct("<2sQQQI")
+_PAYLOAD_HEAD = struct.Struct("<QIIBQ")
+_NCOLS = 8
+_ESC = 255
+_NONE = 254
+_MAX_HEADER = 1 << 20
+_MAX_COLUMN = 1 << 34
+
+
+# ---------------------------------------------------------------------------- varints
+
+@njit(cache=True)
+def _varint_encode(values, out):
+    n = 0
+    for v in values:
+        v = np.uint64(v)
+        while v >= 128:
+            out[n] = np.uint8((v & np.uint64(127)) | np.uint64(128))
+            n += 1
+            v >>= np.uint64(7)
+        out[n] = np.uint8(v)
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def _varint_decode(data, out):
+    """Decode up to out.size varints; returns (count, error) — error 1 truncated, 2 too long."""
+    n = 0
+    i = 0
+    size = data.size
+    while i < size and n < out.size:
+        v = np.int64(0)
+        shift = 0
+        while True:
+            if i >= size:
+                return n, 1
+            b = np.int64(data[i])
+            i += 1
+            if shift >= 56:
+                return n, 2
+            v |= (b & 127) << shift
+            if b < 128:
+                break
+            shift += 7
+        out[n] = v
+        n += 1
+    if i != size:
+        return n, 3
+    return n, 0
+
+
+def _varints(values) -> bytes:
+    values = np.asarray(values, np.int64)
+    if values.size and values.min() < 0:
+        raise ViformError("internal: negative varint")
+    out = np.empty(values.size * 10, np.uint8)
+    return out[:_varint_encode(values, out)].tobytes()
+
+
+def _unvarints(data: bytes, count: int, what: str) -> np.ndarray:
+    out = np.empty(count, np.int64)
+    n, err = _varint_decode(np.frombuffer(data, np.uint8), out)
+    if err or n != count:
+        why = {1: "a value is cut short", 2: "a value is too long", 3: "extra bytes"}.get(err, "too few values")
+        raise ViformError(f"column {what!r}: {why} (expected {count} values, read {n})")
+    return out
+
+
+def _zz(x):
+    x = np.asarray(x, np.int64)
+    return np.where(x >= 0, 2 * x, -2 * x - 1)
+
+
+@njit(cache=True, inline="always")
+def _unzz(v):
+    return (v >> 1) if (v & 1) == 0 else -((v + 1) >> 1)
+
+
+# ---------------------------------------------------------------------------- record model
+
+@njit(cache=True, inline="always")
+def _context(model, prev, prev2, ref):
+    if model == 0:
+        return prev * 256 + min(ref, 255)
+    return prev * 256 + prev2
+
+
+@njit(cache=True)
+def _model_encode(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_end, model, strict,
+                  sym, ctx, esc, ofirst, gres, tdef, tgres):
+    """Records → symbols, contexts and side columns. Returns the used lengths."""
+    ns = 0
+    ne = 0
+    nf = 0
+    ng = 0
+    nt = 0
+    r = 0
+    for p in range(counts.size):
+        a = anchor0[p]
+        ref = ref0[p]
+        prevref = 0
+        prev = _NONE
+        prev2 = _NONE
+        for _ in range(counts[p]):
+            m = rec_m[r]
+            g = rec_g[r]
+            o = rec_o[r]
+            if ref == 0:
+                ofirst[nf] = o - 1
+                nf += 1
+            else:
+                base = prevref if (model == 1 and prevref > 0) else ref
+                d = o - base
+                if strict and base == ref:
+                    dd = 2 * d - 2 if d > 0 else -2 * d - 1  # o ≠ ref: no zero
+                else:
+                    dd = 2 * d if d >= 0 else -2 * d - 1
+                if m < 15 and dd < 15:
+                    s = m * 15 + dd
+                else:
+                    s = _ESC
+                    esc[ne] = m
+                    esc[ne + 1] = dd
+                    ne += 2
+                sym[ns] = s
+                ctx[ns] = _context(model, prev, prev2, ref)
+                ns += 1
+                if not strict and m > 0:
+                    e = g - m * ref
+                    gres[ng] = 2 * e if e >= 0 else -2 * e - 1
+                    ng += 1
+                prev2 = prev
+                prev = s
+            a = a + g + o
+            prevref = ref
+            ref = o
+            r += 1
+        if ref > 0:
+            m = tail_m[p]
+            fill = (seg_end - 1 - a) // ref
+            e = fill - m
+            tdef[nt] = 2 * e if e >= 0 else -2 * e - 1
+            nt += 1
+            if not strict and m > 0:
+                e = tail_g[p] - m * ref
+                tgres[ng] = 2 * e if e >= 0 else -2 * e - 1
+                ng += 1
+    return ns, ne, nf, ng, nt
+
+
+@njit(cache=True)
+def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0, seg_end, model, strict,
+                  rec_m, rec_g, rec_o, tail_m, tail_g):
+    """Inverse of :func:`_model_encode`; every read is bounds-checked. Returns an error code (0 ok)."""
+    ptr = ctx_start[:-1].copy()
+    ne = 0
+    nf = 0
+    ng = 0
+    nt = 0
+    r = 0
+    big = np.int64(1) << 31
+    for p in range(counts.size):
+        a = anchor0[p]
+        ref = ref0[p]
+        prevref = 0
+        prev = _NONE
+        prev2 = _NONE
+        for _ in range(counts[p]):
+            if ref == 0:
+                if nf >= ofirst.size:
+                    return 1
+                m = np.int64(0)
+                g = np.int64(0)
+                o = ofirst[nf] + 1
+                nf += 1
+            else:
+                c = _context(model, prev, prev2, ref)
+                k = ptr[c]
+                if k >= ctx_start[c + 1]:
+                    return 2
+                ptr[c] = k + 1
+                s = np.int64(sym[k])
+                if s == _ESC:
+                    if ne + 1 >= esc.size:
+                        return 3
+                    m = esc[ne]
+                    dd = esc[ne + 1]
+                    ne += 2
+                elif s < 225:
+                    m = s // 15
+                    dd = s % 15
+                else:
+                    return 4
+                base = prevref if (model == 1 and prevref > 0) else ref
+                if strict and base == ref:
+                    d = (dd + 2) // 2 if dd % 2 == 0 else -((dd + 1) // 2)
+                else:
+                    d = _unzz(dd)
+                o = base + d
+                if m > big or o < 1 or o > big:
+                    return 5
+                if strict:
+                    g = m * ref
+                elif m > 0:
+                    if ng >= gres.size:
+                        return 6
+                    if gres[ng] > big:
+                        return 5
+                    g = m * ref + _unzz(gres[ng])
+                    ng += 1
+                else:
+                    g = np.int64(0)
+                prev2 = prev
+                prev = s
+            if ref > big:
+                return 5
+            rec_m[r] = m
+            rec_g[r] = g
+            rec_o[r] = o
+            a = a + g + o
+            if a > seg_end or a < -1:
+                return 7
+            prevref = ref
+            ref = o
+            r += 1
+        if ref > 0:
+            if nt >= tdef.size:
+                return 8
+            fill = (seg_end - 1 - a) // ref
+            m = fill - _unzz(tdef[nt])
+            nt += 1
+            if m < 0 or m > big:
+                return 9
+            if strict or m == 0:
+                g = m * ref
+            else:
+                if ng >= gres.size:
+                    return 6
+                if gres[ng] > big:
+                    return 5
+                g = m * ref + _unzz(gres[ng])
+                ng += 1
+            tail_m[p] = m
+            tail_g[p] = g
+        else:
+            tail_m[p] = 0
+            tail_g[p] = 0
+    if nf != ofirst.size or ne != esc.size or ng != gres.size or nt != tdef.size:
+        return 10
+    for c in range(ptr.size):
+        if ptr[c] != ctx_start[c + 1]:
+            return 10
+    return 0
+
+
+_MODEL_ERRORS = {1: "first-offset column too short", 2: "symbol context overrun", 3: "escape column too short",
+                 4: "invalid symbol", 5: "value out of range", 6: "span column too short",
+                 7: "spike outside the segment", 8: "tail column too short", 9: "bad tail count",
+                 10: "columns hold unused values"}
+
+
+# ---------------------------------------------------------------------------- segment payload
+
+class _Zstd:
+    def __init__(self, level: int = ZSTD_LEVEL):
+        self.c = zstandard.ZstdCompressor(level=level, write_checksum=True)
+        self.d = zstandard.ZstdDecompressor()
+
+    def compress(self, b: bytes) -> bytes:
+        return self.c.compress(b)
+
+    def decompress(self, b: bytes, limit: int, what: str) -> bytes:
+        try:
+            # max_output_size bounds memory on a forged frame; a frame states its size itself
+            out = self.d.decompress(b, max_output_size=limit)
+        except zstandard.ZstdError as exc:
+            raise ViformError(f"column {what!r} is damaged (zstd: {exc})") from None
+        if len(out) > limit:
+            raise ViformError(f"column {what!r} decompresses to more than the {limit} bytes it may hold")
+        return out
+
+
+def _segment_columns(seg: Segment, anchor0, ref0, model: int, strict: bool) -> tuple[list[bytes], int]:
+    n = seg.m.size
+    npix = seg.counts.size
+    sym = np.empty(n, np.uint8)
+    ctx = np.empty(n, np.int64)
+    esc = np.empty(2 * n, np.int64)
+    ofirst = np.empty(n, np.int64)
+    gres = np.empty(n + npix, np.int64)
+    tdef = np.empty(npix, np.int64)
+    seg_end = seg.start_tick + seg.n_ticks
+    ns, ne, nf, ng, nt = _model_encode(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
+                                       seg_end, model, strict, sym, ctx, esc, ofirst, gres, tdef, gres)
+    sym, ctx = sym[:ns], ctx[:ns]
+    order = np.argsort(ctx, kind="stable")
+    used, cnt = np.unique(ctx, return_counts=True)
+    table = np.empty(2 * used.size, np.int64)
+    table[0::2] = np.diff(used, prepend=0)
+    table[1::2] = cnt
+    cols = [_varints(seg.counts), _varints(ofirst[:nf]), sym[order].tobytes(), _varints(table),
+            _varints(esc[:ne]), _varints(gres[:ng]), _varints(tdef[:nt]), b""]
+    return cols, ns
+
+
+def _encode_payload(seg: Segment, anchor0, ref0, strict: bool, zc: _Zstd) -> bytes:
+    best = None
+    for model in (0, 1):
+        cols, _ = _segment_columns(seg, anchor0, ref0, model, strict)
+        packed = [zc.compress(c) for c in cols]
+        size = sum(map(len, packed))
+        if best is None or size < best[0]:
+            best = (size, model, packed)
+    _, model, packed = best
+    out = io.BytesIO()
+    out.write(_PAYLOAD_HEAD.pack(seg.start_tick, seg.n_ticks, seg.m.size, model, seg.n_spikes))
+    for c in packed:
+        out.write(struct.pack("<I", len(c)))
+        out.write(c)
+    return out.getvalue()
+
+
+def _decode_payload(payload: bytes, n_pixels: int, anchor0, ref0, strict: bool, zc: _Zstd,
+                    expected_start: int, segment_ticks: int) -> Segment:
+    if len(payload) < _PAYLOAD_HEAD.size:
+        raise ViformError("segment payload is shorter than its header")
+    start, n_ticks, n_rec, model, spikes = _PAYLOAD_HEAD.unpack_from(payload)
+    if start != expected_start:
+        raise ViformError(f"segment starts at tick {start}, expected {expected_start}")
+    if not 1 <= n_ticks <= segment_ticks or model > 1:
+        raise ViformError(f"segment header is invalid (ticks {n_ticks}, model {model})")
+    if n_rec > spikes or spikes > n_ticks * n_pixels:
+        raise ViformError(f"segment header is invalid ({n_rec} records, {spikes} spikes)")
+    pos = _PAYLOAD_HEAD.size
+    cols = []
+    for c in range(_NCOLS):
+        if pos + 4 > len(payload):
+            raise ViformError(f"segment payload is cut short in column {c}")
+        (length,) = struct.unpack_from("<I", payload, pos)
+        pos += 4
+        if pos + length > len(payload):
+            raise ViformError(f"segment payload is cut short in column {c}")
+        cols.append(payload[pos:pos + length])
+        pos += length
+    if pos != len(payload):
+        raise ViformError("segment payload has trailing bytes")
+    names = ("counts", "first offsets", "symbols", "contexts", "escapes", "spans", "tails", "reserved")
+    limit_rec = 10 * (n_rec + n_pixels) + 64
+    raw = [zc.decompress(c, limit_rec, names[i]) for i, c in enumerate(cols)]
+    counts = _unvarints(raw[0], n_pixels, "counts")
+    if counts.sum() != n_rec or counts.min(initial=0) < 0:
+        raise ViformError(f"record counts add up to {int(counts.sum())}, the header says {n_rec}")
+    first_known = ref0 > 0
+    n_first = int(np.count_nonzero((~first_known) & (counts > 0)))
+    ofirst = _unvarints(raw[1], n_first, "first offsets")
+    sym = np.frombuffer(raw[2], np.uint8)
+    n_sym = n_rec - n_first
+    if sym.size != n_sym:
+        raise ViformError(f"symbol column holds {sym.size} symbols, expected {n_sym}")
+    table = _count_varints(raw[3], "contexts")
+    if table.size % 2:
+        raise ViformError("context table is cut short")
+    ids = np.cumsum(table[0::2])
+    if table.size and (ids[-1] >= 65536 or (table[2::2] <= 0).any() or (table[1::2] <= 0).any()):
+        raise ViformError("context table is invalid")
+    ctx_start = np.zeros(65537, np.int64)
+    ctx_start[ids + 1] = table[1::2]
+    np.cumsum(ctx_start, out=ctx_start)
+    if ctx_start[-1] != n_sym:
+        raise ViformError(f"context table counts {int(ctx_start[-1])} symbols, expected {n_sym}")
+    esc = _count_varints(raw[4], "escapes")
+    gres = _count_varints(raw[5], "spans")
+    tdef = _count_varints(raw[6], "tails")
+    if raw[7]:
+        raise ViformError("reserved column is not empty")
+    rec_m = np.empty(n_rec, np.int64)
+    rec_g = np.empty(n_rec, np.int64)
+    rec_o = np.empty(n_rec, np.int64)
+    tail_m = np.empty(n_pixels, np.int64)
+    tail_g = np.empty(n_pixels, np.int64)
+    err = _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0, start + n_ticks, model,
+                        strict, rec_m, rec_g, rec_o, tail_m, tail_g)
+    if err:
+        raise ViformError(f"segment at tick {start} is damaged ({_MODEL_ERRORS[err]})")
+    seg = Segment(start, n_ticks, counts, rec_m, rec_g, rec_o, np.zeros(0, np.int64), tail_m, tail_g,
+                  np.zeros(0, np.int64))
+    return seg, spikes
+
+
+def _count_varints(data: bytes, what: str) -> np.ndarray:
+    arr = np.frombuffer(data, np.uint8)
+    n = int(np.count_nonzero(arr < 128))
+    return _unvarints(data, n, what)
+
+
+# ---------------------------------------------------------------------------- writer
+
+class CodedWriter:
+    """Streaming writer of a ``.vfc`` file: ``push`` blocks of ticks, then ``close``.
+
+    The file appears under its name only when ``close`` succeeds (atomic).
+    """
+
+    def __init__(self, path, height: int, width: int, clock_hz: float, params: CodingParameters,
+                 threshold_electrons: float | None = None, start_time_s: float = 0.0,
+                 metadata: dict | None = None, level: int = ZSTD_LEVEL):
+        self.path = Path(path)
+        self.height = check_int("height", height, 1)
+        self.width = check_int("width", width, 1)
+        self.params = params
+        self.strict = params.mode == "strict"
+        self.encoder = FirstSpikeEncoder(self.height * self.width, params)
+        self.state = FirstSpikeDecoder(self.height * self.width)  # mirrors the decoder's state
+        self.zc = _Zstd(level)
+        self.header = {
+            "format": "viform first-spike coded stream", "version": VERSION,
+            "height": self.height, "width": self.width, "clock_hz": float(clock_hz),
+            "threshold_electrons": threshold_electrons, "start_time_s": float(start_time_s),
+            "mode": params.mode, "k": params.k, "slack_ticks": params.slack_ticks,
+            "segment_ticks": params.segment_ticks, "metadata": _json_safe(metadata or {}),
+        }
+        self._cm = atomic_open(self.path, "wb")
+        self.f = self._cm.__enter__()
+        head = json.dumps(self.header, sort_keys=True).encode()
+        self.f.write(MAGIC + struct.pack("<HII", VERSION, len(head), zlib.crc32(head)) + head)
+        self.n_segments = 0
+        self.spikes = 0
+        self.bytes_written = len(MAGIC) + 10 + len(head)
+        self._crcs = 0
+
+    def push(self, block) -> None:
+        for seg in self.encoder.push(block):
+            self._write(seg)
+
+    def _write(self, seg: Segment) -> None:
+        payload = _encode_payload(seg, self.state.anchor, self.state.tau_ref, self.strict, self.zc)
+        self.state.check(seg, advance=True)  # mirror the reader's state (anchors, widths)
+        crc = zlib.crc32(payload)
+        self.f.write(_SEG_HEAD.pack(b"SG", len(payload), crc) + payload)
+        self._crcs = zlib.crc32(struct.pack("<I", crc), self._crcs)
+        self.n_segments += 1
+        self.spikes += seg.n_spikes
+        self.bytes_written += _SEG_HEAD.size + len(payload)
+
+    def close(self) -> Path:
+        for seg in self.encoder.finish():
+            self._write(seg)
+        if self.encoder.next_tick == 0:
+            self.abort()
+            raise ViformError("the stream has no ticks to code")
+        self.f.write(_TRAILER.pack(b"EN", self.encoder.next_tick, self.n_segments, self.spikes, self._crcs))
+        self.bytes_written += _TRAILER.size
+        self._cm.__exit__(None, None, None)
+        return self.path
+
+    def abort(self) -> None:
+        try:
+            raise RuntimeError("aborted")
+        except RuntimeError as exc:
+            self._cm.__exit__(type(exc), exc, exc.__traceback__)
+
+
+def _json_safe(d: dict) -> dict:
+    return json.loads(json.dumps(d, default=lambda v: v.item() if hasattr(v, "item") else str(v)))
+
+
+def encode_source(source: SpikeSource, path, mode: str = "strict", *, k: float | None = None,
+                  threshold_electrons: float | None = None, slack_ticks: int = 0,
+                  segment_ticks: int | None = None, block_ticks: int = 1024, level: int = ZSTD_LEVEL,
+                  progress: bool = False) -> dict:
+    """Code a viform into a ``.vfc`` file (streaming, bounded memory). Returns a summary."""
+    from viform.coding.first_spike import DEFAULT_K, DEFAULT_SEGMENT_TICKS
+
+    q = threshold_electrons if threshold_electrons is not None else source.threshold_electrons
+    params = CodingParameters(mode, DEFAULT_K if k is None else k, q, slack_ticks,
+                              segment_ticks or DEFAULT_SEGMENT_TICKS)
+    writer = CodedWriter(path, source.height, source.width, source.clock_hz, params, q, source.start_time_s,
+                         {k2: v for k2, v in source.metadata.items() if k2 != "sensor"}, level)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=source.n_ticks, unit="tick", desc="encode", leave=False, unit_scale=True)
+    try:
+        for _, block in source.iter_blocks(block_ticks):
+            writer.push(block)
+            if bar is not None:
+                bar.update(block.shape[0])
+        writer.close()
+    except BaseException:
+        if not writer.f.closed:
+            writer.abort()
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    raw = source.n_ticks * source.height * source.width / 8
+    return {"path": str(path), "mode": mode, "bytes": writer.bytes_written, "raw_bytes": raw,
+            "ratio_vs_raw": raw / writer.bytes_written, "spikes": writer.spikes,
+            "first_spikes": None, "segments": writer.n_segments}
+
+
+# ---------------------------------------------------------------------------- reader
+
+class CodedFile(SpikeSource):
+    """A ``.vfc`` file read as a :class:`SpikeSource` (decoded on the fly, segment by segment).
+
+    Opening reads the header and trailer and walks the segment index (lengths only);
+    ``iter_blocks`` decodes sequentially in bounded memory. ``verify()`` decodes everything
+    and checks the CRCs and spike counts.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise ViformError(f"coded file {str(self.path)!r} does not exist")
+        self.size = self.path.stat().st_size
+        with open(self.path, "rb") as f:
+            self.header = self._read_header(f)
+            self._index = self._read_index(f)
+        h = self.header
+        self.height, self.width = h["height"], h["width"]
+        self.clock_hz = h["clock_hz"]
+        self.threshold_electrons = h["threshold_electrons"]
+        self.start_time_s = h["start_time_s"]
+        self.metadata = dict(h.get("metadata") or {}, coded_mode=h["mode"], source_coded=str(self.path))
+        self.mode = h["mode"]
+        self.segment_ticks = h["segment_ticks"]
+        self._cache = None
+
+    # -- structure
+    def _fail(self, what: str, offset: int):
+        raise ViformError(f"{str(self.path)!r} is not a valid {EXTENSION} file: {what} (at byte {offset})")
+
+    def _read_header(self, f) -> dict:
+        fixed = f.read(len(MAGIC) + 10)
+        if len(fixed) < len(MAGIC) or fixed[:len(MAGIC)] != MAGIC:
+            self._fail("wrong magic number (not a first-spike coded viform)", 0)
+        if len(fixed) < len(MAGIC) + 10:
+            self._fail("file is truncated inside the header", len(fixed))
+        version, hlen, hcrc = struct.unpack_from("<HII", fixed, len(MAGIC))
+        if version > VERSION or version < 1:
+            self._fail(f"format version {version} is not supported (this viform reads up to {VERSION})",
+                       len(MAGIC))
+        if hlen > _MAX_HEADER:
+            self._fail(f"header length {hlen} is implausible", len(MAGIC) + 2)
+        head = f.read(hlen)
+        if len(head) < hlen:
+            self._fail("file is truncated inside the header", len(fixed) + len(head))
+        if zlib.crc32(head) != hcrc:
+            self._fail("header checksum mismatch", len(fixed))
+        try:
+            h = json.loads(head.decode())
+            for key, typ in (("height", int), ("width", int), ("clock_hz", (int, float)), ("mode", str),
+                             ("segment_ticks", int), ("start_time_s", (int, float)), ("k", (int, float))):
+                if not isinstance(h[key], typ):
+                    raise TypeError(key)
+            if not (1 <= h["height"] <= 1 << 16 and 1 <= h["width"] <= 1 << 16 and h["clock_hz"] > 0
+                    and 1 <= h["segment_ticks"] <= 1 << 30 and h["mode"] in ("strict", "statistical", "intensity")
+                    and math.isfinite(h["start_time_s"])):
+                raise ValueError("out of range")
+        except Exception as exc:
+            self._fail(f"header is invalid ({exc})", len(fixed))
+        return h
+
+    def _read_index(self, f) -> list[tuple[int, int, int]]:
+        index = []
+        pos = f.tell()
+        while True:
+            head = f.read(_SEG_HEAD.size)
+            if len(head) < 2:
+                self._fail("file is truncated: the end record is missing", pos)
+            if head[:2] == b"EN":
+                rest = head + f.read(_TRAILER.size - len(head))
+                if len(rest) < _TRAILER.size:
+                    self._fail("file is truncated inside the end record", pos)
+                _, n_ticks, n_seg, spikes, crcs = _TRAILER.unpack(rest)
+                if f.read(1):
+                    self._fail("bytes after the end record", pos + _TRAILER.size)
+                break
+            if len(head) < _SEG_HEAD.size or head[:2] != b"SG":
+                self._fail("expected a segment or the end record", pos)
+            _, length, crc = _SEG_HEAD.unpack(head)
+            if pos + _SEG_HEAD.size + length > self.size:
+                self._fail("file is truncated inside a segment", pos)
+            index.append((pos + _SEG_HEAD.size, length, crc))
+            pos += _SEG_HEAD.size + length
+            f.seek(pos)
+        if n_seg != len(index):
+            self._fail(f"end record counts {n_seg} segments, the file holds {len(index)}", pos)
+        seg = self.header["segment_ticks"]
+        if n_ticks < 1 or -(-n_ticks // seg) != n_seg:
+            self._fail(f"end record's {n_ticks} ticks do not match {n_seg} segments of {seg} ticks", pos)
+        acc = 0
+        for _, _, crc in index:
+            acc = zlib.crc32(struct.pack("<I", crc), acc)
+        if acc != crcs:
+            self._fail("segment checksum list mismatch", pos)
+        self.n_ticks = int(n_ticks)
+        self.spikes_stored = int(spikes)
+        if spikes > n_ticks * self.header["height"] * self.header["width"]:
+            self._fail("end record's spike count is impossible", pos)
+        return index
+
+    # -- decoding
+    def iter_segments(self):
+        """Yield ``(decoder, segment)`` in order, each validated (CRC, structure, spike count)."""
+        n_pixels = self.height * self.width
+        dec = FirstSpikeDecoder(n_pixels)
+        zc = _Zstd()
+        strict = self.mode == "strict"
+        total = 0
+        with open(self.path, "rb") as f:
+            for n, (offset, length, crc) in enumerate(self._index):
+                f.seek(offset)
+                payload = f.read(length)
+                if len(payload) != length or zlib.crc32(payload) != crc:
+                    self._fail(f"segment {n} checksum mismatch (damaged data)", offset)
+                try:
+                    seg, spikes = _decode_payload(payload, n_pixels, dec.anchor, dec.tau_ref, strict, zc,
+                                                  n * self.segment_ticks, self.segment_ticks)
+                    expect_ticks = min(self.segment_ticks, self.n_ticks - n * self.segment_ticks)
+                    if seg.n_ticks != expect_ticks:
+                        raise ViformError(f"segment {n} holds {seg.n_ticks} ticks, expected {expect_ticks}")
+                    if dec.check(seg) != spikes:
+                        raise ViformError(f"segment {n} decodes to a different spike count than stored")
+                except ViformError as exc:
+                    self._fail(str(exc), offset)
+                total += spikes
+                yield dec, seg
+        if total != self.spikes_stored:
+            self._fail(f"segments hold {total} spikes, the end record says {self.spikes_stored}", self.size)
+
+    def iter_blocks(self, block_ticks: int = 1024, start: int = 0, stop: int | None = None):
+        block_ticks = check_int("block_ticks", block_ticks, 1)
+        stop = self.n_ticks if stop is None else min(stop, self.n_ticks)
+        pending = []
+        have = 0
+        first = start
+        for dec, seg in self.iter_segments():
+            s0 = seg.start_tick
+            if s0 + seg.n_ticks <= start:
+                dec.check(seg, advance=True)
+                continue
+            if s0 >= stop:
+                break
+            for a, blk in dec.decode(seg, block_ticks=block_ticks):
+                lo, hi = max(a, start), min(a + blk.shape[0], stop)
+                if lo >= hi:
+                    continue
+                pending.append(blk[lo - a:hi - a])
+                have += hi - lo
+                while have >= block_ticks:
+                    cat = np.concatenate(pending) if len(pending) > 1 else pending[0]
+                    yield first, cat[:block_ticks].reshape(-1, self.height, self.width)
+                    first += block_ticks
+                    rest = cat[block_ticks:]
+                    pending = [rest] if rest.shape[0] else []
+                    have = rest.shape[0]
+        if have:
+            cat = np.concatenate(pending) if len(pending) > 1 else pending[0]
+            yield first, cat.reshape(-1, self.height, self.width)
+
+    def read_ticks(self, start: int, stop: int) -> np.ndarray:
+        start, stop = max(0, start), min(stop, self.n_ticks)
+        if stop <= start:
+            return np.zeros((0, self.height, self.width), bool)
+        return np.concatenate([b for _, b in self.iter_blocks(stop - start, start, stop)])
+
+    def verify(self) -> int:
+        """Decode everything; raise on any damage. Returns the spike count."""
+        n = 0
+        for dec, seg in self.iter_segments():
+            for _, blk in dec.decode(seg, block_ticks=256):
+                n += int(np.count_nonzero(blk))
+        return n
+
+    def quadruples(self) -> np.ndarray:
+        """The stored first spikes as (i, j, t, τ) quadruples (ticks)."""
+        from viform.coding.first_spike import quadruples
+
+        segs = []
+        for dec, seg in self.iter_segments():
+            segs.append(seg)
+            dec.check(seg, advance=True)
+        return quadruples(segs, self.height, self.width)
+
+
+def open_coded(path) -> CodedFile:
+    """Open a ``.vfc`` file as a :class:`SpikeSource`."""
+    return CodedFile(path)
+
+
+def is_coded_file(path) -> bool:
+    """True when ``path`` starts with the ``.vfc`` magic number."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
+def describe_coded_file(path) -> dict:
+    """Summary of a ``.vfc`` file for ``viform info`` (header, size, ratio; no full decode)."""
+    cf = CodedFile(path)
+    h = cf.header
+    raw = cf.n_ticks * cf.height * cf.width / 8
+    return {
+        "format": f"first-spike coded viform ({EXTENSION}, version {h['version']})",
+        "height": cf.height, "width": cf.width, "n_ticks": cf.n_ticks, "clock_hz": cf.clock_hz,
+        "duration_s": cf.n_ticks / cf.clock_hz, "start_time_s": cf.start_time_s,
+        "threshold_electrons": cf.threshold_electrons, "mode": h["mode"], "k": h["k"],
+        "slack_ticks": h["slack_ticks"], "segment_ticks": h["segment_ticks"], "segments": len(cf._index),
+        "spike_count": cf.spikes_stored, "file_bytes": cf.size, "raw_bytes": raw,
+        "ratio_vs_raw": raw / cf.size, "bits_per_spike": 8 * cf.size / max(1, cf.spikes_stored),
+        "metadata": h.get("metadata", {}),
+    }
