@@ -31,28 +31,43 @@ def saturating_intensity(name, unit_lux, seed=3):
     return plateau_onset(INTENSITY_UNITS, resp["signal_dn"])
 
 
+#: Plateau detection is late by at most one grid step (linear interpolation past the kink)
+#: plus ~0.9 % (0.08 dB) from the 1 % PRNU spread of the pixels' saturation points.
+LATE_DB = db(INTENSITY_UNITS[1] / INTENSITY_UNITS[0]) + 0.1  # 0.17 + 0.1 dB
+EARLY_DB = 0.1
+
+
+def assert_saturates_at(measured, seed_value):
+    assert -EARLY_DB < db(measured / seed_value) < LATE_DB, (measured, seed_value)
+
+
 def test_two_segments_extend_saturation_30_to_105_fig8():
     """Seed 001 fig. 8 ("8/8" case): normal mode saturates at 30, two segments at 105 (10.88 dB).
 
     The intensity unit is calibrated from the normal mode's 30 (the seed gives no unit);
-    105 and 10.88 dB follow from the segment timing and barrier (see sensors/presets.py).
-    Measured from noisy flat fields: PRNU (1 %) spreads the pixels' saturation, which moves
-    the measured plateau onset up by ~1–2 %, well inside the ±1 dB tolerance.
+    105 and 10.88 dB follow from the segment timing and barrier (see sensors/presets.py), so
+    this is a consistency check of the noisy simulation, not an independent prediction.
+    Tolerance: the measured plateau onset is late by ≤ one grid step (1.9 %, 0.17 dB) plus
+    the PRNU spread (0.08 dB); both ends shift alike, so the ratio is within ±LATE_DB.
     """
     normal = saturating_intensity("seed001-normal", SEED001_FIG8_UNIT_LUX)
     hdr = saturating_intensity("seed001-2seg", SEED001_FIG8_UNIT_LUX)
-    assert abs(db(normal / 30.0)) < 1.0
-    assert abs(db(hdr / 105.0)) < 1.0
-    assert abs(db(hdr / normal) - 10.88) < 1.0
+    assert_saturates_at(normal, 30.0)
+    assert_saturates_at(hdr, 105.0)
+    assert abs(db(hdr / normal) - 10.88) < LATE_DB
 
 
 def test_three_segments_extend_range_35_to_440_fig9():
-    """Seed 001 fig. 9: normal range 35, three segments 440: 12.57× = 21.99 dB."""
+    """Seed 001 fig. 9: normal range 35, three segments 440: 12.57× = 21.99 dB.
+
+    The solved parameters give 12.6 × 35 = 441 noise-free (0.02 dB from 440); same tolerance
+    reasoning as fig. 8.
+    """
     normal = saturating_intensity("seed001-normal", SEED001_FIG9_UNIT_LUX)
     hdr = saturating_intensity("seed001-3seg", SEED001_FIG9_UNIT_LUX)
-    assert abs(db(normal / 35.0)) < 1.0
-    assert abs(db(hdr / 440.0)) < 1.0
-    assert abs(db(hdr / normal) - 21.99) < 1.0
+    assert_saturates_at(normal, 35.0)
+    assert_saturates_at(hdr, 440.0)
+    assert abs(db(hdr / normal) - 21.99) < LATE_DB
 
 
 def test_three_segment_knees_at_348_and_669_dn_fig9():
