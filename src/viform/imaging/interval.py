@@ -21,8 +21,9 @@ from viform._validate import ViformError, check_int
 from viform.imaging.units import LightImage, light_from_rate
 from viform.stream.container import SpikeSource
 
-#: How far interval imaging looks back and ahead of an instant by default, ticks.
-DEFAULT_LOOKAHEAD_TICKS = 4096
+#: How far interval imaging looks back and ahead of an instant by default, ticks (memory:
+#: (block + lookahead) ticks of bits are held when streaming every tick).
+DEFAULT_LOOKAHEAD_TICKS = 1024
 
 
 @njit(cache=True, parallel=True)
@@ -96,50 +97,70 @@ def interval_image(source: SpikeSource, t_s: float, sensor_parameters=None,
 # ------------------------------------------------------------------ every tick, streaming
 
 @njit(cache=True, parallel=True)
-def _interval_all(block, offset, first, last, lookahead, n_total, out):
-    # τ for every tick in [first, last) of a block holding ticks [offset, offset + n)
-    n, p = block.shape
-    for j in prange(p):
-        prev = offset - 1
-        for i in range(first - offset - 1, -1, -1):
-            if block[i, j]:
-                prev = i + offset
-                break
-        nxt = -1
-        for k in range(first, last):
-            i = k - offset
-            if block[i, j]:
-                prev = k
-            if nxt <= k:
-                nxt = offset + n
-                for m in range(i + 1, n):
-                    if block[m, j]:
-                        nxt = m + offset
-                        break
+def _interval_block(bits, first, n_block, lookahead, n_total, prev, out):
+    """τ for ticks [first, first + n_block); ``bits`` holds ticks [first, first + len(bits)).
+
+    ``prev`` (per pixel, carried between blocks) is the last spike before ``first`` (or −1).
+    A backward pass finds each tick's next spike, a forward pass its previous one; both
+    run ticks outer and pixels inner so the inner loops are contiguous.
+    """
+    n_avail, p = bits.shape
+    chunk = 4096
+    for c in prange((p + chunk - 1) // chunk):
+        j0 = c * chunk
+        j1 = min(j0 + chunk, p)
+        nxt = np.empty(j1 - j0, dtype=np.int64)
+        # first spike at or after the block's end, within the lookahead read
+        for j in range(j0, j1):
+            nxt[j - j0] = first + n_avail
+            for i in range(n_block, n_avail):
+                if bits[i, j]:
+                    nxt[j - j0] = first + i
+                    break
+        for i in range(n_block - 1, -1, -1):
+            for j in range(j0, j1):
+                out[i, j] = nxt[j - j0]  # spike strictly after tick first + i
+                if bits[i, j]:
+                    nxt[j - j0] = first + i
+        for i in range(n_block):
+            k = first + i
             lo = max(0, k - lookahead + 1)
             hi = min(n_total, k + lookahead + 1)
-            a = prev if prev >= lo else lo - 1
-            b = nxt if nxt < hi else hi
-            out[k - first, j] = b - a
+            for j in range(j0, j1):
+                if bits[i, j]:
+                    prev[j] = k
+                a = prev[j] if prev[j] >= lo else lo - 1
+                b = out[i, j] if out[i, j] < hi else hi
+                out[i, j] = b - a
 
 
-def interval_frames(source: SpikeSource, block_ticks: int = 256,
+def interval_frames(source: SpikeSource, block_ticks: int = 1024,
                     lookahead_ticks: int = DEFAULT_LOOKAHEAD_TICKS):
     """τ (ticks) at every tick, streamed: yields ``(first_tick, tau)`` with tau (T, H, W) int32.
 
-    Each block is read with ``lookahead_ticks`` of context on both sides, so intervals up
-    to that length are exact and the result does not depend on ``block_ticks``.
+    Intervals are searched up to ``lookahead_ticks`` before and after each tick (longer ones
+    are cut there, the end rule above). Each tick is read once: the lookahead read for one
+    block is kept for the next, and the last spike before a block is carried, so memory is
+    bounded by (block + lookahead) ticks and the result does not depend on ``block_ticks``.
     """
     block_ticks = check_int("block_ticks", block_ticks, 1)
     look = check_int("lookahead_ticks", lookahead_ticks, 1)
     pixels = source.height * source.width
-    for first in range(0, source.n_ticks, block_ticks):
-        last = min(first + block_ticks, source.n_ticks)
-        lo, hi = max(0, first - look), min(source.n_ticks, last + look)
-        block = source.read_ticks(lo, hi).reshape(hi - lo, pixels).view(np.uint8)
-        out = np.empty((last - first, pixels), dtype=np.int32)
-        _interval_all(block, lo, first, last, look, source.n_ticks, out)
-        yield first, out.reshape(last - first, source.height, source.width)
+    n_total = source.n_ticks
+    prev = np.full(pixels, -1, dtype=np.int64)
+    buffer = np.zeros((0, pixels), dtype=np.uint8)
+    buffer_end = 0
+    for first in range(0, n_total, block_ticks):
+        last = min(first + block_ticks, n_total)
+        need = min(n_total, last + look)
+        if need > buffer_end:
+            fresh = source.read_ticks(buffer_end, need).reshape(need - buffer_end, pixels).view(np.uint8)
+            buffer = np.concatenate([buffer, fresh]) if buffer.size else np.ascontiguousarray(fresh)
+            buffer_end = need
+        out = np.empty((last - first, pixels), dtype=np.int64)
+        _interval_block(buffer, first, last - first, look, n_total, prev, out)
+        buffer = buffer[last - first:]
+        yield first, out.astype(np.int32).reshape(last - first, source.height, source.width)
 
 
 # ------------------------------------------------------------------ display mappings
