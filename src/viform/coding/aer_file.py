@@ -14,11 +14,11 @@ Layout (version 1, little-endian)::
     segments, each: b"SG", u32 payload length, u32 CRC-32 of the payload, payload
     trailer: b"EN", u64 n_ticks, u64 n_segments, u64 spikes, u32 CRC-32 of the segment CRCs
 
-A segment payload is: u64 start tick, u32 ticks, u32 records, u8 model, u64 spikes, then
+A segment payload is: u64 start tick, u32 ticks, u32 records, u8 model·layout, u64 spikes, then
 eight columns, each u32 length + one zstd frame (content checksum on): per-pixel record
 counts, first offsets of pixels that had not fired, the context-sorted record symbols,
-the context table, escapes, span residuals (lossy modes), tail deficits, tail span
-residuals (lossy modes). Records are coded as one byte symbol combining the repeat count m
+the context table, escapes, span residuals (lossy modes), tail deficits, the first full
+widths of pixels (coded against the previous pixel's). Records are coded as one byte symbol combining the repeat count m
 and the width change, split by a context (the previous symbol of the pixel and its
 current width, or its previous two symbols — whichever is smaller is kept per segment);
 contexts are recomputed by the decoder as it goes, so only the per-context counts are
@@ -152,9 +152,11 @@ def _context(model, prev, prev2, ref):
 
 
 @njit(cache=True)
-def _model_encode(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_end, model, strict,
-                  sym, ctx, esc, ofirst, gres, tdef, tgres):
+def _model_encode(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_end, model, dsym, strict,
+                  sym, ctx, esc, ofirst, gres, tdef, tgres, second):
     """Records → symbols, contexts and side columns. Returns the used lengths."""
+    n2 = 0
+    last_second = np.int64(0)
     ns = 0
     ne = 0
     nf = 0
@@ -167,6 +169,7 @@ def _model_encode(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, se
         prevref = 0
         prev = _NONE
         prev2 = _NONE
+        after_first = False
         for _ in range(counts[p]):
             m = rec_m[r]
             g = rec_g[r]
@@ -174,6 +177,20 @@ def _model_encode(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, se
             if ref == 0:
                 ofirst[nf] = o - 1
                 nf += 1
+                after_first = True
+            elif after_first:
+                # the first full width of a pixel: its reference is only the partial first
+                # interval, so it is coded against the previous pixel's (neighbours are alike)
+                e = o - last_second
+                second[n2] = 2 * e if e >= 0 else -2 * e - 1
+                second[n2 + 1] = m
+                n2 += 2
+                last_second = o
+                after_first = False
+                if not strict and m > 0:
+                    e = g - m * ref
+                    gres[ng] = 2 * e if e >= 0 else -2 * e - 1
+                    ng += 1
             else:
                 base = prevref if (model == 1 and prevref > 0) else ref
                 d = o - base
@@ -181,8 +198,8 @@ def _model_encode(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, se
                     dd = 2 * d - 2 if d > 0 else -2 * d - 1  # o ≠ ref: no zero
                 else:
                     dd = 2 * d if d >= 0 else -2 * d - 1
-                if m < 15 and dd < 15:
-                    s = m * 15 + dd
+                if m < 225 // dsym and dd < dsym:
+                    s = m * dsym + dd
                 else:
                     s = _ESC
                     esc[ne] = m
@@ -211,13 +228,15 @@ def _model_encode(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, se
                 e = tail_g[p] - m * ref
                 tgres[ng] = 2 * e if e >= 0 else -2 * e - 1
                 ng += 1
-    return ns, ne, nf, ng, nt
+    return ns, ne, nf, ng, nt, n2
 
 
 @njit(cache=True)
-def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0, seg_end, model, strict,
-                  rec_m, rec_g, rec_o, tail_m, tail_g):
+def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, second, anchor0, ref0, seg_end, model, dsym,
+                  strict, rec_m, rec_g, rec_o, tail_m, tail_g):
     """Inverse of :func:`_model_encode`; every read is bounds-checked. Returns an error code (0 ok)."""
+    n2 = 0
+    last_second = np.int64(0)
     ptr = ctx_start[:-1].copy()
     ne = 0
     nf = 0
@@ -231,6 +250,7 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0
         prevref = 0
         prev = _NONE
         prev2 = _NONE
+        after_first = False
         for _ in range(counts[p]):
             if ref == 0:
                 if nf >= ofirst.size:
@@ -239,6 +259,28 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0
                 g = np.int64(0)
                 o = ofirst[nf] + 1
                 nf += 1
+                after_first = True
+            elif after_first:
+                if n2 + 1 >= second.size:
+                    return 11
+                o = last_second + _unzz(second[n2])
+                m = second[n2 + 1]
+                n2 += 2
+                last_second = o
+                after_first = False
+                if m > big or o < 1 or o > big:
+                    return 5
+                if strict:
+                    g = m * ref
+                elif m > 0:
+                    if ng >= gres.size:
+                        return 6
+                    if gres[ng] > big:
+                        return 5
+                    g = m * ref + _unzz(gres[ng])
+                    ng += 1
+                else:
+                    g = np.int64(0)
             else:
                 c = _context(model, prev, prev2, ref)
                 k = ptr[c]
@@ -252,9 +294,9 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0
                     m = esc[ne]
                     dd = esc[ne + 1]
                     ne += 2
-                elif s < 225:
-                    m = s // 15
-                    dd = s % 15
+                elif s < (225 // dsym) * dsym:
+                    m = s // dsym
+                    dd = s % dsym
                 else:
                     return 4
                 base = prevref if (model == 1 and prevref > 0) else ref
@@ -311,7 +353,7 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0
         else:
             tail_m[p] = 0
             tail_g[p] = 0
-    if nf != ofirst.size or ne != esc.size or ng != gres.size or nt != tdef.size:
+    if nf != ofirst.size or ne != esc.size or ng != gres.size or nt != tdef.size or n2 != second.size:
         return 10
     for c in range(ptr.size):
         if ptr[c] != ctx_start[c + 1]:
@@ -322,7 +364,10 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0
 _MODEL_ERRORS = {1: "first-offset column too short", 2: "symbol context overrun", 3: "escape column too short",
                  4: "invalid symbol", 5: "value out of range", 6: "span column too short",
                  7: "spike outside the segment", 8: "tail column too short", 9: "bad tail count",
-                 10: "columns hold unused values"}
+                 10: "columns hold unused values", 11: "first-width column too short"}
+
+#: Symbol layouts: a record symbol is m·D + coded width change, D from this list (per segment).
+_LAYOUTS = (15, 25, 45, 75, 5, 9)
 
 
 # ---------------------------------------------------------------------------- segment payload
@@ -346,7 +391,7 @@ class _Zstd:
         return out
 
 
-def _segment_columns(seg: Segment, anchor0, ref0, model: int, strict: bool) -> tuple[list[bytes], int]:
+def _segment_columns(seg: Segment, anchor0, ref0, model: int, layout: int, strict: bool) -> tuple[list[bytes], int]:
     n = seg.m.size
     npix = seg.counts.size
     sym = np.empty(n, np.uint8)
@@ -355,9 +400,11 @@ def _segment_columns(seg: Segment, anchor0, ref0, model: int, strict: bool) -> t
     ofirst = np.empty(n, np.int64)
     gres = np.empty(n + npix, np.int64)
     tdef = np.empty(npix, np.int64)
+    second = np.empty(2 * npix, np.int64)
     seg_end = seg.start_tick + seg.n_ticks
-    ns, ne, nf, ng, nt = _model_encode(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
-                                       seg_end, model, strict, sym, ctx, esc, ofirst, gres, tdef, gres)
+    ns, ne, nf, ng, nt, n2 = _model_encode(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
+                                           seg_end, model, _LAYOUTS[layout], strict, sym, ctx, esc, ofirst, gres,
+                                           tdef, gres, second)
     sym, ctx = sym[:ns], ctx[:ns]
     order = np.argsort(ctx, kind="stable")
     used, cnt = np.unique(ctx, return_counts=True)
@@ -365,21 +412,23 @@ def _segment_columns(seg: Segment, anchor0, ref0, model: int, strict: bool) -> t
     table[0::2] = np.diff(used, prepend=0)
     table[1::2] = cnt
     cols = [_varints(seg.counts), _varints(ofirst[:nf]), sym[order].tobytes(), _varints(table),
-            _varints(esc[:ne]), _varints(gres[:ng]), _varints(tdef[:nt]), b""]
-    return cols, ns
+            _varints(esc[:ne]), _varints(gres[:ng]), _varints(tdef[:nt]), _varints(second[:n2])]
+    return cols, ne
 
 
 def _encode_payload(seg: Segment, anchor0, ref0, strict: bool, zc: _Zstd) -> bytes:
-    best = None
+    # choose the symbol layout with the fewest escapes, then the context model by a fast trial
+    escapes = [_segment_columns(seg, anchor0, ref0, 0, lay, strict)[1] for lay in range(len(_LAYOUTS))]
+    layout = int(np.argmin(escapes))
+    fast = zstandard.ZstdCompressor(level=3)
+    trials = []
     for model in (0, 1):
-        cols, _ = _segment_columns(seg, anchor0, ref0, model, strict)
-        packed = [zc.compress(c) for c in cols]
-        size = sum(map(len, packed))
-        if best is None or size < best[0]:
-            best = (size, model, packed)
-    _, model, packed = best
+        cols, _ = _segment_columns(seg, anchor0, ref0, model, layout, strict)
+        trials.append((sum(len(fast.compress(c)) for c in cols), model, cols))
+    _, model, cols = min(trials, key=lambda x: x[0])
+    packed = [zc.compress(c) for c in cols]
     out = io.BytesIO()
-    out.write(_PAYLOAD_HEAD.pack(seg.start_tick, seg.n_ticks, seg.m.size, model, seg.n_spikes))
+    out.write(_PAYLOAD_HEAD.pack(seg.start_tick, seg.n_ticks, seg.m.size, model + 2 * layout, seg.n_spikes))
     for c in packed:
         out.write(struct.pack("<I", len(c)))
         out.write(c)
@@ -393,7 +442,8 @@ def _decode_payload(payload: bytes, n_pixels: int, anchor0, ref0, strict: bool, 
     start, n_ticks, n_rec, model, spikes = _PAYLOAD_HEAD.unpack_from(payload)
     if start != expected_start:
         raise ViformError(f"segment starts at tick {start}, expected {expected_start}")
-    if not 1 <= n_ticks <= segment_ticks or model > 1:
+    model, layout = model % 2, model // 2
+    if not 1 <= n_ticks <= segment_ticks or layout >= len(_LAYOUTS):
         raise ViformError(f"segment header is invalid (ticks {n_ticks}, model {model})")
     if n_rec > spikes or spikes > n_ticks * n_pixels:
         raise ViformError(f"segment header is invalid ({n_rec} records, {spikes} spikes)")
@@ -410,7 +460,7 @@ def _decode_payload(payload: bytes, n_pixels: int, anchor0, ref0, strict: bool, 
         pos += length
     if pos != len(payload):
         raise ViformError("segment payload has trailing bytes")
-    names = ("counts", "first offsets", "symbols", "contexts", "escapes", "spans", "tails", "reserved")
+    names = ("counts", "first offsets", "symbols", "contexts", "escapes", "spans", "tails", "first widths")
     limit_rec = 10 * (n_rec + n_pixels) + 64
     raw = [zc.decompress(c, limit_rec, names[i]) for i, c in enumerate(cols)]
     counts = _unvarints(raw[0], n_pixels, "counts")
@@ -420,7 +470,8 @@ def _decode_payload(payload: bytes, n_pixels: int, anchor0, ref0, strict: bool, 
     n_first = int(np.count_nonzero((~first_known) & (counts > 0)))
     ofirst = _unvarints(raw[1], n_first, "first offsets")
     sym = np.frombuffer(raw[2], np.uint8)
-    n_sym = n_rec - n_first
+    n_second = int(np.count_nonzero((~first_known) & (counts > 1)))
+    n_sym = n_rec - n_first - n_second
     if sym.size != n_sym:
         raise ViformError(f"symbol column holds {sym.size} symbols, expected {n_sym}")
     table = _count_varints(raw[3], "contexts")
@@ -437,15 +488,14 @@ def _decode_payload(payload: bytes, n_pixels: int, anchor0, ref0, strict: bool, 
     esc = _count_varints(raw[4], "escapes")
     gres = _count_varints(raw[5], "spans")
     tdef = _count_varints(raw[6], "tails")
-    if raw[7]:
-        raise ViformError("reserved column is not empty")
+    second = _count_varints(raw[7], "first widths")
     rec_m = np.empty(n_rec, np.int64)
     rec_g = np.empty(n_rec, np.int64)
     rec_o = np.empty(n_rec, np.int64)
     tail_m = np.empty(n_pixels, np.int64)
     tail_g = np.empty(n_pixels, np.int64)
-    err = _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, anchor0, ref0, start + n_ticks, model,
-                        strict, rec_m, rec_g, rec_o, tail_m, tail_g)
+    err = _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, second, anchor0, ref0, start + n_ticks,
+                        model, _LAYOUTS[layout], strict, rec_m, rec_g, rec_o, tail_m, tail_g)
     if err:
         raise ViformError(f"segment at tick {start} is damaged ({_MODEL_ERRORS[err]})")
     seg = Segment(start, n_ticks, counts, rec_m, rec_g, rec_o, np.zeros(0, np.int64), tail_m, tail_g,
