@@ -142,3 +142,86 @@ def lightcomm_command(bitrate_bps, modulation, distance_m, ambient_lux, led_cd, 
 
 
 
+
+
+def run_display(velocity_px_per_s: float = 600.0, eye_ms: float = 1000 / 60, link_latency_ticks: int = 0,
+                seed: int = 0, out=None) -> dict:
+    """Everything ``viform display`` reports; figures written to ``out`` when given."""
+    from viform.display.passthrough import run_passthrough
+    from viform.display.spike_display import compare_displays, moving_bars_scene
+
+    check_positive("eye_ms", eye_ms)
+    scene = moving_bars_scene(velocity_px_per_s=velocity_px_per_s)
+    duration = max(0.06, 1.6 * eye_ms / 1e3)
+    comp = compare_displays(scene, duration_s=duration, eye_integration_s=eye_ms / 1e3, seed=seed,
+                            keep_arrays=out is not None)
+    passthrough = run_passthrough(link_latency_ticks=link_latency_ticks, seed=seed, keep_arrays=out is not None)
+    figures = []
+    if out is not None:
+        from viform.report import display_plots as dp
+
+        out = Path(out)
+        dp.plot_display_light_vs_time(out / "display_light_vs_time.png", comp)
+        dp.plot_tracked_edges(out / "display_tracking_eye.png", comp)
+        dp.plot_passthrough_step(out / "passthrough_step.png", passthrough)
+        figures = [str(out / n) for n in ("display_light_vs_time.png", "display_tracking_eye.png",
+                                          "passthrough_step.png")]
+    comp.pop("arrays", None)
+    passthrough.pop("arrays", None)
+    for row in comp["displays"].values():
+        row.pop("profile", None)
+    return {"comparison": comp, "passthrough": passthrough, "figures": figures}
+
+
+def print_display(r: dict) -> None:
+    c, p = r["comparison"], r["passthrough"]
+    sc = c["scene"]
+    click.echo(f"scene: {sc['pattern']} (period {sc['period_px']:g} px, {sc['min_lux']:g}–{sc['max_lux']:g} lux) "
+               f"moving at {sc['velocity_px_per_s']:g} px/s, {c['duration_s'] * 1e3:.3g} ms, "
+               f"spike clock {c['clock_hz']:g} Hz, Q={c['threshold_electrons']:g} e-")
+    windows = list(next(iter(v for k, v in c["displays"].items() if k != "truth"))["error_rel_rms"])
+    click.echo(f"{'display':<14}" + "".join(f"{'err ' + w:>12}" for w in windows)
+               + f"{'mean lux':>10}{'eye edge px':>13}{'theory px':>11}")
+    click.echo(f"{'scene':<14}" + " " * 12 * len(windows) + f"{c['true_time_mean_lux']:>10.4f}"
+               f"{c['displays']['truth']['tracked_edge_width_px']:>13.2f}{'':>11}")
+    for name, row in c["displays"].items():
+        if name == "truth":
+            continue
+        th = row.get("tracked_edge_width_theory_px")
+        click.echo(f"{name:<14}" + "".join(f"{row['error_rel_rms'][w]:>12.4f}" for w in windows)
+                   + f"{row['time_mean_lux']:>10.4f}{row['tracked_edge_width_px']:>13.2f}"
+                   + (f"{th:>11.2f}" if th is not None else f"{'':>11}"))
+    click.echo(f"  (err = relative RMS of the light averaged over the window; eye = tracking eye integrating "
+               f"{c['eye_integration_s'] * 1e3:.3g} ms; spike display dark bias "
+               f"{c['spike_display_dark_bias_lux']:.2g} lux)")
+    s, v = p["spike"], p["conventional"]
+    click.echo(f"pass-through (spike camera → spike display, link {p['link_latency_ticks']} ticks): latency "
+               f"{s['latency_s'] * 1e6:.3g} µs (theory {s['latency_theory_s'] * 1e6:.3g} µs); "
+               + ", ".join(f"err {w} {e:.4f}" for w, e in s["error_rel_rms"].items()))
+    click.echo(f"conventional ({p['frame_rate_hz']:g} Hz camera → hold display): latency "
+               f"{v['latency_s'] * 1e3:.3g} ms (theory {v['latency_theory_s'] * 1e3:.3g} ms); "
+               + ", ".join(f"err {w} {e:.4f}" for w, e in v["error_rel_rms"].items()))
+    for f in r["figures"]:
+        click.echo(f"wrote {f}")
+
+
+@cli.command("display")
+@click.option("--velocity", "velocity_px_per_s", type=float, default=600.0, show_default=True,
+              help="Speed of the moving bars, px/s.")
+@click.option("--eye-ms", type=float, default=1000 / 60, show_default=True,
+              help="Integration time of the tracking eye (or tracking camera exposure), ms.")
+@click.option("--link-latency-ticks", type=int, default=0, show_default=True,
+              help="Extra ticks of the camera → display link in the pass-through.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write the results as JSON.")
+@click.option("--out", type=click.Path(file_okay=False), default=None, help="Folder for figures.")
+def display_command(velocity_px_per_s, eye_ms, link_latency_ticks, seed, json_path, out):
+    """Spike continuous display vs 60/120 Hz sample-and-hold, and the spike pass-through (seed 000 §7)."""
+    from viform._io import write_json
+
+    check_int("link_latency_ticks", link_latency_ticks, 0, 600)
+    r = run_display(velocity_px_per_s, eye_ms, link_latency_ticks, seed, out)
+    print_display(r)
+    if json_path:
+        write_json(json_path, r)
+        click.echo(f"wrote {json_path}")
