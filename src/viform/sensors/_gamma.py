@@ -47,7 +47,7 @@ def hash3(seed, a, b):
 @njit(cache=True, inline="always")
 def uniform_from_hash(h):
     """A uniform double in (0, 1) from the top 53 bits of a hash."""
-    return ((h >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
+    return (np.int64(h >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
 
 
 def build_tables(shapes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -118,8 +118,9 @@ def gamma_draw(shape, table, edges, widths, log_peak, squeeze, key, counter):
             h = splitmix64(base ^ (attempt * np.uint64(0xA0761D6478BD642F)))
         attempt += np.uint64(1)
         # two 26-bit uniforms from the bits below the bin index
-        u1 = (((h >> np.uint64(26)) & np.uint64(0x3FFFFFF)) + 0.5) * (1.0 / 67108864.0)
-        u2 = ((h & np.uint64(0x3FFFFFF)) + 0.5) * (1.0 / 67108864.0)
+        # (through int64: unsigned-to-float conversion is slow on x86)
+        u1 = (np.int64((h >> np.uint64(26)) & np.uint64(0x3FFFFFF)) + 0.5) * (1.0 / 67108864.0)
+        u2 = (np.int64(h & np.uint64(0x3FFFFFF)) + 0.5) * (1.0 / 67108864.0)
         if b < TABLE_SIZE - 1:
             x = edges[table, b] + u1 * widths[table, b]
             if u2 < squeeze[table, b]:
