@@ -17,8 +17,6 @@ import click
 from viform._validate import ViformError, check_choice, check_positive, check_range
 from viform.cli.app import cli
 
-_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
-
 
 def _parse_size(text: str, name: str) -> tuple[int, int]:
     try:
@@ -28,20 +26,6 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
     if w < 1 or h < 1:
         raise ViformError(f"{name} = {text!r} is not allowed: width and height must be ≥ 1")
     return h, w
-
-
-def _load(spec: str, height: int, width: int, scene_fps: float | None):
-    from viform.light.scenes import BUILTIN_SCENES, StillScene, VideoScene, builtin_scene
-
-    if spec in BUILTIN_SCENES:
-        return builtin_scene(spec, height, width)
-    path = Path(spec)
-    if not path.exists():
-        raise ViformError(f"scene {spec!r} is neither a built-in scene ({', '.join(BUILTIN_SCENES)}) "
-                          "nor an existing file or folder")
-    if path.is_file() and path.suffix.lower() in _IMAGE_SUFFIXES:
-        return StillScene.from_file(path, max_lux=1.0, shape=(height, width))
-    return VideoScene.from_file(path, frame_rate_hz=scene_fps, max_lux=1.0, shape=(height, width))
 
 
 @cli.command("highspeed")
@@ -102,6 +86,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         write_outputs,
     )
     from viform.isp.link import INTERFACES, link_plan
+    from viform.light.scenes import load_scene
     from viform.sensors.highspeed_timing import lux13hs_timing
 
     check_choice("interface", interface, tuple(INTERFACES))
@@ -110,7 +95,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     window = timing.window(roi)
     rh, rw = _parse_size(render, "render")
     rh, rw = min(rh, window.height), min(rw, window.width)
-    base = _load(scene, rh, rw, scene_fps)
+    base = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps, resize=True)
     mean0 = float(base.illuminance_lux(0.0).mean())
     if mean0 <= 0:
         raise ViformError(f"scene {scene!r} is black at t = 0; cannot scale it to --lux")

@@ -441,10 +441,12 @@ _VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".gif", ".webm")
 
 
 def load_scene(spec: str, height: int = 250, width: int = 400, max_lux: float = 4.0,
-               frame_rate_hz: float | None = None, interpolation: str = "linear") -> Scene:
+               frame_rate_hz: float | None = None, interpolation: str = "linear",
+               resize: bool = False) -> Scene:
     """A scene from a built-in name, an image file, a video file or a folder of images.
 
-    Image and video pixel values map linearly to [0, ``max_lux``] lux.
+    Image and video pixel values map linearly to [0, ``max_lux``] lux. Built-in scenes are
+    made at ``height`` × ``width``; files keep their own size unless ``resize``.
     """
     if spec in BUILTIN_SCENES:
         return builtin_scene(spec, height, width)
@@ -452,7 +454,8 @@ def load_scene(spec: str, height: int = 250, width: int = 400, max_lux: float = 
     if not path.exists():
         raise ViformError(f"scene {spec!r} is neither a built-in scene ({', '.join(BUILTIN_SCENES)}) "
                           "nor an existing file or folder")
+    shape = (height, width) if resize else None
     if path.is_dir() or path.suffix.lower() in _VIDEO_SUFFIXES:
         return VideoScene.from_file(path, frame_rate_hz=frame_rate_hz, max_lux=max_lux,
-                                    interpolation=interpolation)
-    return StillScene.from_file(path, max_lux=max_lux)
+                                    interpolation=interpolation, shape=shape)
+    return StillScene.from_file(path, max_lux=max_lux, shape=shape)
