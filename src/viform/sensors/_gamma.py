@@ -50,13 +50,13 @@ def uniform_from_hash(h):
     return (np.int64(h >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
 
 
-def build_tables(shapes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def build_tables(shapes) -> tuple[np.ndarray]:
     """Quantile tables for Gamma(a, 1) for each shape in ``shapes`` (each ≥ 1).
 
-    Returns ``edges`` (n, M) — the lower quantile of each bin —, ``widths`` (n, M),
-    ``log_peak`` (n, M) — log of the maximum of x^(a−1)·e^(−x) over the bin —, and
-    ``squeeze`` (n, M) — min/max density ratio over the bin, below which a draw is
-    accepted without evaluating the density.
+    Returns a one-element tuple holding an (n, M, 4) array: per bin its lower quantile
+    (edge), its width, the log of the maximum of x^(a−1)·e^(−x) over the bin, and the
+    squeeze — the min/max density ratio over the bin, below which a draw is accepted
+    without evaluating the density. The four values of a bin share a cache line.
     """
     shapes = np.asarray(shapes, dtype=np.float64)
     n, m = shapes.size, TABLE_SIZE
@@ -86,7 +86,7 @@ def build_tables(shapes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
         # the open last bin is sampled from its exponential envelope instead
         widths[i, -1] = 0.0
         squeeze[i, -1] = 0.0
-    return edges, widths, log_peak, squeeze
+    return (np.ascontiguousarray(np.stack([edges, widths, log_peak, squeeze], axis=-1)),)
 
 
 def stream_keys(seed: int, n: int) -> np.ndarray:
@@ -103,7 +103,7 @@ def _stream_keys(seed, n):
 
 
 @njit(cache=True, inline="always")
-def gamma_draw(shape, table, edges, widths, log_peak, squeeze, key, counter):
+def gamma_draw(shape, table, bins, key, counter):
     """One Gamma(shape, 1) variate, a pure function of the pixel's stream ``key`` and ``counter``.
 
     The k-th output of a SplitMix64 stream whose state starts at ``key``.
@@ -122,13 +122,13 @@ def gamma_draw(shape, table, edges, widths, log_peak, squeeze, key, counter):
         u1 = (np.int64((h >> np.uint64(26)) & np.uint64(0x3FFFFFF)) + 0.5) * (1.0 / 67108864.0)
         u2 = (np.int64(h & np.uint64(0x3FFFFFF)) + 0.5) * (1.0 / 67108864.0)
         if b < TABLE_SIZE - 1:
-            x = edges[table, b] + u1 * widths[table, b]
-            if u2 < squeeze[table, b]:
+            x = bins[table, b, 0] + u1 * bins[table, b, 1]
+            if u2 < bins[table, b, 3]:
                 return x
-            if x > 0.0 and np.log(u2) < (shape - 1.0) * np.log(x) - x - log_peak[table, b]:
+            if x > 0.0 and np.log(u2) < (shape - 1.0) * np.log(x) - x - bins[table, b, 2]:
                 return x
         else:
-            q = edges[table, b]
+            q = bins[table, b, 0]
             rate = 1.0 - (shape - 1.0) / q
             x = q - np.log(u1) / rate
             if np.log(u2) <= (shape - 1.0) * (np.log(x / q) - (x - q) / q):
@@ -137,13 +137,13 @@ def gamma_draw(shape, table, edges, widths, log_peak, squeeze, key, counter):
 
 def gamma_samples(shape: float, n: int, key: int = 0) -> np.ndarray:
     """``n`` draws of Gamma(shape, 1) from the stream ``key`` (the sampler the simulator uses)."""
-    tables = build_tables([shape])
-    return _draw_many(float(shape), *tables, np.uint64(key), int(n))
+    (bins,) = build_tables([shape])
+    return _draw_many(float(shape), bins, np.uint64(key), int(n))
 
 
 @njit(cache=True)
-def _draw_many(shape, edges, widths, log_peak, squeeze, key, n):
+def _draw_many(shape, bins, key, n):
     out = np.empty(n)
     for i in range(n):
-        out[i] = gamma_draw(shape, 0, edges, widths, log_peak, squeeze, key, i)
+        out[i] = gamma_draw(shape, 0, bins, key, i)
     return out

@@ -195,7 +195,7 @@ class SpikeSensor(Sensor):
             q = self.threshold_map_electrons(height, width).ravel()
             shapes, index = np.unique(q, return_inverse=True)
             tables = build_tables(shapes) if self.parameters.photon_noise else \
-                tuple(np.zeros((1, 1)) for _ in range(4))
+                (np.zeros((1, 1, 4)),)
             self._tables[key] = (q, shapes, index.astype(np.int32), tables)
         return self._tables[key]
 
@@ -357,12 +357,12 @@ FIXED_POINT_SCALE = float(1 << 32)
 
 
 @njit(cache=True)
-def _initial_targets(target, charge, counter, q, index, edges, widths, log_peak, squeeze, keys,
+def _initial_targets(target, charge, counter, q, index, bins, keys,
                      noise, random_initial):
     scale = 4294967296.0
     for p in range(q.size):
         if noise:
-            t = gamma_draw(q[p], index[p], edges, widths, log_peak, squeeze, keys[p], 0)
+            t = gamma_draw(q[p], index[p], bins, keys[p], 0)
         else:
             t = q[p]
         target[p] = max(np.int64(1), np.int64(t * scale + 0.5))
@@ -374,9 +374,9 @@ def _initial_targets(target, charge, counter, q, index, edges, widths, log_peak,
 
 
 @njit(cache=True, inline="always")
-def _next_target(p, q, index, edges, widths, log_peak, squeeze, keys, noise, counter):
+def _next_target(p, q, index, bins, keys, noise, counter):
     if noise:
-        t = gamma_draw(q[p], index[p], edges, widths, log_peak, squeeze, keys[p], counter[p])
+        t = gamma_draw(q[p], index[p], bins, keys[p], counter[p])
     else:
         t = q[p]
     counter[p] += 1
@@ -385,7 +385,7 @@ def _next_target(p, q, index, edges, widths, log_peak, squeeze, keys, noise, cou
 
 @njit(cache=True, parallel=True)
 def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter, q, index,
-               edges, widths, log_peak, squeeze, keys, noise, reset_readout):
+               bins, keys, noise, reset_readout):
     """Integrate-and-fire over one block of ticks, event-driven per pixel.
 
     ``rates[j, p]`` is the fixed-point charge per tick of pixel p in light-sample interval
@@ -431,13 +431,13 @@ def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter,
                         out[k - 1, p] = True
                         if reset_readout:
                             c = 0
-                            t = _next_target(p, q, index, edges, widths, log_peak, squeeze, keys, noise,
+                            t = _next_target(p, q, index, bins, keys, noise,
                                              counter)
                         else:
                             # further crossings inside the same tick are lost to the one-bit readout
                             while c >= t:
                                 c -= t
-                                t = _next_target(p, q, index, edges, widths, log_peak, squeeze, keys,
+                                t = _next_target(p, q, index, bins, keys,
                                                  noise, counter)
                     c += (end - k) * e
                     k = end
