@@ -67,7 +67,11 @@ def test_sliding_accumulation_equals_windowed_sums():
 
 def test_seed_display_mapping_is_255_minus_normalised_tau():
     tau = np.array([[1, 128, 255]])
-    assert tau_display_8bit(tau).tolist() == [[255, 128, 0]]
+    assert tau_display_8bit(tau, percentiles=(0, 100)).tolist() == [[255, 128, 0]]
+    # a single huge (dark) interval does not wash out the others with the default percentiles
+    tau = np.concatenate([np.arange(1, 101), [10_000]])[None, :]
+    shown = tau_display_8bit(tau)
+    assert shown[0, 0] == 255 and shown[0, -1] == 0 and shown[0, 50] < 150
 
 
 def test_moving_edge_interval_stays_sharp_where_long_accumulation_blurs():

@@ -165,15 +165,17 @@ def interval_frames(source: SpikeSource, block_ticks: int = 1024,
 
 # ------------------------------------------------------------------ display mappings
 
-def tau_display_8bit(tau_ticks) -> np.ndarray:
+def tau_display_8bit(tau_ticks, percentiles=(1.0, 99.0)) -> np.ndarray:
     """The seed's display mapping: τ normalised to [0, 255], shown as 255 − τ (seed 000 §6, Fig. 4(b)).
 
-    τ is normalised linearly between its minimum and maximum over the image; a gamma-like
-    curve that "simulates the eye's nonlinear perception" (seed 000 §6).
+    τ is normalised linearly between two percentiles of the image (1 % and 99 % by default;
+    ``(0, 100)`` is plain min–max) and clipped, so a few very long (dark or censored)
+    intervals do not wash the picture out. The inversion acts like a gamma curve that
+    "simulates the eye's nonlinear perception" (seed 000 §6).
     """
     tau = np.asarray(tau_ticks, dtype=np.float64)
-    lo, hi = float(tau.min()), float(tau.max())
-    norm = np.zeros_like(tau) if hi == lo else (tau - lo) / (hi - lo) * 255.0
+    lo, hi = (float(v) for v in np.percentile(tau, percentiles))
+    norm = np.zeros_like(tau) if hi == lo else np.clip((tau - lo) / (hi - lo), 0.0, 1.0) * 255.0
     return np.rint(255.0 - norm).astype(np.uint8)
 
 
