@@ -24,16 +24,27 @@ Metrics
 
 * error over time: RMS over pixels and windows of (emitted − true) light, each averaged
   over consecutive windows of length w, divided by the mean true light
-  (:func:`windowed_error`);
+  (:func:`windowed_error`). For the spike display it is counting noise: the count of a
+  window holding N spikes on average has variance N/Q (Gamma(Q) intervals, seed 000 §5.1:
+  Fano factor 1/Q) + 1/6 (the pixel's phase at each window edge is uniform, 1/12 per
+  edge), so the relative RMS error is √(N̄/Q + 1/6)/N̄ with N̄ the mean count over pixels
+  (:func:`counting_error_theory`; the variance is linear in N, so the pixels' different
+  light levels average exactly);
 * tracking-eye blur: an eye (or a camera of exposure T_e) following the motion at v px/s
   integrates I(u + v·t, t) over T_e (shift-and-add, :func:`tracked_profile`); on a hold
-  display the frame stays put while the eye moves, so an edge is smeared over v/f pixels:
-  10–90 % width 0.8·v/f (:func:`hold_edge_width_theory_px`), 10 px at 600 px/s and 60 Hz.
-  The spike display follows the scene at the tick rate: its smear is v/clock (0.015 px).
+  display (100 % duty cycle: each frame is lit for its whole period 1/f) the frame stays
+  put while the eye moves, so each frame is swept across the retina as a box of v/f pixels
+  (10 px at 600 px/s and 60 Hz), the same box for every frame when the content is the
+  exact scene at the frame's start. When T_e is a whole number of frame periods the eye
+  sees the edge convolved with that box: 10–90 % width 0.8·v/f
+  (:func:`hold_edge_width_theory_px`; 8 px at 600 px/s and 60 Hz; a display lit for a
+  fraction D of the period would give 0.8·D·v/f). The spike display follows the scene
+  at the tick rate: its smear is v/clock (0.015 px).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,6 +150,12 @@ def windowed_error(emitted, truth, window_ticks: int, skip_ticks: int = 0) -> fl
     return float(np.sqrt(np.mean((eb - tb) ** 2)) / np.mean(tb))
 
 
+def counting_error_theory(mean_spikes_per_window: float, threshold_electrons: float) -> float:
+    """Relative RMS error of a spike display over windows of N̄ spikes: √(N̄/Q + 1/6)/N̄ (module docstring)."""
+    n = check_positive("mean_spikes_per_window", mean_spikes_per_window)
+    return math.sqrt(n / round(threshold_electrons) + 1 / 6) / n
+
+
 def tracked_profile(emitted, clock_hz: float, velocity_px_per_s: float, start_tick: int, n_ticks: int,
                     u_step_px: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
     """What an eye tracking horizontal motion at ``velocity_px_per_s`` integrates (shift-and-add).
@@ -186,7 +203,11 @@ def edge_width_px(u, profile, low: float, high: float, centre_px: float, half_sp
 
 
 def hold_edge_width_theory_px(velocity_px_per_s: float, refresh_hz: float) -> float:
-    """10–90 % width of an edge on a hold display seen by a tracking eye: 0.8·v/f (ideal content)."""
+    """10–90 % width of an edge on a hold display seen by a tracking eye: 0.8·v/f.
+
+    Valid for ideal content, a 100 % duty cycle and an integration time of whole frame
+    periods (module docstring); not defined otherwise.
+    """
     return 0.8 * abs(velocity_px_per_s) / refresh_hz
 
 
@@ -227,12 +248,14 @@ def compare_displays(scene: TranslatingScene | None = None, duration_s: float = 
     shift0 = v * start / clock
     m = round((u_mid - shift0 - scene.origin_px[0] - half) / (2 * half))
     edge_u = scene.origin_px[0] + half + 2 * half * m + shift0
+    window_ticks = {f"{w * 1e3:.3g} ms": max(1, int(round(w * clock))) for w in windows_s}
+    spikes_per_tick = float(np.mean(truth, dtype=np.float64)) * sensor.optics.electrons_per_lux_second / clock \
+        / round(sensor.threshold_electrons)
     rows = {}
     for name, emitted in [("truth", truth)] + list(displays.items()):
         row = {}
         if name != "truth":
-            row["error_rel_rms"] = {f"{w * 1e3:.3g} ms": windowed_error(emitted, truth, max(1, int(round(w * clock))))
-                                    for w in windows_s}
+            row["error_rel_rms"] = {k: windowed_error(emitted, truth, w) for k, w in window_ticks.items()}
             row["time_mean_lux"] = float(np.mean(emitted, dtype=np.float64))
         u, prof = tracked_profile(emitted, clock, v, start, eye_ticks)
         # ±half/2 around the edge holds a hold display's one-sided smear of v/f (< half/2 here)
@@ -241,8 +264,12 @@ def compare_displays(scene: TranslatingScene | None = None, duration_s: float = 
         if keep_arrays:
             row["profile"] = (u, prof)
         rows[name] = row
+    rows["spike"]["error_rel_rms_theory"] = {k: counting_error_theory(spikes_per_tick * w, sensor.threshold_electrons)
+                                             for k, w in window_ticks.items()}
     for f in refresh_hz:
-        rows[f"hold {f:g} Hz"]["tracked_edge_width_theory_px"] = hold_edge_width_theory_px(v, f)
+        # the box theory needs whole frame periods (within the one-tick rounding of eye_ticks)
+        whole = round(eye_ticks * f / clock) >= 1 and abs(eye_ticks - round(eye_ticks * f / clock) * clock / f) <= 1
+        rows[f"hold {f:g} Hz"]["tracked_edge_width_theory_px"] = hold_edge_width_theory_px(v, f) if whole else None
     result = {
         "scene": {"pattern": scene.pattern, "velocity_px_per_s": v, "period_px": scene.period_px,
                   "min_lux": scene.min_lux, "max_lux": scene.max_lux, "height": scene.height, "width": scene.width},
