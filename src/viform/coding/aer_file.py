@@ -45,6 +45,7 @@ from numba import njit
 
 from viform._io import atomic_open
 from viform._validate import ViformError, check_int
+from viform.coding import context_model
 from viform.coding.first_spike import (
     CodingParameters,
     FirstSpikeDecoder,
@@ -55,8 +56,10 @@ from viform.stream.container import SpikeSource
 
 #: File magic (PNG-style: catches text-mode and truncation damage).
 MAGIC = b"VIFC\x89\r\n\x1a"
-#: Format version written; readers refuse newer ones.
-VERSION = 1
+#: Format version written (2: context-modelled range coding); readers take 1 and 2, refuse others.
+VERSION = 2
+#: Versions this reader decodes.
+SUPPORTED_VERSIONS = (1, 2)
 #: File extension of first-spike coded viforms.
 EXTENSION = ".vfc"
 #: zstd level of the last stage.
@@ -503,6 +506,54 @@ def _decode_payload(payload: bytes, n_pixels: int, anchor0, ref0, strict: bool, 
     return seg, spikes
 
 
+def _encode_payload_v2(seg: Segment, anchor0, ref0, width: int, strict: bool, zc: _Zstd) -> bytes:
+    """Version-2 payload: the segment's records range-coded (:mod:`viform.coding.context_model`), one zstd frame."""
+    n_rec, npix = seg.m.size, seg.counts.size
+    size = 16 * (n_rec + npix) + 4096
+    rec_s = np.empty(n_rec + 1, np.int64)
+    while True:
+        out = np.empty(size, np.uint8)
+        n = context_model.encode_segment(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
+                                         seg.start_tick, seg.start_tick + seg.n_ticks, width, strict, out, rec_s)
+        if n <= size:
+            break
+        size = 2 * n
+    frame = zc.compress(out[:n].tobytes())
+    return (_PAYLOAD_HEAD.pack(seg.start_tick, seg.n_ticks, n_rec, 0, seg.n_spikes) + struct.pack("<I", len(frame))
+            + frame)
+
+
+def _decode_payload_v2(payload: bytes, n_pixels: int, width: int, anchor0, ref0, strict: bool, zc: _Zstd,
+                       expected_start: int, segment_ticks: int):
+    if len(payload) < _PAYLOAD_HEAD.size + 4:
+        raise ViformError("segment payload is shorter than its header")
+    start, n_ticks, n_rec, flags, spikes = _PAYLOAD_HEAD.unpack_from(payload)
+    if start != expected_start:
+        raise ViformError(f"segment starts at tick {start}, expected {expected_start}")
+    if not 1 <= n_ticks <= segment_ticks or flags != 0:
+        raise ViformError(f"segment header is invalid (ticks {n_ticks}, flags {flags})")
+    if n_rec > spikes or spikes > n_ticks * n_pixels:
+        raise ViformError(f"segment header is invalid ({n_rec} records, {spikes} spikes)")
+    (length,) = struct.unpack_from("<I", payload, _PAYLOAD_HEAD.size)
+    pos = _PAYLOAD_HEAD.size + 4
+    if pos + length != len(payload):
+        raise ViformError("segment payload length does not match its frame")
+    data = np.frombuffer(zc.decompress(payload[pos:], 32 * (n_rec + n_pixels) + 4096, "records"), np.uint8)
+    # an adaptive binary decision costs ≥ 0.02 bit and a record takes ≥ 3: this bounds the records a byte can hold
+    cap = min(n_rec, 256 * data.size + 4096)
+    counts = np.empty(n_pixels, np.int64)
+    rec_m, rec_g, rec_o, rec_s = (np.empty(cap, np.int64) for _ in range(4))
+    tail_m = np.empty(n_pixels, np.int64)
+    tail_g = np.empty(n_pixels, np.int64)
+    err = context_model.decode_segment(data, n_pixels, anchor0, ref0, start, start + n_ticks, width, strict, n_rec,
+                                       counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s)
+    if err:
+        raise ViformError(f"segment at tick {start} is damaged ({context_model.ERRORS[err]})")
+    seg = Segment(start, n_ticks, counts, rec_m, rec_g, rec_o, np.zeros(0, np.int64), tail_m, tail_g,
+                  np.zeros(0, np.int64))
+    return seg, spikes
+
+
 def _count_varints(data: bytes, what: str) -> np.ndarray:
     arr = np.frombuffer(data, np.uint8)
     n = int(np.count_nonzero(arr < 128))
@@ -519,8 +570,11 @@ class CodedWriter:
 
     def __init__(self, path, height: int, width: int, clock_hz: float, params: CodingParameters,
                  threshold_electrons: float | None = None, start_time_s: float = 0.0,
-                 metadata: dict | None = None, level: int = ZSTD_LEVEL):
+                 metadata: dict | None = None, level: int = ZSTD_LEVEL, version: int = VERSION):
         self.path = Path(path)
+        if version not in SUPPORTED_VERSIONS:
+            raise ViformError(f"version must be one of {SUPPORTED_VERSIONS}; got {version!r}")
+        self.version = version
         self.height = check_int("height", height, 1)
         self.width = check_int("width", width, 1)
         self.params = params
@@ -529,7 +583,7 @@ class CodedWriter:
         self.state = FirstSpikeDecoder(self.height * self.width)  # mirrors the decoder's state
         self.zc = _Zstd(level)
         self.header = {
-            "format": "viform first-spike coded stream", "version": VERSION,
+            "format": "viform first-spike coded stream", "version": version,
             "height": self.height, "width": self.width, "clock_hz": float(clock_hz),
             "threshold_electrons": threshold_electrons, "start_time_s": float(start_time_s),
             "mode": params.mode, "k": params.k, "slack_ticks": params.slack_ticks,
@@ -538,7 +592,7 @@ class CodedWriter:
         self._cm = atomic_open(self.path, "wb")
         self.f = self._cm.__enter__()
         head = json.dumps(self.header, sort_keys=True).encode()
-        self.f.write(MAGIC + struct.pack("<HII", VERSION, len(head), zlib.crc32(head)) + head)
+        self.f.write(MAGIC + struct.pack("<HII", version, len(head), zlib.crc32(head)) + head)
         self.n_segments = 0
         self.spikes = 0
         self.bytes_written = len(MAGIC) + 10 + len(head)
@@ -549,7 +603,10 @@ class CodedWriter:
             self._write(seg)
 
     def _write(self, seg: Segment) -> None:
-        payload = _encode_payload(seg, self.state.anchor, self.state.tau_ref, self.strict, self.zc)
+        if self.version == 1:
+            payload = _encode_payload(seg, self.state.anchor, self.state.tau_ref, self.strict, self.zc)
+        else:
+            payload = _encode_payload_v2(seg, self.state.anchor, self.state.tau_ref, self.width, self.strict, self.zc)
         self.state.check(seg, advance=True)  # mirror the reader's state (anchors, widths)
         crc = zlib.crc32(payload)
         self.f.write(_SEG_HEAD.pack(b"SG", len(payload), crc) + payload)
@@ -583,15 +640,18 @@ def _json_safe(d: dict) -> dict:
 def encode_source(source: SpikeSource, path, mode: str = "strict", *, k: float | None = None,
                   threshold_electrons: float | None = None, slack_ticks: int = 0,
                   segment_ticks: int | None = None, block_ticks: int = 1024, level: int = ZSTD_LEVEL,
-                  progress: bool = False) -> dict:
-    """Code a viform into a ``.vfc`` file (streaming, bounded memory). Returns a summary."""
+                  progress: bool = False, version: int = VERSION) -> dict:
+    """Code a viform into a ``.vfc`` file (streaming, bounded memory). Returns a summary.
+
+    ``version`` 1 writes the older column layout (kept so that old readers can be served).
+    """
     from viform.coding.first_spike import DEFAULT_K, DEFAULT_SEGMENT_TICKS
 
     q = threshold_electrons if threshold_electrons is not None else source.threshold_electrons
     params = CodingParameters(mode, DEFAULT_K if k is None else k, q, slack_ticks,
                               segment_ticks or DEFAULT_SEGMENT_TICKS)
     writer = CodedWriter(path, source.height, source.width, source.clock_hz, params, q, source.start_time_s,
-                         {k2: v for k2, v in source.metadata.items() if k2 != "sensor"}, level)
+                         {k2: v for k2, v in source.metadata.items() if k2 != "sensor"}, level, version)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -655,9 +715,10 @@ class CodedFile(SpikeSource):
         if len(fixed) < len(MAGIC) + 10:
             self._fail("file is truncated inside the header", len(fixed))
         version, hlen, hcrc = struct.unpack_from("<HII", fixed, len(MAGIC))
-        if version > VERSION or version < 1:
-            self._fail(f"format version {version} is not supported (this viform reads up to {VERSION})",
-                       len(MAGIC))
+        if version not in SUPPORTED_VERSIONS:
+            self._fail(f"format version {version} is not supported (this viform reads versions "
+                       f"{', '.join(map(str, SUPPORTED_VERSIONS))})", len(MAGIC))
+        self.version = version
         if hlen > _MAX_HEADER:
             self._fail(f"header length {hlen} is implausible", len(MAGIC) + 2)
         head = f.read(hlen)
@@ -733,8 +794,12 @@ class CodedFile(SpikeSource):
                 if len(payload) != length or zlib.crc32(payload) != crc:
                     self._fail(f"segment {n} checksum mismatch (damaged data)", offset)
                 try:
-                    seg, spikes = _decode_payload(payload, n_pixels, dec.anchor, dec.tau_ref, strict, zc,
-                                                  n * self.segment_ticks, self.segment_ticks)
+                    if self.version == 1:
+                        seg, spikes = _decode_payload(payload, n_pixels, dec.anchor, dec.tau_ref, strict, zc,
+                                                      n * self.segment_ticks, self.segment_ticks)
+                    else:
+                        seg, spikes = _decode_payload_v2(payload, n_pixels, self.width, dec.anchor, dec.tau_ref,
+                                                         strict, zc, n * self.segment_ticks, self.segment_ticks)
                     expect_ticks = min(self.segment_ticks, self.n_ticks - n * self.segment_ticks)
                     if seg.n_ticks != expect_ticks:
                         raise ViformError(f"segment {n} holds {seg.n_ticks} ticks, expected {expect_ticks}")
@@ -822,7 +887,7 @@ def describe_coded_file(path) -> dict:
     h = cf.header
     raw = cf.n_ticks * cf.height * cf.width / 8
     return {
-        "format": f"first-spike coded viform ({EXTENSION}, version {h['version']})",
+        "format": f"first-spike coded viform ({EXTENSION}, version {cf.version})",
         "height": cf.height, "width": cf.width, "n_ticks": cf.n_ticks, "clock_hz": cf.clock_hz,
         "duration_s": cf.n_ticks / cf.clock_hz, "start_time_s": cf.start_time_s,
         "threshold_electrons": cf.threshold_electrons, "mode": h["mode"], "k": h["k"],

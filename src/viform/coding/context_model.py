@@ -1,0 +1,685 @@
+"""Context-modelled binary range coding of first-spike segments (``.vfc`` version 2).
+
+The records of a segment (see :mod:`viform.coding.first_spike`: per pixel, first spikes
+``(m, g, o)`` plus a tail ``(m, g)``; seed 000 §5.2) are coded with an adaptive binary
+range coder (LZMA style: 11-bit probabilities, carry-less byte output) whose contexts
+use what the decoder already knows:
+
+* the pixel's own history — its current width τ (bucketed), its last width change and
+  last repeat count;
+* its already-decoded neighbours (left, up, up-right; pixels are coded in row-major
+  order, each with all its records of the segment) — the neighbours' width at the time
+  of the pixel's next spike predicts whether the width grows or shrinks (a moving edge
+  reaches neighbouring pixels at nearly the same time), and the neighbours' first full
+  widths predict a new pixel's first full width;
+* the structure of the stream: a pixel's first spike (its phase) is uniform in
+  ``[1, τ₁]`` given its first full width τ₁, so it is coded after τ₁ as a uniform value
+  (log₂ τ₁ bits, no byte rounding); whether another first spike follows is coded as one
+  binary decision whose context is the time left in the segment in units of τ (no
+  per-pixel record counts are stored).
+
+Integers are binarized Elias-gamma style (adaptive unary bit length, adaptive top two
+mantissa bits, plain lower bits). Every decoding loop is bounded and every value
+range-checked: a damaged stream gives an error code, never a crash or a hang.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_TOP = np.int64(1) << 24
+_MASK32 = (np.int64(1) << 32) - 1
+_PBITS = 11
+_PONE = 1 << _PBITS
+_SHIFT = 5
+
+#: Probabilities per adaptive integer (Elias-gamma) context: 24 unary + 24·3 mantissa tree.
+_EG = 96
+_MAXBITS = 40
+
+# context counts
+_RB = 20  # width buckets
+_NB = 10  # neighbour-trend buckets (9 + none)
+_DP = 5  # previous width change: none, -big, -1, +1, +big
+_MB = 4  # previous repeat count: none, 0, 1-3, ≥4
+_MORE = 2 + 8 * 4 * 2
+
+# layout of the probability table
+_P_MORE = 0
+_P_MORE2 = _P_MORE + _MORE
+_P_SIGN = _P_MORE2 + _RB
+_P_ZERO = _P_SIGN + _NB * _DP * _RB
+_P_PLT = _P_ZERO + _NB * _DP * _RB
+_P_PHASE = _P_PLT + _RB
+_P_D = _P_PHASE + 2
+_P_M = _P_D + _NB * _DP * _RB * _EG
+_P_FW = _P_M + _MB * _RB * _EG
+_P_FWS = _P_FW + (_RB + 1) * _EG
+_P_M2 = _P_FWS + (_RB + 1)
+_P_PH = _P_M2 + _EG
+_P_TAIL = _P_PH + (_RB + 1) * _EG
+_P_GRES = _P_TAIL + 2 * 8 * _EG
+_P_GSIGN = _P_GRES + 4 * _EG
+_NPROB = _P_GSIGN + 4
+
+# error codes (0 ok)
+ERRORS = {1: "value out of range", 2: "too many records", 3: "a first spike after the segment end",
+          4: "stream is cut short", 5: "record count differs from the header", 6: "repeats without a width"}
+
+
+# ---------------------------------------------------------------------------- range coder
+
+@njit(cache=True, inline="always")
+def _shift_low(st, out):
+    low = st[0]
+    if low < 0xFF000000 or low > _MASK32:
+        carry = low >> 32
+        temp = st[2]
+        while True:
+            pos = st[4]
+            if pos < out.size:
+                out[pos] = (temp + carry) & 0xFF
+            st[4] = pos + 1
+            temp = 0xFF
+            st[3] -= 1
+            if st[3] == 0:
+                break
+        st[2] = (low >> 24) & 0xFF
+    st[3] += 1
+    st[0] = (low & 0x00FFFFFF) << 8
+
+
+@njit(cache=True, inline="always")
+def _ebit(st, out, probs, i, bit):
+    p = probs[i]
+    bound = (st[1] >> _PBITS) * p
+    if bit == 0:
+        st[1] = bound
+        probs[i] = p + ((_PONE - p) >> _SHIFT)
+    else:
+        st[0] += bound
+        st[1] -= bound
+        probs[i] = p - (p >> _SHIFT)
+    while st[1] < _TOP:
+        st[1] <<= 8
+        _shift_low(st, out)
+
+
+@njit(cache=True, inline="always")
+def _ebit_plain(st, out, bit):
+    st[1] >>= 1
+    if bit:
+        st[0] += st[1]
+    while st[1] < _TOP:
+        st[1] <<= 8
+        _shift_low(st, out)
+
+
+@njit(cache=True, inline="always")
+def _eunif_small(st, out, v, n):
+    r = st[1] // n
+    st[0] += v * r
+    st[1] = r
+    while st[1] < _TOP:
+        st[1] <<= 8
+        _shift_low(st, out)
+
+
+@njit(cache=True)
+def _eunif(st, out, v, n):
+    """Code v uniform in [0, n)."""
+    if n <= 4096:
+        if n > 1:
+            _eunif_small(st, out, v, n)
+        return
+    hi_n = ((n - 1) >> 12) + 1
+    hi = v >> 12
+    _eunif(st, out, hi, hi_n)
+    lo_n = ((n - 1) & 4095) + 1 if hi == hi_n - 1 else 4096
+    _eunif_small(st, out, v & 4095, lo_n)
+
+
+@njit(cache=True)
+def _euint(st, out, probs, base, v):
+    """Adaptive Elias-gamma code of v ≥ 0 (v < 2**40)."""
+    x = v + 1
+    n = 0
+    while (x >> (n + 1)) > 0:
+        n += 1
+    for i in range(n):
+        _ebit(st, out, probs, base + min(i, 23), 1)
+    _ebit(st, out, probs, base + min(n, 23), 0)
+    node = 1
+    nb = min(n, 23)
+    for k in range(n - 1, -1, -1):
+        bit = (x >> k) & 1
+        if n - 1 - k < 2:
+            _ebit(st, out, probs, base + 24 + nb * 3 + node - 1, bit)
+            node = node * 2 + bit if node == 1 else node
+        else:
+            _ebit_plain(st, out, bit)
+
+
+@njit(cache=True)
+def _eflush(st, out):
+    for _ in range(5):
+        _shift_low(st, out)
+
+
+@njit(cache=True, inline="always")
+def _dnorm(ds, data):
+    while ds[0] < _TOP:
+        ds[0] <<= 8
+        pos = ds[2]
+        b = np.int64(data[pos]) if pos < data.size else np.int64(0)
+        ds[2] = pos + 1
+        ds[1] = ((ds[1] << 8) | b) & _MASK32
+
+
+@njit(cache=True, inline="always")
+def _dbit(ds, data, probs, i):
+    p = probs[i]
+    bound = (ds[0] >> _PBITS) * p
+    if ds[1] < bound:
+        ds[0] = bound
+        probs[i] = p + ((_PONE - p) >> _SHIFT)
+        bit = 0
+    else:
+        ds[1] -= bound
+        ds[0] -= bound
+        probs[i] = p - (p >> _SHIFT)
+        bit = 1
+    _dnorm(ds, data)
+    return bit
+
+
+@njit(cache=True, inline="always")
+def _dbit_plain(ds, data):
+    ds[0] >>= 1
+    bit = 0
+    if ds[1] >= ds[0]:
+        ds[1] -= ds[0]
+        bit = 1
+    _dnorm(ds, data)
+    return bit
+
+
+@njit(cache=True, inline="always")
+def _dunif_small(ds, data, n):
+    r = ds[0] // n
+    v = ds[1] // r
+    if v >= n:
+        v = n - 1
+        ds[3] = 1  # impossible in a valid stream
+    ds[1] -= v * r
+    ds[0] = r
+    _dnorm(ds, data)
+    return v
+
+
+@njit(cache=True)
+def _dunif(ds, data, n):
+    if n <= 4096:
+        if n > 1:
+            return _dunif_small(ds, data, n)
+        return np.int64(0)
+    hi_n = ((n - 1) >> 12) + 1
+    hi = _dunif(ds, data, hi_n)
+    lo_n = ((n - 1) & 4095) + 1 if hi == hi_n - 1 else 4096
+    return (hi << 12) | _dunif_small(ds, data, lo_n)
+
+
+@njit(cache=True)
+def _duint(ds, data, probs, base):
+    n = 0
+    while _dbit(ds, data, probs, base + min(n, 23)) == 1:
+        n += 1
+        if n > _MAXBITS:
+            ds[3] = 1
+            return np.int64(0)
+    x = np.int64(1)
+    node = 1
+    nb = min(n, 23)
+    for k in range(n - 1, -1, -1):
+        if n - 1 - k < 2:
+            bit = _dbit(ds, data, probs, base + 24 + nb * 3 + node - 1)
+            node = node * 2 + bit if node == 1 else node
+        else:
+            bit = _dbit_plain(ds, data)
+        x = (x << 1) | bit
+    return x - 1
+
+
+@njit(cache=True)
+def _dstart(ds, data):
+    ds[0] = _MASK32
+    ds[1] = 0
+    ds[2] = 0
+    ds[3] = 0
+    for _ in range(5):
+        pos = ds[2]
+        b = np.int64(data[pos]) if pos < data.size else np.int64(0)
+        ds[2] = pos + 1
+        ds[1] = ((ds[1] << 8) | b) & _MASK32
+
+
+# ---------------------------------------------------------------------------- contexts
+
+@njit(cache=True, inline="always")
+def _rbucket(ref):
+    if ref <= 8:
+        return max(ref, 1) - 1
+    e = 0
+    while (ref >> (e + 1)) > 0:
+        e += 1
+    half = (ref >> (e - 1)) & 1
+    return min(8 + (e - 3) * 2 + half, _RB - 1)
+
+
+@njit(cache=True, inline="always")
+def _mbucket(m):
+    if m < 0:
+        return 0
+    if m == 0:
+        return 1
+    if m < 4:
+        return 2
+    return 3
+
+
+@njit(cache=True, inline="always")
+def _dbucket(d, have):
+    if not have:
+        return 0
+    if d < -1:
+        return 1
+    if d < 0:
+        return 2
+    if d <= 1:
+        return 3
+    return 4
+
+
+@njit(cache=True)
+def _nb_width(n, q, rec_start, counts, rec_s, rec_o, ref0, ptr, slot):
+    """Width of neighbour pixel n's interval holding tick q (−1 unknown); ptr[slot] walks forward."""
+    lo = rec_start[n] + (1 if ref0[n] == 0 and counts[n] > 0 else 0)
+    hi = rec_start[n] + counts[n]
+    k = max(ptr[slot], lo)
+    while k < hi and rec_s[k] < q:
+        k += 1
+    ptr[slot] = k
+    if k > lo:
+        return rec_o[k - 1]
+    if ref0[n] > 0:
+        return ref0[n]
+    if lo < hi:
+        return rec_o[lo]
+    return np.int64(-1)
+
+
+@njit(cache=True)
+def _nb_mean(p, width, q, rec_start, counts, rec_s, rec_o, ref0, ptr):
+    """Mean width (×4, rounded) of the decoded neighbours left, up, up-right at tick q; −1 if none."""
+    row = p // width
+    col = p - row * width
+    tot = np.int64(0)
+    cnt = 0
+    if col > 0:
+        w = _nb_width(p - 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 0)
+        if w > 0:
+            tot += w
+            cnt += 1
+    if row > 0:
+        w = _nb_width(p - width, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 1)
+        if w > 0:
+            tot += w
+            cnt += 1
+        if col + 1 < width:
+            w = _nb_width(p - width + 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 2)
+            if w > 0:
+                tot += w
+                cnt += 1
+    if cnt == 0:
+        return np.int64(-1)
+    return (4 * tot + cnt // 2) // cnt
+
+
+@njit(cache=True, inline="always")
+def _nbctx(nb4, ref):
+    if nb4 < 0:
+        return _NB - 1
+    # relative trend (nb − τ)/τ in eighths, rounded, clipped to ±4
+    den = 4 * ref
+    c = (16 * (nb4 - den) + den) // (2 * den)
+    return min(max(c, -4), 4) + 4
+
+
+@njit(cache=True, inline="always")
+def _dctx(nbc, dp, rb):
+    return (nbc * _DP + dp) * _RB + rb
+
+
+@njit(cache=True, inline="always")
+def _more_ctx(remaining, ref, mb, first):
+    r = min(remaining // ref, 7)
+    return 2 + ((r * 4 + mb) * 2 + first)
+
+
+@njit(cache=True, inline="always")
+def _nb_first(p, width, rec_start, counts, rec_s, rec_o, ref0, ptr, seg_start):
+    ptr[0] = 0
+    ptr[1] = 0
+    ptr[2] = 0
+    return _nb_mean(p, width, seg_start, rec_start, counts, rec_s, rec_o, ref0, ptr)
+
+
+# ---------------------------------------------------------------------------- encoder
+
+@njit(cache=True)
+def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_start, seg_end, width, strict,
+                   out, rec_s):
+    """Code one segment's records into ``out``; returns the byte count (> out.size: retry bigger)."""
+    npix = counts.size
+    probs = np.full(_NPROB, _PONE // 2, np.int64)
+    st = np.zeros(6, np.int64)
+    st[1] = _MASK32
+    st[3] = 1
+    rec_start = np.zeros(npix + 1, np.int64)
+    for p in range(npix):
+        rec_start[p + 1] = rec_start[p] + counts[p]
+    ptr = np.zeros(3, np.int64)
+    for p in range(npix):
+        a = anchor0[p]
+        ref = ref0[p]
+        r = rec_start[p]
+        r_end = r + counts[p]
+        mb = 0
+        dp = 0
+        have_d = False
+        first = 1
+        ptr[0] = 0
+        ptr[1] = 0
+        ptr[2] = 0
+        if ref == 0:
+            col = p % width
+            lf = 1 if (col > 0 and counts[p - 1] > 0) else 0
+            _ebit(st, out, probs, _P_MORE + lf, 1 if r < r_end else 0)
+            if r == r_end:
+                continue
+            off = seg_start - 1 - a  # a pixel that never fired: a = -1; code its first tick within the segment
+            phase = rec_o[r] - off
+            rec_s[r] = a
+            nb4 = _nb_first(p, width, rec_start, counts, rec_s, rec_o, ref0, ptr, seg_start)
+            fb = _RB if nb4 < 0 else _rbucket((nb4 + 2) // 4)
+            two = r + 1 < r_end
+            _ebit(st, out, probs, _P_MORE2 + min(fb, _RB - 1), 1 if two else 0)
+            if two:
+                m2 = rec_m[r + 1]
+                o2 = rec_o[r + 1]
+                _euint(st, out, probs, _P_M2, m2)
+                pred = (nb4 + 2) // 4 if nb4 > 0 else 0
+                e = o2 - pred
+                _ebit(st, out, probs, _P_FWS + fb, 1 if e < 0 else 0)
+                _euint(st, out, probs, _P_FW + fb * _EG, abs(e) - (1 if e < 0 else 0))
+                # the phase given the first full width: uniform below it (strict: never equal when m2 = 0)
+                lim = o2 - 1 if (strict and m2 == 0) else o2
+                below = phase <= lim
+                _ebit(st, out, probs, _P_PHASE + (1 if m2 > 0 else 0), 1 if below else 0)
+                if below:
+                    _eunif(st, out, phase - 1, lim)
+                else:
+                    _euint(st, out, probs, _P_PH + _rbucket(o2) * _EG, phase - lim - 1)
+                a = a + off + phase
+                ref = off + phase
+                r += 1
+                # the second record (m2 repeats of the phase width, then o2)
+                g = rec_g[r]
+                if not strict and m2 > 0:
+                    e = g - m2 * ref
+                    _ebit(st, out, probs, _P_GSIGN, 1 if e < 0 else 0)
+                    _euint(st, out, probs, _P_GRES, abs(e) - (1 if e < 0 else 0))
+                rec_s[r] = a + g
+                a = a + g + o2
+                ref = o2
+                mb = _mbucket(m2)
+                r += 1
+                first = 0
+            else:
+                _euint(st, out, probs, _P_PH + fb * _EG, phase - 1)
+                a = a + off + phase
+                ref = off + phase
+                r += 1
+        while True:
+            remaining = seg_end - 1 - a
+            more = r < r_end
+            if remaining >= 1:
+                _ebit(st, out, probs, _P_MORE + _more_ctx(remaining, ref, mb, first), 1 if more else 0)
+            if not more:
+                break
+            first = 0
+            m = rec_m[r]
+            g = rec_g[r]
+            o = rec_o[r]
+            rb = _rbucket(ref)
+            _euint(st, out, probs, _P_M + (mb * _RB + rb) * _EG, m)
+            if not strict and m > 0:
+                e = g - m * ref
+                _ebit(st, out, probs, _P_GSIGN + 1, 1 if e < 0 else 0)
+                _euint(st, out, probs, _P_GRES + _EG, abs(e) - (1 if e < 0 else 0))
+            s = a + g
+            rec_s[r] = s
+            nb4 = _nb_mean(p, width, s + (ref + 1) // 2, rec_start, counts, rec_s, rec_o, ref0, ptr)
+            c = _dctx(_nbctx(nb4, ref), _dbucket(dp, have_d), rb)
+            d = o - ref
+            if not strict:
+                _ebit(st, out, probs, _P_ZERO + c, 1 if d == 0 else 0)
+            if d != 0 or strict:
+                _ebit(st, out, probs, _P_SIGN + c, 1 if d < 0 else 0)
+                _euint(st, out, probs, _P_D + c * _EG, abs(d) - 1)
+            dp = d
+            have_d = True
+            mb = _mbucket(m)
+            a = s + o
+            ref = o
+            r += 1
+        if ref > 0:
+            m = tail_m[p]
+            fill = (seg_end - 1 - a) // ref
+            e = fill - m
+            tc = (0 if strict else 8) + min(fill, 7)
+            _euint(st, out, probs, _P_TAIL + tc * _EG, 2 * e if e >= 0 else -2 * e - 1)
+            if not strict and m > 0:
+                e = tail_g[p] - m * ref
+                _ebit(st, out, probs, _P_GSIGN + 2, 1 if e < 0 else 0)
+                _euint(st, out, probs, _P_GRES + 2 * _EG, abs(e) - (1 if e < 0 else 0))
+    _eflush(st, out)
+    return st[4]
+
+
+# ---------------------------------------------------------------------------- decoder
+
+@njit(cache=True)
+def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict, n_rec,
+                   counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s):
+    """Inverse of :func:`encode_segment`. Returns an error code (0 ok); arrays are filled in place.
+
+    ``rec_m, rec_g, rec_o, rec_s`` must hold at least ``n_rec`` records.
+    """
+    probs = np.full(_NPROB, _PONE // 2, np.int64)
+    ds = np.zeros(4, np.int64)
+    _dstart(ds, data)
+    big = np.int64(1) << 31
+    cap = min(n_rec, rec_m.size)
+    rec_start = np.zeros(npix + 1, np.int64)
+    ptr = np.zeros(3, np.int64)
+    r = 0
+    for p in range(npix):
+        rec_start[p] = r
+        counts[p] = 0
+        a = anchor0[p]
+        ref = ref0[p]
+        mb = 0
+        dp = 0
+        have_d = False
+        first = 1
+        ptr[0] = 0
+        ptr[1] = 0
+        ptr[2] = 0
+        if ref < 0 or ref > big or a < -1 or a >= seg_end:
+            return 1
+        if ref == 0:
+            col = p % width
+            lf = 1 if (col > 0 and counts[p - 1] > 0) else 0
+            if _dbit(ds, data, probs, _P_MORE + lf) == 0:
+                tail_m[p] = 0
+                tail_g[p] = 0
+                if ds[2] > data.size + 8:
+                    return 4
+                continue
+            if r >= cap:
+                return 2
+            off = seg_start - 1 - a
+            if off < 0:
+                return 1
+            nb4 = _nb_first(p, width, rec_start, counts, rec_s, rec_o, ref0, ptr, seg_start)
+            fb = _RB if nb4 < 0 else _rbucket((nb4 + 2) // 4)
+            two = _dbit(ds, data, probs, _P_MORE2 + min(fb, _RB - 1)) == 1
+            if two:
+                if r + 1 >= cap:
+                    return 2
+                m2 = _duint(ds, data, probs, _P_M2)
+                pred = (nb4 + 2) // 4 if nb4 > 0 else 0
+                neg = _dbit(ds, data, probs, _P_FWS + fb)
+                mag = _duint(ds, data, probs, _P_FW + fb * _EG)
+                o2 = pred - mag - 1 if neg else pred + mag
+                if o2 < 1 or o2 > big or m2 > big or ds[3]:
+                    return 1
+                lim = o2 - 1 if (strict and m2 == 0) else o2
+                if _dbit(ds, data, probs, _P_PHASE + (1 if m2 > 0 else 0)):
+                    if lim < 1:
+                        return 1
+                    phase = _dunif(ds, data, lim) + 1
+                else:
+                    phase = _duint(ds, data, probs, _P_PH + _rbucket(o2) * _EG) + lim + 1
+                phase += off
+                if phase > big or ds[3]:
+                    return 1
+                rec_m[r] = 0
+                rec_g[r] = 0
+                rec_o[r] = phase
+                rec_s[r] = a
+                a = a + phase
+                ref = phase
+                if a >= seg_end:
+                    return 3
+                r += 1
+                g = m2 * ref
+                if not strict and m2 > 0:
+                    neg = _dbit(ds, data, probs, _P_GSIGN)
+                    mag = _duint(ds, data, probs, _P_GRES)
+                    g += -mag - 1 if neg else mag
+                if g < m2 or g > big:
+                    return 1
+                rec_m[r] = m2
+                rec_g[r] = g
+                rec_o[r] = o2
+                rec_s[r] = a + g
+                a = a + g + o2
+                ref = o2
+                if a >= seg_end:
+                    return 3
+                mb = _mbucket(m2)
+                r += 1
+                first = 0
+            else:
+                phase = _duint(ds, data, probs, _P_PH + fb * _EG) + 1 + off
+                if phase > big or ds[3]:
+                    return 1
+                rec_m[r] = 0
+                rec_g[r] = 0
+                rec_o[r] = phase
+                rec_s[r] = a
+                a = a + phase
+                ref = phase
+                if a >= seg_end:
+                    return 3
+                r += 1
+        while True:
+            remaining = seg_end - 1 - a
+            if remaining < 1:
+                break
+            if _dbit(ds, data, probs, _P_MORE + _more_ctx(remaining, ref, mb, first)) == 0:
+                break
+            if ds[2] > data.size + 8:
+                return 4
+            if r >= cap:
+                return 2
+            first = 0
+            rb = _rbucket(ref)
+            m = _duint(ds, data, probs, _P_M + (mb * _RB + rb) * _EG)
+            if m > big or ds[3]:
+                return 1
+            g = m * ref
+            if not strict and m > 0:
+                neg = _dbit(ds, data, probs, _P_GSIGN + 1)
+                mag = _duint(ds, data, probs, _P_GRES + _EG)
+                g += -mag - 1 if neg else mag
+            if g < m or g > big:
+                return 1
+            s = a + g
+            if s >= seg_end:
+                return 3
+            rec_s[r] = s
+            nb4 = _nb_mean(p, width, s + (ref + 1) // 2, rec_start, counts, rec_s, rec_o, ref0, ptr)
+            c = _dctx(_nbctx(nb4, ref), _dbucket(dp, have_d), rb)
+            d = np.int64(0)
+            zero = False
+            if not strict:
+                zero = _dbit(ds, data, probs, _P_ZERO + c) == 1
+            if not zero:
+                neg = _dbit(ds, data, probs, _P_SIGN + c)
+                mag = _duint(ds, data, probs, _P_D + c * _EG) + 1
+                d = -mag if neg else mag
+            o = ref + d
+            if o < 1 or o > big or ds[3]:
+                return 1
+            rec_m[r] = m
+            rec_g[r] = g
+            rec_o[r] = o
+            a = s + o
+            if a >= seg_end:
+                return 3
+            dp = d
+            have_d = True
+            mb = _mbucket(m)
+            ref = o
+            r += 1
+        counts[p] = r - rec_start[p]
+        if ref > 0:
+            fill = (seg_end - 1 - a) // ref
+            tc = (0 if strict else 8) + min(fill, 7)
+            e = _duint(ds, data, probs, _P_TAIL + tc * _EG)
+            m = fill - ((e >> 1) if (e & 1) == 0 else -((e + 1) >> 1))
+            if m < 0 or m > big or ds[3]:
+                return 1
+            g = m * ref
+            if not strict and m > 0:
+                neg = _dbit(ds, data, probs, _P_GSIGN + 2)
+                mag = _duint(ds, data, probs, _P_GRES + 2 * _EG)
+                g += -mag - 1 if neg else mag
+            if g < m or g > big:
+                return 1
+            tail_m[p] = m
+            tail_g[p] = g
+        else:
+            tail_m[p] = 0
+            tail_g[p] = 0
+        if ds[2] > data.size + 8:
+            return 4
+    if r != n_rec:
+        return 5
+    if ds[2] > data.size + 5:
+        return 4
+    return 0
