@@ -48,3 +48,13 @@ def test_display_cli(tmp_path, capsys):
     d = r["comparison"]["displays"]
     assert d["spike"]["tracked_edge_width_px"] < d["hold 120 Hz"]["tracked_edge_width_px"]
     assert r["passthrough"]["spike"]["latency_s"] < 1e-3
+
+
+def test_unusable_outputs_are_refused_before_any_figure(tmp_path, capsys):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    for cmd in (["lightcomm", "--no-max"], ["display"]):
+        rc = main([*cmd, "--out", str(tmp_path / "figs"), "--json", str(blocker / "r.json")])
+        err = capsys.readouterr().err
+        assert rc == 2 and "--json" in err and err.count("\n") == 1
+        assert not (tmp_path / "figs").exists()

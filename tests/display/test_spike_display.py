@@ -137,6 +137,10 @@ def test_bad_display_input():
         sd.HoldDisplay(60.0, "crt")
     with pytest.raises(ViformError, match="spikes must have shape"):
         sd.SpikeDisplay().emitted_lux(np.zeros((3, 3), bool))
+    with pytest.raises(ViformError, match="velocity_px_per_s = 0 "):
+        sd.compare_displays(sd.moving_bars_scene(velocity_px_per_s=0.0))
+    with pytest.raises(ViformError, match="at most 660 px/s"):
+        sd.compare_displays(sd.moving_bars_scene(velocity_px_per_s=3000.0))
     with pytest.raises(ViformError, match="TranslatingScene"):
         sd.compare_displays(StillScene(np.ones((4, 4))))
     with pytest.raises(ViformError, match="link_latency_ticks"):

@@ -12,8 +12,19 @@ from pathlib import Path
 
 import click
 
-from viform._validate import check_int, check_non_negative, check_positive
+from viform._validate import ViformError, check_int, check_non_negative, check_positive
 from viform.cli.app import cli
+from viform.cli.frame import _check_output_folder
+
+
+def _check_outputs(json_path, out) -> None:
+    """Refuse unusable --json/--out before any work, so a bad path leaves no figures behind."""
+    if out is not None:
+        _check_output_folder("--out", Path(out))
+    if json_path is not None:
+        if Path(json_path).is_dir():
+            raise ViformError(f"--json: {json_path} is a folder; give a file name")
+        _check_output_folder("--json", Path(json_path).resolve().parent)
 
 
 def run_lightcomm(bitrate_bps: float = 10e3, modulation: str = "ook", distance_m: float = 100.0,
@@ -39,8 +50,7 @@ def run_lightcomm(bitrate_bps: float = 10e3, modulation: str = "ook", distance_m
     res, spikes = lc.simulate_link(link, bits, bitrate_bps, modulation, seed=seed, return_spikes=True)
     result = {"link": link.to_dict(), "transmission": res.summary(),
               "theory": {"rate_limits": lc.theoretical_rate_limits(link, modulation),
-                         "ook_ber_starved": lc.ook_ber_starved(res.spikes_per_on_slot_pixel)
-                         if res.modulation == "ook" else None}}
+                         "starved_ber": lc.starved_ber(res.spikes_per_on_slot_pixel)}}
     if message is not None:
         received = lc.bits_to_bytes(res.bits_received)
         result["transmission"]["message_sent"] = message
@@ -80,7 +90,8 @@ def print_lightcomm(r: dict) -> None:
     lk, tx, th = r["link"], r["transmission"], r["theory"]["rate_limits"]
     click.echo(f"link: LED {lk['transmitter']['luminous_intensity_cd']:g} cd at {lk['distance_m']:g} m, "
                f"lens f={lk['lens']['focal_length_m'] * 1e3:g} mm f/{lk['lens']['f_number']:g}, "
-               f"ambient {lk['ambient_lux']:g} lux on the sensor")
+               f"ambient {lk['ambient_lux']:g} lux on the sensor (a 50 % grey background lit by "
+               f"{lk['ambient_scene_lux_grey50']:.3g} lux)")
     click.echo(f"  LED image {lk['image_diameter_m'] * 1e6:.3g} µm over {lk['led_pixels']} pixel(s); "
                f"brightest pixel {lk['led_on_peak_pixel_e_per_s']:.4g} e-/s "
                f"({lk['led_on_peak_pixel_e_per_s'] / lk['sensor']['threshold_electrons']:.4g} spikes/s), "
@@ -130,18 +141,14 @@ def lightcomm_command(bitrate_bps, modulation, distance_m, ambient_lux, led_cd, 
     from viform._io import write_json
 
     if message is not None and message == "":
-        from viform._validate import ViformError
-
         raise ViformError("--message is empty: give at least one character to transmit")
+    _check_outputs(json_path, out)
     r = run_lightcomm(bitrate_bps, modulation, distance_m, ambient_lux, led_cd, n_bits, message, seed, clock_hz,
                       threshold_electrons, not no_max, sweeps, out)
     print_lightcomm(r)
     if json_path:
         write_json(json_path, r)
         click.echo(f"wrote {json_path}")
-
-
-
 
 
 def run_display(velocity_px_per_s: float = 600.0, eye_ms: float = 1000 / 60, link_latency_ticks: int = 0,
@@ -220,6 +227,7 @@ def display_command(velocity_px_per_s, eye_ms, link_latency_ticks, seed, json_pa
     from viform._io import write_json
 
     check_int("link_latency_ticks", link_latency_ticks, 0, 600)
+    _check_outputs(json_path, out)
     r = run_display(velocity_px_per_s, eye_ms, link_latency_ticks, seed, out)
     print_display(r)
     if json_path:

@@ -38,26 +38,31 @@ Receiver
     earliest slot, an error unless that is the symbol sent).
 
 Theory of the bit-error rate (seed 000 §5.1: the interval to Q electrons is Gamma(Q, λ))
-    In a slot of duration T at photoelectron rate λ a pixel fires about n̄ = λT/Q times.
-    Its integrator keeps the charge left over between slots, so over a long random stream
-    each on-slot of an isolated pixel without background fires with probability
-    ≈ min(1, λ_on·T/Q) (the charge of ~Q/(λT) on-slots is needed per spike):
+    In a slot of duration T at photoelectron rate λ a pixel fires n̄ = λT/Q times on average.
+    Its integrator keeps the charge left over between slots, so the count of a slot is
+    sub-Poisson: variance n̄/Q (Fano factor 1/Q) + the pixel's phase at the two slot edges,
+    i.e. ⌊μ⌋ or ⌈μ⌉ (μ its mean) with probabilities set by the fractional part of μ.
 
-    * photon-starved (n̄_on ≲ 1): OOK misses an on bit with P ≈ 1 − n̄_on, so
-      BER_OOK ≈ ½·max(0, 1 − λ_on T/Q) (:func:`ook_ber_starved`); PPM needs only one spike
-      per *symbol* (M slots, of which one is on) and its position is the message: the
-      spike can only come in the on slot when there is no background, so the symbol is lost
-      only when no spike falls in it, P ≈ max(0, 1 − n̄_on) and BER ≈ P·M/(2(M − 1)).
-    * ambient light adds λ_b to every slot: the off level μ₀ = λ_b T/Q grows. The counts are
-      sub-Poisson (Fano factor ≈ 1/Q, plus ±1 at the slot edges), so a background of b
-      spikes per slot costs little by itself; errors appear once b + n̄_on approaches the
-      number of ticks in a slot, where the one-spike-per-tick readout clips the on level,
-      and the BER tends to ½ when the background alone fires every tick.
+    * photon-starved (n̄_on < 1, no background): an on slot fires with probability n̄_on
+      (the charge of ~1/n̄_on on slots is needed per spike) and off slots never fire. Every
+      code here has one on slot per symbol (OOK: per one bit) and a lost symbol decodes to a
+      fixed default (OOK 0, Manchester 0, PPM slot 0), wrong on average for half its bits:
+      BER = ½·max(0, 1 − λ_on T/Q) for OOK, Manchester and M-PPM alike
+      (:func:`starved_ber`; for PPM (1 − 1/M)·M/(2(M − 1)) = ½). The misses are regular,
+      not independent: of N_on on slots, N_on·(1 − n̄_on) ± √(N_on·n̄_on/Q + 1/6) miss.
+    * ambient light adds λ_b to every slot: b = λ_b T/Q spikes. OOK's midpoint threshold
+      θ = b + n̄_on/2 then separates off counts {⌊b⌋, ⌈b⌉} from on counts
+      {⌊b + n̄_on⌋, ⌈b + n̄_on⌉} only if n̄_on ≳ 2–3: with n̄_on ≈ 1 a background far below the
+      clock's ceiling already costs BER ≈ ½·frac(b) (off slots reaching ⌈b⌉ ≥ θ; 0.25 at
+      b = ½). With a few spikes per on slot the background only shifts μ₀, and errors
+      appear once b + n̄_on approaches the number of ticks in a slot, where the
+      one-spike-per-tick readout clips the on level; the BER tends to ½ when the background
+      alone fires every tick.
     * the readout clock: a pixel reads at most one spike per tick, so a slot shorter than
       one tick (slot rate above ``clock_hz``) cannot be received at all and is refused;
       slots of a few ticks whose edges fall inside ticks share those ticks with their
       neighbours, and the inter-symbol interference raises the BER as the slot rate nears
-      the clock.
+      the clock (a saturated pixel at 1.1 ticks per slot: ≈ 0.2).
 
 Error-free rate: the link is error-free when every on slot fires at least once and no off
 slot fires: λ_on T/Q ≳ a few and λ_b T/Q ≪ 1, with T ≥ a couple of ticks;
@@ -369,7 +374,9 @@ class LightLink:
                         "dark_current_e_per_s": self.sensor.dark_current_e_per_s,
                         "pixel_pitch_m": self.optics.pixel_pitch_m,
                         "quantum_efficiency": self.optics.quantum_efficiency},
-             "image_diameter_m": self.image_diameter_m, "image_lux": self.image_lux, "flux_lm": self.flux_lm}
+             "image_diameter_m": self.image_diameter_m, "image_lux": self.image_lux, "flux_lm": self.flux_lm,
+             # the same ambient as a light-meter reading on a 50 % grey background (camera equation)
+             "ambient_scene_lux_grey50": self.ambient_lux / ambient_sensor_lux(1.0, 0.5, self.lens)}
         d.update(self.electron_rates())
         return d
 
@@ -607,17 +614,10 @@ def ber(link: LightLink, bitrate_bps: float, modulation: str = "ook", n_bits: in
 
 # ------------------------------------------------------------------ theory
 
-def ook_ber_starved(spikes_per_on_slot: float) -> float:
-    """Photon-starved OOK, no background: BER ≈ ½·max(0, 1 − λ_on T/Q) (module docstring)."""
+def starved_ber(spikes_per_on_slot: float) -> float:
+    """Photon-starved BER without background, OOK, Manchester and M-PPM: ½·max(0, 1 − λ_on T/Q)
+    (module docstring)."""
     return 0.5 * max(0.0, 1.0 - check_non_negative("spikes_per_on_slot", spikes_per_on_slot))
-
-
-def ppm_ber_starved(spikes_per_on_slot: float, m: int) -> float:
-    """Photon-starved M-PPM, no background: a symbol is lost w.p. ≈ max(0, 1 − n̄_on) (an empty
-    symbol decodes as slot 0, right 1/M of the time); a wrong symbol has M/(2(M−1)) bits wrong
-    on average."""
-    lost = max(0.0, 1.0 - check_non_negative("spikes_per_on_slot", spikes_per_on_slot))
-    return lost * (1 - 1 / m) * m / (2 * (m - 1))
 
 
 def theoretical_rate_limits(link: LightLink, modulation: str = "ook", spikes_needed: float = 3.0,
@@ -650,18 +650,14 @@ def max_error_free_rate(link: LightLink, modulation: str = "ook", n_bits: int = 
     photon-starved, BER ≳ ¼) down to ``min_bps`` (default: the clock limit / 2^12).
     """
     mod = get_modulation(modulation)
-    top = link.sensor.clock_hz / mod.slots_per_bit
-    lo = min_bps if min_bps is not None else top / 4096
-    # no need to try rates where an on slot gets under half a spike (BER ≳ ¼ by the theory)
-    starved = theoretical_rate_limits(link, modulation, spikes_needed=0.5)["photon_limited_bps"]
-    rate = top
-    while rate / 2 ** (1 / steps_per_octave) > max(starved, lo):
-        rate /= 2 ** (1 / steps_per_octave)
-    top = rate
-    check_positive("min_bps", lo)
     factor = 2 ** (1 / check_int("steps_per_octave", steps_per_octave, 1))
+    rate = link.sensor.clock_hz / mod.slots_per_bit
+    lo = check_positive("min_bps", min_bps if min_bps is not None else rate / 4096)
+    # skip the grid rates where an on slot gets under half a spike (BER > ¼ by the theory)
+    starved = theoretical_rate_limits(link, modulation, spikes_needed=0.5)["photon_limited_bps"]
+    while rate > starved and rate / factor >= lo * (1 - 1e-9):
+        rate /= factor
     tried = []
-    rate = top
     while rate >= lo * (1 - 1e-9):
         r = ber(link, rate, modulation, n_bits, seed)
         tried.append({"bitrate_bps": rate, "bit_errors": r["bit_errors"], "ber": r["ber"]})

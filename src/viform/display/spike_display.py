@@ -232,6 +232,13 @@ def compare_displays(scene: TranslatingScene | None = None, duration_s: float = 
     sensor = sensor or SpikeSensorParameters()
     clock = sensor.clock_hz
     v = scene.velocity_px_per_s[0]
+    # the edge is measured within ±period/4 of its place, which must hold the slowest hold
+    # display's smear v/f (plus a pixel of interpolation)
+    v_max = (scene.period_px / 4 - 1) * min(refresh_hz)
+    if not 0 < abs(v) <= v_max:
+        raise ViformError(f"velocity_px_per_s = {v:g} is not allowed: it must be non-zero and at most {v_max:g} px/s "
+                          f"in size, so that a {min(refresh_hz):g} Hz display's smear v/f stays inside a quarter "
+                          f"of the bars' {scene.period_px:g} px period")
     stream = SpikeSensor(sensor).capture(scene, duration_s, seed=seed, light_sample_ticks=1)
     n = stream.n_ticks
     truth = true_lux(scene, n, clock)
