@@ -198,6 +198,8 @@ def print_display(r: dict) -> None:
         click.echo(f"{name:<14}" + "".join(f"{row['error_rel_rms'][w]:>12.4f}" for w in windows)
                    + f"{row['time_mean_lux']:>10.4f}{row['tracked_edge_width_px']:>13.2f}"
                    + (f"{th:>11.2f}" if th is not None else f"{'':>11}"))
+    click.echo(f"{'  theory':<14}" + "".join(f"{c['displays']['spike']['error_rel_rms_theory'][w]:>12.4f}"
+                                             for w in windows) + "  (spike display: √(N/Q + 1/6)/N)")
     click.echo(f"  (err = relative RMS of the light averaged over the window; eye = tracking eye integrating "
                f"{c['eye_integration_s'] * 1e3:.3g} ms; spike display dark bias "
                f"{c['spike_display_dark_bias_lux']:.2g} lux)")

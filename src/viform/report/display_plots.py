@@ -24,14 +24,12 @@ def _figure(*args, **kw):
 def plot_ber_sweeps(path, sweeps: dict, modulation: str) -> None:
     """BER against bit rate, distance (received light) and ambient light, one panel each."""
     fig, axes = _figure(1, 3, figsize=(13, 3.8))
-    floor = None
     for ax, (name, rows) in zip(axes, sweeps.items(), strict=False):
         x = np.array([r[name] for r in rows], float)
         y = np.array([r["ber"] for r in rows], float)
         n = rows[0]["n_bits"] if rows else 1
         floor = 0.5 / n
-        ax.plot(np.where(x > 0, x, np.nan) if name != "ambient_lux" else np.maximum(x, 1e-3),
-                np.maximum(y, floor), "o-", label=f"{modulation} (0 errors plotted at ½/n)")
+        ax.plot(np.maximum(x, 1e-3), np.maximum(y, floor), "o-", label=f"{modulation} (0 errors plotted at ½/n)")
         ax.set_yscale("log")
         ax.set_xscale("log")
         ax.set_ylim(floor / 2, 1)
@@ -39,17 +37,12 @@ def plot_ber_sweeps(path, sweeps: dict, modulation: str) -> None:
                        "ambient_lux": "ambient on sensor (lux; 0 drawn at 1e-3)"}[name])
         ax.set_ylabel("bit-error rate")
         ax.grid(True, which="both", alpha=0.3)
-        if name != "bitrate_bps":
-            ax2 = ax.twinx()
-            key = "expected_spikes_per_on_slot_pixel" if name == "distance_m" else "background_spikes_per_slot_pixel"
-            ax2.plot(np.maximum(x, 1e-3), [r[key] for r in rows], "s--", color="tab:gray", alpha=0.6)
-            ax2.set_yscale("log")
-            ax2.set_ylabel("signal spikes / on slot" if name == "distance_m" else "background spikes / slot")
-        else:
-            ax2 = ax.twinx()
-            ax2.plot(x, [r["expected_spikes_per_on_slot_pixel"] for r in rows], "s--", color="tab:gray", alpha=0.6)
-            ax2.set_yscale("log")
-            ax2.set_ylabel("signal spikes / on slot")
+        background = name == "ambient_lux"
+        key = "background_spikes_per_slot_pixel" if background else "expected_spikes_per_on_slot_pixel"
+        ax2 = ax.twinx()
+        ax2.plot(np.maximum(x, 1e-3), [r[key] for r in rows], "s--", color="tab:gray", alpha=0.6)
+        ax2.set_yscale("log")
+        ax2.set_ylabel("background spikes / slot" if background else "signal spikes / on slot")
         ax.legend(fontsize=7, loc="lower right")
     fig.suptitle("Spike-camera light link: BER (circles) and spikes per slot (grey squares)")
     fig.tight_layout()
