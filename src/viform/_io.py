@@ -54,6 +54,23 @@ def atomic_open(path, mode: str = "wb"):
         yield f
 
 
+def check_output_folder(option: str, folder) -> None:
+    """Refuse, before any work, an output folder that cannot be created or written.
+
+    ``option`` names the command-line option or parameter in the error message.
+    """
+    from viform._validate import ViformError
+
+    folder = Path(folder)
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ViformError(f"{option}: {existing} is not a folder, so {folder} cannot be created")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ViformError(f"{option}: the folder {existing} is not writable")
+
+
 def write_json(path, data) -> None:
     """Write ``data`` as indented JSON, atomically."""
     with atomic_open(path, "w") as f:

@@ -12,19 +12,19 @@ from pathlib import Path
 
 import click
 
+from viform._io import check_output_folder
 from viform._validate import ViformError, check_int, check_non_negative, check_positive
 from viform.cli.app import cli
-from viform.cli.frame import _check_output_folder
 
 
 def _check_outputs(json_path, out) -> None:
     """Refuse unusable --json/--out before any work, so a bad path leaves no figures behind."""
     if out is not None:
-        _check_output_folder("--out", Path(out))
+        check_output_folder("--out", Path(out))
     if json_path is not None:
         if Path(json_path).is_dir():
             raise ViformError(f"--json: {json_path} is a folder; give a file name")
-        _check_output_folder("--json", Path(json_path).resolve().parent)
+        check_output_folder("--json", Path(json_path).resolve().parent)
 
 
 def run_lightcomm(bitrate_bps: float = 10e3, modulation: str = "ook", distance_m: float = 100.0,

@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from viform._io import check_output_folder
 from viform.cli.app import cli
 
 
@@ -133,21 +134,6 @@ def _jsonable(obj):
     return obj
 
 
-def _check_output_folder(option: str, folder: Path) -> None:
-    """Refuse, before any work, an output folder that cannot be created or written."""
-    import os
-
-    from viform._validate import ViformError
-
-    existing = folder
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():
-        raise ViformError(f"{option}: {existing} is not a folder, so {folder} cannot be created")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise ViformError(f"{option}: the folder {existing} is not writable")
-
-
 @cli.command("characterize")
 @click.argument("sensor")
 @click.option(
@@ -188,11 +174,11 @@ def characterize(sensor, out_dir, json_path, size, seed):
     size = check_int("--size", size, 4, 512)
     # Check the outputs first, so a bad path fails at once and leaves no figures behind.
     if out_dir is not None:
-        _check_output_folder("--out", Path(out_dir))
+        check_output_folder("--out", Path(out_dir))
     if json_path is not None:
         if Path(json_path).is_dir():
             raise ViformError(f"--json: {json_path} is a folder; give a file name")
-        _check_output_folder("--json", Path(json_path).resolve().parent)
+        check_output_folder("--json", Path(json_path).resolve().parent)
     presets.describe_preset(sensor)  # clear error for an unknown name
     result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
     figures = {}
