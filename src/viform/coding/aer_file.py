@@ -539,8 +539,9 @@ def _decode_payload_v2(payload: bytes, n_pixels: int, width: int, anchor0, ref0,
     if pos + length != len(payload):
         raise ViformError("segment payload length does not match its frame")
     data = np.frombuffer(zc.decompress(payload[pos:], 32 * (n_rec + n_pixels) + 4096, "records"), np.uint8)
-    # an adaptive binary decision costs ≥ 0.02 bit and a record takes ≥ 3: this bounds the records a byte can hold
-    cap = min(n_rec, 256 * data.size + 4096)
+    # a coded binary decision costs ≥ log2(2048/2043) ≈ 0.0035 bit and a record takes ≥ 3: this bounds the
+    # records a byte can hold (a forged record count cannot make the reader allocate more)
+    cap = min(n_rec, 1024 * data.size + 4096)
     counts = np.empty(n_pixels, np.int64)
     rec_m, rec_g, rec_o, rec_s = (np.empty(cap, np.int64) for _ in range(4))
     tail_m = np.empty(n_pixels, np.int64)

@@ -2,8 +2,9 @@
 
 The records of a segment (see :mod:`viform.coding.first_spike`: per pixel, first spikes
 ``(m, g, o)`` plus a tail ``(m, g)``; seed 000 §5.2) are coded with an adaptive binary
-range coder (LZMA style: 11-bit probabilities, carry-less byte output) whose contexts
-use what the decoder already knows:
+range coder (LZMA-style carry handling, byte output; each context holds a fast- and a
+slow-adapting probability estimate, averaged) whose contexts use what the decoder already
+knows:
 
 * the pixel's own history — its current width τ (bucketed), its last width change and
   last repeat count;
@@ -32,7 +33,10 @@ _TOP = np.int64(1) << 24
 _MASK32 = (np.int64(1) << 32) - 1
 _PBITS = 11
 _PONE = 1 << _PBITS
-_SHIFT = 5
+# two estimates per context, a fast (shift 4) and a slow (shift 7) one, averaged (15-bit each)
+_QONE = 1 << 15
+_FAST = 4
+_SLOW = 7
 
 #: Probabilities per adaptive integer (Elias-gamma) context: 24 unary + 24·3 mantissa tree.
 _EG = 96
@@ -91,16 +95,27 @@ def _shift_low(st, out):
 
 
 @njit(cache=True, inline="always")
+def _adapt(probs, i, bit):
+    a = probs[2 * i]
+    b = probs[2 * i + 1]
+    if bit == 0:
+        probs[2 * i] = a + ((_QONE - a) >> _FAST)
+        probs[2 * i + 1] = b + ((_QONE - b) >> _SLOW)
+    else:
+        probs[2 * i] = a - (a >> _FAST)
+        probs[2 * i + 1] = b - (b >> _SLOW)
+
+
+@njit(cache=True, inline="always")
 def _ebit(st, out, probs, i, bit):
-    p = probs[i]
+    p = (probs[2 * i] + probs[2 * i + 1]) >> 5
     bound = (st[1] >> _PBITS) * p
     if bit == 0:
         st[1] = bound
-        probs[i] = p + ((_PONE - p) >> _SHIFT)
     else:
         st[0] += bound
         st[1] -= bound
-        probs[i] = p - (p >> _SHIFT)
+    _adapt(probs, i, bit)
     while st[1] < _TOP:
         st[1] <<= 8
         _shift_low(st, out)
@@ -179,17 +194,16 @@ def _dnorm(ds, data):
 
 @njit(cache=True, inline="always")
 def _dbit(ds, data, probs, i):
-    p = probs[i]
+    p = (probs[2 * i] + probs[2 * i + 1]) >> 5
     bound = (ds[0] >> _PBITS) * p
     if ds[1] < bound:
         ds[0] = bound
-        probs[i] = p + ((_PONE - p) >> _SHIFT)
         bit = 0
     else:
         ds[1] -= bound
         ds[0] -= bound
-        probs[i] = p - (p >> _SHIFT)
         bit = 1
+    _adapt(probs, i, bit)
     _dnorm(ds, data)
     return bit
 
@@ -382,7 +396,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
                    out, rec_s):
     """Code one segment's records into ``out``; returns the byte count (> out.size: retry bigger)."""
     npix = counts.size
-    probs = np.full(_NPROB, _PONE // 2, np.int64)
+    probs = np.full(2 * _NPROB, _QONE // 2, np.int64)
     st = np.zeros(6, np.int64)
     st[1] = _MASK32
     st[3] = 1
@@ -507,7 +521,7 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
 
     ``rec_m, rec_g, rec_o, rec_s`` must hold at least ``n_rec`` records.
     """
-    probs = np.full(_NPROB, _PONE // 2, np.int64)
+    probs = np.full(2 * _NPROB, _QONE // 2, np.int64)
     ds = np.zeros(4, np.int64)
     _dstart(ds, data)
     big = np.int64(1) << 31
