@@ -5,7 +5,7 @@ sent as a quadruple (i, j, t, τ). A ``.vfc`` file stores exactly those quadrupl
 repeat counts the strict mode needs to be lossless, see :mod:`viform.coding.first_spike`),
 in compact integer form with zstd as the last stage.
 
-Layout (version 1, little-endian)::
+Layout (version 2, little-endian)::
 
     magic   8 bytes  b"VIFC\\x89\\r\\n\\x1a"
     u16 version, u32 header length, u32 CRC-32 of the header, header (UTF-8 JSON:
@@ -14,15 +14,21 @@ Layout (version 1, little-endian)::
     segments, each: b"SG", u32 payload length, u32 CRC-32 of the payload, payload
     trailer: b"EN", u64 n_ticks, u64 n_segments, u64 spikes, u32 CRC-32 of the segment CRCs
 
-A segment payload is: u64 start tick, u32 ticks, u32 records, u8 model·layout, u64 spikes, then
-eight columns, each u32 length + one zstd frame (content checksum on): per-pixel record
+Version 2 segment payload: u64 start tick, u32 ticks, u32 records, u8 flags (0), u64 spikes,
+u32 length + one zstd frame (content checksum on) holding the records range-coded by
+:mod:`viform.coding.context_model` (neighbour-predicted first widths, uniform phases,
+context-modelled width changes).
+
+Version 1 (still read, and written with ``version=1``): after the same payload head (the
+u8 is model·layout) eight columns, each u32 length + one zstd frame: per-pixel record
 counts, first offsets of pixels that had not fired, the context-sorted record symbols,
 the context table, escapes, span residuals (lossy modes), tail deficits, the first full
-widths of pixels (coded against the previous pixel's). Records are coded as one byte symbol combining the repeat count m
-and the width change, split by a context (the previous symbol of the pixel and its
-current width, or its previous two symbols — whichever is smaller is kept per segment);
-contexts are recomputed by the decoder as it goes, so only the per-context counts are
-stored. Values that do not fit a symbol go to the escape column as LEB128 varints.
+widths of pixels (coded against the previous pixel's). Records are coded as one byte
+symbol combining the repeat count m and the width change, split by a context (the
+previous symbol of the pixel and its current width, or its previous two symbols —
+whichever is smaller is kept per segment); contexts are recomputed by the decoder as it
+goes, so only the per-context counts are stored. Values that do not fit a symbol go to
+the escape column as LEB128 varints.
 
 Corrupt or truncated files raise :class:`~viform._validate.ViformError` with the byte
 offset and what was wrong; every length, count, value and spike position is checked
