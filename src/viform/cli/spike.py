@@ -100,7 +100,10 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     sensor = _sensor_from_options(**sensor_kw)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
                        interpolation=interpolation)
-    stream = sensor.stream(light, duration_s, seed=seed, light_sample_ticks=light_sample_ticks, progress=True)
+    # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
+    reuse = Path(out_path).suffix.lower() in (".dat", ".zarr")
+    stream = sensor.stream(light, duration_s, seed=seed, light_sample_ticks=light_sample_ticks, progress=True,
+                           reuse_buffer=reuse)
     started = time.perf_counter()
     save_spikes(out_path, stream, block_ticks=1024)
     elapsed = time.perf_counter() - started

@@ -227,7 +227,8 @@ class SpikeSensor(Sensor):
 
     def simulate(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
                  light_sample_ticks: int = 1, progress: bool = False,
-                 state: SpikeSimulationState | None = None) -> Iterator[tuple[int, np.ndarray]]:
+                 state: SpikeSimulationState | None = None,
+                 reuse_buffer: bool = False) -> Iterator[tuple[int, np.ndarray]]:
         """Simulate tick by tick in time blocks; yields ``(first_tick, spikes)`` with bool (T, H, W).
 
         Memory is bounded by the block (default: about 64 MB of light samples and bits).
@@ -245,6 +246,10 @@ class SpikeSensor(Sensor):
         light_sample_ticks : int
             The scene is evaluated at the middle of every interval of ``light_sample_ticks``
             ticks and held over it; 1 (default) evaluates it at the middle of every tick.
+        reuse_buffer : bool
+            Yield every block in the same output buffer, overwritten by the next block: for
+            consumers that use each block at once (writers, reducers), it saves allocating and
+            page-faulting fresh memory for every block. Copy a block to keep it.
         """
         check_positive("duration_s", duration_s)
         p = self.parameters
@@ -259,6 +264,7 @@ class SpikeSensor(Sensor):
         if state is None:
             state = self.initial_state(height, width, seed)
         reset_readout = p.reset == "readout"
+        buffer = None
         bar = None
         if progress:
             from tqdm import tqdm
@@ -272,7 +278,12 @@ class SpikeSensor(Sensor):
                 times = (np.arange(j0, j1) + 0.5) * (sample / p.clock_hz)
                 lux = scene.illuminance_lux_many(times).reshape(times.size, pixels)
                 rates = np.rint(self.electrons_per_tick(lux) * FIXED_POINT_SCALE).astype(np.int64)
-                out = np.empty((last - first, pixels), dtype=np.bool_)
+                if reuse_buffer:
+                    if buffer is None or buffer.shape[0] < last - first:
+                        buffer = np.empty((last - first, pixels), dtype=np.bool_)
+                    out = buffer[: last - first]
+                else:
+                    out = np.empty((last - first, pixels), dtype=np.bool_)
                 if not p.photon_noise:
                     _run_block_deterministic(out, rates, first, sample, j0, state.charge, state.target,
                                              reset_readout)
@@ -296,9 +307,13 @@ class SpikeSensor(Sensor):
                            0.0, self.capture_metadata(scene, seed, light_sample_ticks))
 
     def stream(self, scene: Scene, duration_s: float, *, seed: int = 0, light_sample_ticks: int = 1,
-               progress: bool = False) -> SimulatedSpikes:
-        """A lazy :class:`SpikeSource` that simulates as it is read (bounded memory)."""
-        return SimulatedSpikes(self, scene, duration_s, seed, light_sample_ticks, progress)
+               progress: bool = False, reuse_buffer: bool = False) -> SimulatedSpikes:
+        """A lazy :class:`SpikeSource` that simulates as it is read (bounded memory).
+
+        With ``reuse_buffer`` the blocks of ``iter_blocks`` share one buffer (see
+        :meth:`simulate`): for writers that consume each block at once.
+        """
+        return SimulatedSpikes(self, scene, duration_s, seed, light_sample_ticks, progress, reuse_buffer)
 
     def capture_metadata(self, scene: Scene, seed: int, light_sample_ticks: int) -> dict:
         return {"sensor": self.describe(), "scene": scene.describe(), "seed": seed,
@@ -320,10 +335,11 @@ class SimulatedSpikes(SpikeSource):
     """
 
     def __init__(self, sensor: SpikeSensor, scene: Scene, duration_s: float, seed: int,
-                 light_sample_ticks: int = 1, progress: bool = False):
+                 light_sample_ticks: int = 1, progress: bool = False, reuse_buffer: bool = False):
         p = sensor.parameters
         self.sensor, self.scene, self.seed = sensor, scene, seed
         self.light_sample_ticks, self.progress = light_sample_ticks, progress
+        self.reuse_buffer = reuse_buffer  # blocks from iter_blocks valid only until the next one
         self.height, self.width = sensor.check_scene(scene, sensor.height, sensor.width)
         self.n_ticks = max(1, int(round(check_positive("duration_s", duration_s) * p.clock_hz)))
         self.clock_hz = p.clock_hz
@@ -331,11 +347,13 @@ class SimulatedSpikes(SpikeSource):
         self.start_time_s = 0.0
         self.metadata = sensor.capture_metadata(scene, seed, light_sample_ticks)
 
-    def iter_blocks(self, block_ticks: int = 1024, start: int = 0, stop: int | None = None):
+    def iter_blocks(self, block_ticks: int = 1024, start: int = 0, stop: int | None = None,
+                    reuse_buffer: bool | None = None):
         stop = self.n_ticks if stop is None else min(stop, self.n_ticks)
+        reuse = self.reuse_buffer if reuse_buffer is None else reuse_buffer
         sim = self.sensor.simulate(self.scene, self.n_ticks / self.clock_hz, seed=self.seed,
                                    block_ticks=block_ticks, light_sample_ticks=self.light_sample_ticks,
-                                   progress=self.progress)
+                                   progress=self.progress, reuse_buffer=reuse)
         for first, block in sim:
             if first + block.shape[0] <= start:
                 continue
@@ -345,7 +363,7 @@ class SimulatedSpikes(SpikeSource):
             yield first + a, block[a:b]
 
     def read_ticks(self, start: int, stop: int) -> np.ndarray:
-        parts = [b for _, b in self.iter_blocks(max(1, stop - start), start, stop)]
+        parts = [b for _, b in self.iter_blocks(max(1, stop - start), start, stop, reuse_buffer=False)]
         return np.concatenate(parts) if parts else np.zeros((0, self.height, self.width), bool)
 
 
