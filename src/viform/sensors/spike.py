@@ -231,7 +231,7 @@ class SpikeSensor(Sensor):
                  reuse_buffer: bool = False) -> Iterator[tuple[int, np.ndarray]]:
         """Simulate tick by tick in time blocks; yields ``(first_tick, spikes)`` with bool (T, H, W).
 
-        Memory is bounded by the block (default: about 64 MB of light samples and bits).
+        Memory is bounded by the block (default: about 32 MB of light samples and bits).
 
         Parameters
         ----------
@@ -258,7 +258,8 @@ class SpikeSensor(Sensor):
         pixels = height * width
         sample = check_int("light_sample_ticks", light_sample_ticks, 1)
         if block_ticks is None:
-            block_ticks = max(sample, (64 << 20) // max(1, pixels * (1 + 8 // sample)))
+            # about 32 MB of spike bits and light samples a block (cache-friendly, bounded)
+            block_ticks = max(1, (32 << 20) // max(1, pixels * (1 + 16 // sample)))
         block_ticks = check_int("block_ticks", block_ticks, 1)
         q, shapes, index, tables = self._pixel_tables(height, width)
         if state is None:
