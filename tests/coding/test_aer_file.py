@@ -91,8 +91,9 @@ def test_fuzz_truncations_and_mutations(tmp_path):
     good = _good_file(tmp_path)
     original = _decode_bytes(tmp_path, good, "orig.vfc")
     rng = np.random.default_rng(12345)
-    cuts = sorted(set(rng.integers(0, len(good), 120).tolist()) | {0, 1, 7, 8, 20, len(good) - 1})
-    cases = [good[:c] for c in cuts]
+    encode_source(_stream(6, (40, 3, 4)), tmp_path / "small.vfc", segment_ticks=16)
+    small = (tmp_path / "small.vfc").read_bytes()
+    cases = [small[:c] for c in range(len(small))]  # every truncation length of a small file
     for _ in range(300):
         b = bytearray(good)
         kind = rng.integers(3)
@@ -106,14 +107,14 @@ def test_fuzz_truncations_and_mutations(tmp_path):
         cases.append(bytes(b))
     for _ in range(60):
         cases.append(MAGIC + rng.integers(0, 256, int(rng.integers(0, 400))).astype(np.uint8).tobytes())
-    for data in cases:
+    for n, data in enumerate(cases):
         try:
             out = _decode_bytes(tmp_path, data)
         except ViformError as exc:
             assert str(exc)  # a message, one line
             assert "\n" not in str(exc)
             continue
-        assert np.array_equal(out, original)  # only a no-op change may decode
+        assert n >= len(small) and np.array_equal(out, original)  # only a no-op change may decode
 
 
 def test_fuzz_forged_payloads_with_valid_crcs(tmp_path):
@@ -150,6 +151,101 @@ def test_fuzz_forged_payloads_with_valid_crcs(tmp_path):
             _decode_bytes(tmp_path, bytes(b))
         except ViformError:
             pass
+
+
+def _resign(header: dict, payloads: list[bytes], n_ticks: int, spikes: int, version: int = 2) -> bytes:
+    """A .vfc file with the given (possibly forged) parts and every CRC recomputed."""
+    import json
+    import struct
+    import zlib
+
+    from viform.coding import aer_file
+
+    head = json.dumps(header).encode()
+    out = bytearray(MAGIC + struct.pack("<HII", version, len(head), zlib.crc32(head)) + head)
+    acc = 0
+    for p in payloads:
+        crc = zlib.crc32(p)
+        out += aer_file._SEG_HEAD.pack(b"SG", len(p), crc) + p
+        acc = zlib.crc32(struct.pack("<I", crc), acc)
+    return bytes(out + aer_file._TRAILER.pack(b"EN", n_ticks, len(payloads), spikes, acc))
+
+
+def _parts(data: bytes):
+    import json
+    import struct
+
+    hlen = struct.unpack_from("<I", data, 10)[0]
+    header, pos, payloads = json.loads(data[18:18 + hlen]), 18 + hlen, []
+    while data[pos:pos + 2] == b"SG":
+        length = struct.unpack_from("<I", data, pos + 2)[0]
+        payloads.append(data[pos + 10:pos + 10 + length])
+        pos += 10 + length
+    return header, payloads
+
+
+def test_forged_counts_do_not_allocate(tmp_path):
+    """Re-signed files stating huge sizes: a clear error without allocating what they state.
+
+    A zstd frame states its decompressed size and zstd allocates that much (its
+    ``max_output_size`` only applies to frames that do not): 300 bytes of run-length blocks
+    state 64 MB here. A record count of 2³² − 1 with a few bytes behind it must not size the
+    record arrays either. Peak Python-visible allocation is bounded by 8 MB.
+    """
+    import struct
+    import tracemalloc
+
+    import zstandard
+
+    from viform.coding import aer_file
+
+    header, payloads = _parts(_good_file(tmp_path))
+    header = dict(header, height=1000, width=1000, segment_ticks=4096)
+    n_pix = 1000 * 1000
+    bomb = zstandard.ZstdCompressor(level=1).compress(bytes(64 << 20))  # states 64 MB
+    junk = zstandard.ZstdCompressor(level=1).compress(bytes(range(256)) * 4)
+    cases = {
+        "bomb": (1000, 2000, bomb),  # 1000 records may hold 32·(1000 + 10⁶) + 4096 bytes < 64 MB
+        "records": ((1 << 32) - 1, 1 << 40, junk),
+    }
+    for name, (n_rec, spikes, frame) in cases.items():
+        payload = aer_file._PAYLOAD_HEAD.pack(0, 4096, n_rec, 0, spikes) + struct.pack("<I", len(frame)) + frame
+        data = _resign(header, [payload], 4096, spikes)
+        tracemalloc.start()
+        try:
+            with pytest.raises(ViformError) as info:
+                _decode_bytes(tmp_path, data)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert "\n" not in str(info.value)
+        assert peak < 8 * n_pix + (8 << 20), (name, peak)  # the per-pixel state, nothing of the stated sizes
+
+
+@pytest.mark.parametrize("key, value", [
+    ("height", 1 << 17), ("width", 0), ("height", True), ("clock_hz", float("inf")), ("clock_hz", -1.0),
+    ("k", -1.0), ("threshold_electrons", "100"), ("threshold_electrons", 0.0), ("slack_ticks", -1),
+    ("segment_ticks", 1 << 31), ("mode", "fancy"), ("metadata", [1]), ("start_time_s", float("nan")),
+])
+def test_forged_header_values_are_refused(tmp_path, key, value):
+    """A re-signed header with an impossible value is refused before any decoding."""
+    header, payloads = _parts(_good_file(tmp_path))
+    data = _resign(dict(header, **{key: value}), payloads, 70, 0)
+    with pytest.raises(ViformError, match="header is invalid"):
+        _decode_bytes(tmp_path, data)
+
+
+def test_too_many_pixels_refused(tmp_path):
+    """65536² pixels would need ~400 GB of decoder state: refused by the reader and the writer."""
+    from viform.coding.aer_file import MAX_PIXELS, CodedWriter
+    from viform.coding.first_spike import CodingParameters
+
+    header, payloads = _parts(_good_file(tmp_path))
+    data = _resign(dict(header, height=1 << 16, width=1 << 16), payloads, 70, 0)
+    with pytest.raises(ViformError, match="header is invalid"):
+        _decode_bytes(tmp_path, data)
+    with pytest.raises(ViformError, match="at most"):
+        CodedWriter(tmp_path / "w.vfc", 1 << 13, (MAX_PIXELS >> 13) + 1, 1e3, CodingParameters())
 
 
 DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"

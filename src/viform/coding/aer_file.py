@@ -78,6 +78,9 @@ _NCOLS = 8
 _ESC = 255
 _NONE = 254
 _MAX_HEADER = 1 << 20
+#: Most pixels a coded file may have (8192 × 8192): the decoder keeps ~100 bytes of state per pixel, and a
+#: header is cheap to forge.
+MAX_PIXELS = 1 << 26
 _MAX_COLUMN = 1 << 34
 
 
@@ -390,13 +393,24 @@ class _Zstd:
         return self.c.compress(b)
 
     def decompress(self, b: bytes, limit: int, what: str) -> bytes:
+        """Decompress one whole frame of at most ``limit`` bytes (nothing before or after it).
+
+        The frame's stated content size is checked against ``limit`` *before* decompressing:
+        zstd allocates what a frame states (``max_output_size`` only applies to frames that do
+        not state it), and a few kB of run-length blocks can state gigabytes.
+        """
         try:
-            # max_output_size bounds memory on a forged frame; a frame states its size itself
-            out = self.d.decompress(b, max_output_size=limit)
+            size = zstandard.get_frame_parameters(b).content_size
+            if size == zstandard.CONTENTSIZE_UNKNOWN:
+                raise ViformError(f"column {what!r} is damaged (its zstd frame does not state its size)")
+            if size > limit:
+                raise ViformError(f"column {what!r} states {size} bytes, more than the {limit} it may hold")
+            dobj = self.d.decompressobj()
+            out = dobj.decompress(b)
         except zstandard.ZstdError as exc:
             raise ViformError(f"column {what!r} is damaged (zstd: {exc})") from None
-        if len(out) > limit:
-            raise ViformError(f"column {what!r} decompresses to more than the {limit} bytes it may hold")
+        if not dobj.eof or dobj.unused_data or len(out) != size:
+            raise ViformError(f"column {what!r} is damaged (cut short, or bytes after its zstd frame)")
         return out
 
 
@@ -524,9 +538,17 @@ def _encode_payload_v2(seg: Segment, anchor0, ref0, width: int, strict: bool, zc
         if n <= size:
             break
         size = 2 * n
+    if n > _v2_data_limit(n_rec, npix):  # never write what the reader would refuse
+        raise ViformError(f"segment at tick {seg.start_tick} codes to {n} bytes, more than the format allows; "
+                          "use a shorter segment_ticks")
     frame = zc.compress(out[:n].tobytes())
     return (_PAYLOAD_HEAD.pack(seg.start_tick, seg.n_ticks, n_rec, 0, seg.n_spikes) + struct.pack("<I", len(frame))
             + frame)
+
+
+def _v2_data_limit(n_rec: int, n_pixels: int) -> int:
+    """Most range-coded bytes a version-2 segment of ``n_rec`` records may hold (reader and writer agree)."""
+    return 32 * (n_rec + n_pixels) + 4096
 
 
 def _decode_payload_v2(payload: bytes, n_pixels: int, width: int, anchor0, ref0, strict: bool, zc: _Zstd,
@@ -544,16 +566,20 @@ def _decode_payload_v2(payload: bytes, n_pixels: int, width: int, anchor0, ref0,
     pos = _PAYLOAD_HEAD.size + 4
     if pos + length != len(payload):
         raise ViformError("segment payload length does not match its frame")
-    data = np.frombuffer(zc.decompress(payload[pos:], 32 * (n_rec + n_pixels) + 4096, "records"), np.uint8)
-    # a coded binary decision costs ≥ log2(2048/2043) ≈ 0.0035 bit and a record takes ≥ 3: this bounds the
-    # records a byte can hold (a forged record count cannot make the reader allocate more)
-    cap = min(n_rec, 1024 * data.size + 4096)
+    data = np.frombuffer(zc.decompress(payload[pos:], _v2_data_limit(n_rec, n_pixels), "records"), np.uint8)
     counts = np.empty(n_pixels, np.int64)
-    rec_m, rec_g, rec_o, rec_s = (np.empty(cap, np.int64) for _ in range(4))
     tail_m = np.empty(n_pixels, np.int64)
     tail_g = np.empty(n_pixels, np.int64)
-    err = context_model.decode_segment(data, n_pixels, anchor0, ref0, start, start + n_ticks, width, strict, n_rec,
-                                       counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s)
+    # the record arrays grow with the records actually decoded (×4 and decode again when full), never to
+    # the stated count up front: a forged count with little data behind it allocates little
+    cap = min(n_rec, 4 * data.size + 4096)
+    while True:
+        rec_m, rec_g, rec_o, rec_s = (np.empty(cap, np.int64) for _ in range(4))
+        err = context_model.decode_segment(data, n_pixels, anchor0, ref0, start, start + n_ticks, width, strict,
+                                           n_rec, counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s)
+        if err != context_model.TOO_MANY_RECORDS or cap >= n_rec:
+            break
+        cap = min(n_rec, 4 * cap)
     if err:
         raise ViformError(f"segment at tick {start} is damaged ({context_model.ERRORS[err]})")
     seg = Segment(start, n_ticks, counts, rec_m, rec_g, rec_o, np.zeros(0, np.int64), tail_m, tail_g,
@@ -582,8 +608,10 @@ class CodedWriter:
         if version not in SUPPORTED_VERSIONS:
             raise ViformError(f"version must be one of {SUPPORTED_VERSIONS}; got {version!r}")
         self.version = version
-        self.height = check_int("height", height, 1)
-        self.width = check_int("width", width, 1)
+        self.height = check_int("height", height, 1, 1 << 16)
+        self.width = check_int("width", width, 1, 1 << 16)
+        if self.height * self.width > MAX_PIXELS:
+            raise ViformError(f"{height}×{width} pixels: a coded file holds at most {MAX_PIXELS} pixels")
         self.params = params
         self.strict = params.mode == "strict"
         self.encoder = FirstSpikeEncoder(self.height * self.width, params)
@@ -739,10 +767,17 @@ class CodedFile(SpikeSource):
                              ("segment_ticks", int), ("start_time_s", (int, float)), ("k", (int, float))):
                 if not isinstance(h[key], typ):
                     raise TypeError(key)
-            if not (1 <= h["height"] <= 1 << 16 and 1 <= h["width"] <= 1 << 16 and h["clock_hz"] > 0
-                    and 1 <= h["segment_ticks"] <= 1 << 30 and h["mode"] in ("strict", "statistical", "intensity")
-                    and math.isfinite(h["start_time_s"])):
-                raise ValueError("out of range")
+            q = h.get("threshold_electrons")
+            if not (1 <= h["height"] <= 1 << 16 and 1 <= h["width"] <= 1 << 16
+                    and h["height"] * h["width"] <= MAX_PIXELS
+                    and 0 < h["clock_hz"] < math.inf and 1 <= h["segment_ticks"] <= 1 << 30
+                    and h["mode"] in ("strict", "statistical", "intensity") and math.isfinite(h["start_time_s"])
+                    and 0 <= h["k"] < math.inf and isinstance(h.get("slack_ticks", 0), int)
+                    and h.get("slack_ticks", 0) >= 0 and isinstance(h.get("metadata") or {}, dict)
+                    and (q is None or (isinstance(q, (int, float)) and 0 < q < math.inf))):
+                raise ValueError("a value is out of range")
+            if any(isinstance(h[key], bool) for key in ("height", "width", "segment_ticks")):
+                raise TypeError("a count is a boolean")
         except Exception as exc:
             self._fail(f"header is invalid ({exc})", len(fixed))
         return h
@@ -814,6 +849,9 @@ class CodedFile(SpikeSource):
                         raise ViformError(f"segment {n} decodes to a different spike count than stored")
                 except ViformError as exc:
                     self._fail(str(exc), offset)
+                except MemoryError:
+                    self._fail(f"segment {n} needs more memory than is available (its stated record count "
+                               "is implausible, or the machine is too small for it)", offset)
                 total += spikes
                 yield dec, seg
         if total != self.spikes_stored:

@@ -67,7 +67,8 @@ _P_GRES = _P_TAIL + 2 * 8 * _EG
 _P_GSIGN = _P_GRES + 4 * _EG
 _NPROB = _P_GSIGN + 4
 
-# error codes (0 ok)
+# error codes (0 ok); TOO_MANY_RECORDS also means "the record arrays are full" (the caller may grow them)
+TOO_MANY_RECORDS = 2
 ERRORS = {1: "value out of range", 2: "too many records", 3: "a first spike after the segment end",
           4: "stream is cut short", 5: "record count differs from the header", 6: "repeats without a width"}
 
