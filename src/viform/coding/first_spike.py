@@ -109,6 +109,18 @@ class CodingParameters:
 
 # ---------------------------------------------------------------------------- kernels
 
+@njit(cache=True, inline="always")
+def _emit_pending(p, pend, pend_m, pend_g, pend_o, pend_ref, out_pix, out_m, out_g, out_o, out_ref, n_out):
+    """Output pixel p's pending (intensity mode: held back) first-spike record; returns the new count."""
+    out_pix[n_out] = p
+    out_m[n_out] = pend_m[p]
+    out_g[n_out] = pend_g[p]
+    out_o[n_out] = pend_o[p]
+    out_ref[n_out] = pend_ref[p]
+    pend[p] = False
+    return n_out + 1
+
+
 @njit(cache=True)
 def _encode_block(block, first_tick, rel_tol, slack, drop, last_spike, anchor, tau_ref, run_m,
                   pend, pend_m, pend_g, pend_o, pend_a0, pend_t, pend_ref,
@@ -129,30 +141,18 @@ def _encode_block(block, first_tick, rel_tol, slack, drop, last_spike, anchor, t
             ref = tau_ref[p]
             if ref > 0 and abs(w - ref) <= rel_tol * ref + slack:
                 run_m[p] += 1
-                if drop and pend[p]:
-                    out_pix[n_out] = p
-                    out_m[n_out] = pend_m[p]
-                    out_g[n_out] = pend_g[p]
-                    out_o[n_out] = pend_o[p]
-                    out_ref[n_out] = pend_ref[p]
-                    n_out += 1
-                    pend[p] = False
+                if pend[p]:  # the pending first spike is followed by a repeat: not transitional
+                    n_out = _emit_pending(p, pend, pend_m, pend_g, pend_o, pend_ref, out_pix, out_m, out_g,
+                                          out_o, out_ref, n_out)
             else:
-                if drop and pend[p] and run_m[p] == 0:
-                    # the pending first spike was transitional: absorb it as one more repeat
+                if pend[p]:
+                    # the pending first spike was transitional (a repeat would have flushed it, so its
+                    # run is empty): absorb it as one more repeat of the run before
                     pend_m[p] += 1
                     pend_g[p] = pend_t[p] - pend_a0[p]
                     pend_o[p] = s - pend_t[p]
                     pend_t[p] = s
                 else:
-                    if drop and pend[p]:  # cannot happen (a repeat flushes it); kept for safety
-                        out_pix[n_out] = p
-                        out_m[n_out] = pend_m[p]
-                        out_g[n_out] = pend_g[p]
-                        out_o[n_out] = pend_o[p]
-                        out_ref[n_out] = pend_ref[p]
-                        n_out += 1
-                        pend[p] = False
                     g = last_spike[p] - anchor[p] if run_m[p] > 0 else 0
                     if drop and ref > 0:
                         pend[p] = True
@@ -180,13 +180,8 @@ def _encode_block(block, first_tick, rel_tol, slack, drop, last_spike, anchor, t
 def _flush_pending(pend, pend_m, pend_g, pend_o, pend_ref, out_pix, out_m, out_g, out_o, out_ref, n_out):
     for p in range(pend.size):
         if pend[p]:
-            out_pix[n_out] = p
-            out_m[n_out] = pend_m[p]
-            out_g[n_out] = pend_g[p]
-            out_o[n_out] = pend_o[p]
-            out_ref[n_out] = pend_ref[p]
-            n_out += 1
-            pend[p] = False
+            n_out = _emit_pending(p, pend, pend_m, pend_g, pend_o, pend_ref, out_pix, out_m, out_g, out_o,
+                                  out_ref, n_out)
     return n_out
 
 
