@@ -128,12 +128,40 @@ def test_static_scene_statistical_psnr_bound():
     assert sum(x.n_records for x in segs) < 0.25 * a.sum()
 
 
-def _interval_psnr(spikes, truth_rate):
+def test_statistical_mode_follows_a_step_and_a_loose_tolerance_does_not():
+    """Statistical mode must keep real changes: light doubling at tick 1500.
+
+    With k = 2 (changes above 2·τ/√Q are signal, seed §5.1) the decoded interval image after
+    the step stays within 1 dB of the uncoded one; with k = 1000 every change is taken for
+    noise, each pixel becomes one run of its mean width, and the image after the step loses
+    more than 3 dB — so this test can tell a working tolerance from a useless one.
+    """
+    from viform.light.scenes import StepScene, StillScene
+    from viform.sensors.spike import SpikeSensor
+
+    q = 400.0
+    sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0)
+    rng = np.random.default_rng(1)
+    e_per_tick = rng.uniform(8, 30, (16, 16))
+    lux = sensor.parameters.optics.lux_from_electrons_per_s(e_per_tick * sensor.parameters.clock_hz)
+    scene = StepScene(StillScene(lux), step_time_s=1500 / 40e3, factor=2.0)
+    a = sensor.capture(scene, 3000 / 40e3, seed=5).spikes
+    after = a[1500:]
+    truth_after = 2 * e_per_tick / q
+    psnr_raw = _interval_psnr(after, truth_after, first=300, last=1200, step=150)
+    good = decode_segments(encode_array(a, CodingParameters("statistical", 2.0, q, 1)), a.shape)[1500:]
+    loose = decode_segments(encode_array(a, CodingParameters("statistical", 1000.0, q, 1)), a.shape)[1500:]
+    assert _interval_psnr(good, truth_after, first=300, last=1200, step=150) >= psnr_raw - 1.0
+    assert _interval_psnr(loose, truth_after, first=300, last=1200, step=150) < psnr_raw - 3.0
+
+
+def _interval_psnr(spikes, truth_rate, first=600, last=None, step=300):
     # interval image (rate 1/τ of the interval holding the instant) at several instants
     T = spikes.shape[0]
+    last = T - 600 if last is None else last
     err = []
     flat = spikes.reshape(T, -1)
-    for k in range(600, T - 600, 300):
+    for k in range(first, last, step):
         rate = np.empty(flat.shape[1])
         for p in range(flat.shape[1]):
             ticks = np.flatnonzero(flat[:, p])
