@@ -12,11 +12,22 @@ time-rescaling theorem. The simulator therefore adds the expected charge of each
 target; no per-tick Poisson draw and no Gaussian approximation is made. With
 ``photon_noise=False`` the target is Q itself (the deterministic, noise-free model).
 
+Initial state: with ``random_initial_charge`` each pixel starts in the stationary state
+of its renewal process, as if it had been exposed long before t = 0: the interval in
+progress is length-biased, Gamma(Q + 1, 1), and the pixel sits a uniform fraction of the
+way into it, so the charge still missing is the forward-recurrence law (1 − F_Q(x))/Q
+(mean (Q + 1)/2 e⁻, not Q/2). The firing rate is then λ/Q from the first tick, with no
+start-up transient. (The readout-reset pixel starts in the self-reset pixel's state.)
+Without it every pixel starts empty.
+
 Saturation: readout allows at most one spike per pixel per tick, so light above
 Q·clock_hz electrons/s (τ̌ = 1/clock_hz, seed 000 §4.3) gives a spike every tick; the
 extra threshold crossings inside a tick are lost (self-reset pixel) or the charge after
 the crossing is drained at readout (``reset="readout"``). The expected firing rate of the
 self-reset pixel is therefore 1 − P(no crossing in a tick), which tends to one per tick.
+The self-reset pixel's lost crossings are drawn one by one, except where a tick brings
+≥ 8·Q² e⁻ after its first crossing: the number of electrons modulo Q is then uniform to
+within e^-64, so the pixel leaves the tick in the stationary state above, drawn at once.
 
 Reproducibility: the k-th interval of pixel p is drawn by a counter-based generator from
 (seed, p, k) (:mod:`viform.sensors._gamma`), and the light of each tick is computed from
@@ -83,8 +94,9 @@ class SpikeSensorParameters:
     threshold_spread_fraction : float
         Fixed-pattern spread of Q across pixels (std / mean).
     random_initial_charge : bool
-        Start each pixel a uniformly random fraction of the way through its first interval
-        (True), or empty (False).
+        Start each pixel in the stationary state of its spike train (True: a uniform
+        fraction of the way into a length-biased Gamma(Q + 1) interval, see the module
+        notes), or empty (False).
     reset : {"self", "readout"}
         Self-reset at the threshold crossing (charge after it is kept), or reset at the next
         readout tick (charge collected after the crossing is drained).
@@ -205,6 +217,18 @@ class SpikeSensor(Sensor):
         p = self.parameters
         return (p.optics.electrons_per_s(lux) + p.dark_current_e_per_s) / p.clock_hz
 
+    def _fixed_point_rates(self, lux) -> np.ndarray:
+        """Charge per tick in the kernels' fixed point (2^-32 e⁻), refusing light that overflows it."""
+        rates = self.electrons_per_tick(lux) * FIXED_POINT_SCALE
+        if rates.size and float(rates.max()) >= MAX_RATE_FIXED_POINT:
+            limit = self.parameters.optics.lux_from_electrons_per_s(
+                MAX_RATE_FIXED_POINT / FIXED_POINT_SCALE * self.parameters.clock_hz
+                - self.parameters.dark_current_e_per_s)
+            raise ViformError(f"scene illuminance {float(lux.max()):.3g} lux is above the simulator's limit "
+                              f"of {float(limit):.3g} lux for this pixel and clock (the pixel saturates "
+                              "long before: one spike per tick)")
+        return np.rint(rates).astype(np.int64)
+
     def expected_firing_rate_per_tick(self, lux) -> np.ndarray:
         """Mean spikes per tick of a steady pixel (deterministic model, self-reset).
 
@@ -278,7 +302,7 @@ class SpikeSensor(Sensor):
                 # light sampled at the middle of each interval of `sample` ticks, held over it
                 times = (np.arange(j0, j1) + 0.5) * (sample / p.clock_hz)
                 lux = scene.illuminance_lux_many(times).reshape(times.size, pixels)
-                rates = np.rint(self.electrons_per_tick(lux) * FIXED_POINT_SCALE).astype(np.int64)
+                rates = self._fixed_point_rates(lux)
                 if reuse_buffer:
                     if buffer is None or buffer.shape[0] < last - first:
                         buffer = np.empty((last - first, pixels), dtype=np.bool_)
@@ -373,23 +397,47 @@ class SimulatedSpikes(SpikeSource):
 # associative, so the event-driven kernel below, which jumps straight to the next
 # threshold crossing, gives the same bits as tick-by-tick summation, whatever the block size.
 FIXED_POINT_SCALE = float(1 << 32)
+#: Largest charge per tick, fixed point: sums of charge and target then stay inside int64.
+MAX_RATE_FIXED_POINT = float(1 << 61)
+# (c − t)·_SATURATION_SCALE ≥ Q² ⇔ c − t ≥ 8·Q² e⁻. P(N mod Q = m) for N ~ Poisson(r) differs
+# from 1/Q by at most exp(−r·(1 − cos 2π/Q)) ≤ exp(−8r/Q²), below e^-64 here.
+_SATURATION_SCALE = 1.0 / (8.0 * FIXED_POINT_SCALE)
 
 
 @njit(cache=True)
 def _initial_targets(target, charge, counter, q, index, bins, keys,
                      noise, random_initial):
-    scale = 4294967296.0
     for p in range(q.size):
-        if noise:
-            t = gamma_draw(q[p], index[p], bins, keys[p], 0)
+        if noise and random_initial:
+            charge[p], target[p] = _equilibrium_state(p, q, index, bins, keys, counter)
         else:
-            t = q[p]
-        target[p] = max(np.int64(1), np.int64(t * scale + 0.5))
-        counter[p] = 1
-        if random_initial:
-            # an independent hash places the pixel inside its first interval
-            u = uniform_from_hash(splitmix64(keys[p] ^ np.uint64(0x5EED5EED5EED5EED)))
-            charge[p] = np.int64(u * target[p])
+            target[p] = _next_target(p, q, index, bins, keys, noise, counter)
+            if random_initial:
+                # the noise-free pixel's stationary state: a uniform fraction of Q collected
+                u = uniform_from_hash(splitmix64(keys[p] ^ np.uint64(0x5EED5EED5EED5EED)))
+                charge[p] = np.int64(u * target[p])
+
+
+@njit(cache=True, inline="always")
+def _equilibrium_state(p, q, index, bins, keys, counter):
+    """(charge, target) of pixel p drawn from the stationary state of its renewal process.
+
+    In charge time the spikes of a self-reset pixel are a renewal process with Gamma(Q, 1)
+    intervals (seed 000 §5.1). Observed at a time unrelated to its spikes, the interval in
+    progress is length-biased, Gamma(Q + 1, 1) = Gamma(Q, 1) + Exp(1), and the observer sits
+    a uniform fraction of the way into it; the charge still missing is then the stationary
+    forward-recurrence law (1 − F_Q(x))/Q. Used for the random initial charge (so the stream
+    is stationary from t = 0) and after a tick of heavy saturation (see :func:`_run_block`).
+    Uses draw ``counter[p]`` of the pixel's stream and advances it.
+    """
+    g = gamma_draw(q[p], index[p], bins, keys[p], counter[p])
+    h = splitmix64(keys[p] + np.uint64(counter[p]) * np.uint64(0x9E3779B97F4A7C15)
+                   ^ np.uint64(0x5EED5EED5EED5EED))
+    counter[p] += 1
+    length = g - np.log(uniform_from_hash(h))  # Gamma(Q, 1) + Exp(1)
+    target = max(np.int64(1), np.int64(length * 4294967296.0 + 0.5))
+    charge = np.int64(uniform_from_hash(splitmix64(h)) * target)
+    return charge, target
 
 
 @njit(cache=True, inline="always")
@@ -452,6 +500,16 @@ def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter,
                             c = 0
                             t = _next_target(p, q, index, bins, keys, noise,
                                              counter)
+                        elif not noise:
+                            # further crossings in the tick are lost to the one-bit readout
+                            c -= t
+                            if c >= t:
+                                c %= t
+                        elif (c - t) * _SATURATION_SCALE >= q[p] * q[p]:
+                            # ≥ 8·Q² e⁻ after the first crossing: the electron count mod Q is
+                            # uniform to within e^-64, so the pixel leaves the tick in the
+                            # stationary state; drawn at once instead of one Gamma per crossing
+                            c, t = _equilibrium_state(p, q, index, bins, keys, counter)
                         else:
                             # further crossings inside the same tick are lost to the one-bit readout
                             while c >= t:
@@ -512,8 +570,8 @@ def _run_block_deterministic(out, rates, first_tick, sample, sample0, charge, ta
             elif _tick_self_reset(c, e, t, out[k, p0:p1]):
                 # saturating pixels: further crossings in the tick are lost to the readout
                 for i in range(p1 - p0):
-                    while c[i] >= t[i]:
-                        c[i] -= t[i]
+                    if c[i] >= t[i]:
+                        c[i] %= t[i]
         charge[p0:p1] = c
 
 
