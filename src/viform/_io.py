@@ -20,10 +20,15 @@ def atomic_path(path, suffix: str | None = None):
     the name see the right one). On any exception the temporary file (or folder) is
     removed and the target is untouched.
     """
+    from viform._validate import ViformError
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix if suffix is not None else path.suffix,
-                               dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix if suffix is not None else path.suffix,
+                                   dir=path.parent)
+    except OSError as exc:  # name the file the user asked for, not the temporary one
+        raise ViformError(f"{str(path)!r} cannot be written: {exc.strerror or exc}") from None
     os.close(fd)
     tmp = Path(tmp)
     # mkstemp creates 0600; give the result the permissions a plain open() would

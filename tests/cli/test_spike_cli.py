@@ -22,8 +22,9 @@ def run(args, capsys):
 def test_simulate_info_reconstruct(tmp_path, capsys):
     spikes = tmp_path / "s.dat"
     code, out, err = run(["simulate", "moving-edge", "--duration", "0.005", "--out", str(spikes),
-                          "--height", "16", "--width", "32", "--seed", "3"], capsys)
+                          "--height", "16", "--width", "32", "--seed", "3", "--json"], capsys)
     assert code == 0, err
+    assert json.loads(out)["n_ticks"] == 200
     assert spikes.stat().st_size == 200 * 16 * 32 // 8
     code, out, _ = run(["info", str(spikes), "--height", "16", "--width", "32", "--json"], capsys)
     summary = json.loads(out)
@@ -32,9 +33,10 @@ def test_simulate_info_reconstruct(tmp_path, capsys):
     assert summary["raw_data_rate_bit_per_s"] == 16 * 32 * 40_000
     folder = tmp_path / "img"
     for method in ("accumulation", "interval"):
-        code, _, err = run(["reconstruct", str(spikes), "--method", method, "--at", "0.002,0.004",
-                            "--height", "16", "--width", "32", "--out", str(folder)], capsys)
+        code, out, err = run(["reconstruct", str(spikes), "--method", method, "--at", "0.002,0.004",
+                              "--height", "16", "--width", "32", "--out", str(folder), "--json"], capsys)
         assert code == 0, err
+        assert json.loads(out)["ticks"] == [80, 160]
     light = np.load(folder / "light.npz")
     assert light["spikes_per_s"].shape == (2, 16, 32)
     assert len(list(folder.glob("*.png"))) == 4
@@ -66,6 +68,14 @@ def test_zarr_output_keeps_sensor_metadata_so_lux_comes_back(tmp_path, capsys):
       "--out", "{tmp}/x.png"], "outside the stream"),
     (["reconstruct", "{tmp}/good.dat", "--method", "interval", "--at", "abc", "--height", "4", "--width", "8",
       "--out", "{tmp}/x.png"], "--at"),
+    (["reconstruct", "{tmp}/good.dat", "--method", "interval", "--at", "0", "--height", "4", "--width", "8",
+      "--out", "{tmp}/x.jpg"], "--out"),
+    (["reconstruct", "{tmp}/good.dat", "--method", "accumulation", "--display", "seed", "--at", "0",
+      "--height", "4", "--width", "8", "--out", "{tmp}/x.png"], "--display"),
+    (["info", "{tmp}/good.dat", "--height", "4", "--width", "8", "--clock-hz", "0"], "clock_hz"),
+    (["info", "{tmp}/broken.mp4"], "unknown spike file type"),
+    (["info", "{tmp}/text.npz"], "not a .npz"),
+    (["simulate", "translating", "--duration", "0.001", "--out", "{tmp}/file.dat/x.dat"], "--out"),
 ])
 def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, needle):
     from viform.stream.container import SpikeStream
@@ -73,6 +83,8 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, needle
 
     write_dat(tmp_path / "good.dat", SpikeStream(np.ones((3, 4, 8), bool), 40_000.0))
     (tmp_path / "broken.mp4").write_bytes(b"garbage")
+    (tmp_path / "text.npz").write_text("not an archive")
+    (tmp_path / "file.dat").write_bytes(b"")  # a file where a folder is needed
     args = [a.replace("{tmp}", str(tmp_path)) for a in args]
     code, out, err = run(args, capsys)
     assert code == 2

@@ -85,18 +85,21 @@ def _apply(options):
               help="Light between video frames.")
 @click.option("--light-sample-ticks", type=int, default=1, show_default=True,
               help="Evaluate the scene every N ticks (held in between).")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the line of text.")
 @_apply(sensor_options)
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
-             light_sample_ticks, **sensor_kw):
+             light_sample_ticks, as_json, **sensor_kw):
     """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the viform.
 
     Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
     """
+    from viform._io import check_output_folder
     from viform.light.scenes import load_scene
     from viform.stream.io import FORMATS, save_spikes
 
     if Path(out_path).suffix.lower() not in FORMATS:
         raise ViformError(f"--out = {out_path!r}: the suffix must be one of {', '.join(FORMATS)}")
+    check_output_folder("--out", Path(out_path).resolve().parent)
     sensor = _sensor_from_options(**sensor_kw)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
                        interpolation=interpolation)
@@ -108,6 +111,12 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     save_spikes(out_path, stream, block_ticks=1024)
     elapsed = time.perf_counter() - started
     pixel_ticks = stream.n_ticks * stream.height * stream.width
+    if as_json:
+        click.echo(json.dumps({"file": str(out_path), "n_ticks": stream.n_ticks, "height": stream.height,
+                               "width": stream.width, "clock_hz": stream.clock_hz,
+                               "threshold_electrons": stream.threshold_electrons, "seed": seed,
+                               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed}, indent=2))
+        return
     click.echo(f"wrote {out_path}: {stream.n_ticks} ticks × {stream.height}×{stream.width} at "
                f"{stream.clock_hz:g} Hz ({pixel_ticks / elapsed:.3g} pixel-ticks/s)")
 
@@ -129,12 +138,26 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
               help="PNG mapping: linear light (/max), the seed's 255−τ, 1/τ, or the common TFP/TFI 8-bit.")
 @click.option("--scale", type=float, default=1.0, show_default=True,
               help="Full-scale firing rate per tick for --display 8bit (0.6 for REDS simulations).")
-def reconstruct(file, method, at, window_s, out_path, height, width, clock_hz, no_flip, display, scale):
-    """Images of the viform in FILE at any instant, by accumulation or interval imaging."""
-    from viform._io import atomic_path, save_image
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary of what was written.")
+def reconstruct(file, method, at, window_s, out_path, height, width, clock_hz, no_flip, display, scale, as_json):
+    """Images of the viform in FILE at any instant, by accumulation or interval imaging.
+
+    PNG mappings (--display): accumulation shows linear light or, with 8bit, the common TFP
+    image; interval shows 1/τ (linear, inverse), the seed's 255 − τ (seed) or the common TFI
+    image (8bit).
+    """
+    from viform._io import atomic_path, check_output_folder, save_image
     from viform.imaging import accumulation_image, interval_8bit, interval_image, inverse_tau_display_8bit
     from viform.imaging.interval import tau_display_8bit
 
+    out = Path(out_path)
+    if out.suffix.lower() != ".png" and out.suffix and not out.is_dir():
+        raise ViformError(f"--out = {out_path!r} is not allowed: give a .png file (one instant) or a folder")
+    if method == "accumulation" and display == "seed":
+        raise ViformError("--display seed (255 − τ) is not allowed with --method accumulation: it maps intervals")
+    if not scale > 0:
+        raise ViformError(f"--scale = {scale!r} is not allowed: it must be > 0")
+    check_output_folder("--out", (out.parent if out.suffix.lower() == ".png" else out).resolve())
     source = _open(file, height, width, clock_hz, flip=not no_flip)
     times = _parse_times(at)
     ticks = [source.tick_of(t, "--at") for t in times]
@@ -158,16 +181,16 @@ def reconstruct(file, method, at, window_s, out_path, height, width, clock_hz, n
                    "linear": inverse_tau_display_8bit}.get(display, lambda x: interval_8bit(x, scale))(tau)
         images.append(image)
         pngs.append(png)
-    out = Path(out_path)
     if out.suffix.lower() == ".png":
         if len(times) != 1:
             raise ViformError(f"--out = {out_path!r} is one PNG but --at gives {len(times)} instants: give a folder")
         save_image(out, pngs[0])
-        click.echo(f"wrote {out}")
+        _report(as_json, f"wrote {out}", {"files": [str(out)], "times_s": times, "ticks": ticks})
         return
     out.mkdir(parents=True, exist_ok=True)
-    for t, png in zip(times, pngs, strict=True):
-        save_image(out / f"{method}_{t:.6f}s.png", png)
+    files = [out / f"{method}_{t:.6f}s.png" for t in times]
+    for path, png in zip(files, pngs, strict=True):
+        save_image(path, png)
     arrays = {"times_s": np.array(times), "ticks": np.array(ticks),
               "spikes_per_s": np.stack([i.spikes_per_s for i in images])}
     if images[0].electrons_per_s is not None:
@@ -178,7 +201,12 @@ def reconstruct(file, method, at, window_s, out_path, height, width, clock_hz, n
         arrays["censored"] = np.stack([i.censored for i in images])
     with atomic_path(out / "light.npz") as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, **arrays)
-    click.echo(f"wrote {len(times)} PNG(s) and light.npz to {out}")
+    _report(as_json, f"wrote {len(times)} PNG(s) and light.npz to {out}",
+            {"files": [str(f) for f in files] + [str(out / "light.npz")], "times_s": times, "ticks": ticks})
+
+
+def _report(as_json: bool, line: str, summary: dict) -> None:
+    click.echo(json.dumps(summary, indent=2) if as_json else line)
 
 
 @cli.command()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,8 @@ def read_npz(path, clock_hz: float = DEFAULT_DAT_CLOCK_HZ, key: str | None = Non
     names). Metadata arrays saved by :func:`save_spikes` (clock, Q, start) are used when present;
     other scalar entries (e.g. a label) go to the metadata.
     """
+    if not zipfile.is_zipfile(path):
+        raise ViformError(f"{str(path)!r} is not a .npz file (not a zip archive)")
     try:
         with np.load(path, allow_pickle=False) as data:
             names = list(data.keys())
@@ -53,11 +56,13 @@ def open_spikes(path, height: int | None = None, width: int | None = None, *,
     suffix = path.suffix.lower()
     if not path.exists():
         raise ViformError(f"spike file {str(path)!r} does not exist")
+    # None means "not given"; 0 or a negative clock is refused by the readers, not replaced
+    clock_hz = DEFAULT_DAT_CLOCK_HZ if clock_hz is None else clock_hz
     if suffix == ".dat":
         return read_dat(path, height, width, flip=flip, allow_partial=allow_partial,
-                        clock_hz=clock_hz or DEFAULT_DAT_CLOCK_HZ, threshold_electrons=threshold_electrons)
+                        clock_hz=clock_hz, threshold_electrons=threshold_electrons)
     if suffix == ".npz":
-        stream = read_npz(path, clock_hz or DEFAULT_DAT_CLOCK_HZ)
+        stream = read_npz(path, clock_hz)
         if threshold_electrons is not None:
             stream.threshold_electrons = threshold_electrons
         return stream
