@@ -2,7 +2,9 @@
 
 For tick k a pixel's interval runs from its last spike at or before k (tick ``prev``) to its
 first spike after k (tick ``next``), τ = (next − prev) ticks — the convention of the common
-"TFI" reconstruction, so 8-bit results compare with published numbers.
+"TFI" reconstruction, so 8-bit results compare with published numbers. For steady light
+Q/τ is unbiased: the interval holding a fixed instant is length-biased, Gamma(Q + 1, λ) in
+electrons, and E[Q/X] = λ for that law (tested in ``tests/imaging``).
 
 Rule at the stream's ends (documented, no NaN, no division by zero): an interval cut by an
 end is measured up to that end, as if a spike stood just outside the stream (tick −1 before

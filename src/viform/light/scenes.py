@@ -403,11 +403,10 @@ class FlickerScene(Scene):
         if self.waveform == "sine":
             return 1.0 + self.depth * (math.cos(w * t0) - math.cos(w * t1)) / (w * (t1 - t0))
 
-        def square_integral(t):  # ∫0^t sign(sin(w s)) ds, period P
+        def square_integral(t):  # ∫0^t sign(sin(w s)) ds: whole periods add 0
             period = 1.0 / self.frequency_hz
-            n, r = divmod(t, period)
-            half = period / 2
-            return n * 0.0 + (r if r <= half else half - (r - half))
+            r = t % period
+            return r if r <= period / 2 else period - r
 
         return 1.0 + self.depth * (square_integral(t1) - square_integral(t0)) / (t1 - t0)
 

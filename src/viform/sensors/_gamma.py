@@ -11,7 +11,9 @@ and samples inside it by rejection under the bin's maximum density, with a preco
 squeeze that accepts almost every draw without evaluating the density. The open last
 bin [q, ∞) is sampled exactly by rejection from an exponential envelope of rate
 1 − (a − 1)/q. Each step is an exact rejection sampler, so the draws follow Gamma(a, 1)
-to floating-point precision.
+up to the resolution of the uniforms: 26 bits each, i.e. a position within a bin to
+2^-26 of its width, and an exponential tail cut at 18.7/rate past the last quantile
+(probability < 1e-11). Tested by Kolmogorov–Smirnov for a = 1, 2, 7, 100, 1e3, 1e4.
 """
 
 from __future__ import annotations
