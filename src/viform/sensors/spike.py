@@ -274,6 +274,10 @@ class SpikeSensor(Sensor):
             Yield every block in the same output buffer, overwritten by the next block: for
             consumers that use each block at once (writers, reducers), it saves allocating and
             page-faulting fresh memory for every block. Copy a block to keep it.
+        state : SpikeSimulationState, optional
+            A fresh :meth:`initial_state` (t = 0) that the simulation updates in place, so a
+            caller can read the pixels' charge between blocks. The stream always starts at
+            tick 0: a state already advanced is refused rather than restarted.
         """
         check_positive("duration_s", duration_s)
         p = self.parameters
@@ -288,6 +292,9 @@ class SpikeSensor(Sensor):
         q, shapes, index, tables = self._pixel_tables(height, width)
         if state is None:
             state = self.initial_state(height, width, seed)
+        elif state.next_tick != 0:
+            raise ViformError(f"state has already run to tick {state.next_tick}; simulate starts at tick 0, "
+                              "so pass a fresh initial_state")
         reset_readout = p.reset == "readout"
         buffer = None
         bar = None
