@@ -350,27 +350,18 @@ class OverflowSensor(FrameSensor):
         v3 = self.expected_voltages_v(photocurrent_a)[2]
         return (self.v_reset_v - v3) / self.parameters.conversion_gain_v_per_e
 
+    def _circuit(self) -> tuple:
+        """(C_PD, C_F, V_res, V_F, V_sat, integration times): the arguments of the closed forms."""
+        return (self.c_pd_f, self.overflow_capacitance_f, self.v_reset_v, self.v_f_v, self.v_sat_v,
+                self.integration_times_s)
+
     def dynamic_range_gain_db(self) -> float:
         """Noise-free DR gain over the plain 4T APS (see :func:`dynamic_range_gain_db`)."""
-        return dynamic_range_gain_db(
-            self.c_pd_f,
-            self.overflow_capacitance_f,
-            self.v_reset_v,
-            self.v_f_v,
-            self.v_sat_v,
-            self.integration_times_s,
-        )
+        return dynamic_range_gain_db(*self._circuit())
 
     def segment_boundaries_a(self) -> dict:
         """Photocurrents at the seed's points B, C, D, E (see :func:`segment_boundaries_a`)."""
-        return segment_boundaries_a(
-            self.c_pd_f,
-            self.overflow_capacitance_f,
-            self.v_reset_v,
-            self.v_f_v,
-            self.v_sat_v,
-            self.integration_times_s,
-        )
+        return segment_boundaries_a(*self._circuit())
 
     def describe(self) -> dict:
         d = super().describe()
