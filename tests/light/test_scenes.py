@@ -100,3 +100,17 @@ def test_unreadable_video_and_unknown_scene_give_clear_errors(tmp_path):
         load_scene(str(bad), frame_rate_hz=30.0)
     with pytest.raises(ViformError, match="neither a built-in scene"):
         load_scene("no-such-scene")
+
+
+def test_mp4_video_declares_its_frame_rate(tmp_path):
+    """A real video file (imageio-ffmpeg): the declared 25 fps is used, pixel values map to lux."""
+    import imageio.v3 as iio
+
+    frames = np.stack([np.full((16, 32), 40 * i, np.uint8) for i in range(5)])
+    iio.imwrite(tmp_path / "v.mp4", frames, fps=25, codec="libx264")
+    video = load_scene(str(tmp_path / "v.mp4"), max_lux=255.0, interpolation="hold")
+    assert video.frame_rate_hz == pytest.approx(25.0)
+    assert video.shape == (16, 32)
+    # lossy codec: compare the frame means with a few grey levels of slack
+    assert np.mean(video.illuminance_lux(0.0)) == pytest.approx(0.0, abs=4)
+    assert np.mean(video.illuminance_lux(0.13)) == pytest.approx(120.0, abs=4)  # frame 3
