@@ -206,6 +206,9 @@ def per_tick_reference(sensor, scene, n_ticks, seed, sample):
                 t[i] = module._next_target(i, q, index, *tables, state.keys, True, counter)
             elif c[i] - t[i] >= 8 * q[i] ** 2 * module.FIXED_POINT_SCALE:
                 c[i], t[i] = module._equilibrium_state(i, q, index, *tables, state.keys, counter)
+            elif c[i] - t[i] >= module._JUMP_INTERVALS * q[i] * module.FIXED_POINT_SCALE:
+                c[i], t[i] = module._saturated_state((c[i] - t[i]) / module.FIXED_POINT_SCALE, i, q, state.keys,
+                                                     counter)
             else:
                 while c[i] >= t[i]:
                     c[i] -= t[i]
@@ -214,13 +217,14 @@ def per_tick_reference(sensor, scene, n_ticks, seed, sample):
 
 
 @pytest.mark.parametrize("reset", ["self", "readout"])
-@pytest.mark.parametrize("q", [1, 5])
-def test_event_driven_kernel_equals_per_tick_integration(reset, q):
+@pytest.mark.parametrize("q,max_lux", [(1, 5.0), (5, 5.0), (10, 100.0)])
+def test_event_driven_kernel_equals_per_tick_integration(reset, q, max_lux):
     """With photon noise, jumping to the crossing tick gives the per-tick model's bits exactly,
-    across light-sample intervals (7 ticks), blocks (41 ticks) and saturation (up to 36 e⁻/tick:
-    both the one-by-one drain and the ≥ 8·Q² stationary draw at Q = 1)."""
+    across light-sample intervals (7 ticks), blocks (41 ticks) and saturation (up to 36 e⁻/tick
+    at 5 lux: the one-by-one drain and the ≥ 8·Q² stationary draw at Q = 1; up to 720 e⁻/tick at
+    100 lux and Q = 10: all three, including the exact jump for 480–800 e⁻ past a crossing)."""
     sensor = SpikeSensor(threshold_electrons=q, reset=reset, dark_current_e_per_s=5000.0)
-    scene = TranslatingScene(4, 6, velocity_px_per_s=(3000.0, 0.0), min_lux=0.01, max_lux=5.0, period_px=4)
+    scene = TranslatingScene(4, 6, velocity_px_per_s=(3000.0, 0.0), min_lux=0.01, max_lux=max_lux, period_px=4)
     expected = per_tick_reference(sensor, scene, 200, 5, 7)
     got = sensor.capture(scene, 200 / 40e3, seed=5, light_sample_ticks=7, block_ticks=41).spikes
     assert np.array_equal(got, expected)
@@ -234,16 +238,18 @@ def first_spike_charge_electrons(spikes, electrons_per_tick, after_tick=0):
     return (flat.argmax(axis=0) + 0.5) * electrons_per_tick
 
 
-@pytest.mark.parametrize("bright_electrons_per_tick", [None, 20.0, 1000.0])
-def test_pixels_start_and_leave_saturation_in_the_stationary_state(bright_electrons_per_tick):
+@pytest.mark.parametrize("q,dim,bright_electrons_per_tick", [(2, 0.02, None), (2, 0.02, 20.0), (2, 0.02, 1000.0),
+                                                            (20, 0.2, 2000.0)])
+def test_pixels_start_and_leave_saturation_in_the_stationary_state(q, dim, bright_electrons_per_tick):
     """The charge to the first spike follows the forward-recurrence law of the Gamma(Q) renewal
     process: mean (Q + 1)/2, variance (Q + 1)(Q + 2)/3 − (Q + 1)²/4 (Q = 2: 1.5 and 1.75 e⁻²).
 
-    At t = 0 (random initial charge) and after 10 saturated ticks — 20 e⁻/tick (crossings
-    drawn one by one) or 1000 e⁻/tick (≥ 8·Q², drawn at once). A pixel started empty, or a
-    uniform fraction into a plain Gamma(Q) interval, has mean Q/2 = 1: 24 standard errors off.
+    At t = 0 (random initial charge) and after 10 saturated ticks — at Q = 2, 20 e⁻/tick
+    (crossings drawn one by one) or 1000 e⁻/tick (≥ 8·Q², drawn at once); at Q = 20,
+    2000 e⁻/tick (between 48·Q and 8·Q²: the exact Poisson jump). A pixel started empty, or a
+    uniform fraction into a plain Gamma(Q) interval, has mean Q/2 = 1 at Q = 2: 24 standard
+    errors off.
     """
-    q, dim = 2, 0.02
     sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0)
     lux_dim = lux_for_electrons_per_tick(sensor, dim)
     if bright_electrons_per_tick is None:
@@ -253,6 +259,8 @@ def test_pixels_start_and_leave_saturation_in_the_stationary_state(bright_electr
         scene = StepScene(StillScene(np.full((64, 64), bright)), step_time_s=10 / 40e3, factor=lux_dim / bright)
         after = 10
     spikes = sensor.capture(scene, (after + 1500) / 40e3, seed=21).spikes
+    if bright_electrons_per_tick == 2000.0:
+        assert 48 * q <= bright_electrons_per_tick - q < 8 * q * q  # the exact-jump regime
     if after:
         assert spikes[:after].all()
     charge = first_spike_charge_electrons(spikes, dim, after)
@@ -263,6 +271,40 @@ def test_pixels_start_and_leave_saturation_in_the_stationary_state(bright_electr
     n = charge.size
     assert abs(charge.mean() - m1) < 5 * math.sqrt((var + dim ** 2 / 12) / n)
     assert abs(charge.var() - var) < 5 * math.sqrt((central4 - var ** 2) / n) + dim ** 2 / 12
+
+
+@pytest.mark.parametrize("residual_electrons", [10.0, 150.0, 3000.0])
+def test_saturated_jump_has_the_law_of_one_gamma_per_crossing(residual_electrons):
+    """The constant-cost end state of a saturated tick against draining one Gamma(Q) per crossing.
+
+    Reference: NumPy Gamma(Q) intervals summed past R; the state is (age since the last
+    crossing, charge still missing). Two-sample Kolmogorov–Smirnov on 20,000 draws each.
+    """
+    from viform.sensors import spike as module
+
+    q, n = 7, 20_000
+    rng = np.random.default_rng(1)
+    age_ref, rest_ref = np.empty(n), np.empty(n)
+    for i in range(n):
+        total = 0.0
+        while True:
+            interval = rng.gamma(q)
+            if total + interval > residual_electrons:
+                age_ref[i] = residual_electrons - total
+                rest_ref[i] = total + interval - residual_electrons
+                break
+            total += interval
+    qs = np.full(1, float(q))
+    keys = np.array([np.uint64(123456789)])
+    counter = np.zeros(1, dtype=np.int64)
+    age, rest = np.empty(n), np.empty(n)
+    for i in range(n):
+        c, t = module._saturated_state(residual_electrons, 0, qs, keys, counter)
+        age[i], rest[i] = c / module.FIXED_POINT_SCALE, (t - c) / module.FIXED_POINT_SCALE
+    assert counter[0] == n
+    assert stats.ks_2samp(age, age_ref).pvalue > 1e-3
+    assert stats.ks_2samp(rest, rest_ref).pvalue > 1e-3
+    assert abs(age.mean() - age_ref.mean()) < 5 * math.sqrt(2 * age_ref.var() / n)
 
 
 def test_light_beyond_the_fixed_point_range_is_refused():

@@ -18,6 +18,8 @@ up to the resolution of the uniforms: 26 bits each, i.e. a position within a bin
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 from scipy import special
@@ -148,4 +150,106 @@ def _draw_many(shape, bins, key, n):
     out = np.empty(n)
     for i in range(n):
         out[i] = gamma_draw(shape, 0, bins, key, i)
+    return out
+
+
+# ----------------------------------------------------------- general samplers on a hash stream
+# For the rare events that need other laws (a saturated tick's end state in
+# :mod:`viform.sensors.spike`), draws come from a short SplitMix64 stream started at
+# ``event_stream(key, counter)``: still a pure function of (seed, pixel, event index).
+_STREAM_DOMAIN = np.uint64(0xD6E8FEB86659FD93)
+
+
+@njit(cache=True, inline="always")
+def event_stream(key, counter):
+    """Start of the random stream of one event of a pixel (its key and event counter)."""
+    return splitmix64(key ^ _STREAM_DOMAIN ^ (np.uint64(counter) * np.uint64(0x9E3779B97F4A7C15)))
+
+
+@njit(cache=True, inline="always")
+def stream_uniform(state):
+    """(u in (0, 1), next state) from a SplitMix64 stream."""
+    state = state + np.uint64(0xBF58476D1CE4E5B9)
+    return uniform_from_hash(splitmix64(state)), state
+
+
+@njit(cache=True)
+def stream_normal(state):
+    """(standard normal deviate, next state) by the Box–Muller transform (exact)."""
+    u1, state = stream_uniform(state)
+    u2, state = stream_uniform(state)
+    return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2), state
+
+
+@njit(cache=True)
+def stream_gamma(shape, state):
+    """(Gamma(shape, 1) deviate, next state), shape ≥ 1, by Marsaglia & Tsang (2000) — exact rejection."""
+    d = shape - 1.0 / 3.0
+    c = 1.0 / np.sqrt(9.0 * d)
+    while True:
+        x, state = stream_normal(state)
+        v = 1.0 + c * x
+        if v <= 0.0:
+            continue
+        v = v * v * v
+        u, state = stream_uniform(state)
+        if u < 1.0 - 0.0331 * x * x * x * x:
+            return d * v, state
+        if np.log(u) < 0.5 * x * x + d * (1.0 - v + np.log(v)):
+            return d * v, state
+
+
+@njit(cache=True)
+def stream_poisson(mean, state):
+    """(Poisson(mean) deviate, next state): multiplication below mean 10, else Hörmann's PTRS (1993).
+
+    Both are exact (PTRS is a transformed rejection with the exact acceptance test).
+    """
+    if mean < 10.0:
+        limit = np.exp(-mean)
+        n = np.int64(0)
+        product, state = stream_uniform(state)
+        while product > limit:
+            n += 1
+            u, state = stream_uniform(state)
+            product *= u
+        return n, state
+    slam = np.sqrt(mean)
+    loglam = np.log(mean)
+    b = 0.931 + 2.53 * slam
+    a = -0.059 + 0.02483 * b
+    invalpha = 1.1239 + 1.1328 / (b - 3.4)
+    vr = 0.9277 - 3.6224 / (b - 2.0)
+    while True:
+        u, state = stream_uniform(state)
+        u -= 0.5
+        v, state = stream_uniform(state)
+        us = 0.5 - abs(u)
+        k = np.floor((2.0 * a / us + b) * u + mean + 0.43)
+        if us >= 0.07 and v <= vr:
+            return np.int64(k), state
+        if k < 0.0 or (us < 0.013 and v > us):
+            continue
+        if np.log(v) + np.log(invalpha) - np.log(a / (us * us) + b) <= -mean + k * loglam - math.lgamma(k + 1.0):
+            return np.int64(k), state
+
+
+def stream_samples(kind: str, parameter: float, n: int, key: int = 0) -> np.ndarray:
+    """``n`` draws of 'normal', 'gamma' (shape) or 'poisson' (mean), one event each (for tests)."""
+    code = {"normal": 0, "gamma": 1, "poisson": 2}[kind]
+    return _stream_many(code, float(parameter), np.uint64(key), int(n))
+
+
+@njit(cache=True)
+def _stream_many(code, parameter, key, n):
+    out = np.empty(n)
+    for i in range(n):
+        state = event_stream(key, i)
+        if code == 0:
+            out[i], state = stream_normal(state)
+        elif code == 1:
+            out[i], state = stream_gamma(parameter, state)
+        else:
+            value, state = stream_poisson(parameter, state)
+            out[i] = value
     return out
