@@ -409,9 +409,9 @@ class SimulatedSpikes(SpikeSource):
 FIXED_POINT_SCALE = float(1 << 32)
 #: Largest charge per tick, fixed point: sums of charge and target then stay inside int64.
 MAX_RATE_FIXED_POINT = float(1 << 61)
-# (c − t)·_SATURATION_SCALE ≥ Q² ⇔ c − t ≥ 8·Q² e⁻. P(N mod Q = m) for N ~ Poisson(r) differs
-# from 1/Q by at most exp(−r·(1 − cos 2π/Q)) ≤ exp(−8r/Q²), below e^-64 here.
-_SATURATION_SCALE = 1.0 / (8.0 * FIXED_POINT_SCALE)
+# From 8·Q² e⁻ past a tick's first crossing, P(N mod Q = m) for N ~ Poisson(r) differs from
+# 1/Q by at most exp(−r·(1 − cos 2π/Q)) ≤ exp(−8r/Q²), below e^-64: the pixel leaves the
+# tick in the stationary state (see :func:`_run_block`).
 # Below that, a tick with more than this many Q of charge after its first crossing jumps to
 # its end state exactly (:func:`_saturated_state`, ~0.2 µs) instead of one Gamma per crossing.
 _JUMP_INTERVALS = 48.0
@@ -516,6 +516,9 @@ def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter,
             for p in range(p0, p1):
                 c = charge[p]
                 t = target[p]
+                # charge past a crossing above which a saturated tick jumps / is stationary
+                stationary_from = np.int64(8.0 * q[p] * q[p] * 4294967296.0)
+                jump_from = min(np.int64(_JUMP_INTERVALS * q[p] * 4294967296.0), stationary_from)
                 k = w0
                 j = j_first
                 j_end = (j + 1) * sample - first_tick
@@ -547,20 +550,20 @@ def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter,
                             c -= t
                             if c >= t:
                                 c %= t
-                        elif (c - t) * _SATURATION_SCALE >= q[p] * q[p]:
-                            # ≥ 8·Q² e⁻ after the first crossing: the electron count mod Q is
-                            # uniform to within e^-64, so the pixel leaves the tick in the
-                            # stationary state; drawn at once instead of one Gamma per crossing
-                            c, t = _equilibrium_state(p, q, index, bins, keys, counter)
-                        elif c - t >= _JUMP_INTERVALS * q[p] * 4294967296.0:
-                            # many crossings lost in this tick: jump to its end state exactly
-                            c, t = _saturated_state((c - t) / 4294967296.0, p, q, keys, counter)
-                        else:
+                        elif c - t < jump_from:
                             # further crossings inside the same tick are lost to the one-bit readout
                             while c >= t:
                                 c -= t
                                 t = _next_target(p, q, index, bins, keys,
                                                  noise, counter)
+                        elif c - t >= stationary_from:
+                            # ≥ 8·Q² e⁻ after the first crossing: the electron count mod Q is
+                            # uniform to within e^-64, so the pixel leaves the tick in the
+                            # stationary state; drawn at once instead of one Gamma per crossing
+                            c, t = _equilibrium_state(p, q, index, bins, keys, counter)
+                        else:
+                            # many crossings lost in this tick: jump to its end state exactly
+                            c, t = _saturated_state((c - t) / 4294967296.0, p, q, keys, counter)
                     c += (end - k) * e
                     k = end
                     if k == j_end:
