@@ -264,7 +264,8 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, second, ancho
         prev2 = _NONE
         after_first = False
         for _ in range(counts[p]):
-            if ref == 0:
+            first_record = ref == 0
+            if first_record:
                 if nf >= ofirst.size:
                     return 1
                 m = np.int64(0)
@@ -280,19 +281,6 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, second, ancho
                 n2 += 2
                 last_second = o
                 after_first = False
-                if m > big or o < 1 or o > big:
-                    return 5
-                if strict:
-                    g = m * ref
-                elif m > 0:
-                    if ng >= gres.size:
-                        return 6
-                    if gres[ng] > big:
-                        return 5
-                    g = m * ref + _unzz(gres[ng])
-                    ng += 1
-                else:
-                    g = np.int64(0)
             else:
                 c = _context(model, prev, prev2, ref)
                 k = ptr[c]
@@ -317,6 +305,10 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, second, ancho
                 else:
                     d = _unzz(dd)
                 o = base + d
+                prev2 = prev
+                prev = s
+            if not first_record:
+                # a repeat count and a width: check them, then the span of the repeats
                 if m > big or o < 1 or o > big:
                     return 5
                 if strict:
@@ -330,8 +322,6 @@ def _model_decode(counts, sym, ctx_start, esc, ofirst, gres, tdef, second, ancho
                     ng += 1
                 else:
                     g = np.int64(0)
-                prev2 = prev
-                prev = s
             if ref > big:
                 return 5
             rec_m[r] = m

@@ -561,6 +561,8 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
             nb4 = _nb_first(p, width, rec_start, counts, rec_s, rec_o, ref0, ptr, seg_start)
             fb = _RB if nb4 < 0 else _rbucket((nb4 + 2) // 4)
             two = _dbit(ds, data, probs, _P_MORE2 + min(fb, _RB - 1)) == 1
+            m2 = np.int64(0)
+            o2 = np.int64(0)
             if two:
                 if r + 1 >= cap:
                     return 2
@@ -579,17 +581,21 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
                 else:
                     phase = _duint(ds, data, probs, _P_PH + _rbucket(o2) * _EG) + lim + 1
                 phase += off
-                if phase > big or ds[3]:
-                    return 1
-                rec_m[r] = 0
-                rec_g[r] = 0
-                rec_o[r] = phase
-                rec_s[r] = a
-                a = a + phase
-                ref = phase
-                if a >= seg_end:
-                    return 3
-                r += 1
+            else:
+                phase = _duint(ds, data, probs, _P_PH + fb * _EG) + 1 + off
+            if phase > big or ds[3]:
+                return 1
+            # the pixel's first spike: its phase record
+            rec_m[r] = 0
+            rec_g[r] = 0
+            rec_o[r] = phase
+            rec_s[r] = a
+            a = a + phase
+            ref = phase
+            if a >= seg_end:
+                return 3
+            r += 1
+            if two:
                 g = m2 * ref
                 if not strict and m2 > 0:
                     neg = _dbit(ds, data, probs, _P_GSIGN)
@@ -608,19 +614,6 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
                 mb = _mbucket(m2)
                 r += 1
                 first = 0
-            else:
-                phase = _duint(ds, data, probs, _P_PH + fb * _EG) + 1 + off
-                if phase > big or ds[3]:
-                    return 1
-                rec_m[r] = 0
-                rec_g[r] = 0
-                rec_o[r] = phase
-                rec_s[r] = a
-                a = a + phase
-                ref = phase
-                if a >= seg_end:
-                    return 3
-                r += 1
         while True:
             remaining = seg_end - 1 - a
             if remaining < 1:
