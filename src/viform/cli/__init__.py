@@ -17,7 +17,10 @@ from viform.cli.app import cli
 
 #: Modules that add commands to :data:`cli` (imported on start).
 COMMAND_MODULES = [
-    "viform.cli.spike",  # simulate, reconstruct, info, demo (issue 2)
+    "viform.cli.spike",  # simulate (issue 2)
+    "viform.cli.reconstruct",  # reconstruct (issue 2)
+    "viform.cli.files",  # info (issue 2)
+    "viform.cli.demo",  # demo (issue 2)
     "viform.cli.frame",  # characterize (issue 3)
     "viform.cli.highspeed",  # highspeed (issue 4)
     "viform.cli.gated",  # gated (issue 5)
