@@ -4,14 +4,21 @@ For tick k a pixel's interval runs from its last spike at or before k (tick ``pr
 first spike after k (tick ``next``), τ = (next − prev) ticks — the convention of the common
 "TFI" reconstruction, so 8-bit results compare with published numbers. For steady light
 Q/τ is unbiased: the interval holding a fixed instant is length-biased, Gamma(Q + 1, λ) in
-electrons, and E[Q/X] = λ for that law (tested in ``tests/imaging``).
+electrons, and E[Q/X] = λ for that law (tested in ``tests/imaging``). The same length bias
+makes 1/τ unbiased after tick rounding too: an interval of n ticks is picked with
+probability ∝ n, so E[1/τ] = 1/E[n] exactly.
+
+The search for ``prev`` and ``next`` goes as far as the data need: backward and forward, in
+chunks of growing length, until every pixel has its spikes or the stream ends, holding only
+one chunk at a time (bounded memory). No interval is cut short anywhere but at the stream's
+ends (an earlier version cut every interval longer than ≈ 2,048 ticks at a fixed 1,024-tick
+lookahead, which read a flat 0.005 lux scene 77 % too bright).
 
 Rule at the stream's ends (documented, no NaN, no division by zero): an interval cut by an
 end is measured up to that end, as if a spike stood just outside the stream (tick −1 before
 the start, tick T after the end). That τ is a lower bound of the true interval, so the
 light is an upper bound; such pixels are flagged ``censored``. A pixel with no spike at all
-gets τ = T + 1 ticks. With a ``lookahead_ticks`` limit (streaming over long files) an
-interval longer than the limit is cut the same way at the limit.
+gets τ = T + 1 ticks.
 """
 
 from __future__ import annotations
@@ -23,70 +30,98 @@ from viform._validate import ViformError, check_int
 from viform.imaging.units import LightImage, light_from_rate
 from viform.stream.container import SpikeSource
 
-#: How far interval imaging looks back and ahead of an instant by default, ticks (memory:
-#: (block + lookahead) ticks of bits are held when streaming every tick).
+#: Ticks read per search step around an instant (the first step; later ones double, up to
+#: :data:`MAX_CHUNK_BYTES`). Only speed and memory depend on it, never the result.
 DEFAULT_LOOKAHEAD_TICKS = 1024
 
+#: Largest chunk of unpacked spikes (bytes) held while searching for far spikes.
+MAX_CHUNK_BYTES = 32 * 2 ** 20
 
-@njit(cache=True, parallel=True)
-def _intervals_at(block, offset, ticks, lo, hi, prev_out, next_out):
-    # block holds ticks [offset, offset + n); for each requested tick find prev ≤ tick < next
-    n, p = block.shape
-    for j in prange(p):
-        for m in range(ticks.size):
-            k = ticks[m] - offset
-            prev = lo[m] - 1
-            i = k
-            while i >= lo[m] - offset and i >= 0:
-                if block[i, j]:
-                    prev = i + offset
-                    break
-                i -= 1
-            nxt = hi[m]
-            i = k + 1
-            while i < hi[m] - offset and i < n:
-                if block[i, j]:
-                    nxt = i + offset
-                    break
-                i += 1
-            prev_out[m, j] = prev
-            next_out[m, j] = nxt
+
+def _chunk_limit(pixels: int) -> int:
+    return max(1, MAX_CHUNK_BYTES // max(1, pixels))
+
+
+def _search_forward(source: SpikeSource, start: int, pixels_left: np.ndarray, nxt: np.ndarray,
+                    chunk: int) -> None:
+    """Set ``nxt[j]`` to the first spike at tick ≥ ``start`` for each pixel j in ``pixels_left``.
+
+    Reads chunks of growing length until every such pixel has spiked or the stream ends
+    (pixels that never spike again keep ``nxt`` = T). Memory: one chunk of the listed pixels.
+    """
+    n_total = source.n_ticks
+    pixels = source.height * source.width
+    pos = start
+    left = pixels_left
+    nxt[left] = n_total
+    while left.size and pos < n_total:
+        stop = min(n_total, pos + chunk)
+        block = source.read_ticks(pos, stop).reshape(stop - pos, pixels)[:, left]
+        hit = block.any(axis=0)
+        nxt[left[hit]] = pos + block[:, hit].argmax(axis=0)
+        left = left[~hit]
+        pos = stop
+        chunk = min(2 * chunk, _chunk_limit(pixels))
+
+
+def _search_backward(source: SpikeSource, stop: int, pixels_left: np.ndarray, prev: np.ndarray,
+                     chunk: int) -> None:
+    """Set ``prev[j]`` to the last spike at tick < ``stop`` for each listed pixel (−1 if none)."""
+    pixels = source.height * source.width
+    pos = stop
+    left = pixels_left
+    prev[left] = -1
+    while left.size and pos > 0:
+        start = max(0, pos - chunk)
+        block = source.read_ticks(start, pos).reshape(pos - start, pixels)[::-1][:, left]
+        hit = block.any(axis=0)
+        prev[left[hit]] = pos - 1 - block[:, hit].argmax(axis=0)
+        left = left[~hit]
+        pos = start
+        chunk = min(2 * chunk, _chunk_limit(pixels))
 
 
 def interval_ticks(source: SpikeSource, ticks, lookahead_ticks: int | None = None):
     """τ (ticks) of the interval containing each tick in ``ticks``.
 
     Returns ``(tau, censored)``: int64 and bool arrays of shape (len(ticks), H, W).
-    Reads only ticks within ``lookahead_ticks`` of the requested ones (all of the stream
-    when None), so long streams are handled in bounded memory.
+    Each pixel's previous and next spikes are searched as far as needed (to the stream's
+    ends at most), reading ``lookahead_ticks`` ticks first (default
+    :data:`DEFAULT_LOOKAHEAD_TICKS`) and doubling chunks after that, so long streams and
+    long intervals are handled exactly in bounded memory. ``censored`` marks intervals cut
+    by an end of the stream.
     """
     ticks = np.atleast_1d(np.asarray(ticks, dtype=np.int64))
     if ticks.size and (ticks.min() < 0 or ticks.max() >= source.n_ticks):
         raise ViformError(f"tick {int(ticks.min() if ticks.min() < 0 else ticks.max())} is outside the stream's "
                           f"[0, {source.n_ticks})")
-    look = source.n_ticks if lookahead_ticks is None else check_int("lookahead_ticks", lookahead_ticks, 1)
+    look = DEFAULT_LOOKAHEAD_TICKS if lookahead_ticks is None else check_int("lookahead_ticks", lookahead_ticks, 1)
     pixels = source.height * source.width
+    look = min(look, _chunk_limit(pixels))
+    n_total = source.n_ticks
     tau = np.empty((ticks.size, pixels), dtype=np.int64)
     censored = np.empty((ticks.size, pixels), dtype=bool)
+    every = np.arange(pixels)
     for m, k in enumerate(ticks):
-        lo = max(0, int(k) - look + 1)  # earliest tick searched for the previous spike
-        hi = min(source.n_ticks, int(k) + look + 1)  # first tick not searched for the next spike
-        block = source.read_ticks(lo, hi).reshape(hi - lo, pixels).view(np.uint8)
-        prev = np.empty((1, pixels), np.int64)
-        nxt = np.empty((1, pixels), np.int64)
-        _intervals_at(block, lo, np.array([k]), np.array([lo]), np.array([hi]), prev, nxt)
-        tau[m] = nxt[0] - prev[0]
-        censored[m] = (prev[0] < lo) | (nxt[0] >= hi)
+        k = int(k)
+        prev = np.empty(pixels, np.int64)
+        nxt = np.empty(pixels, np.int64)
+        _search_backward(source, k + 1, every, prev, look)  # last spike at or before k
+        _search_forward(source, k + 1, every, nxt, look)  # first spike after k
+        tau[m] = nxt - prev
+        censored[m] = (prev < 0) | (nxt >= n_total)
     shape = (ticks.size, source.height, source.width)
     return tau.reshape(shape), censored.reshape(shape)
 
 
 def interval_image(source: SpikeSource, t_s: float, sensor_parameters=None,
-                   lookahead_ticks: int | None = DEFAULT_LOOKAHEAD_TICKS) -> LightImage:
+                   lookahead_ticks: int | None = None) -> LightImage:
     """Light at instant ``t_s`` as Q/τ of the interval containing it (seed 000 §3.3.2).
 
     Returns a :class:`~viform.imaging.units.LightImage` with the firing rate 1/τ
-    (spikes/s), e⁻/s (Q/τ) and lux when the sensor is known, and the ``censored`` mask.
+    (spikes/s), e⁻/s (Q/τ) and lux when the sensor is known, and the ``censored`` mask
+    (intervals cut by an end of the stream — never by the search, which goes as far as the
+    data need; ``lookahead_ticks`` only sets the first read).
     """
     k = source.tick_of(t_s)
     tau, censored = interval_ticks(source, [k], lookahead_ticks)
@@ -99,26 +134,45 @@ def interval_image(source: SpikeSource, t_s: float, sensor_parameters=None,
 # ------------------------------------------------------------------ every tick, streaming
 
 @njit(cache=True, parallel=True)
-def _interval_block(bits, first, n_block, lookahead, n_total, prev, out):
-    """τ for ticks [first, first + n_block); ``bits`` holds ticks [first, first + len(bits)).
+def _next_after_block(bits, n_block, ahead, buffer_end, out_next):
+    """First spike at or after the block's end, where the buffer ``bits`` holds it.
 
+    ``bits`` holds ticks [first, buffer_end); rows ≥ ``n_block`` lie after the block. A pixel
+    with no spike there keeps ``ahead`` (the first spike at or after an earlier buffer end)
+    when that lies at or beyond ``buffer_end``; otherwise −1 (to be searched further).
+    """
+    n_avail, p = bits.shape
+    for j in prange(p):
+        found = -1
+        for i in range(n_block, n_avail):
+            if bits[i, j]:
+                found = i
+                break
+        if found >= 0:
+            out_next[j] = buffer_end - n_avail + found
+        elif ahead[j] >= buffer_end:
+            out_next[j] = ahead[j]
+        else:
+            out_next[j] = -1
+
+
+@njit(cache=True, parallel=True)
+def _interval_block(bits, first, n_block, next_after, prev, out):
+    """τ for ticks [first, first + n_block); ``bits`` holds (at least) those ticks.
+
+    ``next_after`` is each pixel's first spike at or after the block's end (T if none);
     ``prev`` (per pixel, carried between blocks) is the last spike before ``first`` (or −1).
     A backward pass finds each tick's next spike, a forward pass its previous one; both
     run ticks outer and pixels inner so the inner loops are contiguous.
     """
-    n_avail, p = bits.shape
+    p = bits.shape[1]
     chunk = 4096
     for c in prange((p + chunk - 1) // chunk):
         j0 = c * chunk
         j1 = min(j0 + chunk, p)
         nxt = np.empty(j1 - j0, dtype=np.int64)
-        # first spike at or after the block's end, within the lookahead read
         for j in range(j0, j1):
-            nxt[j - j0] = first + n_avail
-            for i in range(n_block, n_avail):
-                if bits[i, j]:
-                    nxt[j - j0] = first + i
-                    break
+            nxt[j - j0] = next_after[j]
         for i in range(n_block - 1, -1, -1):
             for j in range(j0, j1):
                 out[i, j] = nxt[j - j0]  # spike strictly after tick first + i
@@ -126,32 +180,32 @@ def _interval_block(bits, first, n_block, lookahead, n_total, prev, out):
                     nxt[j - j0] = first + i
         for i in range(n_block):
             k = first + i
-            lo = max(0, k - lookahead + 1)
-            hi = min(n_total, k + lookahead + 1)
             for j in range(j0, j1):
                 if bits[i, j]:
                     prev[j] = k
-                a = prev[j] if prev[j] >= lo else lo - 1
-                b = out[i, j] if out[i, j] < hi else hi
-                out[i, j] = b - a
+                out[i, j] = out[i, j] - prev[j]
 
 
 def interval_frames(source: SpikeSource, block_ticks: int = 1024,
                     lookahead_ticks: int = DEFAULT_LOOKAHEAD_TICKS):
     """τ (ticks) at every tick, streamed: yields ``(first_tick, tau)`` with tau (T, H, W) int32.
 
-    Intervals are searched up to ``lookahead_ticks`` before and after each tick (longer ones
-    are cut there, the end rule above). Each tick is read once: the lookahead read for one
-    block is kept for the next, and the last spike before a block is carried, so memory is
-    bounded by (block + lookahead) ticks and the result does not depend on ``block_ticks``.
+    Exact at any interval length: the last spike before each block is carried, the ticks
+    up to ``lookahead_ticks`` after it are read with it (and kept for the next block), and a
+    pixel whose next spike lies beyond that is searched further, in chunks, once — the spike
+    found is remembered until the stream reaches it. Memory is bounded by (block +
+    lookahead) ticks plus one search chunk; the result does not depend on ``block_ticks``
+    or ``lookahead_ticks``. Intervals cut by the stream's ends follow the end rule above.
     """
     block_ticks = check_int("block_ticks", block_ticks, 1)
     look = check_int("lookahead_ticks", lookahead_ticks, 1)
     pixels = source.height * source.width
     n_total = source.n_ticks
     prev = np.full(pixels, -1, dtype=np.int64)
+    ahead = np.full(pixels, -1, dtype=np.int64)  # a known first spike at/after an earlier buffer end
     buffer = np.zeros((0, pixels), dtype=np.uint8)
     buffer_end = 0
+    next_after = np.empty(pixels, dtype=np.int64)
     for first in range(0, n_total, block_ticks):
         last = min(first + block_ticks, n_total)
         need = min(n_total, last + look)
@@ -159,8 +213,15 @@ def interval_frames(source: SpikeSource, block_ticks: int = 1024,
             fresh = source.read_ticks(buffer_end, need).reshape(need - buffer_end, pixels).view(np.uint8)
             buffer = np.concatenate([buffer, fresh]) if buffer.size else np.ascontiguousarray(fresh)
             buffer_end = need
+        _next_after_block(buffer, last - first, ahead, buffer_end, next_after)
+        far = np.flatnonzero(next_after < 0)
+        if far.size:  # next spike beyond the buffer: search on (or the stream ends)
+            found = np.empty(pixels, dtype=np.int64)
+            _search_forward(source, buffer_end, far, found, max(look, block_ticks))
+            next_after[far] = found[far]
+            ahead[far] = found[far]
         out = np.empty((last - first, pixels), dtype=np.int64)
-        _interval_block(buffer, first, last - first, look, n_total, prev, out)
+        _interval_block(buffer, first, last - first, next_after, prev, out)
         buffer = buffer[last - first:]
         yield first, out.astype(np.int32).reshape(last - first, source.height, source.width)
 
