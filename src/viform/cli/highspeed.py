@@ -50,8 +50,9 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
               help="Optional saturation-aware AE step k (0<k<1, e.g. 0.125): N×k while most pixels "
                    "are at 255. Default: the seed's eq. (6) alone.")
 @click.option("--equalize/--no-equalize", default=True, show_default=True, help="Histogram equalization.")
-@click.option("--eq-source", type=click.Choice(["previous", "same"]), default="previous", show_default=True,
-              help="Histogram of the previous transmitted frame or of the frame itself.")
+@click.option("--eq-source", type=click.Choice(["same", "previous"]), default="same", show_default=True,
+              help="Equalize each frame with its own histogram (gathered while it is buffered) "
+                   "or with the previous transmitted frame's (flashes after a light step).")
 @click.option("--eq-method", type=click.Choice(["shift", "float"]), default="shift", show_default=True)
 @click.option("--frames", "n_frames", type=int, default=200, show_default=True, help="Sensor frames to capture.")
 @click.option("--exposure-us", type=float, default=100.0, show_default=True,
@@ -132,13 +133,74 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     click.echo(f"frames: captured {report['frames_captured']}, buffered {report['frames_buffered_at_end']}, "
                f"transmitted {report['frames_transmitted']}, dropped {report['frames_dropped']}")
     for s in report["ae_settling"]:
-        click.echo(f"AE: step at {s['step_time_s']:g} s settled in {s['settle_frames']} frames")
+        if s["settle_frames"] is None:
+            click.echo(f"AE: step at {s['step_time_s']:g} s did not settle within the recording "
+                       f"(gray not held in {target_gray:g} ± {band_gray:g})")
+        else:
+            click.echo(f"AE: step at {s['step_time_s']:g} s settled in {s['settle_frames']} frames "
+                       f"({s['settle_s'] * 1e3:.3g} ms)")
     click.echo(f"wrote {Path(out_dir) / report['files']['video']}, exposure.png, report.json")
 
 
-@cli.command("highspeed-figures")
-def highspeed_figures():
-    """Print the seed-002 figures next to the model's (timing, link, buffer, equalization)."""
-    from viform.isp.highspeed_pipeline import seed_figures
+def format_figures(fig: dict) -> str:
+    """The paper's figures next to the model's, as a small table with units."""
+    red, nor = fig["reduced_1280x720_100MHz"], fig["normal_full_1280x864_133MHz"]
+    r166, r25 = fig["reduced_166MHz"], fig["reduced_2500fps_full_frame"]
+    links = fig["links_fps_1280x720x8"]
+    ddr, dec, eq = fig["ddr"], fig["decimation"], fig["equalization_shift"]
+    rows = [
+        ("reduced 1280x720 @ 100 MHz", f"{red['cycles_per_frame']} cycles, {red['fps']:.1f} fps",
+         "60 000 cycles, 1 666 fps"),
+        ("normal 1280x864 @ 133 MHz", f"{nor['fps']:.0f} fps", "3 500 fps"),
+        ("reduced 1280x864 @ 166 MHz", f"{r166['fps_1280x864']:.0f} fps", "-"),
+        ("reduced 1280x864, clock for 2 500 fps",
+         f"{r25['pixel_clock_hz'] / 1e6:.1f} MHz (core {r25['core_clock_hz'] / 1e6:.1f} MHz "
+         f"≤ {r25['core_limit_hz'] / 1e6:.0f} MHz)", "2 500 fps"),
+        ("CameraLink, 1280x720x8 bit", f"{links['cameralink']:.0f} fps", "555 fps"),
+        ("DDR4 ring", f"{ddr['capacity_frames']} frames ({ddr['record_s_at_sensor_rate']:.2f} s)",
+         "2 330 frames"),
+        ("frame sampling", f"{dec['strict']}:1 strict; 3:1 overruns the ring after "
+         f"{dec['time_to_first_overrun_s_at_3to1']:.2f} s", "3:1"),
+        ("equalization shifts", f">>{eq['shifts'][0]} + >>{eq['shifts'][1]}", ">>12 + >>15"),
+        ("equalization worst error", f"{eq['max_abs_error_uncompensated']:.1f} → "
+         f"{eq['max_abs_error_compensated']:.2f} levels", "'close to 0'"),
+    ]
+    for s in fig.get("ae_10x_steps_latency1", []):
+        n = s["settle_frames"]
+        rows.append((f"AE after 10x step at {s['step_time_s'] * 1e3:g} ms",
+                     "not settled" if n is None else f"{n} frames ({s['settle_s'] * 1e3:.2f} ms)", "-"))
+    w0 = max(len(r[0]) for r in rows)
+    w1 = max(len(r[1]) for r in rows)
+    head = f"{'quantity':<{w0}}  {'model':<{w1}}  paper"
+    return "\n".join([head, "-" * len(head)] + [f"{a:<{w0}}  {b:<{w1}}  {c}" for a, b, c in rows])
 
-    click.echo(json.dumps(seed_figures(), indent=2))
+
+@cli.command("highspeed-figures")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder for before_after.png (auto-exposure off/on on an over-exposed scene, "
+                   "equalization off/on on a dark one).")
+@click.option("--json", "as_json", is_flag=True, help="Print the numbers as JSON instead of the table.")
+@click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON here.")
+def highspeed_figures(out_dir, as_json, json_file):
+    """Print the paper's figures next to the model's (timing, link, buffer, equalization)."""
+    from viform._io import write_json
+    from viform.isp.highspeed_pipeline import before_after, plot_before_after, seed_figures
+
+    fig = seed_figures()
+    if out_dir is not None:
+        panels = before_after()
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        plot_before_after(Path(out_dir) / "before_after.png", panels)
+        fig["before_after"] = {k: {a: b for a, b in v.items() if a != "image"} for k, v in panels.items()}
+    if json_file:
+        write_json(json_file, fig)
+    if as_json:
+        click.echo(json.dumps(fig, indent=2, default=float))
+        return
+    click.echo(format_figures(fig))
+    if out_dir is not None:
+        click.echo("")
+        for k, v in fig["before_after"].items():
+            click.echo(f"{k:<17} exposure {v['exposure_s'] * 1e6:6.1f} µs  mean gray {v['mean_gray']:5.1f}  "
+                       f"at 255: {100 * v['saturated_fraction']:4.1f} %  levels {v['gray_levels_used']}")
+        click.echo(f"wrote {Path(out_dir) / 'before_after.png'}")

@@ -105,7 +105,7 @@ class HighSpeedConfig:
     ae_latency_frames: int = 1
     ae_saturated_cut: float | None = None
     equalize: bool = True
-    eq_source: str = "previous"
+    eq_source: str = "same"
     eq_method: str = "shift"
     eq_compensate: bool = True
     exposure_s: float = 100e-6
@@ -354,6 +354,99 @@ def ae_settling(result: HighSpeedResult, step_times_s, target_gray: float,
     return out
 
 
+def photo_scene(height: int = 90, width: int = 160, mean_lux: float = 200.0) -> Scene:
+    """A photograph (scikit-image's bundled ``camera``, 512 × 512) cropped to the aspect
+    ratio, resized to ``height`` × ``width`` and scaled to ``mean_lux`` on the sensor."""
+    from skimage.data import camera
+    from skimage.transform import resize
+
+    from viform.light.scenes import StillScene
+
+    img = camera().astype(np.float64)
+    rows = int(round(img.shape[1] * height / width))
+    r0 = max(0, (img.shape[0] - rows) // 2)
+    img = resize(img[r0:r0 + rows], (height, width), anti_aliasing=True)
+    img = np.maximum(img, 1.0)  # keep every pixel lit (the photograph has true blacks)
+    return StillScene(img * (check_positive("mean_lux", mean_lux) / img.mean()))
+
+
+def before_after(render_shape=(90, 160), n_frames: int = 40, seed: int = 0,
+                 bright_lux: float = 3_000.0, dark_lux: float = 40.0,
+                 exposure_s: float = 500e-6, dark_exposure_s: float = 100e-6) -> dict:
+    """Seed 002 Fig. 9 as a model run: auto-exposure off/on on an over-exposed scene and
+    histogram equalization off/on on a dark one.
+
+    Over-exposed: the photograph at ``bright_lux`` with ``exposure_s`` (AE off saturates it;
+    AE on brings the mean gray into 128 ± 15). Dark: the photograph at ``dark_lux`` with a
+    fixed ``dark_exposure_s`` (AE off, so the frame stays dark), shown without and with the
+    seed's same-frame equalization (eq. (3) by shifts, (E1)).
+
+    Returns the four last frames (uint8) and, for each, its mean gray, the fraction of
+    saturated (255) pixels and the number of distinct gray levels in use.
+    """
+    h, w = render_shape
+    bright, dark = photo_scene(h, w, bright_lux), photo_scene(h, w, dark_lux)
+    runs = {
+        "AE off": run_highspeed(bright, HighSpeedConfig(n_frames=n_frames, ae=False, equalize=False,
+                                                        exposure_s=exposure_s, seed=seed)),
+        "AE on": run_highspeed(bright, HighSpeedConfig(n_frames=n_frames, ae=True, equalize=False,
+                                                       exposure_s=exposure_s, seed=seed)),
+        "equalization off": run_highspeed(dark, HighSpeedConfig(n_frames=1, ae=False, equalize=False,
+                                                                exposure_s=dark_exposure_s, seed=seed)),
+    }
+    runs["equalization on"] = runs["equalization off"]
+    out = {}
+    for name, r in runs.items():
+        frame = r.gray8[-1]
+        if name == "equalization on":
+            frame = StreamEqualizer("same")(frame)  # what the link sends (seed eq. (3), (E1))
+        out[name] = {"image": frame, "exposure_s": float(r.exposure_s[-1]),
+                     "mean_gray": float(frame.mean()),
+                     "saturated_fraction": float((frame >= 255).mean()),
+                     "gray_levels_used": int(np.unique(frame).size),
+                     "gray_p1_p99": [float(v) for v in np.percentile(frame, [1, 99])]}
+    return out
+
+
+def plot_before_after(path, panels: dict) -> None:
+    """2 × 2 figure of :func:`before_after` (one 0–255 gray scale for every panel)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from viform._io import save_figure
+
+    fig, axes = plt.subplots(2, 2, figsize=(8.6, 5.6))
+    for ax, (name, p) in zip(axes.ravel(), panels.items(), strict=True):
+        im = ax.imshow(p["image"], cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        ax.set_title(f"{name}: exposure {p['exposure_s'] * 1e6:.0f} µs\nmean gray {p['mean_gray']:.0f}, "
+                     f"{100 * p['saturated_fraction']:.0f} % at 255, {p['gray_levels_used']} levels",
+                     fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])  # keep the frame: a saturated panel is white, not missing
+    fig.suptitle("Over-exposed scene without/with auto-exposure (top); "
+                 "dark scene without/with equalization (bottom)", fontsize=10)
+    fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="output gray level (0–255)")
+    save_figure(path, fig)
+
+
+def equalizer_step_flash(source: str, levels=(60.0, 600.0), shape=(36, 64), seed: int = 0) -> list:
+    """Mean output gray of three frames around a 10× light step, equalized with ``source``
+    ("same" or "previous"): frame 0 before the step, frames 1 and 2 after it."""
+    h, w = shape
+    scene = photo_scene(h, w, 1.0)
+    base = scene.illuminance_lux(0.0)
+    eq = StreamEqualizer(source)
+    pixels = FrameSensor(lux13hs_pixel_parameters(), exposure_s=1e-4, frame_rate_hz=1e3).pixel_array(h, w)
+    out = []
+    for k, lux in enumerate((levels[0], levels[1], levels[1])):
+        rng = pixels.rng(seed, k)
+        dn = pixels.digitize(pixels.collect_electrons(base * lux, 100e-6, rng), rng)
+        out.append(float(eq(to_gray8(dn, 10)).mean()))
+    return out
+
+
 # ----------------------------------------------------------------------------- outputs
 
 def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", step_times_s=(),
@@ -437,6 +530,8 @@ def seed_figures(include_simulation: bool = True) -> dict:
     red = lux13hs_timing("reduced")
     nor = lux13hs_timing("normal")
     red166 = lux13hs_timing("reduced", 166e6)
+    f2500 = red.clock_for_frame_rate_hz(2500.0)
+    red2500 = lux13hs_timing("reduced", f2500)
     rate = red.frame_rate_hz(SEED_ROI)
     plan = link_plan(rate, 720, 1280, "cameralink")
     eq = shift_error(1280 * 720)
@@ -447,6 +542,11 @@ def seed_figures(include_simulation: bool = True) -> dict:
         "normal_full_1280x864_133MHz": {"fps": nor.frame_rate_hz(), "seed": "3 500 fps at full frame"},
         "reduced_166MHz": {"fps_1280x720": red166.frame_rate_hz(SEED_ROI),
                            "fps_1280x864": red166.frame_rate_hz(), "seed": "reduced mode up to 2 500 fps"},
+        "reduced_2500fps_full_frame": {"pixel_clock_hz": f2500, "core_clock_hz": red2500.core_clock_hz,
+                                       "core_limit_hz": red2500.max_clock_hz,
+                                       "fps_1280x864": red2500.frame_rate_hz(),
+                                       "seed": "2 500 fps: the halved core clock is not bound by the "
+                                               "maximum clock"},
         "links_fps_1280x720x8": {k: v.max_frame_rate_hz(720, 1280, 8) for k, v in INTERFACES.items()},
         "cameralink_seed": "555 fps",
         "ddr": {"capacity_frames": DDRBuffer().capacity_frames(720, 1280, 8),

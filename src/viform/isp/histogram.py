@@ -161,18 +161,20 @@ def equalize(gray8, lut) -> np.ndarray:
 class StreamEqualizer:
     """Histogram equalization of a live stream (seed 002 §3.2.2–§3.2.3).
 
-    ``source="previous"`` maps frame k through the histogram of the previous frame it saw
-    (the streaming form: the LUT is ready before frame k arrives; the first frame passes
-    through unchanged). ``source="same"`` uses frame k's own histogram, which the seed's
-    camera can afford because each frame sits in DDR4 until its histogram is complete
-    (§3.2.2: statistics are gathered while writing, the frame is equalized when read back;
-    a ping-pong RAM holds the next frame's histogram meanwhile).
+    ``source="same"`` (default, the seed's way) uses frame k's own histogram: the seed's
+    camera can afford it because each frame sits in DDR4 until its histogram is complete
+    (§3.2.2: statistics are gathered while the frame is written, the frame is equalized when
+    read back; a ping-pong RAM holds the next frame's histogram meanwhile), so a light step
+    never maps one frame through another frame's table. ``source="previous"`` maps frame k
+    through the histogram of the previous frame it saw (a streaming form without a frame
+    buffer; the first frame passes through unchanged; after a step the frame flashes
+    black or white).
 
     ``method="shift"`` uses (E1) (``compensate`` toggles the >> 15 term); ``"float"`` uses
     eq. (3) in floating point, rounded to the nearest level.
     """
 
-    def __init__(self, source: str = "previous", method: str = "shift", compensate: bool = True,
+    def __init__(self, source: str = "same", method: str = "shift", compensate: bool = True,
                  pixels_per_clock: int = 8, counter_bits: int = 20):
         self.source = check_choice("source", source, ("previous", "same"))
         self.method = check_choice("method", method, ("shift", "float"))

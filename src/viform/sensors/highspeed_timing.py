@@ -114,7 +114,11 @@ class ReadoutTiming:
     sensor_height, sensor_width : int
         Active array, rows and columns.
     max_clock_hz : float
-        Highest clock the sensor accepts.
+        Highest *core* clock the sensor accepts (166 MHz on the LUX13HS).
+    core_clock_divider : int
+        Core clock = ``pixel_clock_hz / core_clock_divider``. 1 in normal mode; 2 in reduced
+        mode, where the seed says the core runs at half the clock and is therefore no longer
+        bound by the maximum clock (seed 002 §2.2).
     mode : str
         Label (``"normal"``/``"reduced"``).
     """
@@ -128,20 +132,28 @@ class ReadoutTiming:
     sensor_width: int = LUX13HS_WIDTH
     max_clock_hz: float = LUX13HS_MAX_CLOCK_HZ
     mode: str = "reduced"
+    core_clock_divider: int = 1
 
     def __post_init__(self):
         check_positive("pixel_clock_hz", self.pixel_clock_hz)
         check_positive("max_clock_hz", self.max_clock_hz)
-        if self.pixel_clock_hz > self.max_clock_hz * (1 + 1e-12):
+        check_int("core_clock_divider", self.core_clock_divider, 1)
+        if self.core_clock_hz > self.max_clock_hz * (1 + 1e-12):
             raise ViformError(f"pixel_clock_hz = {self.pixel_clock_hz:g} is not allowed: "
-                              f"the sensor's "
-                              f"maximum clock is {self.max_clock_hz:g} Hz")
+                              f"the sensor's core runs at 1/{self.core_clock_divider} of it and its "
+                              f"maximum core clock is {self.max_clock_hz:g} Hz (pixel clock ≤ "
+                              f"{self.max_clock_hz * self.core_clock_divider:g} Hz)")
         check_int("pixels_per_clock", self.pixels_per_clock, 1)
         check_int("rows_per_address", self.rows_per_address, 1)
         check_int("parallel_readouts", self.parallel_readouts, 1)
         check_int("frame_overhead_cycles", self.frame_overhead_cycles, 0)
         check_int("sensor_height", self.sensor_height, 1)
         check_int("sensor_width", self.sensor_width, 1)
+
+    @property
+    def core_clock_hz(self) -> float:
+        """Clock of the sensor core: ``pixel_clock_hz / core_clock_divider``."""
+        return self.pixel_clock_hz / self.core_clock_divider
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -207,13 +219,26 @@ class ReadoutTiming:
         """``cycles`` must be a whole number in [1, cycles_per_frame − 1]."""
         return check_int("exposure_cycles", cycles, 1, self.max_exposure_cycles(roi))
 
+    def clock_for_frame_rate_hz(self, frame_rate_hz: float, roi: Window | str | None = None,
+                                overhead_s: float = LUX13HS_FRAME_OVERHEAD_S) -> float:
+        """Pixel clock at which the window runs at ``frame_rate_hz``, inverting (T1)–(T2)
+        with the overhead held at ``overhead_s`` (the seed's 24 µs):
+        f = fps · data_cycles / (1 − fps · overhead_s)."""
+        fps = check_positive("frame_rate_hz", frame_rate_hz)
+        if fps * overhead_s >= 1:
+            raise ViformError(f"frame_rate_hz = {fps:g} is not allowed: the {overhead_s * 1e6:g} µs "
+                              "per-frame overhead alone limits the rate to "
+                              f"{1 / overhead_s:g} fps")
+        return fps * self.data_cycles(roi) / (1.0 - fps * overhead_s)
+
     def pixel_rate_per_s(self) -> float:
         """Peak pixel throughput of the output, pixels/s."""
         return self.pixel_clock_hz * self.pixels_per_clock * self.rows_per_step
 
     def summary(self, roi: Window | str | None = None) -> dict:
         w = self.window(roi)
-        return {**asdict(self), "roi": asdict(w), "cycles_per_row": self.cycles_per_row(w),
+        return {**asdict(self), "core_clock_hz": self.core_clock_hz, "roi": asdict(w),
+                "cycles_per_row": self.cycles_per_row(w),
                 "data_cycles": self.data_cycles(w), "cycles_per_frame": self.cycles_per_frame(w),
                 "frame_period_s": self.frame_period_s(w), "frame_rate_hz": self.frame_rate_hz(w),
                 "max_exposure_s": self.max_exposure_cycles(w) / self.pixel_clock_hz}
@@ -225,6 +250,13 @@ def lux13hs_timing(mode: str = "reduced", pixel_clock_hz: float | None = None,
 
     ``"reduced"``: 40 LVDS outputs, 4 pixels per clock per row; default clock 100 MHz and
     the seed's 2 400 overhead cycles (60 000-cycle frame at 1280 × 720 → 1 666.7 fps).
+
+    In reduced mode the core clock is half the pixel clock (``core_clock_divider = 2``), so
+    the 166 MHz core limit allows pixel clocks up to 332 MHz; the seed's "up to 2 500 fps"
+    at the full 1280 × 864 frame needs 183.8 MHz (core 91.9 MHz), which the model now
+    accepts (seed 002 §2.2). The seed gives no reduced-mode clock, so the default stays at
+    its 100 MHz operating point; the LVDS outputs then carry 4 bits a clock each, 735 Mb/s
+    per pair at 183.8 MHz (not a limit the seed states).
 
     ``"normal"``: 80 LVDS outputs, 8 pixels per clock per row, at the Table-1 regular clock
     133 MHz. The seed gives no overhead for this mode; we keep the seed's 24 µs of charge
@@ -243,7 +275,8 @@ def lux13hs_timing(mode: str = "reduced", pixel_clock_hz: float | None = None,
     check_non_negative("frame_overhead_cycles", frame_overhead_cycles)
     return ReadoutTiming(pixel_clock_hz=pixel_clock_hz,
                          pixels_per_clock=4 if mode == "reduced" else 8,
-                         frame_overhead_cycles=int(frame_overhead_cycles), mode=mode)
+                         frame_overhead_cycles=int(frame_overhead_cycles), mode=mode,
+                         core_clock_divider=2 if mode == "reduced" else 1)
 
 
 #: The seed's operating point: reduced mode, 100 MHz, 1280 × 720 window → 60 000 cycles.
