@@ -436,6 +436,18 @@ BUILTIN_SCENES = {
     "flicker": lambda height, width, **kw: FlickerScene(height=height, width=width, **kw),
 }
 
+
+def _dilemma_scene(name):  # lazy: viform.light.dilemma imports this module
+    def make(height, width, **kw):
+        from viform.light import dilemma
+
+        return dilemma.BUILTIN[name](height=height, width=width, **kw)
+
+    return make
+
+
+BUILTIN_SCENES.update({name: _dilemma_scene(name) for name in ("dilemma", "night-road-fog")})
+
 _VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".gif", ".webm")
 
 

@@ -1,0 +1,317 @@
+"""Built-in scenes that pose the high-speed / high-dynamic-range dilemma, with analytic truth.
+
+Seed 000 §1–§2 calls it the "dilemma" of timed-exposure cameras: a long exposure reaches
+dim light but blurs motion and saturates bright light, a short one freezes motion but
+loses the shadows. Seeds 001 (segmented exposure) and 003 (conditional overflow) widen
+the range of one exposure, seed 002 shortens the frame, seed 000's spike camera lets every
+pixel choose its own integration time. :class:`DilemmaScene` puts all of it in one view:
+
+* more than six decades of sensor-plane illuminance (a lamp, a sunlit window, a shadowed
+  interior and a deep-shadow corner);
+* fast motion: a three-blade propeller (tip speed ≥ 2 000 px/s) and a vehicle crossing at
+  2 500 px/s whose leading edge is a sharp vertical step (it gives the motion-blur metric);
+* a 90 Hz PWM LED (the flicker of LED lamps and signs that short exposures catch or miss);
+* a small, dim, fast object (a Gaussian blob moving at 3 000 px/s over the dark interior).
+
+The light at any instant is a closed form (:meth:`DilemmaScene.illuminance_lux`), so every
+sensor is compared with the exact truth. Every component is defined relative to the
+image size, so the scene exists at any resolution; speeds are in pixels per second at the
+chosen size.
+
+:class:`NightRoadFogScene` is a night road in fog for the range-gated camera (seed 004): a
+passive view in lux (oncoming headlights with their fog halo, airlight, signs and a car
+attenuated by the fog) and, for the gated camera, the same scene as an
+:class:`~viform.light.active.ActiveScene` (range, reflectance, retroreflective sheeting).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from viform._validate import ViformError, check_int, check_non_negative, check_positive, check_range
+from viform.light.scenes import Scene
+
+
+def pwm_on_time_s(t_s: float, frequency_hz: float, duty: float) -> float:
+    """Time the PWM output has been on in [0, t_s]: whole periods plus the part of the last one.
+
+    The LED is on during the first ``duty`` fraction of each period 1/f.
+    """
+    period = 1.0 / frequency_hz
+    whole = math.floor(t_s / period)
+    return whole * duty * period + min(t_s - whole * period, duty * period)
+
+
+class DilemmaScene(Scene):
+    """The dilemma scene (see the module notes); all illuminances on the sensor plane, lux.
+
+    Parameters
+    ----------
+    height, width : int
+        Resolution (≥ 32 × 48).
+    brightness : float
+        Factor on every illuminance (1 = the documented levels below).
+    speed : float
+        Factor on every speed (1 = propeller tip 2 000 px/s at the default size scale, vehicle
+        2 500 px/s, small object 3 000 px/s).
+    shadow_lux, interior_lux, window_lux, lamp_lux : float
+        Deep-shadow corner (0.01), shadowed interior (0.05–0.4 textured), sunlit window
+        (1 000–3 000) and lamp (30 000) levels: 6.5 decades.
+    led_on_lux, led_off_lux, led_frequency_hz, led_duty : float
+        The PWM LED (10 lux on, 0.02 off, 90 Hz, 25 % duty).
+    """
+
+    name = "dilemma"
+
+    def __init__(self, height: int = 96, width: int = 160, brightness: float = 1.0, speed: float = 1.0,
+                 shadow_lux: float = 0.01, interior_lux: float = 0.05, window_lux: float = 1000.0,
+                 lamp_lux: float = 30_000.0, led_on_lux: float = 10.0, led_off_lux: float = 0.02,
+                 led_frequency_hz: float = 90.0, led_duty: float = 0.25, duration_s: float | None = None):
+        height = check_int("height", height, 32)
+        width = check_int("width", width, 48)
+        super().__init__(height, width, duration_s)
+        self.brightness = check_positive("brightness", brightness)
+        self.speed = check_non_negative("speed", speed)
+        self.shadow_lux = check_positive("shadow_lux", shadow_lux) * self.brightness
+        self.interior_lux = check_positive("interior_lux", interior_lux) * self.brightness
+        self.window_lux = check_positive("window_lux", window_lux) * self.brightness
+        self.lamp_lux = check_positive("lamp_lux", lamp_lux) * self.brightness
+        self.led_on_lux = check_positive("led_on_lux", led_on_lux) * self.brightness
+        self.led_off_lux = check_non_negative("led_off_lux", led_off_lux) * self.brightness
+        self.led_frequency_hz = check_positive("led_frequency_hz", led_frequency_hz)
+        self.led_duty = check_range("led_duty", led_duty, 0.0, 1.0, low_open=True, high_open=True)
+        h, w = height, width
+        y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+        self._x, self._y = x, y
+        # Static background: textured interior, darker towards the deep-shadow corner (lower left).
+        shade = np.clip((x / w) * 0.6 + (1 - y / h) * 0.6, 0.0, 1.0)
+        wall = self.interior_lux * (1.0 + 7.0 * shade) * (0.85 + 0.15 * np.sin(x / 3.0) * np.sin(y / 5.0))
+        corner = (x < 0.22 * w) & (y > 0.62 * h)
+        wall[corner] = self.shadow_lux
+        # Sunlit window (upper left), with a sky gradient and window bars.
+        self.window = (x >= 0.04 * w) & (x < 0.36 * w) & (y >= 0.06 * h) & (y < 0.46 * h)
+        sky = self.window_lux * (1.0 + 2.0 * (1 - (y - 0.06 * h) / (0.4 * h)))
+        bars = (np.abs(x - 0.20 * w) < max(0.5, 0.012 * w)) | (np.abs(y - 0.26 * h) < max(0.5, 0.012 * h))
+        wall = np.where(self.window & ~bars, sky, wall)
+        wall = np.where(self.window & bars, 0.5 * self.brightness, wall)
+        # Lamp (upper right): a small disc.
+        lamp_r = max(1.5, 0.035 * h)
+        self.lamp = (x - 0.88 * w) ** 2 + (y - 0.14 * h) ** 2 <= lamp_r ** 2
+        wall[self.lamp] = self.lamp_lux
+        # Road band (bottom) where the vehicle passes.
+        self.road_rows = (int(round(0.74 * h)), int(round(0.95 * h)))
+        r0, r1 = self.road_rows
+        wall[r0:r1] = 0.3 * self.brightness
+        self._background = wall
+        # Propeller: three blades about (cx, cy), radius R; tip speed 2000 px/s at speed = 1.
+        self.prop_centre = (0.58 * w, 0.40 * h)
+        self.prop_radius_px = 0.26 * h
+        self.prop_tip_speed_px_per_s = 2000.0 * self.speed
+        self.prop_omega_rad_per_s = self.prop_tip_speed_px_per_s / self.prop_radius_px
+        dx, dy = x - self.prop_centre[0], y - self.prop_centre[1]
+        self._prop_r = np.hypot(dx, dy)
+        self._prop_theta = np.arctan2(dy, dx)
+        self._prop_disc = (self._prop_r <= self.prop_radius_px) & (self._prop_r >= 0.12 * self.prop_radius_px)
+        self.prop_lux = 4.0 * self.brightness
+        # Vehicle: a bright box on the road moving right at 2500 px/s, entering from the left edge.
+        self.vehicle_speed_px_per_s = 2500.0 * self.speed
+        self.vehicle_length_px = 0.35 * w
+        self.vehicle_front0_px = 0.30 * w
+        self.vehicle_rows = (r0 + max(1, (r1 - r0) // 5), r1 - max(1, (r1 - r0) // 5))
+        self.vehicle_lux = 3.0 * self.brightness
+        # PWM LED (right, middle).
+        led = max(1.0, 0.04 * h)
+        self.led = (np.abs(x - 0.93 * w) <= led) & (np.abs(y - 0.55 * h) <= led)
+        # Small dim fast object: crossing the dim interior horizontally at 3000 px/s (wraps around).
+        self.object_speed_px_per_s = 3000.0 * self.speed
+        self.object_row_px = 0.66 * h
+        self.object_x0_px = 0.05 * w
+        self.object_sigma_px = max(0.7, 0.012 * h)
+        self.object_lux = 1.0 * self.brightness
+
+    # ------------------------------------------------------------------ truth
+    def vehicle_front_px(self, t_s: float) -> float:
+        """x of the vehicle's leading (right) edge at ``t_s`` (px, wraps around the width)."""
+        span = self.width + self.vehicle_length_px
+        return (self.vehicle_front0_px + self.vehicle_speed_px_per_s * t_s) % span
+
+    def led_is_on(self, t_s: float) -> bool:
+        phase = (t_s * self.led_frequency_hz) % 1.0
+        return phase < self.led_duty
+
+    def _moving(self, t_s: float, lux: np.ndarray) -> np.ndarray:
+        # Vehicle (opaque box; its front edge is the sharp step the blur metric uses).
+        front = self.vehicle_front_px(t_s)
+        v0, v1 = self.vehicle_rows
+        cols = (self._x[0] <= front) & (self._x[0] > front - self.vehicle_length_px)
+        lux[v0:v1, cols] = self.vehicle_lux
+        # Propeller blades: |angle to nearest blade| < 14°.
+        phase = self._prop_theta - self.prop_omega_rad_per_s * t_s
+        blade = self._prop_disc & (np.cos(3.0 * phase) > math.cos(3.0 * math.radians(14.0)))
+        lux[blade] = self.prop_lux
+        # Small dim object: an additive Gaussian blob.
+        ox = (self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width
+        lux += self.object_lux * np.exp(-((self._x - ox) ** 2 + (self._y - self.object_row_px) ** 2)
+                                        / (2 * self.object_sigma_px ** 2))
+        return lux
+
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        lux = self._moving(float(t_s), self._background.copy())
+        lux[self.led] = self.led_on_lux if self.led_is_on(float(t_s)) else self.led_off_lux
+        return lux
+
+    def max_speed_px_per_s(self) -> float:
+        return max(self.prop_tip_speed_px_per_s, self.vehicle_speed_px_per_s, self.object_speed_px_per_s)
+
+    def mean_illuminance_lux(self, t0_s: float, t1_s: float, samples: int | None = None) -> np.ndarray:
+        """Mean light over [t0_s, t1_s]: moving parts by the midpoint rule with samples every ≤ 0.5 px
+        of motion (so blur is resolved), the PWM LED exactly (its on-time in the window)."""
+        if not t1_s >= t0_s:
+            raise ViformError(f"window end t1_s={t1_s!r} must be ≥ start t0_s={t0_s!r}")
+        if t1_s == t0_s:
+            return self.illuminance_lux(t0_s)
+        n = int(min(2000, max(4, math.ceil(self.max_speed_px_per_s() * (t1_s - t0_s) / 0.5))))
+        if samples is not None:
+            n = max(n, int(samples))
+        acc = np.zeros(self.shape)
+        for k in range(n):
+            acc += self._moving(t0_s + (k + 0.5) * (t1_s - t0_s) / n, self._background.copy())
+        acc /= n
+        on = (pwm_on_time_s(t1_s, self.led_frequency_hz, self.led_duty)
+              - pwm_on_time_s(t0_s, self.led_frequency_hz, self.led_duty)) / (t1_s - t0_s)
+        acc[self.led] = self.led_off_lux + (self.led_on_lux - self.led_off_lux) * on
+        return acc
+
+    # ------------------------------------------------------------------ what the scene demands
+    def demand(self) -> dict:
+        """What a camera needs to see this scene: its dynamic range and time resolution."""
+        lo = min(self.shadow_lux, self.led_off_lux or self.shadow_lux)
+        hi = self.lamp_lux
+        return {
+            "min_lux": lo, "max_lux": hi,
+            "dynamic_range_db": 20 * math.log10(hi / lo),
+            "max_speed_px_per_s": self.max_speed_px_per_s(),
+            # an edge moving at the top speed crosses one pixel in this time
+            "time_resolution_s": 1.0 / self.max_speed_px_per_s() if self.max_speed_px_per_s() > 0 else math.inf,
+            "flicker_hz": self.led_frequency_hz,
+        }
+
+    def regions(self) -> dict:
+        """Masks and geometry the comparison metrics use."""
+        return {"led": self.led, "lamp": self.lamp, "window": self.window,
+                "edge_rows": self.vehicle_rows, "edge_dark_lux": 0.3 * self.brightness,
+                "edge_bright_lux": self.vehicle_lux}
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(brightness=self.brightness, speed=self.speed, shadow_lux=self.shadow_lux,
+                 interior_lux=self.interior_lux, window_lux=self.window_lux, lamp_lux=self.lamp_lux,
+                 led_on_lux=self.led_on_lux, led_off_lux=self.led_off_lux,
+                 led_frequency_hz=self.led_frequency_hz, led_duty=self.led_duty,
+                 propeller_tip_speed_px_per_s=self.prop_tip_speed_px_per_s,
+                 vehicle_speed_px_per_s=self.vehicle_speed_px_per_s,
+                 object_speed_px_per_s=self.object_speed_px_per_s, demand=self.demand())
+        return d
+
+
+
+class NightRoadFogScene(Scene):
+    """A night road in fog: passive light in lux, and the same scene with range for the gated camera.
+
+    A flat road seen from 1.2 m (vertical field of view 20°), fog of visibility
+    ``visibility_m`` (extinction σ = 3.912/V, Koschmieder), retroreflective signs at 60, 90
+    and 120 m on the right, an unlit car at 80 m in the lane, and an oncoming car's
+    headlights at 150 m on the left. Passive light (sensor plane, lux): objects lit by the
+    own low beams fall as 1/R² and are attenuated twice by the fog, T(R)², plus the fog's
+    own airlight A·(1 − T(R)); the oncoming headlights (once attenuated) carry a forward-
+    scattering halo of strength ∝ 1 − T. The light is static: no motion.
+
+    :attr:`active` is the :class:`~viform.light.active.ActiveScene` (range, reflectance at
+    905 nm, sheeting R_A, the same fog) that the gated camera of seed 004 images; the
+    oncoming headlights are outside its 905 nm filter band and are not part of it.
+    """
+
+    name = "night-road-fog"
+
+    def __init__(self, height: int = 96, width: int = 160, visibility_m: float = 100.0,
+                 brightness: float = 1.0, speed: float = 0.0, duration_s: float | None = None):
+        from viform.light.active import ActiveScene, Medium
+
+        height = check_int("height", height, 32)
+        width = check_int("width", width, 48)
+        super().__init__(height, width, duration_s)
+        self.visibility_m = check_positive("visibility_m", visibility_m, allow_inf=True)
+        self.brightness = check_positive("brightness", brightness)
+        medium = Medium.from_visibility(self.visibility_m, name=f"fog, visibility {self.visibility_m:g} m")
+        h, w = height, width
+        ifov = math.radians(20.0) / h
+        horizon = 0.42 * h
+        y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+        below = y - horizon + 0.5
+        road_range = np.where(below > 0, 1.2 / np.maximum(below, 1e-9) / ifov, np.inf)
+        range_m = np.minimum(road_range, 400.0)
+        range_m[below <= 0] = np.inf
+        reflectance = np.where(below > 0, 0.15, 0.0)
+        retro = np.zeros((h, w))
+        self.targets: dict[str, np.ndarray] = {}
+
+        def box(label, range_, centre_x_m, bottom_m, width_m, height_m, refl, ra):
+            cx = w / 2 + centre_x_m / range_ / ifov
+            yb = horizon + (1.2 - bottom_m) / range_ / ifov
+            hw, hh = max(1.0, width_m / range_ / ifov / 2), max(1.0, height_m / range_ / ifov)
+            mask = (np.abs(x - cx) <= hw) & (y <= yb) & (y > yb - hh)
+            range_m[mask] = range_
+            reflectance[mask] = refl
+            retro[mask] = ra
+            self.targets[label] = mask
+
+        for r in (120.0, 90.0, 60.0):
+            box(f"sign {r:g} m", r, 3.5, 1.5, 0.9, 0.9, 0.6, 50.0)
+        box("car 80 m", 80.0, 0.3, 0.3, 1.8, 1.2, 0.3, 0.0)
+        self.active = ActiveScene(range_m=range_m, reflectance=reflectance, retro_coefficient_per_sr=retro,
+                                  medium=medium, ambient_lux=1e-3, name="night road in fog")
+        t = medium.transmission(np.where(np.isfinite(range_m), range_m, 1e4))
+        beams = 30.0 ** 2 / np.maximum(range_m, 5.0) ** 2  # own low beams, 1/R²
+        lit = (0.02 * reflectance + 0.05 * retro) * beams * 100.0
+        airlight = 0.03
+        lux = lit * t ** 2 + airlight * (1 - t) + 1e-3
+        # oncoming headlights at 150 m, left lane, 1.4 m apart, 0.7 m high
+        t150 = float(medium.transmission(150.0))
+        for side in (-0.7, 0.7):
+            cx = w / 2 + (-3.5 + side) / 150.0 / ifov
+            cy = horizon + 0.5 / 150.0 / ifov
+            d2 = (x - cx) ** 2 + (y - cy) ** 2
+            lux += 3000.0 * t150 * np.exp(-d2 / (2 * 0.6 ** 2))
+            lux += 40.0 * (1 - t150) * np.exp(-np.sqrt(d2) / max(2.0, 0.05 * w))
+        self.targets["oncoming headlights"] = np.zeros((h, w), bool)
+        self._lux = lux * self.brightness
+
+    def illuminance_lux(self, t_s: float) -> np.ndarray:
+        return self._lux
+
+    def mean_illuminance_lux(self, t0_s, t1_s, samples=None):
+        return self._lux
+
+    def demand(self) -> dict:
+        lo, hi = float(self._lux.min()), float(self._lux.max())
+        return {"min_lux": lo, "max_lux": hi, "dynamic_range_db": 20 * math.log10(hi / lo),
+                "max_speed_px_per_s": 0.0, "time_resolution_s": math.inf, "flicker_hz": None,
+                "visibility_m": self.visibility_m}
+
+    def regions(self) -> dict:
+        return {"targets": {k: v for k, v in self.targets.items() if v.any()}}
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(visibility_m=self.visibility_m, brightness=self.brightness, demand=self.demand(),
+                 active=self.active.describe())
+        return d
+
+
+#: Scenes registered in :data:`viform.light.scenes.BUILTIN_SCENES`.
+BUILTIN = {
+    "dilemma": lambda height, width, **kw: DilemmaScene(height, width, **kw),
+    "night-road-fog": lambda height, width, **kw: NightRoadFogScene(height, width, **kw),
+}
