@@ -8,7 +8,7 @@ from viform.cli import main
 def test_lightcomm_cli_json_and_figures(tmp_path, capsys):
     js = tmp_path / "r.json"
     rc = main(["lightcomm", "--bitrate", "5000", "--distance-m", "20", "--ambient-lux", "0.5", "--bits", "200",
-               "--json", str(js), "--out", str(tmp_path / "figs")])
+               "--json-file", str(js), "--out", str(tmp_path / "figs")])
     out = capsys.readouterr().out
     assert rc == 0
     assert "maximum error-free rate" in out
@@ -40,7 +40,7 @@ def test_lightcomm_cli_errors_are_one_line(capsys):
 
 def test_display_cli(tmp_path, capsys):
     js = tmp_path / "d.json"
-    rc = main(["display", "--json", str(js)])
+    rc = main(["display", "--json-file", str(js)])
     out = capsys.readouterr().out
     assert rc == 0
     assert "hold 60 Hz" in out and "pass-through" in out
@@ -54,7 +54,17 @@ def test_unusable_outputs_are_refused_before_any_figure(tmp_path, capsys):
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     for cmd in (["lightcomm", "--no-max"], ["display"]):
-        rc = main([*cmd, "--out", str(tmp_path / "figs"), "--json", str(blocker / "r.json")])
+        rc = main([*cmd, "--out", str(tmp_path / "figs"), "--json-file", str(blocker / "r.json")])
         err = capsys.readouterr().err
-        assert rc == 2 and "--json" in err and err.count("\n") == 1
+        assert rc == 2 and "--json-file" in err and err.count("\n") == 1
         assert not (tmp_path / "figs").exists()
+
+
+def test_display_json_flag_prints_json_to_stdout(capsys):
+    """Bare --json prints the results as JSON on stdout (the project's one convention), no table."""
+    rc = main(["display", "--json"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    r = json.loads(out)
+    assert r["comparison"]["displays"]["spike"]["tracked_edge_width_px"] < r["comparison"]["displays"]["hold 60 Hz"][
+        "tracked_edge_width_px"]

@@ -18,13 +18,29 @@ from viform.cli.app import cli
 
 
 def _check_outputs(json_path, out) -> None:
-    """Refuse unusable --json/--out before any work, so a bad path leaves no figures behind."""
+    """Refuse unusable --json-file/--out before any work, so a bad path leaves no figures behind."""
     if out is not None:
         check_output_folder("--out", Path(out))
     if json_path is not None:
         if Path(json_path).is_dir():
-            raise ViformError(f"--json: {json_path} is a folder; give a file name")
-        check_output_folder("--json", Path(json_path).resolve().parent)
+            raise ViformError(f"--json-file: {json_path} is a folder; give a file name")
+        check_output_folder("--json-file", Path(json_path).resolve().parent)
+
+
+def _emit(result: dict, print_table, as_json: bool, json_path) -> None:
+    """The project's one convention: a table by default, ``--json`` to stdout, ``--json-file`` to a file."""
+    import json
+
+    from viform._io import _jsonable, write_json
+
+    if as_json:
+        click.echo(json.dumps(result, indent=2, default=_jsonable))
+    else:
+        print_table(result)
+    if json_path:
+        write_json(json_path, result)
+        if not as_json:
+            click.echo(f"wrote {json_path}")
 
 
 def run_lightcomm(bitrate_bps: float = 10e3, modulation: str = "ook", distance_m: float = 100.0,
@@ -133,22 +149,20 @@ def print_lightcomm(r: dict) -> None:
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--no-max", is_flag=True, help="Skip the search for the maximum error-free rate.")
 @click.option("--sweeps", is_flag=True, help="Run the BER sweeps (always done with --out).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write the results as JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of the table.")
+@click.option("--json-file", "json_path", type=click.Path(dir_okay=False), default=None,
+              help="Also write the results as JSON to this file.")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Folder for figures.")
 def lightcomm_command(bitrate_bps, modulation, distance_m, ambient_lux, led_cd, n_bits, message, clock_hz,
-                      threshold_electrons, seed, no_max, sweeps, json_path, out):
+                      threshold_electrons, seed, no_max, sweeps, as_json, json_path, out):
     """Spike-camera light communication: an LED sending OOK/PPM bits to a spike camera (seed 000 §7)."""
-    from viform._io import write_json
 
     if message is not None and message == "":
         raise ViformError("--message is empty: give at least one character to transmit")
     _check_outputs(json_path, out)
     r = run_lightcomm(bitrate_bps, modulation, distance_m, ambient_lux, led_cd, n_bits, message, seed, clock_hz,
                       threshold_electrons, not no_max, sweeps, out)
-    print_lightcomm(r)
-    if json_path:
-        write_json(json_path, r)
-        click.echo(f"wrote {json_path}")
+    _emit(r, print_lightcomm, as_json, json_path)
 
 
 def run_display(velocity_px_per_s: float = 600.0, eye_ms: float = 1000 / 60, link_latency_ticks: int = 0,
@@ -222,16 +236,14 @@ def print_display(r: dict) -> None:
 @click.option("--link-latency-ticks", type=int, default=0, show_default=True,
               help="Extra ticks of the camera → display link in the pass-through.")
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write the results as JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of the table.")
+@click.option("--json-file", "json_path", type=click.Path(dir_okay=False), default=None,
+              help="Also write the results as JSON to this file.")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Folder for figures.")
-def display_command(velocity_px_per_s, eye_ms, link_latency_ticks, seed, json_path, out):
+def display_command(velocity_px_per_s, eye_ms, link_latency_ticks, seed, as_json, json_path, out):
     """Spike continuous display vs 60/120 Hz sample-and-hold, and the spike pass-through (seed 000 §7)."""
-    from viform._io import write_json
 
     check_int("link_latency_ticks", link_latency_ticks, 0, 600)
     _check_outputs(json_path, out)
     r = run_display(velocity_px_per_s, eye_ms, link_latency_ticks, seed, out)
-    print_display(r)
-    if json_path:
-        write_json(json_path, r)
-        click.echo(f"wrote {json_path}")
+    _emit(r, print_display, as_json, json_path)
