@@ -26,6 +26,7 @@ COMMAND_MODULES = [
     "viform.cli.gated",  # gated (issue 5)
     "viform.cli.coding",  # encode, decode, dr (issue 6)
     "viform.cli.display",  # lightcomm, display (issue 7)
+    "viform.cli.dataset",  # dataset (issue 14)
 ]
 
 

@@ -1,0 +1,90 @@
+"""``viform dataset``: turn a folder of video clips into a spike dataset (Spike-Zoo / SpikeCV layout)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from viform.cli.app import cli
+
+
+def _sig(value: float) -> str:
+    return f"{value:.4g}"
+
+
+@cli.command("dataset")
+@click.argument("src", type=click.Path(file_okay=False))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), required=True,
+              help="Dataset folder to write (an unfinished one made with the same options is resumed).")
+@click.option("--preset", default=None, help="Spike camera: a preset name (default spikeone) or a preset .json file.")
+@click.option("--height", type=int, default=None, help="Sensor rows (default: the preset's).")
+@click.option("--width", type=int, default=None, help="Sensor columns (default: the preset's).")
+@click.option("--workers", type=int, default=None,
+              help="Local worker processes, one clip each at a time (default: the number of CPU cores).")
+@click.option("--scheduler", default=None, help="Address of a running dask scheduler (tcp://HOST:PORT) "
+              "to use instead of local workers.")
+@click.option("--worker-memory", default="auto", show_default=True,
+              help="Memory limit of each local worker, e.g. 2GiB (auto: the machine's memory shared evenly).")
+@click.option("--gt-every", type=int, default=1, show_default=True,
+              help="Write a ground-truth image for every N-th source frame.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Dataset seed; each clip's photon-noise seed is derived from it and the clip's name.")
+@click.option("--frame-rate-hz", type=float, default=None,
+              help="Frame rate of the source clips (required for folders of images; videos declare their own).")
+@click.option("--max-lux", type=float, default=None,
+              help="Illuminance of a full-scale source pixel, lux (default: the light at which the sensor "
+                   "fires 0.6 spikes per tick).")
+@click.option("--interpolation", type=click.Choice(["hold", "linear"]), default="linear", show_default=True,
+              help="Light between source frames.")
+@click.option("--light-sample-ticks", type=int, default=1, show_default=True,
+              help="Evaluate the light once every N ticks (1: every tick).")
+@click.option("--block-ticks", type=int, default=4096, show_default=True,
+              help="Ticks simulated and written at a time (bounds each worker's memory; same bits).")
+@click.option("--no-progress", is_flag=True, help="No progress bar.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
+@click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
+def dataset(src, out_dir, preset, height, width, workers, scheduler, worker_memory, gt_every, seed, frame_rate_hz,
+            max_lux, interpolation, light_sample_ticks, block_ticks, no_progress, as_json, json_file):
+    """Convert SRC, a folder of videos or of frame folders, into a spike dataset in --out.
+
+    Writes spike/<clip>.dat (the spike cameras' packed-bit layout) with a JSON description
+    beside each, gt/<clip>_<frame>.png ground truth, config.yaml (spike_h, spike_w) and
+    manifest.json (ticks, spikes and SHA-256 of every clip). Clips run in parallel on local
+    worker processes or on a dask cluster; finished clips are checked and skipped when the
+    command is run again. Exit status 1 when a clip failed (the others are still written).
+    """
+    from viform._io import check_output_folder, write_json
+    from viform.datasets.build import build_dataset, make_settings
+
+    if json_file is not None:
+        check_output_folder("--json-file", Path(json_file).parent)
+    settings = make_settings(preset, height=height, width=width, seed=seed, gt_every=gt_every,
+                             frame_rate_hz=frame_rate_hz, max_lux=max_lux, interpolation=interpolation,
+                             light_sample_ticks=light_sample_ticks)
+    summary = build_dataset(src, out_dir, settings, workers=workers, scheduler=scheduler,
+                            memory_limit=worker_memory, block_ticks=block_ticks, progress=not no_progress)
+    if json_file is not None:
+        write_json(json_file, summary)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+    else:
+        rows = [
+            ("dataset", summary["out"]),
+            ("sensor", f"{settings.width}×{settings.height} px, {_sig(settings.parameters.clock_hz / 1e3)} kHz, "
+                       f"full scale {_sig(settings.max_lux)} lux"),
+            ("clips", f"{summary['clips']} (converted {summary['converted']}, skipped {summary['skipped']} "
+                      f"already done, failed {len(summary['failed'])})"),
+            ("ticks", f"{summary['ticks']:,}"),
+            ("spikes", f"{summary['spikes']:,}"),
+            ("spike data", f"{_sig(summary['bytes'] / 1e6)} MB"),
+            ("time", f"{_sig(summary['seconds'])} s on {summary['workers']} workers"),
+            ("speed", f"{_sig(summary['clips_per_s'])} clips/s, {_sig(summary['pixel_ticks_per_s'])} pixel-ticks/s"),
+        ]
+        for name, value in rows:
+            click.echo(f"{name:<12} {value}")
+    for fail in summary["failed"]:
+        click.echo(f"viform: clip {fail['clip']!r} failed: {fail['error']}", err=True)
+    if summary["failed"]:
+        raise click.exceptions.Exit(1)

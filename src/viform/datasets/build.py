@@ -1,0 +1,547 @@
+"""Convert a folder of video clips into a spike dataset, clip by clip, on dask.distributed.
+
+Each clip is an independent task (:func:`convert_clip`): its frames become a
+:class:`~viform.light.scenes.VideoScene` (frame k is the light at k / frame_rate_hz, linear
+in between), the spike camera (seed 000 §3.2, exact Poisson photon statistics, seed 000 §5.1)
+reads it on its clock, and the bits are packed and written block by block into
+``spike/<clip>.dat`` while their SHA-256 and spike count are accumulated — the clip's spike
+stream is never held whole. Ground-truth PNGs are the source frames at the sensor's size.
+
+Determinism: the clip's seed is :func:`~viform.datasets.layout.clip_seed` (dataset seed,
+clip name), and the simulator gives the same bits whatever its block size, so the dataset's
+bits do not depend on the number of workers or the order in which they finish.
+
+Resuming: a clip is finished when its sidecar (written last) names the run's settings and
+the ``.dat`` on disk has the SHA-256 and every ground-truth PNG the hash the sidecar records;
+such clips are skipped, anything else is redone from scratch. Every file is written under a
+temporary name and renamed (:mod:`viform._io`), so a killed worker leaves at most a stale
+temporary file, which the next attempt removes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import os
+import time
+import uuid
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from viform._io import atomic_open, check_output_folder, save_image, write_json
+from viform._validate import ViformError, check_choice, check_int, check_positive, one_line
+from viform.datasets.layout import (
+    CONFIG_NAME,
+    GT_DIR,
+    LAYOUT_FORMAT,
+    MANIFEST_NAME,
+    SPIKE_DIR,
+    clip_seed,
+    gt_name,
+    read_config,
+    sha256_file,
+    write_config,
+)
+from viform.datasets.sources import SourceClip, find_clips, lux_to_gt_image, read_clip
+
+#: Preset used when none is given: the 400×250, 40 kHz chip of seed 000 §6.
+DEFAULT_PRESET = "spikeone"
+#: Spikes per tick of a full-scale source pixel when --max-lux is not given (Spike-Zoo's REDS rate).
+FULL_SCALE_RATE = 0.6
+
+
+@dataclass(frozen=True)
+class DatasetSettings:
+    """Everything that decides a clip's bits (compared on resume)."""
+
+    preset: str
+    parameters: object  # SpikeSensorParameters
+    height: int
+    width: int
+    max_lux: float
+    seed: int = 0
+    gt_every: int = 1
+    frame_rate_hz: float | None = None
+    interpolation: str = "linear"
+    light_sample_ticks: int = 1
+
+    def describe(self) -> dict:
+        """JSON-able description (sensor parameters in full)."""
+        d = {k: v for k, v in asdict(self).items() if k != "parameters"}
+        d["sensor"] = json.loads(json.dumps(self.parameters.to_dict(), default=_jsonable))
+        return d
+
+    def fingerprint(self) -> str:
+        """SHA-256 of :meth:`describe`: two runs with the same fingerprint write the same bits."""
+        return hashlib.sha256(json.dumps(self.describe(), sort_keys=True).encode()).hexdigest()
+
+
+@dataclass(frozen=True)
+class ClipTask:
+    """One unit of work sent to a worker."""
+
+    clip: SourceClip
+    out: str
+    settings: DatasetSettings
+    provenance: dict = field(default_factory=dict)
+    block_ticks: int = 4096
+    # testing aid: after this many blocks of this clip the worker process exits abruptly,
+    # once per output folder (a marker file remembers it), as a killed worker would
+    crash_after_blocks: int | None = None
+
+
+def _jsonable(value):
+    from viform._io import _jsonable as convert
+
+    return convert(value)
+
+
+# ---------------------------------------------------------------------- settings
+
+def resolve_preset(spec: str | None, height: int | None = None, width: int | None = None, **overrides):
+    """Sensor parameters and resolution from a spike preset name or JSON file.
+
+    Uses :func:`viform.sensors.spike_presets.load_spike_preset`; ``height``/``width`` override
+    the preset's resolution and ``overrides`` its parameter fields.
+    """
+    from dataclasses import replace
+
+    spec = spec or DEFAULT_PRESET
+    try:
+        from viform.sensors.spike_presets import load_spike_preset
+    except ImportError:  # presets not installed yet: the default chip only
+        load_spike_preset = None
+    if load_spike_preset is not None:
+        preset = load_spike_preset(spec)
+        params, h, w = preset.parameters, preset.height, preset.width
+    else:
+        from viform.sensors.spike import SpikeSensorParameters
+
+        check_choice("--preset", spec, (DEFAULT_PRESET,))
+        params, h, w = SpikeSensorParameters(), 250, 400
+    if overrides:
+        params = replace(params, **overrides)
+    h = check_int("--height", h if height is None else height, 1)
+    w = check_int("--width", w if width is None else width, 1)
+    if (h * w) % 8:
+        raise ViformError(f"--height × --width = {h}×{w} is not a multiple of 8 pixels: the .dat layout "
+                          "packs each frame into whole bytes")
+    return params, h, w
+
+
+def full_scale_lux(parameters, rate_per_tick: float = FULL_SCALE_RATE) -> float:
+    """Illuminance (lux) at which a pixel fires ``rate_per_tick`` spikes per tick on average.
+
+    Seed 000 §3.2: a steady pixel fires (λ_signal + λ_dark)·Δt / Q spikes per tick, so the
+    signal electrons per second needed are rate·Q·clock_hz − dark current.
+    """
+    electrons_per_s = rate_per_tick * round(parameters.threshold_electrons) * parameters.clock_hz \
+        - parameters.dark_current_e_per_s
+    if electrons_per_s <= 0:
+        raise ViformError("the preset's dark current alone exceeds the full-scale firing rate: give --max-lux")
+    return float(parameters.optics.lux_from_electrons_per_s(electrons_per_s))
+
+
+def make_settings(preset: str | None = None, *, height: int | None = None, width: int | None = None,
+                  seed: int = 0, gt_every: int = 1, frame_rate_hz: float | None = None,
+                  max_lux: float | None = None, interpolation: str = "linear", light_sample_ticks: int = 1,
+                  **overrides) -> DatasetSettings:
+    """Validated :class:`DatasetSettings` (errors name the command-line option).
+
+    ``max_lux`` (the illuminance of a full-scale source pixel) defaults to the light at which
+    the sensor fires :data:`FULL_SCALE_RATE` spikes per tick (Spike-Zoo's REDS rate).
+    """
+    params, h, w = resolve_preset(preset, height, width, **overrides)
+    max_lux = full_scale_lux(params) if max_lux is None else max_lux
+    return DatasetSettings(
+        preset=preset or DEFAULT_PRESET, parameters=params, height=h, width=w,
+        seed=check_int("--seed", seed, 0, (1 << 63) - 1),
+        gt_every=check_int("--gt-every", gt_every, 1),
+        frame_rate_hz=None if frame_rate_hz is None else check_positive("--frame-rate-hz", frame_rate_hz),
+        max_lux=check_positive("--max-lux", max_lux),
+        interpolation=check_choice("--interpolation", interpolation, ("hold", "linear")),
+        light_sample_ticks=check_int("--light-sample-ticks", light_sample_ticks, 1))
+
+
+# ---------------------------------------------------------------------- one clip
+
+def _sidecar_tools():
+    try:
+        from viform.stream.sidecar import read_sidecar, sidecar_path, stream_header, write_sidecar
+        return read_sidecar, sidecar_path, stream_header, write_sidecar
+    except ImportError:  # fallback: plain JSON beside the .dat
+        def sidecar_path(p):
+            return Path(p).with_name(Path(p).name + ".json")
+
+        def read_sidecar(p):
+            path = sidecar_path(p)
+            return json.loads(path.read_text()) if path.is_file() else None
+
+        def write_sidecar(p, metadata):
+            write_json(sidecar_path(p), metadata)
+
+        return read_sidecar, sidecar_path, None, write_sidecar
+
+
+def _finished(task: ClipTask, dat: Path) -> dict | None:
+    """The recorded result of a clip already converted with these settings and intact on disk, else None."""
+    read_sidecar, sidecar_path, _, _ = _sidecar_tools()
+    if not dat.is_file() or not sidecar_path(dat).is_file():
+        return None
+    try:
+        side = read_sidecar(dat)
+    except (ViformError, ValueError, OSError):
+        return None
+    record = (side or {}).get("dataset")
+    if not isinstance(record, dict) or record.get("settings_sha256") != task.settings.fingerprint():
+        return None
+    if record.get("source") != task.clip.path or dat.stat().st_size != record.get("bytes"):
+        return None
+    if sha256_file(dat) != record.get("sha256"):
+        return None
+    gt_dir = Path(task.out) / GT_DIR
+    for gt in record.get("gt_frames", []):
+        path = gt_dir / gt["file"]
+        if not path.is_file() or sha256_file(path) != gt.get("sha256"):
+            return None
+    return {**record, "status": "skipped"}
+
+
+def _remove_stale(out: Path, clip: str) -> None:
+    """Temporary files a killed attempt left behind (atomic writes name them ``.<target>.*``)."""
+    for folder, prefix in ((out / SPIKE_DIR, f".{clip}.dat"), (out / GT_DIR, f".{clip}_")):
+        if folder.is_dir():
+            for p in folder.iterdir():
+                if p.name.startswith(prefix):
+                    p.unlink(missing_ok=True)
+
+
+def convert_clip(task: ClipTask) -> dict:
+    """Convert one clip (runs on a worker); returns its manifest row plus ``status`` and ``seconds``.
+
+    Memory: the clip's frames at sensor size (N·H·W·8 bytes) and one block of ticks; the
+    stream goes straight to disk.
+    """
+    from numba import get_num_threads, set_num_threads
+
+    started = time.perf_counter()
+    clip, out = task.clip, Path(task.out)
+    dat = out / SPIKE_DIR / f"{clip.name}.dat"
+    _remove_stale(out, clip.name)
+    done = _finished(task, dat)
+    if done is not None:
+        return {**done, "seconds": time.perf_counter() - started}
+    threads = get_num_threads()
+    set_num_threads(1)  # one clip per worker thread: parallelism comes from the workers
+    try:
+        return _convert(task, dat, started)
+    finally:
+        set_num_threads(threads)
+
+
+def _convert(task: ClipTask, dat: Path, started: float) -> dict:
+    from viform.light.scenes import VideoScene
+    from viform.sensors.spike import SpikeSensor
+    from viform.stream.dat import pack_frames
+
+    s, clip, out = task.settings, task.clip, Path(task.out)
+
+    frames, declared_hz = read_clip(clip, s.height, s.width, s.max_lux)
+    frame_rate_hz = s.frame_rate_hz or declared_hz
+    if frame_rate_hz is None:
+        raise ViformError(f"clip {clip.name!r} declares no frame rate: give --frame-rate-hz")
+    n_frames = frames.shape[0]
+    seed = clip_seed(s.seed, clip.name)
+    sensor = SpikeSensor(s.parameters, s.height, s.width)
+    scene = VideoScene(frames, frame_rate_hz, s.interpolation)
+    source = sensor.stream(scene, n_frames / frame_rate_hz, seed=seed,
+                           light_sample_ticks=s.light_sample_ticks, reuse_buffer=True)
+    clock_hz = source.clock_hz
+
+    # ground truth first: the sidecar, written last, is what marks the clip finished
+    gt_frames = []
+    for k in range(0, n_frames, s.gt_every):
+        name = gt_name(clip.name, k)
+        image = lux_to_gt_image(frames[k], s.max_lux)
+        save_image(out / GT_DIR / name, image)
+        tick = min(int(math.floor(k / frame_rate_hz * clock_hz + 1e-9)), source.n_ticks - 1)
+        gt_frames.append({"frame": k, "time_s": k / frame_rate_hz, "tick": tick, "file": name,
+                          "sha256": sha256_file(out / GT_DIR / name)})
+    del frames  # the scene keeps its own copy
+
+    digest = hashlib.sha256()
+    spikes = 0
+    crash_marker = out / f".crash-{clip.name}"
+    crash = task.crash_after_blocks is not None and not crash_marker.exists()
+    with atomic_open(dat, "wb") as f:
+        for i, (_, block) in enumerate(source.iter_blocks(task.block_ticks)):
+            packed = pack_frames(block, flip=True)  # bottom-up rows, as the cameras write
+            f.write(packed)
+            digest.update(packed)
+            spikes += int(np.count_nonzero(block))
+            if crash and i + 1 >= task.crash_after_blocks:
+                crash_marker.touch()
+                f.flush()
+                os._exit(70)
+        f.flush()
+        os.fsync(f.fileno())
+
+    full_scale_rate = float(sensor.expected_firing_rate_per_tick(np.array(s.max_lux)))
+    record = {
+        "clip": clip.name, "source": clip.path, "seed": seed, "ticks": source.n_ticks,
+        "spikes": spikes, "sha256": digest.hexdigest(), "bytes": dat.stat().st_size,
+        "height": s.height, "width": s.width, "clock_hz": clock_hz, "n_frames": n_frames,
+        "frame_rate_hz": frame_rate_hz, "rate": full_scale_rate, "gt_frames": gt_frames,
+        "settings_sha256": s.fingerprint(),
+    }
+    _write_clip_sidecar(dat, source, sensor, task, record)
+    return {**record, "status": "converted", "seconds": time.perf_counter() - started}
+
+
+def _write_clip_sidecar(dat: Path, source, sensor, task: ClipTask, record: dict) -> None:
+    _, _, stream_header, write_sidecar = _sidecar_tools()
+    extra = {"source_clip": task.clip.path, "preset": task.settings.preset, "dataset": record,
+             "dataset_settings": task.settings.describe(), **task.provenance}
+    if stream_header is not None:
+        header = stream_header(source, rows="bottom-up", extra=extra)
+    else:
+        header = {"height": source.height, "width": source.width, "n_ticks": source.n_ticks,
+                  "clock_hz": source.clock_hz, "threshold_electrons": source.threshold_electrons,
+                  "start_time_s": 0.0, "rows": "bottom-up", "bit_order": "little",
+                  "seed": record["seed"], "metadata": {"sensor": sensor.describe()}, **extra}
+    write_sidecar(dat, json.loads(json.dumps(header, default=_jsonable)))
+
+
+# ---------------------------------------------------------------------- the dataset
+
+def _provenance() -> dict:
+    try:
+        from viform.stream.sidecar import provenance
+        return provenance()
+    except ImportError:
+        import datetime as dt
+        import shlex
+        import sys
+
+        from viform import __version__
+
+        return {"viform_version": __version__, "command_line": shlex.join(sys.argv),
+                "utc_date": dt.datetime.now(dt.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")}
+
+
+def _config(out: Path, settings: DatasetSettings) -> dict:
+    p = settings.parameters
+    return {
+        "filename": out.resolve().name,
+        "spike_h": settings.height,
+        "spike_w": settings.width,
+        "is_labeled": True,
+        "labeled_data_type": [1],  # SpikeCV's label type 1: reconstruction (ground-truth images)
+        "labeled_data_suffix": "png",
+        "clock_hz": float(p.clock_hz),
+        "threshold_electrons": float(p.threshold_electrons),
+        "format": LAYOUT_FORMAT,
+        "settings_sha256": settings.fingerprint(),
+        "settings": settings.describe(),
+    }
+
+
+def _check_existing_config(out: Path, config: dict) -> None:
+    path = out / CONFIG_NAME
+    if not path.exists():
+        return
+    old = read_config(path)
+    if old.get("settings_sha256") == config["settings_sha256"]:
+        return
+    old_s, new_s = old.get("settings") or {}, config["settings"]
+    diff = next((k for k in new_s if old_s.get(k) != new_s.get(k)), None)
+    what = f"{diff}: {old_s.get(diff)!r} there, {new_s.get(diff)!r} now" if diff else "not a viform dataset"
+    raise ViformError(f"--out {str(out)!r} already holds a dataset made with other settings ({what}); "
+                      "use a new --out folder, or the same options to resume it")
+
+
+def _parse_memory(memory_limit) -> str | int:
+    if memory_limit in (None, "auto"):
+        return "auto"
+    from dask.utils import parse_bytes
+
+    try:
+        value = parse_bytes(str(memory_limit))
+    except (ValueError, TypeError):
+        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: give a size such as 2GiB, "
+                          "or auto") from None
+    if value < 64 << 20:
+        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: at least 64MiB per worker")
+    return value
+
+
+def _open_client(workers: int, scheduler: str | None, memory_limit):
+    """A dask client: on an existing scheduler, or on a new LocalCluster (processes, 1 thread each)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="20s"), None
+        except (OSError, TimeoutError) as exc:
+            raise ViformError(f"--scheduler {scheduler!r}: could not connect ({one_line(exc)})") from None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
+                           dashboard_address=None, silence_logs=logging.ERROR)
+    return Client(cluster), cluster
+
+
+def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,
+                  client=None, memory_limit="auto", block_ticks: int = 4096, progress: bool = True,
+                  crash: tuple[str, int] | None = None) -> dict:
+    """Convert every clip of ``src`` into the spike dataset ``out``; returns a summary.
+
+    Parameters
+    ----------
+    src : path
+        A folder of videos or of frame folders (see :mod:`viform.datasets.sources`).
+    out : path
+        The dataset folder (created; an existing one made with the same settings is resumed).
+    settings : DatasetSettings
+        From :func:`make_settings`.
+    workers : int, optional
+        Local worker processes (default: the CPU count, at most one per clip).
+    scheduler : str, optional
+        Address of an existing dask scheduler (``tcp://host:8786``) instead of a local cluster.
+    client : distributed.Client, optional
+        An open client to use as is (tests, notebooks).
+    memory_limit : str or int
+        Per-worker memory limit of the local cluster (``"auto"``: the machine's memory / workers).
+    block_ticks : int
+        Ticks simulated, packed and written at a time (bounds a worker's memory; no effect on bits).
+    progress : bool
+        One tqdm progress bar (stderr) for the whole dataset.
+
+    Returns
+    -------
+    dict
+        ``clips``, ``converted``, ``skipped``, ``failed`` (list of {clip, error}), ``ticks``,
+        ``spikes``, ``bytes``, ``pixel_ticks``, ``seconds``, ``clips_per_s``,
+        ``pixel_ticks_per_s``, ``workers``, ``manifest``.
+    """
+    out = Path(out)
+    clips = find_clips(src)
+    if settings.frame_rate_hz is None:
+        folders = [c.name for c in clips if c.kind == "frames"]
+        if folders:
+            raise ViformError(f"--frame-rate-hz is required: clip {folders[0]!r} is a folder of images, "
+                              "which declares no frame rate")
+    block_ticks = check_int("block_ticks", block_ticks, 1)
+    if scheduler is not None and workers is not None:
+        raise ViformError("--workers and --scheduler exclude each other: a scheduler brings its own workers")
+    if workers is None:
+        workers = max(1, min(os.cpu_count() or 1, len(clips)))
+    workers = check_int("--workers", workers, 1, 1024)
+    memory_limit = _parse_memory(memory_limit)
+    check_output_folder("--out", out)
+    if out.exists() and not out.is_dir():
+        raise ViformError(f"--out {str(out)!r} is a file, not a folder")
+    config = _config(out, settings)
+    _check_existing_config(out, config)
+    (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
+    (out / GT_DIR).mkdir(parents=True, exist_ok=True)
+    write_config(out / CONFIG_NAME, config)
+
+    prov = _provenance()
+    tasks = [ClipTask(c, str(out), settings, prov, block_ticks,
+                      crash[1] if crash is not None and crash[0] == c.name else None) for c in clips]
+    rows: dict[str, dict] = {}
+    failed: dict[str, str] = {}
+    opened = time.perf_counter()
+
+    def record(task: ClipTask, result: dict | None, error: str | None) -> None:
+        if error is None:
+            rows[task.clip.name] = result
+        else:
+            failed[task.clip.name] = error
+        _write_manifest(out, settings, rows, failed)
+
+    own_cluster = None
+    if client is None:
+        client, own_cluster = _open_client(workers, scheduler, memory_limit)
+    bar = None
+    try:
+        n_workers = len(client.scheduler_info().get("workers", {}))
+        started = time.perf_counter()  # rates count conversion, not the cluster's start-up
+        from distributed import as_completed
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tasks), unit="clip", desc="dataset", disable=not progress, leave=True)
+        token = uuid.uuid4().hex[:8]
+        futures = {client.submit(convert_clip, t, key=f"viform-clip-{t.clip.name}-{token}", pure=False): t
+                   for t in tasks}
+        for fut in as_completed(futures):
+            task = futures[fut]
+            try:
+                record(task, fut.result(), None)
+            except ViformError as exc:
+                record(task, None, str(exc))
+            except Exception as exc:  # a worker lost too often, an unexpected failure: report, go on
+                record(task, None, f"{type(exc).__name__}: {one_line(exc)}")
+            bar.update(1)
+            if failed:
+                bar.set_postfix(failed=len(failed))
+    finally:
+        if bar is not None:
+            bar.close()
+        if own_cluster is not None:
+            client.close()
+            own_cluster.close()
+    summary = _summary(out, clips, rows, failed, time.perf_counter() - started, n_workers)
+    summary["startup_s"] = started - opened
+    return summary
+
+
+def _write_manifest(out: Path, settings: DatasetSettings, rows: dict, failed: dict) -> None:
+    """manifest.json: clips sorted by name, without timings (same bits, same manifest)."""
+    keep = ("clip", "source", "seed", "ticks", "spikes", "sha256", "bytes", "n_frames", "frame_rate_hz",
+            "rate", "gt_frames")
+    write_json(out / MANIFEST_NAME, {
+        "format": LAYOUT_FORMAT, "spike_h": settings.height, "spike_w": settings.width,
+        "clock_hz": float(settings.parameters.clock_hz), "settings_sha256": settings.fingerprint(),
+        "clips": [{k: rows[c][k] for k in keep} for c in sorted(rows)],
+        "failed": [{"clip": c, "error": failed[c]} for c in sorted(failed)],
+    })
+
+
+def _summary(out, clips, rows, failed, seconds, workers) -> dict:
+    converted = [r for r in rows.values() if r["status"] == "converted"]
+    pixel_ticks = sum(r["ticks"] * r["height"] * r["width"] for r in converted)
+    return {
+        "out": str(out), "clips": len(clips), "converted": len(converted),
+        "skipped": sum(r["status"] == "skipped" for r in rows.values()),
+        "failed": [{"clip": c, "error": failed[c]} for c in sorted(failed)],
+        "ticks": sum(r["ticks"] for r in rows.values()),
+        "spikes": sum(r["spikes"] for r in rows.values()),
+        "bytes": sum(r["bytes"] for r in rows.values()),
+        "pixel_ticks_converted": pixel_ticks,
+        "seconds": seconds,
+        "clips_per_s": len(converted) / seconds if seconds > 0 else 0.0,
+        "pixel_ticks_per_s": pixel_ticks / seconds if seconds > 0 else 0.0,
+        "workers": workers,
+        "manifest": str(Path(out) / MANIFEST_NAME),
+    }
+
+
+def convert_serially(src, out, settings: DatasetSettings, block_ticks: int = 4096) -> dict:
+    """Reference path without dask: every clip in this process, one after the other (benchmarks)."""
+    out = Path(out)
+    clips = find_clips(src)
+    (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
+    (out / GT_DIR).mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    rows, failed = {}, {}
+    for c in clips:
+        try:
+            rows[c.name] = convert_clip(ClipTask(c, str(out), settings, _provenance(), block_ticks))
+        except ViformError as exc:
+            failed[c.name] = str(exc)
+    _write_manifest(out, settings, rows, failed)
+    return _summary(out, clips, rows, failed, time.perf_counter() - started, 0)
