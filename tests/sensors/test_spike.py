@@ -165,9 +165,9 @@ def test_vectorized_noise_free_kernel_matches_the_event_kernel(reset):
     for first, last in ((0, 123), (123, 400)):
         out = np.empty((last - first, 1000), dtype=bool)
         lux = scene.illuminance_lux_many((np.arange(first, last) + 0.5) / sensor.parameters.clock_hz)
-        rates = np.rint(sensor.electrons_per_tick(lux.reshape(last - first, -1)) * module.FIXED_POINT_SCALE)
-        module._run_block(out, rates.astype(np.int64), first, 1, first, state.charge, state.target, state.counter,
-                          q, index, *tables, state.keys, False, reset == "readout")
+        rates = sensor._fixed_point_rates(lux.reshape(last - first, -1), 20, 50)
+        module._run_block(out, rates, first, 1, first, state.charge, state.target, state.counter,
+                          q, index, *tables, state.keys, False, reset == "readout", 0.0)
         blocks.append(out.reshape(-1, 20, 50))
     assert np.array_equal(vectorized, np.concatenate(blocks))
     assert 0.05 < vectorized.mean() < 1.0
@@ -198,7 +198,7 @@ def per_tick_reference(sensor, scene, n_ticks, seed, sample):
     out = np.zeros((n_ticks, h * w), bool)
     for k in range(n_ticks):
         lux = scene.illuminance_lux((k // sample + 0.5) * sample / p.clock_hz).ravel()
-        c += np.rint(sensor.electrons_per_tick(lux) * module.FIXED_POINT_SCALE).astype(np.int64)
+        c += sensor._fixed_point_rates(lux[None], h, w)[0]
         for i in np.flatnonzero(c >= t):
             out[k, i] = True
             if p.reset == "readout":
@@ -312,3 +312,133 @@ def test_light_beyond_the_fixed_point_range_is_refused():
     with pytest.raises(ViformError, match="lux"):
         sensor.capture(StillScene(np.full((2, 8), 1e9)), 0.001)
     assert sensor.capture(StillScene(np.full((2, 8), 1e7)), 0.001).spikes.all()
+
+
+def stationary_tick_rate(q, electrons_per_tick):
+    """Spikes per tick of a steady self-reset pixel: 1 − P(no crossing in a tick).
+
+    The crossings form a stationary renewal process with Gamma(Q) intervals in charge time;
+    P(no crossing in a window r) is P(forward recurrence > r) = E[(X − r)⁺]/Q, X ~ Gamma(Q),
+    and E[(X − r)⁺] = Q·S_{Q+1}(r) − r·S_Q(r) (S: the regularized upper incomplete gamma).
+    Below saturation (r ≪ Q) it is r/Q; far above, 1.
+    """
+    from scipy import special
+
+    r = electrons_per_tick
+    return 1.0 - special.gammaincc(q + 1, r) + r / q * special.gammaincc(q, r)
+
+
+@pytest.mark.parametrize("q", [1, 7, 100, 16383, 16384, 100_000, 1_000_000])
+@pytest.mark.parametrize("per_q", [0.2, 1.5])
+def test_firing_rate_from_tiny_to_huge_thresholds(q, per_q):
+    """Q from 1 to 10⁶ e⁻ at 0.2·Q e⁻/tick (moderate) and 1.5·Q (saturated): the rate is the
+    stationary renewal law above (0.2 and 1 for large Q; 1 − e^-0.2 and 1 − e^-1.5 at Q = 1).
+
+    Q ≥ 2^14 used to fire at 0.333 at moderate light (fixed-point overflow of 8·Q²).
+    Tolerance: the count of a stationary renewal process over n ticks has variance
+    n·rate·CV² + O(1) with CV² = 1/Q (Bernoulli ticks at Q = 1: ≤ n·rate), so the mean over
+    P pixels has standard error √((n·rate/Q + 1)/P)/n; saturated ticks are counted as at
+    most twice Bernoulli variance n·p(1 − p)."""
+    n_ticks, side = 2000, 8
+    sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0)
+    lux = lux_for_electrons_per_tick(sensor, per_q * q)
+    spikes = sensor.capture(StillScene(np.full((side, side), lux)), n_ticks / 40e3, seed=q).spikes
+    expected = stationary_tick_rate(q, per_q * q)
+    if per_q < 1:
+        var = n_ticks * expected / q + 1
+    else:
+        var = 2 * n_ticks * expected * (1 - expected)
+    se = math.sqrt(var / side ** 2) / n_ticks
+    assert abs(spikes.mean() - expected) <= 5 * se + 1e-12
+    if q >= 16383:
+        assert expected == pytest.approx(min(per_q, 1.0), abs=1e-9)
+
+
+def test_threshold_above_the_fixed_point_range_is_refused():
+    with pytest.raises(ViformError, match="threshold_electrons"):
+        SpikeSensor(threshold_electrons=2.0 ** 27)
+
+
+def test_gain_spread_is_measured_back_from_flat_field_rates():
+    """PRNU: in flat light pixel i fires at g_i·λ/Q, so the spread of the rates is the gain spread.
+
+    The shot-noise part of the count variance (renewal: mean/Q) is subtracted; with 1,024
+    pixels the std estimate has relative standard error ≈ 1/√(2·1024) = 2.2 %: 5σ ≈ 11 %.
+    """
+    q, n_ticks, side, spread = 1000, 4000, 32, 0.03
+    sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0, gain_spread_fraction=spread)
+    gain = sensor.gain_map(side, side)
+    assert gain.mean() == pytest.approx(1.0, abs=5 * spread / side)
+    lux = lux_for_electrons_per_tick(sensor, 0.2 * q)
+    counts = sensor.capture(StillScene(np.full((side, side), lux)), n_ticks / 40e3, seed=8).spikes.sum(axis=0)
+    mean = counts.mean()
+    measured = math.sqrt(max(counts.var() - mean / q - 1 / 6, 0.0)) / mean
+    assert measured == pytest.approx(spread, rel=0.11)
+    # the pattern is the sensor's own: the rates follow the gain map pixel by pixel
+    assert np.corrcoef(counts.ravel(), gain.ravel())[0, 1] > 0.95
+    assert np.array_equal(gain, SpikeSensor(gain_spread_fraction=spread).gain_map(side, side))
+    assert np.all(SpikeSensor().gain_map(4, 4) == 1.0)
+
+
+def test_dark_current_spread_and_hot_pixels_are_measured_back_in_the_dark():
+    """In the dark pixel i fires at Id_i/Q (seed 000 §4.4): the hot pixels show up as the
+    fast ones, at their own dark current, and the bulk spread is the log-normal spread.
+
+    Counts over T: renewal variance ≈ count/Q, subtracted from the bulk variance. Bulk:
+    ≈ 4,000 pixels of CV 0.5 (log-normal kurtosis included) → the spread within 10 %;
+    hot pixels: each pixel's count within 5 √(count/Q) + 1 of its stationary rate × T
+    (Id_i·T/Q below saturation)."""
+    q, side, duration = 10, 64, 0.25
+    sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=2000.0, dark_current_spread_fraction=0.5,
+                         hot_pixel_fraction=0.02, hot_pixel_dark_current_e_per_s=1e5)
+    dark = sensor.dark_current_map_e_per_s(side, side)
+    counts = sensor.capture(StillScene(np.zeros((side, side))), duration, seed=4).spikes.sum(axis=0)
+    # hot pixels collect up to ≈ 5 e⁻ a tick: crossings lost to the readout are included
+    expected = stationary_tick_rate(q, dark / 40e3) * duration * 40e3
+    hot = dark > 2.5e4
+    assert 0.01 < hot.mean() < 0.03
+    assert counts[hot].min() > counts[~hot].max()  # the hot pixels are the fast ones
+    assert np.all(np.abs(counts[hot] - expected[hot]) < 5 * np.sqrt(expected[hot] / q) + 1)
+    bulk = counts[~hot]
+    measured = math.sqrt(bulk.var() - bulk.mean() / q) / bulk.mean()
+    assert measured == pytest.approx(0.5, rel=0.1)
+    assert dark[~hot].mean() == pytest.approx(2000.0, rel=0.05)
+
+
+@pytest.mark.parametrize("per_tick,dead_ticks", [(50.0, 0.5), (10_000.0, 2.0)])
+def test_dead_time_compresses_the_rate(per_tick, dead_ticks):
+    """Self-reset with dead time t_d: each interval is the Gamma(Q) charge time plus t_d, so
+    the renewal rate is λ/(Q + λ·t_d) (per tick: r/(Q + r·d), r e⁻/tick, d ticks): 0.4 instead
+    of 0.5 at r = Q/2, d = 0.5, and 1/(2 + 0.01) instead of 1 far above saturation at d = 2.
+    Every interval is > 1 tick, so no crossing is lost to the readout. Tolerance: renewal count
+    variance n·rate·CV² + 1 (CV = √Q/r / (Q/r + d)), plus a start-up bias ≤ d/(Q/r + d) spike
+    per pixel (the initial state ignores the dead time)."""
+    q, n_ticks, side = 100, 4000, 16
+    sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0, dead_time_s=dead_ticks / 40e3)
+    lux = lux_for_electrons_per_tick(sensor, per_tick)
+    rate = sensor.capture(StillScene(np.full((side, side), lux)), n_ticks / 40e3, seed=2).spikes.mean()
+    mean_interval = q / per_tick + dead_ticks
+    expected = 1 / mean_interval
+    cv2 = (q / per_tick ** 2) / mean_interval ** 2
+    se = math.sqrt((n_ticks * expected * cv2 + 1) / side ** 2) / n_ticks
+    assert abs(rate - expected) < 5 * se + dead_ticks / mean_interval / n_ticks
+
+
+def test_dead_time_after_readout_reset():
+    """Reset at readout, then dead for d: an interval is ceil(d + G/r) ticks, G ~ Gamma(Q);
+    P(interval = m) = F((m − d)·r) − F((m − 1 − d)·r), so the rate is 1 / Σ m·P(m)."""
+    q, per_tick, dead_ticks, n_ticks, side = 100, 40.0, 0.7, 4000, 16
+    sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0, reset="readout",
+                         dead_time_s=dead_ticks / 40e3)
+    lux = lux_for_electrons_per_tick(sensor, per_tick)
+    rate = sensor.capture(StillScene(np.full((side, side), lux)), n_ticks / 40e3, seed=3).spikes.mean()
+    m = np.arange(1, 20)
+    cdf = stats.gamma(q).cdf
+    probabilities = cdf((m - dead_ticks) * per_tick) - cdf((m - 1 - dead_ticks) * per_tick)
+    assert probabilities.sum() == pytest.approx(1.0, abs=1e-12)
+    mean_interval = float((m * probabilities).sum())
+    var_interval = float((m ** 2 * probabilities).sum()) - mean_interval ** 2
+    expected = 1 / mean_interval
+    se = math.sqrt((n_ticks * expected * var_interval / mean_interval ** 2 + 1) / side ** 2) / n_ticks
+    assert abs(rate - expected) < 5 * se + 1 / n_ticks
+    assert expected < 1 / (q / per_tick + dead_ticks)  # rounding up to the readout costs rate

@@ -77,6 +77,8 @@ CLOCK_20KHZ = 20_000.0
 _TILE = 256  # pixels per work item
 _WINDOW = 64  # ticks per window: the tile's output (16 KB) stays in L1 while it is written
 _WIDE_TILE = 2048  # pixels per work item of the vectorized noise-free kernel
+#: Largest threshold, e⁻: targets (≈ Q·2^32 in fixed point) plus a tick's charge stay inside int64.
+MAX_THRESHOLD_ELECTRONS = 1 << 26
 
 
 @dataclass(frozen=True)
@@ -106,7 +108,22 @@ class SpikeSensorParameters:
     photon_noise : bool
         Exact Poisson photon/dark statistics (True) or the deterministic model (False).
     fixed_pattern_seed : int
-        Seed of the sensor's own threshold pattern.
+        Seed of the sensor's own fixed patterns (threshold, gain, dark current, hot pixels).
+    gain_spread_fraction : float
+        Photo-response non-uniformity (PRNU): std / mean of the per-pixel gain that multiplies
+        the photoelectron rate (log-normal, mean 1). Dark current is not affected by it.
+    dark_current_spread_fraction : float
+        Dark-signal non-uniformity: std / mean of the per-pixel dark current (log-normal
+        around ``dark_current_e_per_s``; hot pixels get the same relative spread).
+    hot_pixel_fraction : float
+        Fraction of pixels that are hot: their dark current is ``hot_pixel_dark_current_e_per_s``
+        (times the log-normal spread) instead of ``dark_current_e_per_s``.
+    hot_pixel_dark_current_e_per_s : float
+        Mean dark current of a hot pixel, e⁻/s.
+    dead_time_s : float
+        Reset dead time after each spike, s: the pixel collects no charge for this long after
+        its threshold crossing (self-reset) or after the readout that resets it (``reset =
+        "readout"``). The firing rate becomes λ/(Q + λ·dead_time_s) below saturation.
     """
 
     optics: PixelOptics = field(default_factory=lambda: PixelOptics(pixel_pitch_m=10e-6,
@@ -119,6 +136,11 @@ class SpikeSensorParameters:
     reset: str = "self"
     photon_noise: bool = True
     fixed_pattern_seed: int = 2015
+    gain_spread_fraction: float = 0.0
+    dark_current_spread_fraction: float = 0.0
+    hot_pixel_fraction: float = 0.0
+    hot_pixel_dark_current_e_per_s: float = 1e4
+    dead_time_s: float = 0.0
 
     def __post_init__(self):
         check_positive("threshold_electrons", self.threshold_electrons)
@@ -131,6 +153,22 @@ class SpikeSensorParameters:
         if spread >= 0.5:
             raise ViformError(f"threshold_spread_fraction = {spread!r} is not allowed: it must be < 0.5")
         check_choice("reset", self.reset, ("self", "readout"))
+        if round(self.threshold_electrons) > MAX_THRESHOLD_ELECTRONS:
+            raise ViformError(f"threshold_electrons = {self.threshold_electrons!r} is not allowed: it must be at "
+                              f"most {MAX_THRESHOLD_ELECTRONS} electrons (2^26, the fixed-point charge range)")
+        gain = check_non_negative("gain_spread_fraction", self.gain_spread_fraction)
+        if gain >= 1.0:
+            raise ViformError(f"gain_spread_fraction = {gain!r} is not allowed: it must be < 1")
+        dark = check_non_negative("dark_current_spread_fraction", self.dark_current_spread_fraction)
+        if dark > 10.0:
+            raise ViformError(f"dark_current_spread_fraction = {dark!r} is not allowed: it must be ≤ 10")
+        hot = check_non_negative("hot_pixel_fraction", self.hot_pixel_fraction)
+        if hot > 1.0:
+            raise ViformError(f"hot_pixel_fraction = {hot!r} is not allowed: it must lie in [0, 1]")
+        check_non_negative("hot_pixel_dark_current_e_per_s", self.hot_pixel_dark_current_e_per_s)
+        check_non_negative("dead_time_s", self.dead_time_s)
+        if not math.isfinite(self.dead_time_s):
+            raise ViformError(f"dead_time_s = {self.dead_time_s!r} is not allowed: it must be finite")
 
     @property
     def shortest_interval_s(self) -> float:
@@ -202,7 +240,58 @@ class SpikeSensor(Sensor):
             rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([p.fixed_pattern_seed, 0x51])))
             q = np.rint(p.threshold_electrons * (1 + p.threshold_spread_fraction
                                                  * rng.standard_normal((height, width))))
-        return np.maximum(q, 1.0)
+        return np.clip(q, 1.0, MAX_THRESHOLD_ELECTRONS)
+
+    def _pattern_rng(self, stream: int) -> np.random.Generator:
+        seq = np.random.SeedSequence([self.parameters.fixed_pattern_seed, stream])
+        return np.random.Generator(np.random.PCG64(seq))
+
+    @staticmethod
+    def _log_normal(rng, fraction: float, shape) -> np.ndarray:
+        """Log-normal factors of mean 1 and std / mean ``fraction`` (positive, as a rate must be)."""
+        if fraction == 0:
+            return np.ones(shape)
+        sigma = math.sqrt(math.log1p(fraction * fraction))
+        return np.exp(sigma * rng.standard_normal(shape) - 0.5 * sigma * sigma)
+
+    def gain_map(self, height: int, width: int) -> np.ndarray:
+        """Per-pixel photo-response gain (PRNU), mean 1, std / mean ``gain_spread_fraction``.
+
+        It multiplies the photoelectron rate of each pixel (QE × fill factor × microlens
+        non-uniformity); the firing rate in flat light is then gain·λ/Q. Log-normal so a
+        gain is never negative; at the few-percent spreads of real chips it is
+        indistinguishable from the usual Gaussian PRNU. All ones when the spread is 0.
+        """
+        p = self.parameters
+        return self._log_normal(self._pattern_rng(0x6A1), p.gain_spread_fraction, (height, width))
+
+    def dark_current_map_e_per_s(self, height: int, width: int) -> np.ndarray:
+        """Per-pixel dark current, e⁻/s: a log-normal bulk plus a fraction of hot pixels.
+
+        Dark current comes from thermal generation at defects, whose density varies from
+        pixel to pixel: the bulk is log-normal with mean ``dark_current_e_per_s`` and
+        std / mean ``dark_current_spread_fraction`` (seed 000 §4.4 gives < 100 e⁻/s for the
+        mean). A fraction ``hot_pixel_fraction`` of pixels, chosen at random, hold a strong
+        defect: their mean is ``hot_pixel_dark_current_e_per_s``, with the same relative
+        spread. In the dark a pixel fires at its dark current / Q.
+        """
+        p = self.parameters
+        rng = self._pattern_rng(0xDA4C)
+        spread = self._log_normal(rng, p.dark_current_spread_fraction, (height, width))
+        hot = rng.random((height, width)) < p.hot_pixel_fraction if p.hot_pixel_fraction > 0 else \
+            np.zeros((height, width), bool)
+        return np.where(hot, p.hot_pixel_dark_current_e_per_s, p.dark_current_e_per_s) * spread
+
+    def _pixel_light(self, height: int, width: int):
+        """(a, b) per pixel: charge per tick in fixed point is rint(a·lux + b)."""
+        key = ("light", height, width)
+        if key not in self._tables:
+            p = self.parameters
+            scale = FIXED_POINT_SCALE / p.clock_hz
+            a = (self.gain_map(height, width) * (p.optics.electrons_per_lux_second * scale)).ravel()
+            b = (self.dark_current_map_e_per_s(height, width) * scale).ravel()
+            self._tables[key] = (np.ascontiguousarray(a), np.ascontiguousarray(b))
+        return self._tables[key]
 
     def _pixel_tables(self, height: int, width: int):
         key = (height, width)
@@ -220,17 +309,24 @@ class SpikeSensor(Sensor):
         p = self.parameters
         return (p.optics.electrons_per_s(lux) + p.dark_current_e_per_s) / p.clock_hz
 
-    def _fixed_point_rates(self, lux) -> np.ndarray:
-        """Charge per tick in the kernels' fixed point (2^-32 e⁻), refusing light that overflows it."""
-        rates = self.electrons_per_tick(lux) * FIXED_POINT_SCALE
+    def _fixed_point_rates(self, lux, height: int, width: int) -> np.ndarray:
+        """Charge per tick of each pixel (``lux`` shape (N, H·W)) in the kernels' fixed point
+        (2^-32 e⁻): rint(a·lux + b) with the per-pixel gain and dark current; refuses light
+        that overflows it."""
+        a, b = self._pixel_light(height, width)
+        rates = lux * a
+        rates += b
         if rates.size and float(rates.max()) >= MAX_RATE_FIXED_POINT:
-            limit = self.parameters.optics.lux_from_electrons_per_s(
-                MAX_RATE_FIXED_POINT / FIXED_POINT_SCALE * self.parameters.clock_hz
-                - self.parameters.dark_current_e_per_s)
-            raise ViformError(f"scene illuminance {float(lux.max()):.3g} lux is above the simulator's limit "
-                              f"of {float(limit):.3g} lux for this pixel and clock (the pixel saturates "
-                              "long before: one spike per tick)")
+            raise self._too_bright(float(lux.max()))
         return np.rint(rates).astype(np.int64)
+
+    def _too_bright(self, lux_max: float) -> ViformError:
+        p = self.parameters
+        limit = p.optics.lux_from_electrons_per_s(MAX_RATE_FIXED_POINT / FIXED_POINT_SCALE * p.clock_hz)
+        limit = float(limit) / (1 + 5 * p.gain_spread_fraction)
+        return ViformError(f"scene illuminance {lux_max:.3g} lux is above the simulator's limit of about "
+                           f"{limit:.3g} lux for this pixel and clock (the pixel saturates long before: "
+                           "one spike per tick)")
 
     def expected_firing_rate_per_tick(self, lux) -> np.ndarray:
         """Mean spikes per tick of a steady pixel (deterministic model, self-reset).
@@ -299,6 +395,7 @@ class SpikeSensor(Sensor):
             raise ViformError(f"state has already run to tick {state.next_tick}; simulate starts at tick 0, "
                               "so pass a fresh initial_state")
         reset_readout = p.reset == "readout"
+        dead_ticks = p.dead_time_s * p.clock_hz
         buffer = None
         bar = None
         if progress:
@@ -312,19 +409,19 @@ class SpikeSensor(Sensor):
                 # light sampled at the middle of each interval of `sample` ticks, held over it
                 times = (np.arange(j0, j1) + 0.5) * (sample / p.clock_hz)
                 lux = scene.illuminance_lux_many(times).reshape(times.size, pixels)
-                rates = self._fixed_point_rates(lux)
+                rates = self._fixed_point_rates(lux, height, width)
                 if reuse_buffer:
                     if buffer is None or buffer.shape[0] < last - first:
                         buffer = np.empty((last - first, pixels), dtype=np.bool_)
                     out = buffer[: last - first]
                 else:
                     out = np.empty((last - first, pixels), dtype=np.bool_)
-                if not p.photon_noise:
+                if not p.photon_noise and dead_ticks == 0:
                     _run_block_deterministic(out, rates, first, sample, j0, state.charge, state.target,
                                              reset_readout)
                 else:
                     _run_block(out, rates, first, sample, j0, state.charge, state.target, state.counter,
-                               q, index, *tables, state.keys, p.photon_noise, reset_readout)
+                               q, index, *tables, state.keys, p.photon_noise, reset_readout, dead_ticks)
                 state.next_tick = last
                 if bar is not None:
                     bar.update(last - first)
@@ -492,9 +589,64 @@ def _next_target(p, q, index, bins, keys, noise, counter):
     return max(np.int64(1), np.int64(t * 4294967296.0 + 0.5))
 
 
+@njit(cache=True, inline="always")
+def _fixed_charge(electrons):
+    """``electrons`` in fixed point, capped at 2^62 (a bound no tick's charge reaches, so the cap
+    only disables a shortcut, never overflows: 8·Q²·2^32 passes 2^63 from Q = 2^14)."""
+    x = electrons * 4294967296.0
+    return np.int64(x) if x < 4611686018427387904.0 else np.int64(4611686018427387904)
+
+
+@njit(cache=True, inline="always")
+def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter):
+    """(charge, target) of pixel p after its charge ``c`` reached its target ``t`` in a tick of
+    charge ``e`` (fixed point); the spike itself is the caller's.
+
+    Self-reset: the charge past the crossing is kept; further crossings inside the same tick
+    are lost to the one-bit readout. Dead time: no charge is collected for ``dead_ticks``
+    ticks after each crossing — in charge time (where the photoelectrons are a unit-rate
+    Poisson process, seed 000 §5.1) the pixel skips ``e·dead_ticks`` of charge, exact while
+    the light is constant over the dead time (the crossing tick's light is used).
+    Readout reset: the charge is drained at the readout that ends the tick; the dead time
+    runs from there.
+    """
+    dead = np.int64(0)
+    if dead_ticks > 0.0:
+        dead = np.int64(e * dead_ticks + 0.5)
+    if reset_readout:
+        return -dead, _next_target(p, q, index, bins, keys, noise, counter)
+    if not noise:
+        period = t + dead
+        c -= period
+        if c >= t:
+            c -= ((c - t) // period + 1) * period
+        return c, t
+    if dead > 0:
+        # the stationary shortcuts below assume no dead time: drain one crossing at a time
+        # (at most e / (Q + dead) crossings a tick)
+        while c >= t:
+            c -= t + dead
+            t = _next_target(p, q, index, bins, keys, noise, counter)
+        return c, t
+    over = c - t
+    # charge past a crossing above which a saturated tick jumps / is stationary
+    stationary_from = _fixed_charge(8.0 * q[p] * q[p])
+    if over < min(_fixed_charge(_JUMP_INTERVALS * q[p]), stationary_from):
+        while c >= t:
+            c -= t
+            t = _next_target(p, q, index, bins, keys, noise, counter)
+        return c, t
+    if over >= stationary_from:
+        # ≥ 8·Q² e⁻ after the first crossing: the electron count mod Q is uniform to within
+        # e^-64, so the pixel leaves the tick in the stationary state, drawn at once
+        return _equilibrium_state(p, q, index, bins, keys, counter)
+    # many crossings lost in this tick: jump to its end state exactly
+    return _saturated_state(over / 4294967296.0, p, q, keys, counter)
+
+
 @njit(cache=True, parallel=True)
 def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter, q, index,
-               bins, keys, noise, reset_readout):
+               bins, keys, noise, reset_readout, dead_ticks):
     """Integrate-and-fire over one block of ticks, event-driven per pixel.
 
     ``rates[j, p]`` is the fixed-point charge per tick of pixel p in light-sample interval
@@ -516,9 +668,6 @@ def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter,
             for p in range(p0, p1):
                 c = charge[p]
                 t = target[p]
-                # charge past a crossing above which a saturated tick jumps / is stationary
-                stationary_from = np.int64(8.0 * q[p] * q[p] * 4294967296.0)
-                jump_from = min(np.int64(_JUMP_INTERVALS * q[p] * 4294967296.0), stationary_from)
                 k = w0
                 j = j_first
                 j_end = (j + 1) * sample - first_tick
@@ -541,29 +690,8 @@ def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter,
                         c += steps * e
                         k += steps
                         out[k - 1, p] = True
-                        if reset_readout:
-                            c = 0
-                            t = _next_target(p, q, index, bins, keys, noise,
-                                             counter)
-                        elif not noise:
-                            # further crossings in the tick are lost to the one-bit readout
-                            c -= t
-                            if c >= t:
-                                c %= t
-                        elif c - t < jump_from:
-                            # further crossings inside the same tick are lost to the one-bit readout
-                            while c >= t:
-                                c -= t
-                                t = _next_target(p, q, index, bins, keys,
-                                                 noise, counter)
-                        elif c - t >= stationary_from:
-                            # ≥ 8·Q² e⁻ after the first crossing: the electron count mod Q is
-                            # uniform to within e^-64, so the pixel leaves the tick in the
-                            # stationary state; drawn at once instead of one Gamma per crossing
-                            c, t = _equilibrium_state(p, q, index, bins, keys, counter)
-                        else:
-                            # many crossings lost in this tick: jump to its end state exactly
-                            c, t = _saturated_state((c - t) / 4294967296.0, p, q, keys, counter)
+                        c, t = _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise,
+                                     reset_readout, counter)
                     c += (end - k) * e
                     k = end
                     if k == j_end:
