@@ -182,10 +182,10 @@ def characterize(sensor, out_dir, json_path, size, seed):
     presets.describe_preset(sensor)  # clear error for an unknown name
     result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
     figures = {}
-    if sensor == "spike":
+    if sensor == "spike" or sensor.startswith("spike"):  # chip presets too
         from viform.measure.spike_characterization import characterize_spike_sensor
 
-        dev = presets.make_sensor(sensor)
+        dev = presets.make_sensor(sensor, height=None, width=None)  # any test size
         # 2·τ̂ of dark on 16×16 pixels: ~500 dark spikes, τ̂ to ±5 % (0.4 dB).
         r = characterize_spike_sensor(
             dev,

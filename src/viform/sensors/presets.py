@@ -160,7 +160,14 @@ def spike_available() -> bool:
 
 def preset_names() -> list[str]:
     """Names accepted by :func:`make_sensor` (``spike`` only when the spike module exists)."""
-    return list(PRESETS) + (["spike"] if spike_available() else [])
+    return list(PRESETS) + (["spike", *_spike_chip_names()] if spike_available() else [])
+
+
+def _spike_chip_names() -> list[str]:
+    """The real-chip spike presets (:mod:`viform.sensors.spike_presets`)."""
+    from viform.sensors.spike_presets import SPIKE_PRESET_NAMES
+
+    return list(SPIKE_PRESET_NAMES)
 
 
 def make_sensor(name: str, **kwargs):
@@ -168,6 +175,10 @@ def make_sensor(name: str, **kwargs):
     check_choice("sensor", name, preset_names())
     if name == "spike":
         return _spike(**kwargs)
+    if name in _spike_chip_names():
+        from viform.sensors.spike_presets import load_spike_preset
+
+        return load_spike_preset(name).sensor(**kwargs)
     try:
         return PRESETS[name][1](**kwargs)
     except TypeError as exc:
@@ -176,4 +187,8 @@ def make_sensor(name: str, **kwargs):
 
 def describe_preset(name: str) -> str:
     check_choice("sensor", name, preset_names())
+    if name in _spike_chip_names():
+        from viform.sensors.spike_presets import describe_spike_preset
+
+        return describe_spike_preset(name)
     return "seed 000 spike camera (Q = 100 e⁻, 40 kHz)" if name == "spike" else PRESETS[name][0]
