@@ -54,3 +54,27 @@ def test_dr_cli_json():
     out = json.loads(r.output)
     assert [round(e.get("computed_db", 0), 6) for e in out["seed_examples"][:3]] == [160.0, 180.0, 160.0]
     assert out["dr_db"] == pytest.approx(180.0)
+
+
+def test_dr_cli_takes_a_sensors_q_clock_and_dark_current():
+    """DR = 20·log10(τ̂/τ̌) with τ̌ = 1/clock and τ̂ = Q/Id: 40 kHz, Q = 100 e-, 20 e-/s → 20·log10(2e5) dB."""
+    import math
+
+    from click.testing import CliRunner
+
+    from viform.cli import _load_commands
+    from viform.cli.app import cli
+
+    _load_commands()
+    r = CliRunner().invoke(cli, ["dr", "--json", "--clock-hz", "40000", "--threshold-electrons", "100",
+                                 "--dark-current-e-per-s", "20"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.output)
+    assert out["dr_db"] == pytest.approx(20 * math.log10((100 / 20) * 40000), abs=1e-9)
+
+
+def test_dr_cli_refuses_half_a_range():
+    """--shortest alone used to be ignored silently; it is now an error naming what is missing."""
+    from viform.cli import main
+
+    assert main(["dr", "--shortest", "1e-5"]) == 2

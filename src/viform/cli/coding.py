@@ -63,38 +63,77 @@ def decode_cmd(src, dst):
 
 
 @cli.command("dr")
-@click.option("--json", "as_json", is_flag=True, help="print JSON")
-@click.option("--shortest", type=float, default=None, help="τ̌, s: compute DR for these values instead")
-@click.option("--longest", type=float, default=None, help="τ̂, s")
-@click.option("--sensitivity", type=float, default=None, help="τ̆, s (sub-threshold)")
-@click.option("--levels", type=int, default=None, help="N sub-threshold levels")
-@click.option("--measure", is_flag=True, help="also measure DR on a simulated spike sensor")
-def dr_cmd(as_json, shortest, longest, sensitivity, levels, measure):
-    """Dynamic range of spike continuous photography (seed 000 §4.2–§4.5)."""
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the table.")
+@click.option("--threshold-electrons", type=float, default=None,
+              help="Your sensor's threshold Q, electrons (with --dark-current-e-per-s gives the longest interval).")
+@click.option("--clock-hz", type=float, default=None,
+              help="Your sensor's readout clock, Hz (gives the shortest interval, 1/clock).")
+@click.option("--dark-current-e-per-s", type=float, default=None, help="Your sensor's dark current, e-/s.")
+@click.option("--shortest", type=float, default=None,
+              help="Shortest interval the readout resolves, s (default: 1/--clock-hz).")
+@click.option("--longest", type=float, default=None,
+              help="Longest interval still set by light, s (default: Q / dark current).")
+@click.option("--sensitivity", type=float, default=None, help="Sub-threshold read period, s.")
+@click.option("--levels", type=int, default=None, help="Number of sub-threshold levels.")
+@click.option("--measure", is_flag=True, help="Also measure the DR of a simulated spike sensor.")
+def dr_cmd(as_json, threshold_electrons, clock_hz, dark_current_e_per_s, shortest, longest, sensitivity, levels,
+           measure):
+    """Dynamic range of spike continuous photography: the worked examples, and your sensor's.
+
+    The DR is the ratio of the longest interval still set by light (Q over the dark current)
+    to the shortest one the readout resolves (one clock period); sub-threshold readout of the
+    partial charge extends it at the dark end.
+    """
+    from viform._validate import ViformError, check_positive
     from viform.measure import dynamic_range as dr
 
+    if clock_hz is not None:
+        check_positive("--clock-hz", clock_hz)
+        shortest = 1.0 / clock_hz if shortest is None else shortest
+    if threshold_electrons is not None or dark_current_e_per_s is not None:
+        if threshold_electrons is None or dark_current_e_per_s is None:
+            raise ViformError("--threshold-electrons and --dark-current-e-per-s go together: the longest "
+                              "interval is Q / dark current; give both")
+        check_positive("--threshold-electrons", threshold_electrons)
+        check_positive("--dark-current-e-per-s", dark_current_e_per_s)
+        longest = threshold_electrons / dark_current_e_per_s if longest is None else longest
+    if (shortest is None) != (longest is None):
+        given, missing = ("--shortest", "--longest (or --threshold-electrons with --dark-current-e-per-s)") \
+            if shortest is not None else ("--longest", "--shortest (or --clock-hz)")
+        raise ViformError(f"{given} alone gives no dynamic range: also give {missing}")
+    if (sensitivity is None) != (levels is None):
+        raise ViformError("--sensitivity and --levels go together (the sub-threshold read period and its levels)")
     out = {"seed_examples": dr.seed_examples()}
     if shortest is not None:
-        if longest is not None:
-            out["dr_db"] = dr.dynamic_range_db(shortest, longest)
-        if sensitivity is not None and levels is not None:
+        check_positive("--shortest", shortest)
+        check_positive("--longest", longest)
+        if longest <= shortest:
+            raise ViformError(f"--longest = {longest:g} s is not allowed: it must exceed --shortest = {shortest:g} s")
+        out["shortest_interval_s"], out["longest_interval_s"] = shortest, longest
+        out["dr_db"] = dr.dynamic_range_db(shortest, longest)
+        if sensitivity is not None:
             out["subthreshold_dr_db"] = dr.subthreshold_dynamic_range_db(shortest, sensitivity, levels)
+    elif sensitivity is not None:
+        raise ViformError("--sensitivity/--levels need the shortest interval: give --shortest or --clock-hz")
     if measure:
         out["measured"] = dr.measure_spike_dynamic_range()
     if as_json:
         click.echo(json.dumps(out, indent=2, ensure_ascii=False))
         return
+    click.echo(f"{'worked example':<58}{'computed':>12}{'paper':>10}")
     for ex in out["seed_examples"]:
         if "seed_db" in ex:
-            click.echo(f"{ex['example']}: {ex['computed_db']:.1f} dB (seed: {ex['seed_db']:g} dB)")
+            click.echo(f"{ex['example'][:57]:<58}{ex['computed_db']:>9.1f} dB{ex['seed_db']:>7g} dB")
         else:
-            click.echo(f"{ex['example']}: {ex['computed_ns']:.2f} ns (seed: {ex['seed_ns']:g} ns)")
+            click.echo(f"{ex['example'][:57]:<58}{ex['computed_ns']:>9.2f} ns{ex['seed_ns']:>7g} ns")
     if "dr_db" in out:
-        click.echo(f"DR(τ̌={shortest:g} s, τ̂={longest:g} s) = {out['dr_db']:.2f} dB")
+        click.echo(f"your sensor: shortest interval {shortest:.4g} s, longest {longest:.4g} s → "
+                   f"dynamic range {out['dr_db']:.1f} dB")
     if "subthreshold_dr_db" in out:
-        click.echo(f"sub-threshold DR = {out['subthreshold_dr_db']:.2f} dB")
+        click.echo(f"with sub-threshold readout ({levels} levels every {sensitivity:.4g} s): "
+                   f"{out['subthreshold_dr_db']:.1f} dB")
     if measure:
         m = out["measured"]
-        click.echo(f"simulated sensor (Q={m['threshold_electrons']:g}, Id={m['dark_current_e_per_s']:g} e/s): "
-                   f"measured {m['dr_measured_db']:.2f} dB, formula {m['dr_formula_db']:.2f} dB "
-                   f"(±{m['tolerance_db']:.2f} dB)")
+        click.echo(f"simulated sensor (Q = {m['threshold_electrons']:g} e-, dark current "
+                   f"{m['dark_current_e_per_s']:g} e-/s): measured {m['dr_measured_db']:.2f} dB, formula "
+                   f"{m['dr_formula_db']:.2f} dB (±{m['tolerance_db']:.2f} dB)")
