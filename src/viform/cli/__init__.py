@@ -27,6 +27,8 @@ COMMAND_MODULES = [
     "viform.cli.coding",  # encode, decode, dr (issue 6)
     "viform.cli.display",  # lightcomm, display (issue 7)
     "viform.cli.dataset",  # dataset (issue 14)
+    "viform.cli.capture",  # capture (issue 12)
+    "viform.cli.compare",  # compare (issue 12)
 ]
 
 

@@ -1,0 +1,285 @@
+"""CLI: ``viform capture SENSOR SCENE`` — shoot a scene with any sensor preset and save what it outputs.
+
+Frame cameras write their frames (.npz or .zarr) with the start time and length of every
+exposure window, the unit of the values and the sensor's full description; the spike camera
+writes its spike stream (.dat + sidecar, .npz, .zarr). ``--preview`` adds a PNG (one
+image) or an MP4/GIF (every frame), tone-mapped on a log scale.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import click
+import numpy as np
+
+from viform._validate import ViformError, check_int, check_positive
+from viform.cli.app import cli
+
+#: Frame-file suffixes.
+FRAME_FORMATS = (".npz", ".zarr")
+PREVIEW_FORMATS = (".png", ".mp4", ".gif")
+#: Sensors that are not in :func:`viform.sensors.presets.preset_names` but can capture.
+EXTRA_SENSORS = {
+    "cmos-short": "conventional CMOS, 1 ms exposure at 30 fps",
+    "highspeed": "high-speed camera (1 667 fps at 1280×720) with auto-exposure",
+    "gated": "range-gated CCD with a 905 nm pulsed laser (scenes with range: night-road-fog)",
+}
+
+
+def capture_sensor_names() -> list[str]:
+    """Every name ``viform capture`` accepts."""
+    from viform.sensors.presets import preset_names
+
+    names = list(preset_names())
+    try:
+        from viform.sensors.spike_presets import SPIKE_PRESET_NAMES
+
+        names += [n for n in SPIKE_PRESET_NAMES if n not in names]
+    except ImportError:
+        pass
+    return names + [n for n in EXTRA_SENSORS if n not in names]
+
+
+def _spike_sensor(name: str):
+    from viform.sensors.presets import make_sensor
+
+    try:
+        from viform.sensors.spike_presets import SPIKE_PRESET_NAMES, load_spike_preset
+    except ImportError:
+        SPIKE_PRESET_NAMES = ()
+    if name in SPIKE_PRESET_NAMES:
+        return load_spike_preset(name).sensor(height=None, width=None)
+    return make_sensor(name)
+
+
+def is_spike(name: str) -> bool:
+    try:
+        from viform.sensors.spike_presets import SPIKE_PRESET_NAMES
+    except ImportError:
+        SPIKE_PRESET_NAMES = ()
+    return name == "spike" or name in SPIKE_PRESET_NAMES
+
+
+def save_frame_stack(path, frames, start_times_s, exposure_s, units: str, metadata: dict) -> Path:
+    """Write frames with their exposure windows, unit and metadata (.npz or .zarr), atomically."""
+    from viform._io import _jsonable, atomic_path
+
+    path = Path(path)
+    meta_json = json.dumps(metadata, default=_jsonable)
+    starts = np.asarray(start_times_s, dtype=np.float64)
+    exposures = np.asarray(exposure_s, dtype=np.float64)
+    if path.suffix.lower() == ".npz":
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            np.savez_compressed(f, frames=np.asarray(frames), start_times_s=starts, exposure_s=exposures,
+                                end_times_s=starts + exposures, units=np.array(units),
+                                metadata_json=np.array(meta_json))
+        return path
+    import zarr
+
+    with atomic_path(path, suffix=".zarr") as tmp:
+        tmp.unlink()
+        group = zarr.open_group(str(tmp), mode="w")
+        arr = np.asarray(frames)
+        z = group.create_array("frames", shape=arr.shape, dtype=arr.dtype, chunks=(1, *arr.shape[1:]))
+        z[...] = arr
+        for name, data in (("start_times_s", starts), ("exposure_s", exposures), ("end_times_s", starts + exposures)):
+            a = group.create_array(name, shape=data.shape, dtype=data.dtype)
+            a[...] = data
+        group.attrs["viform"] = {"format": "viform-frames", "version": 1, "units": units,
+                                 "metadata": json.loads(meta_json)}
+    return path
+
+
+def load_frame_stack(path) -> dict:
+    """Read a file written by :func:`save_frame_stack` (frames, times, exposures, units, metadata)."""
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        with np.load(path) as z:
+            return {"frames": z["frames"], "start_times_s": z["start_times_s"], "exposure_s": z["exposure_s"],
+                    "units": str(z["units"]), "metadata": json.loads(str(z["metadata_json"]))}
+    import zarr
+
+    group = zarr.open_group(str(path), mode="r")
+    head = group.attrs["viform"]
+    return {"frames": group["frames"][...], "start_times_s": group["start_times_s"][...],
+            "exposure_s": group["exposure_s"][...], "units": head["units"], "metadata": head["metadata"]}
+
+
+def _log_tone(images, floor=None):
+    """8-bit log tone mapping shared by all frames of a preview (one scale for the clip)."""
+    a = np.asarray(images, dtype=np.float64)
+    pos = a[a > 0]
+    lo = floor if floor is not None else (float(np.percentile(pos, 1)) if pos.size else 1.0)
+    hi = max(float(a.max()), lo * 10)
+    out = (np.log10(np.clip(a, lo, hi)) - math.log10(lo)) / (math.log10(hi) - math.log10(lo))
+    return np.clip(np.rint(out * 255), 0, 255).astype(np.uint8)
+
+
+def write_preview(path, images) -> None:
+    """PNG of the middle image, or an MP4/GIF of all (each pixel doubled for visibility)."""
+    import imageio.v3 as iio
+
+    from viform._io import atomic_path, save_image
+
+    gray = _log_tone(images)
+    if gray.shape[1] < 200:
+        gray = np.repeat(np.repeat(gray, 2, axis=1), 2, axis=2)
+    suffix = Path(path).suffix.lower()
+    if suffix == ".png":
+        save_image(path, gray[len(gray) // 2])
+        return
+    if suffix == ".mp4":
+        h, w = gray.shape[1:]
+        pad = ((0, 0), (0, (-h) % 16), (0, (-w) % 16))  # codec blocks of 16
+        with atomic_path(path) as tmp:
+            iio.imwrite(tmp, np.pad(gray, pad), extension=".mp4", fps=10, codec="libx264")
+        return
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, gray, extension=".gif", duration=100, loop=0)
+
+
+def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int = 0, preview=None) -> dict:
+    """Shoot ``scene`` with ``sensor_name`` and save the output (see the module notes); returns a summary."""
+    from viform.stream.sidecar import provenance
+
+    suffix = Path(out_path).suffix.lower()
+    if is_spike(sensor_name):
+        from viform.imaging import accumulation_image
+        from viform.stream.io import FORMATS, save_spikes
+
+        if suffix not in FORMATS:
+            raise ViformError(f"--out = {str(out_path)!r}: a spike stream is saved as one of {', '.join(FORMATS)}")
+        sensor = _spike_sensor(sensor_name)
+        stream = sensor.capture(scene, duration_s, seed=seed, progress=True)
+        save_spikes(out_path, stream)
+        summary = {"file": str(out_path), "sensor": sensor_name, "kind": "spikes", "n_ticks": stream.n_ticks,
+                   "height": stream.height, "width": stream.width, "clock_hz": stream.clock_hz,
+                   "threshold_electrons": stream.threshold_electrons, **stream.summary()}
+        if preview:
+            n = min(40, stream.n_ticks)
+            window = max(1.0 / stream.clock_hz, duration_s / n)
+            images = [accumulation_image(stream, (k + 1) * duration_s / n - 0.5 / stream.clock_hz, window).spikes_per_s
+                      for k in range(n)]
+            write_preview(preview, images)
+        return summary
+    if suffix not in FRAME_FORMATS:
+        raise ViformError(f"--out = {str(out_path)!r}: frames are saved as one of {', '.join(FRAME_FORMATS)}")
+    meta = {"scene": scene.describe(), "seed": seed, **provenance()}
+    if sensor_name == "highspeed":
+        from dataclasses import replace
+
+        from viform.isp.highspeed_pipeline import HighSpeedConfig, run_highspeed
+        from viform.sensors.highspeed_timing import lux13hs_timing
+
+        cfg = HighSpeedConfig()
+        timing = lux13hs_timing(cfg.mode, cfg.pixel_clock_hz)
+        period = timing.frame_period_s(timing.window(cfg.roi))
+        n = max(1, int(math.floor(duration_s / period + 1e-9)))
+        result = run_highspeed(scene, replace(cfg, n_frames=n, seed=seed))
+        frames, starts, exposures = result.gray8, result.frame_times_s - result.exposure_s, result.exposure_s
+        units = "8-bit gray: the high 8 bits of the 10-bit code (DN >> 2)"
+        meta["sensor"] = {**result.config, "timing": result.timing, "link": result.plan}
+        meta["auto_exposure_cycles"] = result.exposure_cycles
+    elif sensor_name == "gated":
+        from viform.sensors.gated_ccd import GatedInterlineCCD
+
+        active = getattr(scene, "active", None)
+        if active is None:
+            raise ViformError(f"SCENE = {scene.name!r} has no range: the gated camera needs a laser-lit scene with "
+                              "distances (built-in: night-road-fog)")
+        sensor = GatedInterlineCCD(gate_range_m=50.0)
+        stack = sensor.capture(active, duration_s, seed=seed)
+        frames, starts, exposures = stack.frames_dn, stack.start_times_s, stack.exposure_s
+        units = (f"DN (sum of {sensor.pulses} gated exposures in the vertical register, black "
+                 f"{sensor.parameters.pixel.black_offset_dn:g} DN); exposure_s = total gate-open time")
+        meta["sensor"] = sensor.describe()
+    else:
+        if sensor_name == "cmos-short":
+            from viform.sensors.frame import FramePixelParameters, FrameSensor
+
+            sensor = FrameSensor(FramePixelParameters(), exposure_s=1e-3, frame_rate_hz=30.0)
+        else:
+            from viform.sensors.presets import make_sensor
+
+            sensor = make_sensor(sensor_name)
+        stack = sensor.capture(scene, duration_s, seed=seed)
+        frames, starts, exposures = stack.frames_dn, stack.start_times_s, stack.exposure_s
+        p = sensor.parameters
+        units = (f"DN ({p.adc_bits}-bit ADC, black offset {p.black_offset_dn:g} DN, "
+                 f"K = {p.system_gain_dn_per_e:.4g} DN/e-)")
+        meta["sensor"] = sensor.describe()
+    save_frame_stack(out_path, frames, starts, exposures, units, meta)
+    if preview:
+        write_preview(preview, np.asarray(frames, dtype=np.float64))
+    return {"file": str(out_path), "sensor": sensor_name, "kind": "frames", "frames": int(len(frames)),
+            "height": int(frames.shape[1]), "width": int(frames.shape[2]), "units": units,
+            "first_start_s": float(starts[0]), "exposure_s": [float(x) for x in exposures[:8]]}
+
+
+@cli.command()
+@click.argument("sensor")
+@click.argument("scene")
+@click.option("--duration", "duration_s", type=float, required=True, help="Length of the capture, seconds.")
+@click.option("--out", "out_path", type=click.Path(), required=True,
+              help="Frames: .npz or .zarr. Spike stream: .dat, .npz or .zarr.")
+@click.option("--preview", type=click.Path(dir_okay=False), default=None,
+              help="Also write a preview: .png (one image) or .mp4/.gif (every frame), log tone-mapped.")
+@click.option("--height", type=int, default=64, show_default=True, help="Resolution of built-in scenes.")
+@click.option("--width", type=int, default=128, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True, help="Noise seed.")
+@click.option("--max-lux", type=float, default=4.0, show_default=True,
+              help="Illuminance on the sensor of full-scale image/video pixels, lux.")
+@click.option("--frame-rate-hz", type=float, default=None, help="Frame rate of a video or image folder.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of a line of text.")
+@click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
+def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, max_lux, frame_rate_hz, as_json,
+            json_file):
+    """Shoot SCENE with SENSOR and save its output with every exposure window.
+
+    SENSOR: cmos, cmos-short, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
+    seed003-overflow, highspeed, gated, spike, spikeone, spiketwo, spiketwo-40k.
+    SCENE: a built-in scene (dilemma, night-road-fog, translating, rotating, hdr, ...), an
+    image, a video or a folder of images.
+    """
+    from viform._io import check_output_folder, write_json
+    from viform.light.scenes import load_scene
+    from viform.stream.io import FORMATS
+
+    names = capture_sensor_names()
+    if sensor not in names:
+        raise ViformError(f"SENSOR = {sensor!r} is not allowed: choose one of {', '.join(names)}")
+    check_positive("--duration", duration_s)
+    check_int("--height", height, 1)
+    check_int("--width", width, 1)
+    suffix = Path(out_path).suffix.lower()
+    allowed = FORMATS if is_spike(sensor) else FRAME_FORMATS
+    if suffix not in allowed:
+        kind = "a spike stream" if is_spike(sensor) else "frames"
+        raise ViformError(f"--out = {out_path!r}: {kind} must be saved as one of {', '.join(allowed)}")
+    if preview and Path(preview).suffix.lower() not in PREVIEW_FORMATS:
+        raise ViformError(f"--preview = {preview!r}: the suffix must be one of {', '.join(PREVIEW_FORMATS)}")
+    check_output_folder("--out", Path(out_path).resolve().parent)
+    if preview:
+        check_output_folder("--preview", Path(preview).resolve().parent)
+    if json_file:
+        check_output_folder("--json-file", Path(json_file).resolve().parent)
+    light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz)
+    summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview)
+    if preview:
+        summary["preview"] = str(preview)
+    if json_file:
+        write_json(json_file, summary)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2, default=str))
+        return
+    if summary["kind"] == "spikes":
+        click.echo(f"wrote {out_path}: spike stream, {summary['n_ticks']} ticks × {summary['height']}×"
+                   f"{summary['width']} at {summary['clock_hz']:g} Hz")
+    else:
+        click.echo(f"wrote {out_path}: {summary['frames']} frames × {summary['height']}×{summary['width']}, "
+                   f"exposure {summary['exposure_s'][0] * 1e3:.4g} ms, {summary['units']}")
+    if preview:
+        click.echo(f"preview: {preview}")

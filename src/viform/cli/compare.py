@@ -1,0 +1,113 @@
+"""CLI: ``viform compare SCENE`` — one scene shot by every sensor, scored against the truth."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from viform._validate import ViformError
+from viform.cli.app import cli
+
+
+def parse_sensors(text: str | None) -> list[str] | None:
+    from viform.measure.comparison import DEFAULT_SENSORS
+
+    if text is None:
+        return None
+    keys = [k.strip() for k in text.split(",") if k.strip()]
+    if not keys:
+        raise ViformError("--sensors is empty: give sensor names separated by commas, e.g. --sensors spike,cmos")
+    for k in keys:
+        if k not in DEFAULT_SENSORS:
+            raise ViformError(f"--sensors: {k!r} is not allowed: choose from {', '.join(DEFAULT_SENSORS)}")
+    return keys
+
+
+def parse_instants(text: str | None) -> list[float] | None:
+    if text is None:
+        return None
+    from viform.cli._common import parse_times
+
+    return parse_times(text)
+
+
+def check_outputs(out_dir, json_file) -> None:
+    from viform._io import check_output_folder
+
+    if Path(out_dir).exists() and not Path(out_dir).is_dir():
+        raise ViformError(f"--out: {out_dir} is a file; give a folder")
+    check_output_folder("--out", out_dir)
+    if json_file:
+        if Path(json_file).is_dir():
+            raise ViformError(f"--json-file: {json_file} is a folder; give a file name")
+        check_output_folder("--json-file", Path(json_file).resolve().parent)
+
+
+def finish(doc: dict, out_dir, elapsed_s: float, as_json: bool, json_file) -> None:
+    from viform._io import write_json
+    from viform.report.compare_report import metrics_table
+
+    summary = {"report": str(Path(out_dir) / "report.html"), "metrics": str(Path(out_dir) / "metrics.json"),
+               "elapsed_s": elapsed_s, "sensors": {k: {"label": v["label"], "skipped": v["skipped"],
+                                                        **v["metrics"]} for k, v in doc["sensors"].items()},
+               "verdict": doc["verdict"]}
+    if json_file:
+        write_json(json_file, summary)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2, default=str))
+        return
+    click.echo(metrics_table(doc))
+    click.echo("")
+    for line in doc["verdict"]:
+        click.echo(f"- {line}")
+    click.echo(f"\nwrote {summary['report']} and {summary['metrics']} in {elapsed_s:.1f} s")
+
+
+@cli.command()
+@click.argument("scene")
+@click.option("--sensors", default=None,
+              help="Comma-separated sensors (default: all): spike, cmos-short, cmos, seed001-2seg, seed001-3seg, "
+                   "seed003-4t, seed003-overflow, highspeed, gated.")
+@click.option("--duration", "duration_s", type=float, default=0.04, show_default=True, help="Clip length, s.")
+@click.option("--at", "at", default=None, help="Instants to compare, s, comma-separated (default: 30/50/70 %).")
+@click.option("--out", "out_dir", type=click.Path(), default="viform-compare", show_default=True,
+              help="Output folder (report.html, metrics.json, figures/).")
+@click.option("--height", type=int, default=64, show_default=True, help="Resolution of built-in scenes.")
+@click.option("--width", type=int, default=128, show_default=True)
+@click.option("--brightness", type=float, default=None,
+              help="Factor on the light of the dilemma and night-road-fog scenes.")
+@click.option("--speed", type=float, default=None, help="Factor on the dilemma scene's speeds.")
+@click.option("--visibility-m", type=float, default=None, help="Fog visibility of night-road-fog, m.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Noise seed.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
+@click.option("--json-file", type=click.Path(), default=None, help="Also write the JSON summary here.")
+def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, speed, visibility_m, seed, as_json,
+            json_file):
+    """Shoot SCENE with every sensor and write a self-contained report.html and metrics.json.
+
+    SCENE: dilemma (high speed and high dynamic range at once), night-road-fog (with range,
+    for the gated camera), another built-in scene, an image or a video.
+    """
+    from viform.report.compare_report import compare as run
+
+    keys = parse_sensors(sensors)
+    instants = parse_instants(at)
+    check_outputs(out_dir, json_file)
+    options = {k: v for k, v in (("brightness", brightness), ("speed", speed), ("visibility_m", visibility_m))
+               if v is not None}
+    if options and scene not in ("dilemma", "night-road-fog"):
+        raise ViformError(f"--{'/--'.join(k.replace('_', '-') for k in options)} apply to the dilemma and "
+                          f"night-road-fog scenes only, not to SCENE = {scene!r}")
+    if speed is not None and scene != "dilemma":
+        raise ViformError("--speed applies to the dilemma scene only")
+    if visibility_m is not None and scene != "night-road-fog":
+        raise ViformError("--visibility-m applies to the night-road-fog scene only")
+    started = time.perf_counter()
+    doc = run(scene, out_dir, keys, duration_s, height, width, seed, instants, progress=True,
+              command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "", scene_options=options)
+    finish(doc, out_dir, time.perf_counter() - started, as_json, json_file)

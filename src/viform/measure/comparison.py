@@ -1,0 +1,518 @@
+"""One scene, every sensor: shoot, turn each output into lux at chosen instants, score against the truth.
+
+The sensors are the project's documented models (seed 000 spike camera; a conventional
+CMOS at a short and a long exposure; seed 001 segmented exposure; seed 003 plain 4T and
+conditional overflow; seed 002 high-speed camera with auto-exposure; seed 004 range-gated
+CCD where the scene has range). Each output becomes an illuminance estimate (lux) by
+inverting the sensor's own noise-free response:
+
+* linear frame cameras: E = ((DN − black)/K − I_dark·T) / (η_lux · T) (EMVA 1288 linear model);
+* segmented exposure (seed 001 §3.3, fig. 6) and conditional overflow (seed 003 eqs. 1–6):
+  the inverse of the piecewise-linear response, tabulated on a fine lux grid;
+* high-speed camera (seed 002): its 8-bit frames with the exposure the AE chose per frame;
+* spike camera (seed 000 §3.3): accumulation (count·Q / window) and interval (Q/τ) imaging,
+  and the best method the imaging package offers.
+
+The image "at instant t" of a frame camera is the frame whose exposure contains t, or else
+the last frame started before t (what a viewer holds on screen). Metrics, per sensor,
+against the analytic truth at the same instants:
+
+* PSNR and SSIM of log10-illuminance (``skimage.metrics``), both images clipped to the
+  scene's own range, so one decade of error counts the same in shadow and sun;
+* saturated fraction (the pixel's ceiling: full well, top ADC code, a spike every tick) and
+  under-exposed fraction (signal below the noise floor, SNR < 1; no spike for the spike camera);
+* motion-blur edge width: the 10–90 % distance of the moving vehicle's leading edge, px;
+* flicker error: |estimate − truth| of the PWM LED over its on/off swing, 0 (right) … 1 (wrong);
+* dynamic range captured: 20·lg(max/min) of the true illuminances that the sensor renders
+  within a factor of 2 without saturating or dropping below its floor (0.1–99.9 percentile);
+* data rate (MB/s) of the raw output at this resolution, and latency (worst-case time from
+  a light change to an image that shows it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from viform._validate import ViformError, check_choice
+
+#: Sensors of the comparison, in report order, with a one-line description for users.
+SENSOR_DESCRIPTIONS = {
+    "spike": "spike camera (self-reset pixels, 40 kHz readout)",
+    "cmos-short": "conventional CMOS, 1 ms exposure at 30 fps",
+    "cmos": "conventional CMOS, 10 ms exposure at 30 fps",
+    "seed001-2seg": "segmented exposure, two segments, 130 µs at 60 fps",
+    "seed001-3seg": "segmented exposure, three segments, 130 µs at 60 fps",
+    "seed003-4t": "plain 4T pixel, 33.3 ms integration at 30 fps",
+    "seed003-overflow": "conditional-overflow pixel, three integrations in 33.3 ms",
+    "highspeed": "high-speed camera with auto-exposure, 1 667 fps",
+    "gated": "range-gated CCD with a 905 nm pulsed laser (scenes with range only)",
+}
+DEFAULT_SENSORS = tuple(SENSOR_DESCRIPTIONS)
+#: Spike reconstructions reported as separate rows.
+SPIKE_METHODS = ("accumulation", "interval", "best")
+#: Accumulation window of the spike camera's accumulation image, s.
+ACCUMULATION_WINDOW_S = 1e-3
+#: Metric keys, in table order, with units for the report.
+METRICS = {
+    "psnr_log_db": ("PSNR (log-lux)", "dB"),
+    "ssim_log": ("SSIM (log-lux)", ""),
+    "saturated_fraction": ("saturated", "fraction"),
+    "underexposed_fraction": ("under-exposed", "fraction"),
+    "edge_width_px": ("motion-blur edge width", "px"),
+    "flicker_error": ("flicker error", "of on/off swing"),
+    "dr_captured_db": ("scene DR captured", "dB"),
+    "data_rate_mb_per_s": ("data rate", "MB/s"),
+    "latency_s": ("latency", "s"),
+    "time_resolution_s": ("integration time", "s"),
+}
+
+
+def spike_preset():
+    """The spike camera: the ``spikeone`` preset when the project has it, else the defaults.
+
+    Its pixel and readout are the preset's; the resolution is the scene's (every sensor of a
+    comparison sees the same pixels).
+    """
+    try:
+        from viform.sensors.spike_presets import load_spike_preset
+    except ImportError:  # preset module not there: the documented defaults
+        from viform.sensors.presets import make_sensor
+
+        return make_sensor("spike"), "spike defaults"
+    return load_spike_preset("spikeone").sensor(height=None, width=None), "spikeone"
+
+
+def make_compare_sensor(key: str, scene=None):
+    """The sensor behind a comparison key (see :data:`SENSOR_DESCRIPTIONS`)."""
+    check_choice("sensor", key, DEFAULT_SENSORS)
+    from viform.sensors.frame import FramePixelParameters, FrameSensor
+    from viform.sensors.presets import make_sensor
+
+    if key == "spike":
+        return spike_preset()[0]
+    if key == "cmos-short":
+        return FrameSensor(FramePixelParameters(), exposure_s=1e-3, frame_rate_hz=30.0)
+    if key == "highspeed":
+        from viform.isp.highspeed_pipeline import HighSpeedConfig
+
+        return HighSpeedConfig()
+    if key == "gated":
+        from viform.sensors.gated_ccd import GatedInterlineCCD
+
+        return GatedInterlineCCD(gate_range_m=50.0)
+    return make_sensor(key)
+
+
+# ------------------------------------------------------------------ shots
+@dataclass
+class Estimate:
+    """One sensor's light estimate at one instant."""
+
+    lux: np.ndarray
+    saturated: np.ndarray
+    underexposed: np.ndarray
+    source_time_s: tuple  # (start, end) of the light this image integrates
+
+
+@dataclass
+class Shot:
+    """One sensor (or one spike reconstruction) on the scene."""
+
+    key: str
+    label: str
+    description: str
+    estimates: list = field(default_factory=list)
+    parameters: dict = field(default_factory=dict)
+    time_resolution_s: float = math.nan
+    latency_s: float = math.nan
+    data_rate_mb_per_s: float = math.nan
+    frame_rate_hz: float = math.nan
+    lux_units: bool = True
+    skipped: str | None = None
+    metrics: dict = field(default_factory=dict)
+    raw: object = None
+
+
+def frame_at(starts_s, exposures_s, t_s: float) -> int:
+    """Index of the frame shown at ``t_s``: the one exposing at t, else the last started before t."""
+    starts = np.asarray(starts_s)
+    ends = starts + np.asarray(exposures_s)
+    inside = np.flatnonzero((starts <= t_s) & (t_s < ends))
+    if inside.size:
+        return int(inside[-1])
+    before = np.flatnonzero(starts <= t_s)
+    return int(before[-1]) if before.size else 0
+
+
+def _linear_lux(params, dn, exposure_s):
+    k = params.system_gain_dn_per_e
+    electrons = (np.asarray(dn, dtype=np.float64) - params.black_offset_dn) / k
+    signal = electrons - params.dark_current_e_per_s * exposure_s
+    return signal, np.maximum(signal, 0.0) / (params.optics.electrons_per_lux_second * exposure_s)
+
+
+def _noise_floor_electrons(params, exposure_s) -> float:
+    """Temporal noise with no light, e⁻: a signal below it has SNR < 1."""
+    return max(1.0, math.sqrt(params.read_noise_electrons ** 2 + params.dark_current_e_per_s * exposure_s
+                              + 1.0 / (12 * params.system_gain_dn_per_e ** 2)))
+
+
+def _inverse_table(sensor, kind):
+    """(electrons kept, lux) of the noise-free response on a fine lux grid, for inversion."""
+    lux = np.logspace(-6, 7, 4000)
+    if kind == "segmented":
+        kept = sensor.expected_charge_electrons(lux) - sensor.parameters.dark_current_e_per_s * sensor.exposure_s
+    else:  # overflow: CDS signal (dark included), minus the dark part at zero light
+        kept = sensor.expected_signal_electrons(sensor.photocurrent_a(lux))
+        kept = kept - sensor.expected_signal_electrons(sensor.photocurrent_a(np.zeros(1)))[0]
+    top = int(np.argmax(kept >= kept.max() * (1 - 1e-9)))  # first point of the final plateau
+    return kept[: top + 1], lux[: top + 1]
+
+
+def frame_estimates(sensor, stack, instants_s, kind: str = "linear") -> list:
+    """Light estimates of a frame camera's :class:`~viform.sensors.base.FrameStack` at ``instants_s``."""
+    p = sensor.parameters
+    out = []
+    table = None if kind == "linear" else _inverse_table(sensor, kind)
+    for t in instants_s:
+        i = frame_at(stack.start_times_s, stack.exposure_s, t)
+        dn = stack.frames_dn[i]
+        exposure = float(stack.exposure_s[i])
+        signal, lux = _linear_lux(p, dn, exposure)
+        if table is not None:
+            lux = np.interp(np.maximum(signal, 0.0), table[0], table[1], left=0.0)
+            ceiling = table[0][-1]
+        else:
+            ceiling = p.full_well_electrons - p.dark_current_e_per_s * exposure
+        saturated = (signal >= 0.98 * ceiling) | (dn >= p.max_dn)
+        under = signal < _noise_floor_electrons(p, exposure)
+        out.append(Estimate(lux, saturated, under, (float(stack.start_times_s[i]),
+                                                     float(stack.start_times_s[i]) + exposure)))
+    return out
+
+
+def spike_estimates(stream, instants_s, method: str, window_s: float = ACCUMULATION_WINDOW_S) -> list:
+    """Light estimates of a spike stream by ``method`` ("accumulation", "interval", "best")."""
+    from viform.imaging import accumulation_image, interval_image
+
+    out = []
+    tick = 1.0 / stream.clock_hz
+    for t in instants_s:
+        if method == "accumulation":
+            img = accumulation_image(stream, t, window_s)
+            count = img.spikes_per_s * img.info.get("window_ticks", round(window_s * stream.clock_hz)) * tick
+            n = img.info.get("window_ticks", round(window_s * stream.clock_hz))
+            saturated = count >= 0.98 * n
+            under = count < 0.5
+            out.append(Estimate(img.lux, saturated, under, (t - n * tick, t)))
+        elif method == "interval":
+            img = interval_image(stream, t)
+            tau = img.info["tau_ticks"]
+            saturated = tau <= 1
+            under = img.censored if img.censored is not None else np.zeros(tau.shape, bool)
+            out.append(Estimate(img.lux, saturated, under, (t, t)))
+        else:
+            best = best_spike_image(stream, t)
+            out.append(best)
+    return out
+
+
+def best_spike_method_name() -> str:
+    """Name of the reconstruction used as "best" (the imaging package's best public method)."""
+    import viform.imaging as imaging
+
+    for name in ("best_image", "adaptive_image", "hybrid_image"):
+        if hasattr(imaging, name):
+            return name.replace("_image", "")
+    return "interval + accumulation fallback"
+
+
+def best_spike_image(stream, t_s: float) -> Estimate:
+    """The best reconstruction available: the imaging package's own when it offers one, else
+    interval imaging where the interval is complete and a 4 ms accumulation where it is cut."""
+    import viform.imaging as imaging
+
+    for name in ("best_image", "adaptive_image", "hybrid_image"):
+        if hasattr(imaging, name):
+            img = getattr(imaging, name)(stream, t_s)
+            lux = img.lux
+            tau = img.info.get("tau_ticks")
+            sat = (tau <= 1) if tau is not None else np.zeros(lux.shape, bool)
+            under = img.censored if img.censored is not None else ~(lux > 0)
+            return Estimate(lux, sat, under, (t_s, t_s))
+    itv = imaging.interval_image(stream, t_s)
+    acc = imaging.accumulation_image(stream, t_s, 4e-3)
+    cut = itv.censored if itv.censored is not None else np.zeros(itv.lux.shape, bool)
+    lux = np.where(cut, acc.lux, itv.lux)
+    n = acc.info.get("window_ticks", 1)
+    count = acc.spikes_per_s * n / stream.clock_hz
+    return Estimate(lux, itv.info["tau_ticks"] <= 1, cut & (count < 0.5), (t_s, t_s))
+
+
+def highspeed_estimates(result, config, instants_s) -> list:
+    """Light estimates from the high-speed camera's 8-bit sensor frames (before equalization)."""
+    p = config.pixel_parameters
+    shift = p.adc_bits - 8
+    starts = result.frame_times_s - result.exposure_s
+    out = []
+    for t in instants_s:
+        i = frame_at(starts, result.exposure_s, t)
+        gray = result.gray8[i].astype(np.float64)
+        dn = gray * (1 << shift) + ((1 << shift) - 1) / 2.0  # middle of the dropped low bits
+        exposure = float(result.exposure_s[i])
+        signal, lux = _linear_lux(p, dn, exposure)
+        saturated = result.gray8[i] >= 255
+        under = signal < max(_noise_floor_electrons(p, exposure), (1 << shift) / p.system_gain_dn_per_e)
+        out.append(Estimate(lux, saturated, under, (float(starts[i]), float(result.frame_times_s[i]))))
+    return out
+
+
+def data_rate_mb_per_s(height: int, width: int, bits_per_pixel: float, rate_hz: float) -> float:
+    return height * width * bits_per_pixel * rate_hz / 8e6
+
+
+def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> list:
+    """Shoot ``scene`` with sensor ``key``; return its :class:`Shot` (several for the spike camera)."""
+    h, w = scene.shape
+    desc = SENSOR_DESCRIPTIONS[key]
+    if key == "gated":
+        active = getattr(scene, "active", None)
+        if active is None:
+            return [Shot(key, key, desc, skipped="the scene has no range (the gated camera needs a "
+                                                   "laser-lit scene with distances, e.g. night-road-fog)")]
+        sensor = make_compare_sensor(key)
+        frame = sensor.capture_frame(active, seed=seed)
+        e = frame.electrons
+        p = sensor.parameters.pixel
+        est = Estimate(np.maximum(e, 0.0), frame.dn >= p.max_dn * frame.readouts,
+                       e < _noise_floor_electrons(p, 0.0), (0.0, sensor.frame_time_s()))
+        shot = Shot(key, "gated CCD (laser returns, e⁻)", desc, [est] * len(instants_s), sensor.describe(),
+                    time_resolution_s=sensor.pulses * sensor.timing.width_s,
+                    latency_s=1.0 / sensor.frame_rate_hz + sensor.frame_time_s(),
+                    data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
+                    frame_rate_hz=sensor.frame_rate_hz, lux_units=False, raw=frame)
+        return [shot]
+    if key == "spike":
+        sensor, preset = spike_preset()
+        stream = sensor.capture(scene, duration_s, seed=seed)
+        par = sensor.parameters
+        rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
+        shots = []
+        for method in SPIKE_METHODS:
+            label = {"accumulation": f"spike · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
+                     "interval": "spike · interval", "best": f"spike · best ({best_spike_method_name()})"}[method]
+            ests = spike_estimates(stream, instants_s, method)
+            if method == "accumulation":
+                tres = ACCUMULATION_WINDOW_S
+                lat = ACCUMULATION_WINDOW_S + 1 / par.clock_hz
+            else:
+                # a pixel shows a change at its next spike: the typical interval at this light
+                taus = []
+                from viform.imaging import interval_image
+
+                for t in instants_s:
+                    taus.append(np.median(interval_image(stream, t).info["tau_ticks"]) / par.clock_hz)
+                tres = float(np.median(taus))
+                lat = tres + 1 / par.clock_hz
+            shots.append(Shot(f"spike-{method}", label, f"{desc}, {preset}", ests,
+                              {**sensor.describe(), "preset": preset, "reconstruction": method},
+                              time_resolution_s=tres, latency_s=lat, data_rate_mb_per_s=rate,
+                              frame_rate_hz=par.clock_hz, raw=stream))
+        return shots
+    if key == "highspeed":
+        from dataclasses import replace
+
+        from viform.isp.highspeed_pipeline import HighSpeedConfig, run_highspeed
+
+        base = HighSpeedConfig()
+        from viform.sensors.highspeed_timing import lux13hs_timing
+
+        timing = lux13hs_timing(base.mode, base.pixel_clock_hz)
+        period = timing.frame_period_s(timing.window(base.roi))
+        n = max(1, int(math.floor(duration_s / period + 1e-9)))
+        config = replace(base, n_frames=n, seed=seed, scene_samples=8)
+        result = run_highspeed(scene, config)
+        ests = highspeed_estimates(result, config, instants_s)
+        return [Shot(key, "high-speed camera (AE)", desc, ests,
+                     {**result.config, "timing": result.timing, "link": result.plan},
+                     time_resolution_s=float(np.median(result.exposure_s)), latency_s=period,
+                     data_rate_mb_per_s=data_rate_mb_per_s(h, w, config.pixel_parameters.adc_bits, 1 / period),
+                     frame_rate_hz=1 / period, raw=result)]
+    sensor = make_compare_sensor(key)
+    try:
+        stack = sensor.capture(scene, duration_s, seed=seed)
+    except ViformError as exc:
+        return [Shot(key, key, desc, skipped=str(exc))]
+    kind = {"seed001-2seg": "segmented", "seed001-3seg": "segmented", "seed003-overflow": "overflow"}.get(key,
+                                                                                                         "linear")
+    ests = frame_estimates(sensor, stack, instants_s, kind)
+    p = sensor.parameters
+    return [Shot(key, key, desc, ests, sensor.describe(), time_resolution_s=sensor.exposure_s,
+                 latency_s=1.0 / sensor.frame_rate_hz,
+                 data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
+                 frame_rate_hz=sensor.frame_rate_hz, raw=stack)]
+
+
+# ------------------------------------------------------------------ metrics
+def log_lux(lux, lo: float, hi: float) -> np.ndarray:
+    """log10 of illuminance clipped to [lo, hi] (None or 0 become lo)."""
+    return np.log10(np.clip(np.nan_to_num(np.asarray(lux, dtype=np.float64)), lo, hi))
+
+
+def log_fidelity(estimate_lux, truth_lux, lo: float, hi: float) -> tuple[float, float]:
+    """PSNR (dB) and SSIM of log10-lux, both clipped to [lo, hi]; data range lg(hi/lo)."""
+    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+    a, b = log_lux(truth_lux, lo, hi), log_lux(estimate_lux, lo, hi)
+    rng = math.log10(hi / lo)
+    psnr = float(peak_signal_noise_ratio(a, b, data_range=rng))
+    win = min(7, min(a.shape) - (1 - min(a.shape) % 2))
+    ssim = float(structural_similarity(a, b, data_range=rng, win_size=max(3, win)))
+    return min(psnr, 99.0), ssim
+
+
+def edge_width_px(lux, rows, dark_lux: float, bright_lux: float) -> float:
+    """10–90 % width (px) of the rightmost bright→dark edge in the band ``rows``, on log-lux.
+
+    The band's rows are averaged; the profile is normalised between the dark and bright
+    plateaus (known levels of the scene) so noise in either does not move the thresholds.
+    NaN when no such edge is in view.
+    """
+    r0, r1 = rows
+    lo, hi = math.log10(dark_lux), math.log10(bright_lux)
+    prof = np.log10(np.clip(np.asarray(lux, dtype=np.float64)[r0:r1], dark_lux / 10, bright_lux * 10)).mean(axis=0)
+    n = (prof - lo) / (hi - lo)
+    bright = np.flatnonzero(n >= 0.9)
+    if bright.size == 0:
+        return math.nan
+    i90 = int(bright[-1])  # rightmost point still at 90 %
+    after = np.flatnonzero(n[i90:] <= 0.1)
+    if after.size == 0:
+        return math.nan
+    i10 = i90 + int(after[0])
+    # linear interpolation of the crossings on either side
+    x90 = i90 + (n[i90] - 0.9) / max(n[i90] - n[i90 + 1], 1e-12) if i90 + 1 < n.size else float(i90)
+    x10 = i10 - (0.1 - n[i10]) / max(n[i10 - 1] - n[i10], 1e-12)
+    return float(max(x10 - x90, 0.0))
+
+
+def score(shot: Shot, scene, instants_s) -> dict:
+    """The metrics of :data:`METRICS` for one shot (see the module notes)."""
+    if shot.skipped:
+        return {}
+    demand = scene.demand() if hasattr(scene, "demand") else None
+    truths = [scene.illuminance_lux(float(t)) for t in instants_s]
+    lo = demand["min_lux"] / 2 if demand else max(float(min(t.min() for t in truths)), 1e-4)
+    hi = demand["max_lux"] * 2 if demand else float(max(t.max() for t in truths))
+    regions = scene.regions() if hasattr(scene, "regions") else {}
+    m = {"time_resolution_s": shot.time_resolution_s, "latency_s": shot.latency_s,
+         "data_rate_mb_per_s": shot.data_rate_mb_per_s, "frame_rate_hz": shot.frame_rate_hz}
+    sat = float(np.mean([e.saturated.mean() for e in shot.estimates]))
+    under = float(np.mean([e.underexposed.mean() for e in shot.estimates]))
+    m.update(saturated_fraction=sat, underexposed_fraction=under)
+    if not shot.lux_units:
+        m.update(psnr_log_db=math.nan, ssim_log=math.nan, edge_width_px=math.nan, flicker_error=math.nan,
+                 dr_captured_db=math.nan)
+        if "targets" in regions:
+            m["target_cnr"] = target_cnr(shot.estimates[0].lux, regions["targets"])
+        return m
+    fid = [log_fidelity(e.lux, t, lo, hi) for e, t in zip(shot.estimates, truths, strict=True)]
+    m["psnr_log_db"] = float(np.mean([f[0] for f in fid]))
+    m["ssim_log"] = float(np.mean([f[1] for f in fid]))
+    if "edge_rows" in regions:
+        widths = [edge_width_px(e.lux, regions["edge_rows"], regions["edge_dark_lux"], regions["edge_bright_lux"])
+                  for e in shot.estimates]
+        m["edge_width_px"] = float(np.nanmedian(widths)) if np.isfinite(widths).any() else math.nan
+    else:
+        m["edge_width_px"] = math.nan
+    if "led" in regions:
+        swing = scene.led_on_lux - scene.led_off_lux
+        errs = [abs(float(e.lux[regions["led"]].mean()) - float(t[regions["led"]].mean())) / swing
+                for e, t in zip(shot.estimates, truths, strict=True)]
+        m["flicker_error"] = float(min(1.0, np.mean(errs)))
+    else:
+        m["flicker_error"] = math.nan
+    good_truth = []
+    for e, t in zip(shot.estimates, truths, strict=True):
+        ok = (~e.saturated) & (~e.underexposed) & (np.abs(log_lux(e.lux, lo, hi) - log_lux(t, lo, hi)) < math.log10(2))
+        good_truth.append(t[ok])
+    good = np.concatenate(good_truth)
+    good = good[good > 0]
+    if good.size >= 2:
+        m["dr_captured_db"] = float(20 * math.log10(np.percentile(good, 99.9) / np.percentile(good, 0.1)))
+    else:
+        m["dr_captured_db"] = 0.0
+    if "targets" in regions:
+        m["target_cnr"] = target_cnr(shot.estimates[0].lux, regions["targets"])
+    return m
+
+
+def target_cnr(image, targets: dict) -> dict:
+    """Contrast-to-noise of each target against a ring of pixels around it (for the fog scene)."""
+    from scipy.ndimage import binary_dilation
+
+    out = {}
+    for name, mask in targets.items():
+        ring = binary_dilation(mask, iterations=3) & ~binary_dilation(mask, iterations=1)
+        if not ring.any():
+            continue
+        noise = float(np.std(image[ring])) or 1e-12
+        out[name] = float(abs(image[mask].mean() - image[ring].mean()) / noise)
+    return out
+
+
+# ------------------------------------------------------------------ who wins on what
+def verdict(shots, demand: dict | None) -> list[str]:
+    """Sentences saying which sensor wins on what, derived from the metrics alone."""
+    rows = [s for s in shots if not s.skipped and s.lux_units]
+    lines = []
+
+    def best(key, higher=True):
+        vals = [(s.metrics.get(key, math.nan), s) for s in rows]
+        vals = [(v, s) for v, s in vals if isinstance(v, float) and math.isfinite(v)]
+        if not vals:
+            return None, None, None
+        vals.sort(key=lambda vs: -vs[0] if higher else vs[0])
+        return vals[0][1], vals[0][0], vals[-1]
+
+    s, v, worst = best("edge_width_px", higher=False)
+    if s is not None:
+        lines.append(f"Sharpest motion: {s.label}, with a {v:.3g} px edge (integration {s.time_resolution_s:.3g} s); "
+                     f"the most blurred is {worst[1].label} at {worst[0]:.3g} px, because its integration time is "
+                     f"{worst[1].time_resolution_s:.3g} s.")
+    s, v, worst = best("dr_captured_db")
+    if s is not None:
+        need = f" of the {demand['dynamic_range_db']:.0f} dB the scene holds" if demand else ""
+        lines.append(f"Widest range rendered within a factor of 2: {s.label}, {v:.0f} dB{need} "
+                     f"(saturated {s.metrics['saturated_fraction']:.1%}, under-exposed "
+                     f"{s.metrics['underexposed_fraction']:.1%}); narrowest: {worst[1].label}, {worst[0]:.0f} dB.")
+    s, v, worst = best("saturated_fraction", higher=False)
+    if s is not None:
+        lines.append(f"Fewest saturated pixels: {s.label} ({v:.1%}); most: {worst[1].label} ({worst[0]:.1%}).")
+    s, v, worst = best("underexposed_fraction", higher=False)
+    if s is not None:
+        lines.append(f"Fewest pixels lost in the dark: {s.label} ({v:.1%}); most: {worst[1].label} ({worst[0]:.1%}).")
+    s, v, worst = best("flicker_error", higher=False)
+    if s is not None:
+        lines.append(f"Flickering LED seen in its true state: {s.label} (error {v:.2f} of the on/off swing); "
+                     f"worst {worst[1].label} ({worst[0]:.2f}).")
+    s, v, worst = best("psnr_log_db")
+    if s is not None:
+        lines.append(f"Closest to the truth overall (PSNR of log-lux): {s.label}, {v:.1f} dB "
+                     f"(SSIM {s.metrics['ssim_log']:.2f}); last: {worst[1].label}, {worst[0]:.1f} dB.")
+    s, v, worst = best("data_rate_mb_per_s", higher=False)
+    if s is not None:
+        lines.append(f"Least data: {s.label}, {v:.3g} MB/s; most: {worst[1].label}, {worst[0]:.3g} MB/s.")
+    s, v, worst = best("latency_s", higher=False)
+    if s is not None:
+        lines.append(f"Shortest latency: {s.label}, {v:.3g} s; longest: {worst[1].label}, {worst[0]:.3g} s.")
+    if demand and rows:
+        meets = [r.label for r in rows
+                 if r.metrics.get("dr_captured_db", 0) >= demand["dynamic_range_db"] - 6
+                 and r.time_resolution_s <= demand["time_resolution_s"]]
+        lines.append("Meets both the scene's range and its speed: " + (", ".join(meets) if meets else
+                     "no sensor — the dilemma holds for every architecture compared here at these settings."))
+    return lines

@@ -1,0 +1,423 @@
+"""``viform compare``: shoot one scene with every sensor and write report.html + metrics.json.
+
+The report is one self-contained HTML file (figures inline as base64 PNG, no script, no
+network). Every image of light uses the same log-lux colour map and one colour bar in
+lux; error maps use one diverging scale in decades. Metrics and the text saying which
+sensor wins on what come from :mod:`viform.measure.comparison`.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from viform._io import atomic_open, save_figure, write_json
+from viform._validate import ViformError, check_choice, check_int, check_positive
+from viform.measure import comparison as cmp
+
+#: Colour map of light images (perceptually uniform, dark = little light).
+LUX_CMAP = "inferno"
+#: Error maps: log10(estimate / truth) in decades, clipped to ± this.
+ERROR_SPAN_DECADES = 2.0
+
+
+def check_sensors(sensors) -> list[str]:
+    """Validate a list of comparison sensor keys (from ``--sensors``)."""
+    keys = list(sensors) if sensors else list(cmp.DEFAULT_SENSORS)
+    if not keys:
+        raise ViformError("--sensors is empty: give at least one sensor")
+    for k in keys:
+        check_choice("--sensors", k, cmp.DEFAULT_SENSORS)
+    return list(dict.fromkeys(keys))
+
+
+def default_instants(duration_s: float) -> list[float]:
+    """Three instants inside the clip (30 %, 50 %, 70 % of it)."""
+    return [round(f * duration_s, 9) for f in (0.3, 0.5, 0.7)]
+
+
+def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed: int = 0,
+                   progress: bool = True) -> dict:
+    """Shoot ``scene`` with each sensor and score it; returns shots, metrics and the verdict."""
+    duration_s = check_positive("--duration", duration_s)
+    keys = check_sensors(sensors)
+    instants = list(instants_s) if instants_s is not None else default_instants(duration_s)
+    for t in instants:
+        if not 0 <= t < duration_s:
+            raise ViformError(f"instant {t!r} s is outside the clip [0, {duration_s:g}) s")
+    shots, timings = [], {}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(keys), desc="compare", unit="sensor", leave=False)
+    try:
+        for key in keys:
+            if bar is not None:
+                bar.set_postfix_str(key)
+            started = time.perf_counter()
+            for shot in cmp.shoot(key, scene, duration_s, instants, seed=seed):
+                shot.metrics = cmp.score(shot, scene, instants)
+                shots.append(shot)
+            timings[key] = time.perf_counter() - started
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    demand = scene.demand() if hasattr(scene, "demand") else None
+    return {"shots": shots, "instants_s": instants, "demand": demand, "scene": scene,
+            "duration_s": duration_s, "verdict": cmp.verdict(shots, demand), "timings_s": timings}
+
+
+# ------------------------------------------------------------------ figures
+def _lux_norm(result):
+    from matplotlib.colors import LogNorm
+
+    d = result["demand"]
+    if d:
+        return LogNorm(vmin=d["min_lux"], vmax=d["max_lux"])
+    truth = result["scene"].illuminance_lux(result["instants_s"][0])
+    return LogNorm(vmin=max(float(truth.min()), 1e-4), vmax=float(truth.max()))
+
+
+def _panel_grid(n):
+    cols = min(4, n)
+    return math.ceil(n / cols), cols
+
+
+def _when(est, t):
+    a, b = est.source_time_s
+    if a == b:
+        return f"at {t * 1e3:.2f} ms"
+    return f"light of {a * 1e3:.2f}–{b * 1e3:.2f} ms"
+
+
+def figure_instant(result, index: int):
+    """Truth and every sensor's image at one instant, one log-lux colour map and colour bar."""
+    import matplotlib.pyplot as plt
+
+    t = result["instants_s"][index]
+    scene = result["scene"]
+    shots = [s for s in result["shots"] if not s.skipped and s.lux_units]
+    norm = _lux_norm(result)
+    rows, cols = _panel_grid(len(shots) + 1)
+    h, w = scene.shape
+    fig, axes = plt.subplots(rows, cols, figsize=(3.3 * cols + 1.2, 3.3 * rows * h / w + 0.9), squeeze=False,
+                             constrained_layout=True)
+    floor = norm.vmin
+    im = None
+    panels = [("truth", scene.illuminance_lux(t), f"at {t * 1e3:.2f} ms")]
+    panels += [(s.label, s.estimates[index].lux, _when(s.estimates[index], t)) for s in shots]
+    for ax, (title, lux, when) in zip(axes.flat, panels, strict=False):
+        im = ax.imshow(np.maximum(np.nan_to_num(lux), floor), cmap=LUX_CMAP, norm=norm, interpolation="nearest")
+        ax.set_title(f"{title}\n{when}", fontsize=8)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    for ax in list(axes.flat)[len(panels):]:
+        ax.axis("off")
+    fig.colorbar(im, ax=axes, shrink=0.8, label="illuminance on the sensor (lux, log scale)")
+    fig.suptitle(f"Scene '{scene.name}' at t = {t * 1e3:.2f} ms: truth and each sensor's image "
+                 "(same colour map; black = at or below the scene's darkest level)", fontsize=10)
+    return fig
+
+
+def figure_errors(result, index: int):
+    """log10(estimate / truth) per sensor at one instant, one diverging scale in decades."""
+    import matplotlib.pyplot as plt
+
+    t = result["instants_s"][index]
+    scene = result["scene"]
+    shots = [s for s in result["shots"] if not s.skipped and s.lux_units]
+    d = result["demand"] or {"min_lux": 1e-4, "max_lux": 1e6}
+    lo, hi = d["min_lux"] / 2, d["max_lux"] * 2
+    truth = cmp.log_lux(scene.illuminance_lux(t), lo, hi)
+    rows, cols = _panel_grid(len(shots))
+    h, w = scene.shape
+    fig, axes = plt.subplots(rows, cols, figsize=(3.3 * cols + 1.2, 3.3 * rows * h / w + 0.9), squeeze=False,
+                             constrained_layout=True)
+    im = None
+    for ax, s in zip(axes.flat, shots, strict=False):
+        err = cmp.log_lux(s.estimates[index].lux, lo, hi) - truth
+        im = ax.imshow(err, cmap="RdBu_r", vmin=-ERROR_SPAN_DECADES, vmax=ERROR_SPAN_DECADES,
+                       interpolation="nearest")
+        ax.set_title(f"{s.label}\nsaturated {s.estimates[index].saturated.mean():.0%}, "
+                     f"under-exposed {s.estimates[index].underexposed.mean():.0%}", fontsize=8)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    for ax in list(axes.flat)[len(shots):]:
+        ax.axis("off")
+    fig.colorbar(im, ax=axes, shrink=0.8,
+                 label="error: log10(estimate / truth), decades (red = too bright, blue = too dark)")
+    fig.suptitle(f"Error against the truth at t = {t * 1e3:.2f} ms (one scale for every sensor)", fontsize=10)
+    return fig
+
+
+def figure_dilemma(result):
+    """Temporal resolution against dynamic range captured: one point per sensor, the scene's demand marked."""
+    import matplotlib.pyplot as plt
+
+    shots = [s for s in result["shots"] if not s.skipped and s.lux_units]
+    fig, ax = plt.subplots(figsize=(8.5, 5.6), constrained_layout=True)
+    markers = "osD^v<>phX*P"
+    for i, s in enumerate(shots):
+        x = s.time_resolution_s
+        y = s.metrics.get("dr_captured_db", math.nan)
+        if not (math.isfinite(x) and math.isfinite(y)):
+            continue
+        ax.scatter([x], [y], s=70, marker=markers[i % len(markers)], label=s.label, zorder=3)
+    d = result["demand"]
+    if d and math.isfinite(d["time_resolution_s"]):
+        ax.scatter([d["time_resolution_s"]], [d["dynamic_range_db"]], marker="*", s=320, color="gold",
+                   edgecolor="black", zorder=4, label="scene demand (1 px of motion; its full range)")
+        ax.axvline(d["time_resolution_s"], color="0.5", ls="--", lw=1)
+        ax.axhline(d["dynamic_range_db"], color="0.5", ls="--", lw=1)
+        ax.fill_between([1e-7, d["time_resolution_s"]], d["dynamic_range_db"], d["dynamic_range_db"] + 40,
+                        color="gold", alpha=0.15, zorder=0, label="region meeting both demands")
+    ax.set_xscale("log")
+    xs = [s.time_resolution_s for s in shots if math.isfinite(s.time_resolution_s)]
+    if d and math.isfinite(d["time_resolution_s"]):
+        xs.append(d["time_resolution_s"])
+    if xs:
+        ax.set_xlim(min(xs) / 3, max(xs) * 3)
+    ys = [s.metrics.get("dr_captured_db", 0) for s in shots] + ([d["dynamic_range_db"]] if d else [])
+    ax.set_ylim(0, max(ys) * 1.15 + 5)
+    ax.set_xlabel("integration time per image (s, log scale): shorter = sharper motion")
+    ax.set_ylabel("scene dynamic range captured (dB)")
+    ax.set_title("The dilemma: time resolution against dynamic range (top left is better)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    return fig
+
+
+def figure_gated(result):
+    """The gated camera's frame (laser returns, electrons) beside the passive truth, own scales."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    shots = [s for s in result["shots"] if not s.skipped and not s.lux_units]
+    if not shots:
+        return None
+    scene = result["scene"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
+    truth = scene.illuminance_lux(result["instants_s"][0])
+    im0 = axes[0].imshow(truth, cmap=LUX_CMAP, norm=_lux_norm(result), interpolation="nearest")
+    axes[0].set_title("passive light on the sensor (truth, lux)", fontsize=9)
+    fig.colorbar(im0, ax=axes[0], label="illuminance (lux)")
+    e = np.maximum(shots[0].estimates[0].lux, 0.1)
+    im1 = axes[1].imshow(e, cmap="viridis", norm=LogNorm(vmin=max(0.1, float(np.percentile(e, 1))),
+                                                         vmax=max(1.0, float(e.max()))), interpolation="nearest")
+    axes[1].set_title(f"{shots[0].label}: one frame", fontsize=9)
+    fig.colorbar(im1, ax=axes[1], label="laser-return photoelectrons per pixel (e⁻, log)")
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle("Range gating sees the laser's own light, not lux: compare the targets' contrast-to-noise",
+                 fontsize=10)
+    return fig
+
+
+# ------------------------------------------------------------------ HTML
+def _fmt(v) -> str:
+    if v is None:
+        return "—"
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, (int, np.integer)):
+        return f"{int(v):d}"
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        if not math.isfinite(v):
+            return "n/a"
+        if v == 0:
+            return "0"
+        return f"{v:.4g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.3e}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k}: {_fmt(x)}" for k, x in v.items())
+    if isinstance(v, (list, tuple)):
+        text = ", ".join(_fmt(x) for x in v[:8])
+        return f"[{text}{', …' if len(v) > 8 else ''}]"
+    return str(v)
+
+
+def _flatten(d, prefix=""):
+    for k, v in d.items():
+        name = f"{prefix}{k}"
+        if isinstance(v, dict) and len(v) <= 30:
+            yield from _flatten(v, name + ".")
+        else:
+            yield name, v
+
+
+def _img(png_path: Path, alt: str) -> str:
+    data = base64.b64encode(png_path.read_bytes()).decode("ascii")
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:24px auto;max-width:1280px;
+color:#1a1a1a;line-height:1.45;padding:0 16px}
+h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.6em}
+table{border-collapse:collapse;font-size:.85em;margin:.6em 0}td,th{border:1px solid #ccc;padding:3px 7px;
+text-align:right}th{background:#f0f0f0}td:first-child,th:first-child{text-align:left}
+img{max-width:100%;height:auto;border:1px solid #ddd;margin:.4em 0}.note{color:#555;font-size:.9em}
+.sensor{border:1px solid #ddd;border-radius:6px;padding:.3em 1em;margin:1em 0;background:#fafafa}
+.params td{text-align:left;font-family:ui-monospace,monospace;font-size:.9em}ul.verdict li{margin:.3em 0}
+"""
+
+
+def write_report(result, out_dir, command: str = "") -> dict:
+    """Write report.html, metrics.json and figures/*.png in ``out_dir``; return the metrics document."""
+    out = Path(out_dir)
+    figs = out / "figures"
+    figs.mkdir(parents=True, exist_ok=True)
+    scene = result["scene"]
+    shots = result["shots"]
+    instants = result["instants_s"]
+    paths = {}
+    save_figure(figs / "dilemma.png", figure_dilemma(result))
+    paths["dilemma"] = figs / "dilemma.png"
+    for i, t in enumerate(instants):
+        save_figure(figs / f"images_{i}_{t * 1e3:.2f}ms.png", figure_instant(result, i))
+        save_figure(figs / f"errors_{i}_{t * 1e3:.2f}ms.png", figure_errors(result, i))
+        paths[f"images_{i}"] = figs / f"images_{i}_{t * 1e3:.2f}ms.png"
+        paths[f"errors_{i}"] = figs / f"errors_{i}_{t * 1e3:.2f}ms.png"
+    gated = figure_gated(result)
+    if gated is not None:
+        save_figure(figs / "gated.png", gated)
+        paths["gated"] = figs / "gated.png"
+
+    doc = {
+        "scene": scene.describe(), "duration_s": result["duration_s"], "instants_s": instants,
+        "demand": result["demand"], "command": command,
+        "metric_units": {k: u for k, (_, u) in cmp.METRICS.items()},
+        "sensors": {s.key: {"label": s.label, "description": s.description, "skipped": s.skipped,
+                            "metrics": s.metrics, "parameters": s.parameters} for s in shots},
+        "verdict": result["verdict"], "run_time_s": result.get("run_time_s"),
+        "sensor_times_s": result["timings_s"],
+    }
+    write_json(out / "metrics.json", json.loads(json.dumps(doc, default=_json_default)))
+
+    e = html.escape
+    parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>viform compare: {e(scene.name)}"
+             f"</title><style>{_CSS}</style></head><body>"]
+    d = result["demand"]
+    parts.append(f"<h1>One scene, every sensor: '{e(scene.name)}'</h1>")
+    demand_text = ""
+    if d:
+        demand_text = (f" The scene spans {d['min_lux']:.3g}–{d['max_lux']:.3g} lux "
+                       f"({d['dynamic_range_db']:.0f} dB)")
+        if math.isfinite(d["time_resolution_s"]):
+            demand_text += (f", its fastest edge moves {d['max_speed_px_per_s']:.0f} px/s (one pixel every "
+                            f"{d['time_resolution_s'] * 1e6:.0f} µs)")
+        if d.get("flicker_hz"):
+            demand_text += f", and an LED flickers at {d['flicker_hz']:g} Hz"
+        demand_text += "."
+    parts.append(f"<p class='note'>{scene.height}×{scene.width} pixels, {result['duration_s'] * 1e3:g} ms clip, "
+                 f"images compared at {', '.join(f'{t * 1e3:.2f} ms' for t in instants)}.{e(demand_text)} "
+                 f"Every sensor sees the same light (illuminance on the sensor plane) and is used at its "
+                 f"documented settings.{' Command: <code>' + e(command) + '</code>.' if command else ''}"
+                 + (f" Run time {result['run_time_s']:.1f} s." if result.get("run_time_s") else "") + "</p>")
+    parts.append("<section id='verdict'><h2>Who wins on what</h2><ul class='verdict'>")
+    parts += [f"<li>{e(line)}</li>" for line in result["verdict"]]
+    parts.append("</ul><p class='note'>Derived from the metrics below each time the report is made.</p></section>")
+
+    parts.append("<section id='metrics'><h2>Metrics against the truth</h2><table><tr><th>sensor</th>")
+    parts += [f"<th>{e(name)}<br><span class='note'>{e(unit)}</span></th>" for name, unit in cmp.METRICS.values()]
+    parts.append("</tr>")
+    for s in shots:
+        if s.skipped:
+            continue
+        parts.append(f"<tr data-sensor='{e(s.key)}'><td>{e(s.label)}</td>")
+        parts += [f"<td data-metric='{k}'>{_fmt(s.metrics.get(k))}</td>" for k in cmp.METRICS]
+        parts.append("</tr>")
+    parts.append("</table><p class='note'>PSNR and SSIM on log10-lux over the scene's range; saturated = at "
+                 "the pixel's ceiling; under-exposed = below its noise floor (SNR &lt; 1) or no spike; edge width = "
+                 "10–90 % of the moving vehicle's leading edge; flicker error = |estimate − truth| of the PWM "
+                 "LED over its on/off swing; DR captured = 20·lg(max/min) of the true light rendered within a "
+                 "factor of 2; latency = worst-case time from a light change to an image showing it; "
+                 "integration time = the light each image integrates (median interval for the spike "
+                 "camera's interval image). n/a: not defined for this sensor or scene.</p></section>")
+
+    parts.append("<section id='dilemma'><h2>The dilemma: time resolution against dynamic range</h2>")
+    parts.append(_img(paths["dilemma"], "time resolution against dynamic range"))
+    parts.append("</section><section id='images'><h2>Images at the chosen instants</h2>"
+                 "<p class='note'>A frame camera shows the frame exposing at that instant, or else the last "
+                 "frame it took (as a display holds it); the panel title says which light it integrated.</p>")
+    for i, t in enumerate(instants):
+        parts.append(f"<h3 id='instant-{i}'>t = {t * 1e3:.2f} ms</h3>")
+        parts.append(_img(paths[f"images_{i}"], f"images at {t * 1e3:.2f} ms"))
+        parts.append(_img(paths[f"errors_{i}"], f"error maps at {t * 1e3:.2f} ms"))
+    if "gated" in paths:
+        parts.append(_img(paths["gated"], "gated camera frame"))
+    parts.append("</section><section id='sensors'><h2>Sensors and their parameters</h2>")
+    for s in shots:
+        parts.append(f"<div class='sensor' id='sensor-{e(s.key)}'><h3>{e(s.label)}</h3>"
+                     f"<p>{e(s.description)}</p>")
+        if s.skipped:
+            parts.append(f"<p><b>Not in this comparison:</b> {e(s.skipped)}</p></div>")
+            continue
+        parts.append("<table>" + "".join(
+            f"<tr><td>{e(cmp.METRICS[k][0])}</td><td data-metric='{k}'>{_fmt(s.metrics.get(k))} "
+            f"{e(cmp.METRICS[k][1])}</td></tr>" for k in cmp.METRICS))
+        if "target_cnr" in s.metrics:
+            parts.append("".join(f"<tr><td>contrast-to-noise, {e(n)}</td><td>{_fmt(v)}</td></tr>"
+                                 for n, v in s.metrics["target_cnr"].items()))
+        parts.append("</table><details><summary>parameters</summary><table class='params'>")
+        parts += [f"<tr><td>{e(k)}</td><td>{e(_fmt(v))}</td></tr>" for k, v in _flatten(s.parameters)]
+        parts.append("</table></details></div>")
+    parts.append("</section><p class='note'>Made by viform compare; self-contained (no network).</p></body></html>")
+    with atomic_open(out / "report.html", "w") as f:
+        f.write("".join(parts))
+    return doc
+
+
+def _json_default(v):
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist() if v.size <= 64 else f"array{list(v.shape)}"
+    if isinstance(v, Path):
+        return str(v)
+    return str(v)
+
+
+def metrics_table(doc: dict) -> str:
+    """A small console table: one row per sensor, key metrics with units, 3–4 significant figures."""
+    cols = [("psnr_log_db", "PSNR dB"), ("ssim_log", "SSIM"), ("saturated_fraction", "sat"),
+            ("underexposed_fraction", "under"), ("edge_width_px", "edge px"), ("flicker_error", "flicker"),
+            ("dr_captured_db", "DR dB"), ("data_rate_mb_per_s", "MB/s"), ("latency_s", "latency s")]
+    width = max([len(v["label"]) for v in doc["sensors"].values()] + [6])
+    lines = [f"{'sensor':<{width}}  " + "  ".join(f"{h:>9}" for _, h in cols)]
+    for v in doc["sensors"].values():
+        if v["skipped"]:
+            lines.append(f"{v['label']:<{width}}  not applicable: {v['skipped']}")
+            continue
+        lines.append(f"{v['label']:<{width}}  " + "  ".join(f"{_fmt(v['metrics'].get(k)):>9}" for k, _ in cols))
+    return "\n".join(lines)
+
+
+def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, height: int = 64,
+            width: int = 128, seed: int = 0, instants_s=None, progress: bool = True, command: str = "",
+            scene_options: dict | None = None) -> dict:
+    """Load the scene, run the comparison, write the report; return the metrics document."""
+    from viform.light.scenes import BUILTIN_SCENES, builtin_scene, load_scene
+
+    height = check_int("--height", height, 32)
+    width = check_int("--width", width, 48)
+    check_positive("--duration", duration_s)
+    keys = check_sensors(sensors)
+    if scene_spec in BUILTIN_SCENES:
+        scene = builtin_scene(scene_spec, height, width, **(scene_options or {}))
+    else:
+        scene = load_scene(scene_spec, height, width, resize=True)
+    started = time.perf_counter()
+    result = run_comparison(scene, duration_s, keys, instants_s, seed, progress)
+    result["run_time_s"] = time.perf_counter() - started
+    return write_report(result, out_dir, command)
