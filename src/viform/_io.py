@@ -11,44 +11,160 @@ import os
 import tempfile
 from pathlib import Path
 
+#: Marker in the names of temporary outputs: ``.NAME.viform-tmp-PID-XXXX`` (being written) and
+#: ``.NAME.viform-old-PID-XXXX`` (a replaced folder store awaiting deletion). A later write to
+#: the same NAME removes those whose process is gone (see :func:`clean_stale`).
+TMP_MARK = ".viform-tmp-"
+OLD_MARK = ".viform-old-"
 
-@contextlib.contextmanager
-def atomic_path(path, suffix: str | None = None):
-    """Yield a temporary path in the target's folder; rename it onto ``path`` on success.
 
-    ``suffix`` defaults to the target's own suffix (libraries that pick a format from
-    the name see the right one). On any exception the temporary file (or folder) is
-    removed and the target is untouched.
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True  # another user's process (or not ours to judge): leave its files alone
+    return True
+
+
+def _leftover_pid(name: str, prefix: str) -> int | None:
+    """The writer's process id in a leftover name ``prefix + PID-...``, or None."""
+    if not name.startswith(prefix):
+        return None
+    digits = name[len(prefix):].split("-", 1)[0]
+    return int(digits) if digits.isdigit() and len(digits) < 10 else None
+
+
+def _remove(path: Path) -> None:
+    import shutil
+
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+
+
+def clean_stale(path) -> list[Path]:
+    """Remove what killed writers left beside ``path``; returns what was removed or restored.
+
+    A temporary ``.NAME.viform-tmp-PID-*`` of a dead process is deleted. A folder store
+    ``.NAME.viform-old-PID-*`` set aside by a dead process is deleted when ``path`` exists (the
+    new store made it in) and renamed back onto ``path`` when it does not (the writer died
+    between the two renames: the old store is whole again).
+    """
+    path = Path(path)
+    parent = path.parent
+    done: list[Path] = []
+    tmp_prefix = f".{path.name}{TMP_MARK}"
+    old_prefix = f".{path.name}{OLD_MARK}"
+    try:
+        entries = [e for e in parent.iterdir() if e.name.startswith((tmp_prefix, old_prefix))]
+    except OSError:
+        return done
+    for entry in sorted(entries, key=lambda e: e.name):
+        is_tmp = entry.name.startswith(tmp_prefix)
+        pid = _leftover_pid(entry.name, tmp_prefix if is_tmp else old_prefix)
+        if pid is None or _pid_alive(pid):
+            continue
+        if not is_tmp and not os.path.lexists(path):
+            with contextlib.suppress(OSError):
+                os.rename(entry, path)
+                done.append(entry)
+                continue
+        _remove(entry)
+        done.append(entry)
+    return done
+
+
+def _check_target(path: Path, directory: bool) -> None:
+    from viform._validate import ViformError
+
+    if path.is_dir() and not directory:
+        raise ViformError(f"{str(path)!r} is an existing folder; a file was expected there")
+    if directory and path.exists() and not path.is_dir():
+        raise ViformError(f"{str(path)!r} is an existing file; a folder store was expected there")
+    existing = path.parent
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ViformError(f"{str(path)!r} cannot be written: {str(existing)!r} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ViformError(f"{str(path)!r} cannot be written: the folder {str(existing)!r} is not writable")
+
+
+def check_output_path(option: str, path, *, directory: bool = False) -> None:
+    """Refuse, before any work, an output ``path`` that cannot be written as a file (or a folder).
+
+    ``option`` (the flag the user typed, e.g. ``--out``) leads the message.
     """
     from viform._validate import ViformError
 
-    path = Path(path)
     try:
+        _check_target(Path(path), directory)
+    except ViformError as exc:
+        raise ViformError(f"{option}: {exc}") from None
+
+
+@contextlib.contextmanager
+def atomic_path(path, suffix: str | None = None, *, directory: bool = False):
+    """Yield a temporary path in the target's folder; move it onto ``path`` on success.
+
+    ``suffix`` defaults to the target's own suffix (libraries that pick a format from
+    the name see the right one). With ``directory=False`` an empty temporary file is
+    created; with ``directory=True`` nothing is created and the caller makes a folder there
+    (e.g. a zarr store). On any exception (Ctrl-C and SIGTERM included) the temporary is
+    removed and the target is untouched.
+
+    A folder replaces an existing one in three steps: the old store is renamed aside, the
+    new one renamed in, the old one deleted; a crash at any point leaves the old or the new
+    store whole under ``path``, and the next write to ``path`` finishes the job
+    (:func:`clean_stale`). Temporary names carry the writer's process id so that a later run
+    recognises those of killed writers.
+    """
+    import shutil
+
+    from viform._validate import ViformError
+
+    path = Path(path)
+    suffix = path.suffix if suffix is None else suffix
+    pid = os.getpid()
+    try:
+        _check_target(path, directory)
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix if suffix is not None else path.suffix,
-                                   dir=path.parent)
+        clean_stale(path)
+        if directory:
+            tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{TMP_MARK}{pid}-", suffix=suffix, dir=path.parent))
+            tmp.rmdir()  # the caller creates it (libraries refuse an existing folder)
+        else:
+            fd, name = tempfile.mkstemp(prefix=f".{path.name}{TMP_MARK}{pid}-", suffix=suffix, dir=path.parent)
+            os.close(fd)
+            tmp = Path(name)
+            # mkstemp creates 0600; give the result the permissions a plain open() would
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
     except OSError as exc:  # name the file the user asked for, not the temporary one
         raise ViformError(f"{str(path)!r} cannot be written: {exc.strerror or exc}") from None
-    os.close(fd)
-    tmp = Path(tmp)
-    # mkstemp creates 0600; give the result the permissions a plain open() would
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
     try:
         yield tmp
-        if tmp.is_dir() and path.exists() and path.is_dir():
-            import shutil
-
-            shutil.rmtree(path)
-        os.replace(tmp, path)
-    except BaseException:
-        if tmp.is_dir():
-            import shutil
-
-            shutil.rmtree(tmp, ignore_errors=True)
+        if tmp.is_dir() and os.path.lexists(path):
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}{OLD_MARK}{pid}-", dir=path.parent))
+            old.rmdir()
+            os.rename(path, old)
+            try:
+                os.rename(tmp, path)
+            except BaseException:
+                os.rename(old, path)  # put the old store back
+                raise
+            shutil.rmtree(old, ignore_errors=True)
         else:
-            tmp.unlink(missing_ok=True)
+            os.replace(tmp, path)
+    except BaseException:
+        _remove(tmp)
         raise
 
 

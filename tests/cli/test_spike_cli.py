@@ -81,7 +81,7 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, needle
     from viform.stream.container import SpikeStream
     from viform.stream.dat import write_dat
 
-    write_dat(tmp_path / "good.dat", SpikeStream(np.ones((3, 4, 8), bool), 40_000.0))
+    write_dat(tmp_path / "good.dat", SpikeStream(np.ones((3, 4, 8), bool), 40_000.0), sidecar=False)
     (tmp_path / "broken.mp4").write_bytes(b"garbage")
     (tmp_path / "text.npz").write_text("not an archive")
     (tmp_path / "file.dat").write_bytes(b"")  # a file where a folder is needed

@@ -56,7 +56,7 @@ def test_partial_file_is_refused_or_trimmed_on_request(tmp_path):
 
 
 def test_missing_or_wrong_size_is_a_clear_error(tmp_path):
-    path = write_dat(tmp_path / "s.dat", random_stream())
+    path = write_dat(tmp_path / "s.dat", random_stream(), sidecar=False)
     with pytest.raises(ViformError, match="height and width are required"):
         read_dat(path, None, None)
     with pytest.raises(ViformError, match="not a whole number"):

@@ -19,10 +19,12 @@ def parse_times(text: str) -> list[float]:
     return times
 
 
-def open_source(path, height, width, clock_hz=None, flip=True, allow_partial=False):
+def open_source(path, height, width, clock_hz=None, flip=True, allow_partial=False, axes=None, key=None):
+    """Open a spike file for a command; ``flip=True`` (no ``--no-flip``) lets a sidecar decide the row order."""
     from viform.stream.io import open_spikes
 
-    return open_spikes(path, height, width, clock_hz=clock_hz, flip=flip, allow_partial=allow_partial)
+    return open_spikes(path, height, width, clock_hz=clock_hz, flip=None if flip else False,
+                       allow_partial=allow_partial, axes=axes, key=key)
 
 
 def report(as_json: bool, line: str, summary: dict) -> None:

@@ -20,6 +20,18 @@ import numpy as np
 
 from viform._validate import ViformError, check_int, check_positive
 
+#: Bytes of unpacked spikes (one byte per pixel-tick) a reader hands out per block: blocks are
+#: sized by this budget, not by a tick count, so memory stays bounded at any resolution.
+BLOCK_BUDGET_BYTES = 32 << 20
+
+
+def block_ticks_for(height: int, width: int, block_ticks: int | None = None,
+                    budget_bytes: int = BLOCK_BUDGET_BYTES) -> int:
+    """Ticks per block: ``block_ticks`` (if given) capped so a (T, H, W) bool block fits ``budget_bytes``."""
+    cap = max(1, int(budget_bytes) // max(1, int(height) * int(width)))
+    return cap if block_ticks is None else max(1, min(int(block_ticks), cap))
+
+
 #: dtype of the events view (the neuromorphic x, y, t, p convention; t in microseconds).
 EVENT_DTYPE = np.dtype([("x", np.int16), ("y", np.int16), ("t", np.int64), ("p", np.int8)])
 
@@ -81,8 +93,12 @@ class SpikeSource(ABC):
 
     def iter_blocks(self, block_ticks: int = 1024, start: int = 0,
                     stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
-        """Yield ``(first_tick, spikes)`` blocks of at most ``block_ticks`` ticks."""
-        block_ticks = check_int("block_ticks", block_ticks, 1)
+        """Yield ``(first_tick, spikes)`` blocks of at most ``block_ticks`` ticks.
+
+        Blocks are also capped at :data:`BLOCK_BUDGET_BYTES` (so memory stays bounded at any
+        resolution); callers use the ``first_tick`` given, never assume a block length.
+        """
+        block_ticks = block_ticks_for(self.height, self.width, check_int("block_ticks", block_ticks, 1))
         stop = self.n_ticks if stop is None else stop
         for first in range(start, stop, block_ticks):
             yield first, self.read_ticks(first, min(first + block_ticks, stop))

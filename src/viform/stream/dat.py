@@ -7,11 +7,14 @@ simulators that write upright). Older 400×250 recordings store 416 columns per 
 last 16 being padding (``stored_width=416``, detected automatically when only that layout
 fits the file size).
 
-Height, width, clock and threshold are not stored in the file; the reader is told them.
+Height, width, clock and threshold are not stored in the file: viform writes them, with the
+sensor description and provenance, to a JSON sidecar beside it (``clip.dat.json``, see
+:mod:`viform.stream.sidecar`), which the reader uses when present; otherwise it is told them.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 
@@ -19,10 +22,25 @@ import numpy as np
 
 from viform._io import atomic_open
 from viform._validate import ViformError, check_int, check_positive
-from viform.stream.container import SpikeSource
+from viform.stream.container import SpikeSource, block_ticks_for
+from viform.stream.sidecar import read_sidecar, sidecar_path, source_metadata, stream_header, write_sidecar
 
 #: Readout clock assumed for ``.dat`` files when none is given, Hz (seed 000 §6: 40 kHz).
 DEFAULT_DAT_CLOCK_HZ = 40_000.0
+#: Largest height or width accepted (pixels).
+MAX_SIDE = 1 << 16
+#: Bytes read or written per block (bounded memory whatever the file length).
+BLOCK_BYTES = 16 << 20
+
+
+def _agree(path, name, given, declared):
+    """The sidecar's value, or the caller's when it agrees; a contradiction is refused."""
+    if declared is None:
+        return given
+    if given is not None and int(given) != int(declared):
+        raise ViformError(f"--{name} = {given} contradicts the sidecar of {str(path)!r}, which declares "
+                          f"{name} = {int(declared)}; leave --{name} out")
+    return int(declared)
 
 
 def _frame_bytes(height: int, stored_width: int) -> int:
@@ -55,22 +73,38 @@ class DatFile(SpikeSource):
         file; True keeps the whole frames and ignores the trailing bytes.
     """
 
-    def __init__(self, path, height: int | None, width: int | None, *, flip: bool = True,
-                 stored_width: int | None = None, clock_hz: float = DEFAULT_DAT_CLOCK_HZ,
+    def __init__(self, path, height: int | None = None, width: int | None = None, *, flip: bool | None = None,
+                 stored_width: int | None = None, clock_hz: float | None = None,
                  threshold_electrons: float | None = None, allow_partial: bool = False,
-                 start_time_s: float = 0.0):
+                 start_time_s: float | None = None, use_sidecar: bool = True):
         path = Path(path)
-        if height is None or width is None:
-            raise ViformError(f"height and width are required to read {str(path)!r}: "
-                              ".dat files do not store them (e.g. --height 250 --width 400)")
-        self.height = check_int("height", height, 1)
-        self.width = check_int("width", width, 1)
         if not path.is_file():
             raise ViformError(f"spike file {str(path)!r} does not exist")
+        side = read_sidecar(path) if use_sidecar else None
+        self.sidecar = side
+        if side is not None:
+            height = _agree(path, "height", height, side.get("height"))
+            width = _agree(path, "width", width, side.get("width"))
+            if stored_width is None and side.get("stored_width") is not None:
+                stored_width = int(side["stored_width"])
+            if flip is None and side.get("rows") is not None:
+                flip = side["rows"] == "bottom-up"
+            if clock_hz is None:
+                clock_hz = side.get("clock_hz")
+            if threshold_electrons is None:
+                threshold_electrons = side.get("threshold_electrons")
+            if start_time_s is None:
+                start_time_s = side.get("start_time_s")
+        if height is None or width is None:
+            raise ViformError(f"height and width are required to read {str(path)!r}: "
+                              f".dat files do not store them and {sidecar_path(path).name!r} (the sidecar "
+                              "viform writes) is absent; give e.g. --height 250 --width 400")
+        self.height = check_int("height", height, 1, MAX_SIDE)
+        self.width = check_int("width", width, 1, MAX_SIDE)
         size = path.stat().st_size
         if stored_width is None:
             stored_width = self._detect_stored_width(size)
-        self.stored_width = check_int("stored_width", stored_width, self.width)
+        self.stored_width = check_int("stored_width", stored_width, self.width, MAX_SIDE + 64)
         self.frame_bytes = _frame_bytes(self.height, self.stored_width)
         whole, rest = divmod(size, self.frame_bytes)
         if rest and not allow_partial:
@@ -80,15 +114,48 @@ class DatFile(SpikeSource):
                 "check --height/--width, or keep the whole frames with --allow-partial")
         if whole == 0:
             raise ViformError(f"{str(path)!r} holds no whole frame of {self.frame_bytes} bytes")
+        if side is not None and side.get("n_ticks") is not None and int(side["n_ticks"]) != whole \
+                and not allow_partial:
+            raise ViformError(f"{str(path)!r} holds {whole} frames but its sidecar declares "
+                              f"n_ticks = {int(side['n_ticks'])}: "
+                              "the file was cut or replaced (keep the whole frames with --allow-partial)")
         self.path = path
-        self.flip = bool(flip)
+        self.flip = True if flip is None else bool(flip)
         self.n_ticks = whole
-        self.clock_hz = check_positive("clock_hz", clock_hz)
-        self.threshold_electrons = threshold_electrons
-        self.start_time_s = float(start_time_s)
-        self.metadata = {"source": str(path), "format": "dat", "flip": self.flip,
-                         "stored_width": self.stored_width}
+        self.clock_hz = check_positive("clock_hz", DEFAULT_DAT_CLOCK_HZ if clock_hz is None else clock_hz)
+        self.threshold_electrons = (None if threshold_electrons is None
+                                    else check_positive("threshold_electrons", threshold_electrons))
+        self.start_time_s = 0.0 if start_time_s is None else float(start_time_s)
+        self.metadata = source_metadata(side) if side is not None else {}
+        self.metadata.update({"source": str(path), "format": "dat", "flip": self.flip,
+                              "stored_width": self.stored_width})
         self._bytes = np.memmap(path, dtype=np.uint8, mode="r", shape=(whole, self.frame_bytes))
+
+    def verify(self) -> dict:
+        """Check the file against its sidecar: size, and the BLAKE2b checksum when recorded.
+
+        Returns ``{"verified": bool, "checks": [...]}``; raises :class:`ViformError` on a mismatch.
+        """
+        checks = []
+        if self.sidecar is None:
+            return {"verified": False, "checks": ["no sidecar: nothing to verify against"]}
+        size = self.path.stat().st_size
+        declared = self.sidecar.get("data_bytes")
+        if declared is not None:
+            if int(declared) != size:
+                raise ViformError(f"{str(self.path)!r} holds {size} bytes but its sidecar declares {int(declared)}")
+            checks.append(f"size {size} bytes matches the sidecar")
+        digest = self.sidecar.get("blake2b")
+        if digest:
+            h = hashlib.blake2b(digest_size=16)
+            with open(self.path, "rb") as f:
+                for chunk in iter(lambda: f.read(BLOCK_BYTES), b""):
+                    h.update(chunk)
+            if h.hexdigest() != digest:
+                raise ViformError(f"{str(self.path)!r} is damaged: its BLAKE2b checksum differs from the one "
+                                  "in its sidecar")
+            checks.append("BLAKE2b checksum matches the sidecar")
+        return {"verified": bool(checks), "checks": checks or ["sidecar records no size or checksum"]}
 
     def _detect_stored_width(self, size: int) -> int:
         fits = size % _frame_bytes(self.height, self.width) == 0
@@ -107,7 +174,7 @@ class DatFile(SpikeSource):
         return np.ascontiguousarray(frames)
 
 
-def read_dat(path, height: int | None, width: int | None, **kwargs) -> DatFile:
+def read_dat(path, height: int | None = None, width: int | None = None, **kwargs) -> DatFile:
     """Open a ``.dat`` spike file (memory-mapped); see :class:`DatFile` for the options."""
     return DatFile(path, height, width, **kwargs)
 
@@ -122,13 +189,30 @@ def pack_frames(spikes: np.ndarray, flip: bool = True) -> bytes:
     return np.packbits(spikes.reshape(t, h * w), axis=1, bitorder="little").tobytes()
 
 
-def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int = 2048) -> Path:
-    """Write ``source`` as a ``.dat`` file, block by block and atomically."""
+def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int = 2048,
+              sidecar: bool = True) -> Path:
+    """Write ``source`` as a ``.dat`` file, block by block and atomically, with its JSON sidecar.
+
+    The sidecar (:func:`viform.stream.sidecar.stream_header` fields plus the data size and
+    BLAKE2b checksum) is written after the data; a reader notices a crash in between as a size
+    or checksum mismatch, never as silently different bits.
+    """
     path = Path(path)
     _frame_bytes(source.height, source.width)
+    block_ticks = block_ticks_for(source.height, source.width, block_ticks)
+    digest = hashlib.blake2b(digest_size=16)
+    size = 0
     with atomic_open(path, "wb") as f:
         for _, block in source.iter_blocks(block_ticks):
-            f.write(pack_frames(block, flip))
+            raw = pack_frames(block, flip)
+            digest.update(raw)
+            size += len(raw)
+            f.write(raw)
         f.flush()
         os.fsync(f.fileno())
+    if sidecar:
+        write_sidecar(path, stream_header(source, rows="bottom-up" if flip else "upright",
+                                          extra={"data_bytes": size, "blake2b": digest.hexdigest()}))
+    else:  # an old sidecar would describe other bits
+        sidecar_path(path).unlink(missing_ok=True)
     return path

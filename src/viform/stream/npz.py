@@ -1,0 +1,363 @@
+"""Spike streams in ``.npz`` archives, read and written in bounded memory.
+
+Layout written by viform (readable by plain ``numpy.load`` and by Spike-Zoo loaders):
+
+- ``spk``: uint8 array of 0/1, shape (T, H, W) — the key and axis order Spike-Zoo uses;
+- ``viform_header``: a 0-d string array holding the JSON header (:mod:`viform.stream.sidecar`:
+  resolution, clock, Q, optics, dark current, scene, seed, provenance, ``axes``);
+- ``clock_hz``, ``threshold_electrons`` (NaN when unknown), ``start_time_s``: scalars, for
+  readers that do not parse the header.
+
+The spike member is streamed: its ``.npy`` header is read from the zip member, then ticks are
+read block by block as the member decompresses, so neither the file length nor a forged shape
+costs memory (a shape that disagrees with the member's size is refused at open). The zip CRC
+of the member is checked whenever it is read to its end (``info``, ``verify``, full reads).
+
+Axis order: viform's own files declare it; the arrays named ``spk`` and ``spikes`` are
+(T, H, W) by the Spike-Zoo and viform conventions; any other array must be given an explicit
+``axes`` (e.g. ``"hwt"``), never guessed. Arrays that are not (T, H, W) in C order are
+transposed in memory, up to :data:`MAX_WHOLE_BYTES` (beyond that, convert to ``.zarr``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import zipfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from viform._io import atomic_path
+from viform._validate import ViformError
+from viform.stream.container import SpikeSource, block_ticks_for
+from viform.stream.sidecar import (
+    MAX_CLOCK_HZ,
+    MAX_DIMENSION,
+    MAX_TICKS,
+    source_metadata,
+    stream_header,
+    validate_header,
+)
+
+#: Keys read by default, in this order (Spike-Zoo's, then viform's older one); both are (T, H, W).
+DEFAULT_KEYS = ("spk", "spikes")
+HEADER_KEY = "viform_header"
+#: Largest array loaded whole (one not stored as (T, H, W) in C order), bytes.
+MAX_WHOLE_BYTES = 256 << 20
+#: Largest small member (header, scalars) read, bytes.
+MAX_SMALL_MEMBER_BYTES = 4 << 20
+_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError, NotImplementedError,
+           RuntimeError, OverflowError, UnicodeDecodeError)
+
+
+def _check_axes(axes) -> str | None:
+    if axes is None:
+        return None
+    if not isinstance(axes, str) or sorted(axes.lower()) != ["h", "t", "w"]:
+        raise ViformError(f"axes = {axes!r} is not allowed: give the order of the array's axes as a "
+                          "permutation of 't', 'h', 'w', e.g. 'thw' or 'hwt'")
+    return axes.lower()
+
+
+class NpzSpikes(SpikeSource):
+    """A spike stream in a ``.npz`` archive, read block by block from the zip member.
+
+    Parameters
+    ----------
+    path : path-like
+    clock_hz : float or None
+        Readout clock; None takes the file's (or 40 kHz when it has none).
+    key : str or None
+        The array's name; None takes ``spk`` or ``spikes``.
+    axes : str or None
+        Axis order of the array (a permutation of ``"thw"``); None takes the declared one or,
+        for ``spk``/``spikes``, ``"thw"``. Required for other arrays.
+    """
+
+    def __init__(self, path, clock_hz: float | None = None, key: str | None = None, axes: str | None = None):
+        from viform.stream.dat import DEFAULT_DAT_CLOCK_HZ
+
+        path = Path(path)
+        self.path = path
+        axes = _check_axes(axes)
+        if not path.is_file():
+            raise ViformError(f"spike file {str(path)!r} does not exist")
+        try:
+            if not zipfile.is_zipfile(path):
+                raise ViformError(f"{str(path)!r} is not a .npz file (not a zip archive)")
+            self._zip = zipfile.ZipFile(path)
+            infos = {i.filename: i for i in self._zip.infolist()}
+        except ViformError:
+            raise
+        except _ERRORS as exc:
+            raise ViformError(f"{str(path)!r} could not be read as .npz: {_short(exc)}") from None
+        names = [n[:-4] for n in infos if n.endswith(".npy")]
+        if key is None:
+            key = next((k for k in DEFAULT_KEYS if k in names), None)
+            if key is None:
+                raise ViformError(f"{str(path)!r} has no 'spk' or 'spikes' array (it has {names[:20]}); "
+                                  "name the array with key=")
+        elif key not in names:
+            raise ViformError(f"{str(path)!r} has no array {key!r} (it has {names[:20]})")
+        self.key = key
+        small = {}
+        for name in names:
+            if name == key:
+                continue
+            info = infos[name + ".npy"]
+            if info.file_size > MAX_SMALL_MEMBER_BYTES:
+                continue  # not a scalar: not metadata
+            value = self._read_small(name + ".npy")
+            if value is not None:
+                small[name] = value
+        header = {}
+        if HEADER_KEY in small:
+            try:
+                header = json.loads(str(small.pop(HEADER_KEY)))
+            except (ValueError, RecursionError) as exc:
+                raise ViformError(f"{str(path)!r}: member {HEADER_KEY!r} is not valid JSON: {_short(exc)}") from None
+            if not isinstance(header, dict):
+                raise ViformError(f"{str(path)!r}: member {HEADER_KEY!r} must hold a JSON object")
+            validate_header(header, path, required=("height", "width", "clock_hz"))
+        declared_axes = header.get("axes")
+        if declared_axes is not None:
+            declared_axes = _check_axes(declared_axes)
+            if axes is not None and axes != declared_axes:
+                raise ViformError(f"axes = {axes!r} contradicts {str(path)!r}, which declares axes "
+                                  f"{declared_axes!r}")
+        if axes is None:
+            axes = declared_axes or ("thw" if key in DEFAULT_KEYS else None)
+        # scalars of older viform files and other tools (clock, Q, start; labels go to the metadata)
+        legacy = {k: small.pop(k) for k in ("clock_hz", "threshold_electrons", "start_time_s") if k in small}
+        self._open_member(key + ".npy", infos[key + ".npy"])
+        if axes is None:
+            raise ViformError(f"{str(path)!r}: the axis order of array {key!r} (shape {self._shape}) is not "
+                              "declared: give it explicitly, e.g. axes='thw' (ticks, rows, columns) or 'hwt'")
+        self.axes = axes
+        dims = dict(zip(axes, self._shape, strict=True))
+        self.n_ticks, self.height, self.width = dims["t"], dims["h"], dims["w"]
+        if not (1 <= self.height <= MAX_DIMENSION and 1 <= self.width <= MAX_DIMENSION
+                and 0 <= self.n_ticks <= MAX_TICKS):
+            raise ViformError(f"{str(path)!r}: array {key!r} has shape {self._shape} (axes {axes!r}): height and "
+                              f"width must lie in [1, {MAX_DIMENSION}]")
+        for name, dim in (("height", self.height), ("width", self.width), ("n_ticks", self.n_ticks)):
+            if header.get(name) is not None and int(header[name]) != dim:
+                raise ViformError(f"{str(path)!r}: the header declares {name} = {header[name]} but array {key!r} "
+                                  f"has {dim}")
+        self._whole = None
+        if axes != "thw" or self._fortran:
+            if self._data_bytes > MAX_WHOLE_BYTES:
+                raise ViformError(f"{str(path)!r}: array {key!r} is not stored as (ticks, rows, columns) in C order "
+                                  f"and holds {self._data_bytes / 1e6:.0f} MB, more than the "
+                                  f"{MAX_WHOLE_BYTES / 1e6:.0f} MB viform transposes in memory: convert it to .zarr")
+        clock = clock_hz if clock_hz is not None else header.get("clock_hz", _scalar(legacy, "clock_hz"))
+        clock = DEFAULT_DAT_CLOCK_HZ if clock is None else clock
+        q = header["threshold_electrons"] if "threshold_electrons" in header else _scalar(legacy, "threshold_electrons")
+        start = header.get("start_time_s", _scalar(legacy, "start_time_s"))
+        check = {"clock_hz": float(clock),
+                 "threshold_electrons": None if q is None or (isinstance(q, float) and math.isnan(q)) else float(q),
+                 "start_time_s": 0.0 if start is None else float(start)}
+        validate_header(check, path, required=())
+        if not 0 < check["clock_hz"] <= MAX_CLOCK_HZ:
+            raise ViformError(f"clock_hz = {clock!r} is not allowed for {str(path)!r}")
+        self.clock_hz = check["clock_hz"]
+        self.threshold_electrons = check["threshold_electrons"]
+        self.start_time_s = check["start_time_s"]
+        self.header = header
+        self.metadata = source_metadata(header) if header else {}
+        for name, value in small.items():
+            if np.ndim(value) == 0 and name not in self.metadata:
+                item = np.asarray(value).item()
+                self.metadata[name] = item.decode() if isinstance(item, bytes) else item
+        self.metadata.update({"source": str(path), "format": "npz"})
+
+    # ---- zip member access
+    def _read_small(self, member: str):
+        try:
+            with self._zip.open(member) as fp:
+                return np.lib.format.read_array(fp, allow_pickle=False)
+        except _ERRORS:
+            return None  # an unreadable side member is not the data; verify() reports it
+
+    def _open_member(self, member: str, info: zipfile.ZipInfo) -> None:
+        self._member = member
+        self._open_fp().close()
+        self._offset = self._header_bytes
+        self._data_bytes = info.file_size - self._header_bytes
+        expected = math.prod(self._shape) * self._dtype.itemsize
+        if self._data_bytes != expected:
+            raise ViformError(f"{str(self.path)!r}: array {self.key!r} declares shape {self._shape} of "
+                              f"{self._dtype} ({expected} bytes) but the archive holds {self._data_bytes} bytes")
+        self._fp, self._pos = None, 0
+
+    def _open_fp(self):
+        """Open the member and read its .npy header; leaves the position at the data."""
+        path = self.path
+        try:
+            fp = self._zip.open(self._member)
+            version = np.lib.format.read_magic(fp)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(fp)
+            elif version == (2, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(fp)
+            else:
+                raise ViformError(f"{str(path)!r}: array {self.key!r} uses .npy format {version}, "
+                                  "which viform does not stream (1.0 and 2.0 are read)")
+        except ViformError:
+            raise
+        except _ERRORS as exc:
+            raise ViformError(f"{str(path)!r}: array {self.key!r} has a damaged .npy header: {_short(exc)}") from None
+        if dtype.kind not in "biu" or dtype.itemsize > 8 or dtype.hasobject:
+            raise ViformError(f"{str(path)!r}: array {self.key!r} has dtype {dtype}; spikes must be bool or "
+                              "whole numbers 0/1")
+        if len(shape) != 3:
+            raise ViformError(f"{str(path)!r}: array {self.key!r} must have 3 axes (ticks, rows, columns); "
+                              f"got shape {shape}")
+        self._shape, self._fortran, self._dtype = tuple(int(n) for n in shape), bool(fortran), dtype
+        self._header_bytes = fp.tell()
+        self._fp = fp
+        return fp
+
+    def _read_bytes(self, offset: int, count: int) -> bytes:
+        """``count`` bytes of the array's data from ``offset`` (sequential reads are cheap)."""
+        try:
+            if self._fp is None or offset < self._pos:
+                if self._fp is not None:
+                    self._fp.close()
+                self._open_fp()
+                self._pos = 0
+            if offset > self._pos:
+                self._skip(offset - self._pos)
+            data = self._fp.read(count)
+        except ViformError:
+            raise
+        except _ERRORS as exc:
+            raise ViformError(f"{str(self.path)!r}: array {self.key!r} is damaged: {_short(exc)}") from None
+        if len(data) != count:
+            raise ViformError(f"{str(self.path)!r}: array {self.key!r} is truncated (data ends "
+                              f"{count - len(data)} bytes early)")
+        self._pos = offset + count
+        if self._pos == self._data_bytes:  # reading to the end checks the zip CRC
+            try:
+                if self._fp.read(1):
+                    raise ViformError(f"{str(self.path)!r}: array {self.key!r} holds more data than its shape")
+            except ViformError:
+                raise
+            except _ERRORS as exc:
+                raise ViformError(f"{str(self.path)!r}: array {self.key!r} is damaged: {_short(exc)}") from None
+        return data
+
+    def _skip(self, count: int) -> None:
+        step = 8 << 20
+        while count > 0:
+            got = len(self._fp.read(min(step, count)))
+            if got == 0:
+                raise ViformError(f"{str(self.path)!r}: array {self.key!r} is truncated")
+            count -= got
+            self._pos += got
+
+    def _to_bool(self, raw: np.ndarray) -> np.ndarray:
+        if raw.dtype != bool:
+            if raw.size and (raw.max() > 1 or raw.min() < 0):
+                raise ViformError(f"{str(self.path)!r}: array {self.key!r} holds values other than 0 and 1 "
+                                  f"(e.g. {int(raw.max()) if raw.max() > 1 else int(raw.min())})")
+            raw = raw.astype(bool)
+        return raw
+
+    def _whole_array(self) -> np.ndarray:
+        if self._whole is None:
+            raw = np.frombuffer(self._read_bytes(0, self._data_bytes), dtype=self._dtype)
+            raw = raw.reshape(self._shape, order="F" if self._fortran else "C")
+            order = [self.axes.index(c) for c in "thw"]
+            self._whole = np.ascontiguousarray(self._to_bool(np.transpose(raw, order)))
+        return self._whole
+
+    def read_ticks(self, start: int, stop: int) -> np.ndarray:
+        start, stop = max(0, start), min(stop, self.n_ticks)
+        if stop <= start:
+            return np.zeros((0, self.height, self.width), bool)
+        if self.axes != "thw" or self._fortran:
+            return self._whole_array()[start:stop]
+        frame = self.height * self.width * self._dtype.itemsize
+        raw = np.frombuffer(self._read_bytes(start * frame, (stop - start) * frame), dtype=self._dtype)
+        return self._to_bool(raw.reshape(stop - start, self.height, self.width))
+
+    def iter_blocks(self, block_ticks: int = 1024, start: int = 0, stop: int | None = None):
+        # a byte budget per block, counted in the stored dtype (int64 arrays are 8 bytes a pixel)
+        block_ticks = block_ticks_for(self.height, self.width * self._dtype.itemsize, block_ticks)
+        yield from super().iter_blocks(block_ticks, start, stop)
+
+    def verify(self) -> dict:
+        """Read every member to its end (zip CRC-32 checked) and the spikes (values 0/1)."""
+        for info in self._zip.infolist():
+            if info.filename == self._member:
+                continue
+            try:
+                with self._zip.open(info) as fp:
+                    while fp.read(8 << 20):
+                        pass
+            except _ERRORS as exc:
+                raise ViformError(f"{str(self.path)!r}: member {info.filename!r} is damaged: {_short(exc)}") from None
+        for _ in self.iter_blocks(1 << 20):
+            pass
+        if self.n_ticks == 0:
+            self._read_bytes(0, 0)
+        return {"verified": True, "checks": ["zip CRC-32 of every member matches; spikes are 0/1; "
+                                             "shape matches the data size"]}
+
+    def close(self) -> None:
+        if self._fp is not None:
+            self._fp.close()
+        self._zip.close()
+
+
+def _scalar(values: dict, name: str):
+    if name not in values:
+        return None
+    v = np.asarray(values[name])
+    if v.ndim != 0 or v.dtype.kind not in "biuf":
+        return None
+    return v.item()
+
+
+def _short(exc) -> str:
+    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return text[:200]
+
+
+def read_npz(path, clock_hz: float | None = None, key: str | None = None, axes: str | None = None) -> NpzSpikes:
+    """Open a ``.npz`` spike stream (streamed; see :class:`NpzSpikes`)."""
+    return NpzSpikes(path, clock_hz, key, axes)
+
+
+def write_npz(path, source: SpikeSource, *, block_ticks: int = 1024) -> Path:
+    """Write ``source`` as a ``.npz`` (layout in the module docstring), block by block, atomically."""
+    path = Path(path)
+    header = stream_header(source, rows="upright", extra={"axes": "thw"})
+    shape = (int(source.n_ticks), int(source.height), int(source.width))
+    block_ticks = block_ticks_for(source.height, source.width, block_ticks)
+    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED,
+                                                   allowZip64=True) as zf:
+        def small(name, value):
+            with zf.open(name + ".npy", "w") as fp:
+                np.lib.format.write_array(fp, np.asarray(value), allow_pickle=False)
+
+        small(HEADER_KEY, np.array(json.dumps(header)))
+        small("clock_hz", np.float64(source.clock_hz))
+        small("threshold_electrons", np.float64(np.nan if source.threshold_electrons is None
+                                                else source.threshold_electrons))
+        small("start_time_s", np.float64(source.start_time_s))
+        written = 0
+        with zf.open("spk.npy", "w", force_zip64=True) as fp:
+            np.lib.format.write_array_header_2_0(fp, {"descr": "|u1", "fortran_order": False, "shape": shape}) \
+                if len(str(shape)) > 60000 else \
+                np.lib.format.write_array_header_1_0(fp, {"descr": "|u1", "fortran_order": False, "shape": shape})
+            for _, block in source.iter_blocks(block_ticks):
+                fp.write(np.ascontiguousarray(block, dtype=np.uint8).tobytes())
+                written += block.shape[0]
+        if written != shape[0]:
+            raise RuntimeError(f"the stream gave {written} ticks, not the {shape[0]} it declared")
+    return path
+

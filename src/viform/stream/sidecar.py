@@ -1,0 +1,239 @@
+"""Metadata that travels with spike data: the JSON sidecar of ``.dat`` files and the shared header.
+
+A ``.dat`` file holds bits only (see :mod:`viform.stream.dat`), so viform writes a JSON file
+beside it, ``clip.dat`` → ``clip.dat.json``, holding what a reader needs to interpret the bits
+(height, width, clock, row order) and what a user needs to turn them into light (threshold Q,
+optics, dark current: seed 000 §3.3.2, light = Q/τ) and to reproduce them (scene, seed, viform
+version, command line, UTC date). :func:`viform.stream.io.open_spikes` reads it automatically.
+The same header is stored inside ``.npz`` files (member ``viform_header``) and zarr stores
+(attribute ``viform``), so every format carries the same fields.
+
+Every header is validated when it is read (:func:`validate_header`): a forged or damaged field
+gives a one-line :class:`~viform._validate.ViformError` naming the file and the field, before
+anything is allocated from it.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import shlex
+import sys
+from pathlib import Path
+
+from viform._validate import ViformError
+
+#: ``format`` value of a sidecar written by viform.
+SIDECAR_FORMAT = "viform-spike-sidecar"
+SIDECAR_VERSION = 1
+#: Largest height or width a header may declare (pixels).
+MAX_DIMENSION = 1 << 16
+#: Largest readout clock a header may declare, Hz.
+MAX_CLOCK_HZ = 1e12
+#: Largest tick count a header may declare.
+MAX_TICKS = 1 << 40
+#: Largest sidecar read, bytes (a sidecar is a few kB; a bigger one is not ours).
+MAX_SIDECAR_BYTES = 4 << 20
+
+#: Row order names: ``bottom-up`` is the camera/SpikeCV ``.dat`` layout, ``upright`` is top row first.
+ROW_ORDERS = ("bottom-up", "upright")
+
+
+def sidecar_path(data_path) -> Path:
+    """The sidecar of ``data_path``: the same name with ``.json`` appended (``clip.dat.json``)."""
+    data_path = Path(data_path)
+    return data_path.with_name(data_path.name + ".json")
+
+
+def provenance() -> dict:
+    """Who wrote the data: viform version, command line and UTC date (ISO 8601)."""
+    from viform import __version__
+
+    argv = [Path(sys.argv[0]).name if sys.argv and sys.argv[0] else "python", *sys.argv[1:]]
+    return {
+        "viform_version": __version__,
+        "command_line": shlex.join(argv),
+        "utc_date": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z"),
+    }
+
+
+def stream_header(source, *, rows: str = "upright", extra: dict | None = None) -> dict:
+    """The header fields of a :class:`~viform.stream.container.SpikeSource`, with provenance.
+
+    Flat fields: ``height``, ``width``, ``n_ticks``, ``clock_hz``, ``threshold_electrons``,
+    ``start_time_s``, ``rows``, ``bit_order``; copied from the sensor description when the
+    stream was simulated: ``optics``, ``dark_current_e_per_s``; from the capture: ``scene``,
+    ``seed``; ``viform_version``, ``command_line``, ``utc_date``; the full stream metadata
+    (sensor description included) under ``metadata``.
+    """
+    from viform._io import _jsonable
+
+    if rows not in ROW_ORDERS:
+        raise ViformError(f"rows = {rows!r} is not allowed: choose one of {', '.join(ROW_ORDERS)}")
+    metadata = json.loads(json.dumps(dict(source.metadata or {}), default=_jsonable))
+    # the reader's own bookkeeping is not part of what the stream is
+    for key in ("source", "format", "flip", "stored_width", "verified"):
+        metadata.pop(key, None)
+    sensor = metadata.get("sensor") if isinstance(metadata.get("sensor"), dict) else {}
+    header = {
+        "height": int(source.height), "width": int(source.width), "n_ticks": int(source.n_ticks),
+        "clock_hz": float(source.clock_hz),
+        "threshold_electrons": None if source.threshold_electrons is None else float(source.threshold_electrons),
+        "start_time_s": float(source.start_time_s), "rows": rows, "bit_order": "little",
+        "optics": sensor.get("optics"), "dark_current_e_per_s": sensor.get("dark_current_e_per_s"),
+        "scene": metadata.get("scene"), "seed": metadata.get("seed"),
+        **provenance(),
+        "metadata": metadata,
+    }
+    if extra:
+        header.update(extra)
+    return header
+
+
+def write_sidecar(data_path, metadata: dict) -> Path:
+    """Write the JSON sidecar of ``data_path`` atomically; returns its path.
+
+    ``metadata`` is stored as given (see :func:`stream_header` for the fields viform reads)
+    with ``format``/``version`` markers; provenance fields are added when absent.
+    """
+    from viform._io import write_json
+
+    if not isinstance(metadata, dict):
+        raise ViformError(f"sidecar metadata must be a dict, got {type(metadata).__name__}")
+    body = {"format": SIDECAR_FORMAT, "version": SIDECAR_VERSION}
+    body.update({k: v for k, v in provenance().items() if k not in metadata})
+    body.update(metadata)
+    path = sidecar_path(data_path)
+    write_json(path, body)
+    return path
+
+
+def read_sidecar(data_path) -> dict | None:
+    """The validated sidecar of ``data_path``, or None when there is none.
+
+    Raises :class:`ViformError` (naming the sidecar and the field) when it exists but is not
+    valid JSON, not an object, or holds an out-of-range field.
+    """
+    path = sidecar_path(data_path)
+    if not path.is_file():
+        return None
+    try:
+        size = path.stat().st_size
+        if size > MAX_SIDECAR_BYTES:
+            raise ViformError(f"{str(path)!r}: sidecar of {size} bytes is larger than {MAX_SIDECAR_BYTES} bytes")
+        header = json.loads(path.read_text(encoding="utf-8"))
+    except ViformError:
+        raise
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise ViformError(f"{str(path)!r} is not a readable JSON sidecar: {_short(exc)}") from None
+    if not isinstance(header, dict):
+        raise ViformError(f"{str(path)!r}: a sidecar must hold a JSON object, not {type(header).__name__}")
+    return validate_header(header, path, required=())
+
+
+def _short(exc) -> str:
+    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return text[:200]
+
+
+def _number(header: dict, key: str, where) -> float:
+    value = header[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ViformError(f"{str(where)!r}: field {key!r} = {value!r} must be a number")
+    return float(value)
+
+
+def validate_header(header: dict, where, *, required=("height", "width", "clock_hz")) -> dict:
+    """Check every field a reader relies on; return ``header`` unchanged.
+
+    ``where`` (the file) and the field name appear in every message. Fields: ``height``,
+    ``width`` (whole numbers in [1, 65536]), ``clock_hz`` (finite, in (0, 1e12]),
+    ``threshold_electrons`` (null or finite > 0), ``start_time_s`` (finite), ``n_ticks`` (whole,
+    in [0, 2^40]), ``rows`` (``bottom-up`` or ``upright``), ``bit_order`` (``little``),
+    ``dark_current_e_per_s`` (null or finite ≥ 0), ``optics`` (null or an object of finite
+    positive numbers).
+    """
+    if not isinstance(header, dict):
+        raise ViformError(f"{str(where)!r}: the header must be an object, not {type(header).__name__}")
+    for key in required:
+        if key not in header or header[key] is None:
+            raise ViformError(f"{str(where)!r}: required field {key!r} is missing")
+    for key in ("height", "width"):
+        if header.get(key) is not None:
+            v = _number(header, key, where)
+            if not (v.is_integer() and 1 <= v <= MAX_DIMENSION):
+                raise ViformError(f"{str(where)!r}: field {key!r} = {header[key]!r} is not allowed: "
+                                  f"it must be a whole number in [1, {MAX_DIMENSION}]")
+    if header.get("clock_hz") is not None:
+        v = _number(header, "clock_hz", where)
+        if not (math.isfinite(v) and 0 < v <= MAX_CLOCK_HZ):
+            raise ViformError(f"{str(where)!r}: field 'clock_hz' = {header['clock_hz']!r} is not allowed: "
+                              f"it must be a finite number in (0, {MAX_CLOCK_HZ:g}]")
+    if header.get("threshold_electrons") is not None:
+        v = _number(header, "threshold_electrons", where)
+        if not (math.isfinite(v) and v > 0):
+            raise ViformError(f"{str(where)!r}: field 'threshold_electrons' = {header['threshold_electrons']!r} "
+                              "is not allowed: it must be a finite number > 0 (or null)")
+    if header.get("start_time_s") is not None:
+        v = _number(header, "start_time_s", where)
+        if not math.isfinite(v):
+            raise ViformError(f"{str(where)!r}: field 'start_time_s' = {header['start_time_s']!r} must be finite")
+    if header.get("n_ticks") is not None:
+        v = _number(header, "n_ticks", where)
+        if not (v.is_integer() and 0 <= v <= MAX_TICKS):
+            raise ViformError(f"{str(where)!r}: field 'n_ticks' = {header['n_ticks']!r} is not allowed: "
+                              f"it must be a whole number in [0, {MAX_TICKS}]")
+    if header.get("rows") is not None and header["rows"] not in ROW_ORDERS:
+        raise ViformError(f"{str(where)!r}: field 'rows' = {header['rows']!r} is not supported: "
+                          f"use one of {', '.join(ROW_ORDERS)}")
+    if header.get("bit_order") is not None and header["bit_order"] != "little":
+        raise ViformError(f"{str(where)!r}: field 'bit_order' = {header['bit_order']!r} is not supported: "
+                          "only 'little' (least significant bit first)")
+    if header.get("dark_current_e_per_s") is not None:
+        v = _number(header, "dark_current_e_per_s", where)
+        if not (math.isfinite(v) and v >= 0):
+            raise ViformError(f"{str(where)!r}: field 'dark_current_e_per_s' = {header['dark_current_e_per_s']!r} "
+                              "must be a finite number ≥ 0")
+    optics = header.get("optics")
+    if optics is not None:
+        if not isinstance(optics, dict):
+            raise ViformError(f"{str(where)!r}: field 'optics' must be an object")
+        for key, value in optics.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not (math.isfinite(value) and value > 0):
+                raise ViformError(f"{str(where)!r}: field 'optics.{key}' = {value!r} must be a finite number > 0")
+    metadata = header.get("metadata")
+    if metadata is not None and not isinstance(metadata, dict):
+        raise ViformError(f"{str(where)!r}: field 'metadata' must be an object")
+    return header
+
+
+def source_metadata(header: dict) -> dict:
+    """The stream metadata to attach to a reader: the header's ``metadata`` plus the flat fields.
+
+    A sidecar written by another tool (e.g. a dataset writer) may give ``optics`` and
+    ``dark_current_e_per_s`` flat without a ``sensor`` object: they are gathered into one so
+    that imaging can give lux (:func:`viform.imaging.units.sensor_parameters_of`).
+    """
+    meta = dict(header.get("metadata") or {})
+    for key in ("scene", "seed", "viform_version", "command_line", "utc_date"):
+        if header.get(key) is not None and key not in meta:
+            meta[key] = header[key]
+    if "sensor" not in meta and header.get("optics") is not None:
+        sensor = {"model": "spike", "optics": header["optics"],
+                  "dark_current_e_per_s": header.get("dark_current_e_per_s") or 0.0}
+        if header.get("threshold_electrons") is not None:
+            sensor["threshold_electrons"] = header["threshold_electrons"]
+        if header.get("clock_hz") is not None:
+            sensor["clock_hz"] = header["clock_hz"]
+        meta["sensor"] = sensor
+    for key, value in header.items():  # other tools' fields (source clip, labels) stay visible
+        if key not in meta and key not in _HEADER_KEYS and not isinstance(value, (dict, list)):
+            meta[key] = value
+    return meta
+
+
+_HEADER_KEYS = {"format", "version", "height", "width", "n_ticks", "clock_hz", "threshold_electrons",
+                "start_time_s", "rows", "bit_order", "optics", "dark_current_e_per_s", "metadata",
+                "stored_width", "data_bytes", "blake2b", "chunks", "chunk_ticks", "axes"}

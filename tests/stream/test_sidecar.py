@@ -1,0 +1,99 @@
+"""Metadata travels with the data: the .dat JSON sidecar and the same header in .npz and zarr."""
+
+import json
+
+import numpy as np
+import pytest
+
+from viform._validate import ViformError
+from viform.imaging import accumulation_image
+from viform.sensors.spike import SpikeSensor
+from viform.stream.container import SpikeStream
+from viform.stream.dat import write_dat
+from viform.stream.io import open_spikes, save_spikes
+from viform.stream.sidecar import provenance, read_sidecar, sidecar_path, write_sidecar
+
+FIELDS = ("height", "width", "clock_hz", "threshold_electrons", "optics", "dark_current_e_per_s", "rows",
+          "scene", "seed", "viform_version", "command_line", "utc_date")
+
+
+def simulated_stream():
+    """A stream with a full sensor description, as `viform simulate` gives."""
+    sensor = SpikeSensor(threshold_electrons=80.0, dark_current_e_per_s=5.0)
+    spikes = np.random.default_rng(0).random((40, 4, 8)) < 0.2
+    meta = {"sensor": sensor.describe(), "scene": {"name": "moving-edge"}, "seed": 7}
+    return SpikeStream(spikes, 40_000.0, 80.0, 0.0, meta)
+
+
+def test_sidecar_path_and_provenance():
+    assert sidecar_path("/a/clip.dat").name == "clip.dat.json"
+    p = provenance()
+    assert set(p) == {"viform_version", "command_line", "utc_date"}
+    assert p["utc_date"].endswith("Z") and p["utc_date"][:2] == "20"
+
+
+@pytest.mark.parametrize("name", ["s.dat", "s.npz", "s.zarr"])
+def test_every_format_records_the_same_fields_and_gives_lux(tmp_path, name):
+    stream = simulated_stream()
+    path = save_spikes(tmp_path / name, stream, block_ticks=16)
+    if name.endswith(".dat"):
+        header = read_sidecar(path)
+    elif name.endswith(".npz"):
+        header = json.loads(str(np.load(path)["viform_header"]))
+    else:
+        import zarr
+
+        header = zarr.open_array(str(path), mode="r").attrs["viform"]
+    for field in FIELDS:
+        assert field in header, field
+    assert header["optics"]["quantum_efficiency"] == 0.7 and header["dark_current_e_per_s"] == 5.0
+    assert header["seed"] == 7 and header["scene"]["name"] == "moving-edge"
+    back = open_spikes(path)  # no height/width: the .dat sidecar gives them
+    assert back.shape == stream.shape and back.threshold_electrons == 80.0
+    assert np.array_equal(back.read_ticks(0, 40), stream.spikes)
+    image = accumulation_image(back, 0.0009, 0.0005)
+    assert image.lux is not None and np.all(np.isfinite(image.lux))
+
+
+def test_dat_sidecar_contradiction_and_forgery_are_refused(tmp_path):
+    path = write_dat(tmp_path / "s.dat", simulated_stream())
+    with pytest.raises(ViformError, match="--height = 5 contradicts"):
+        open_spikes(path, 5, 8)
+    side = read_sidecar(path)
+    for field, value in [("clock_hz", -1), ("height", 0), ("threshold_electrons", "nan"), ("rows", "sideways"),
+                         ("n_ticks", 41)]:
+        write_sidecar(path, {**side, field: value})
+        with pytest.raises(ViformError, match=field):
+            open_spikes(path)
+    sidecar_path(path).write_text("{not json")
+    with pytest.raises(ViformError, match="not a readable JSON sidecar"):
+        open_spikes(path)
+
+
+def test_dat_sidecar_row_order_is_honoured(tmp_path):
+    stream = simulated_stream()
+    path = write_dat(tmp_path / "up.dat", stream, flip=False)
+    assert read_sidecar(path)["rows"] == "upright"
+    assert np.array_equal(open_spikes(path).read_ticks(0, 40), stream.spikes)
+
+
+def test_dat_verify_catches_a_flipped_bit(tmp_path):
+    path = write_dat(tmp_path / "s.dat", simulated_stream())
+    assert open_spikes(path).verify()["verified"]
+    raw = bytearray(path.read_bytes())
+    raw[10] ^= 4
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ViformError, match="damaged"):
+        open_spikes(path).verify()
+
+
+def test_other_tools_flat_sidecar_gives_lux(tmp_path):
+    """A sidecar with flat optics and dark current (no sensor object) still gives lux."""
+    path = write_dat(tmp_path / "s.dat", SpikeStream(np.ones((4, 4, 8), bool), 20_000.0), sidecar=False)
+    write_sidecar(path, {"height": 4, "width": 8, "clock_hz": 20_000.0, "threshold_electrons": 50.0,
+                         "optics": {"pixel_pitch_m": 1e-5, "fill_factor": 1.0, "quantum_efficiency": 0.5,
+                                    "wavelength_m": 5.55e-7},
+                         "dark_current_e_per_s": 0.0, "rows": "bottom-up", "source_clip": "clip7"})
+    source = open_spikes(path)
+    assert source.clock_hz == 20_000.0 and source.metadata["source_clip"] == "clip7"
+    assert accumulation_image(source, 0.0001, 0.0001).lux is not None
