@@ -1,4 +1,5 @@
-"""``viform gated``: report, JSON, figures, one-line errors."""
+"""``viform gated``: report, JSON (bare flag → stdout, --json-file → file), figures,
+waveforms, one-line errors."""
 
 import json
 
@@ -8,18 +9,40 @@ from viform.cli import main
 def test_gated_cli_writes_json_and_figures(tmp_path, capsys):
     out = tmp_path / "out"
     js = tmp_path / "r.json"
-    assert main(["gated", "--pulses", "20", "--out", str(out), "--json", str(js)]) == 0
+    assert main(["gated", "--pulses", "20", "--out", str(out), "--json-file", str(js)]) == 0
     text = capsys.readouterr().out
-    assert "seed: 15–20" in text and "seed: 70–90" in text
+    assert "paper: 15–20" in text and "paper: 70–90" in text
+    assert "threshold X" in text and "{" not in text          # a table, not JSON
     data = json.loads(js.read_text())
     acc = {t["range_m"]: t["visible"] for t in data["modes"]["accumulate"]["targets"]}
+    # Seed 004 field test: gate at 150 m → glints at 200 and 300 m, none at 50 and 100 m.
     assert acc == {50.0: False, 100.0: False, 200.0: True, 300.0: True}
     assert {p.name for p in out.glob("*.png")} == {
         "range_intensity.png",
         "fog_gated_vs_ungated.png",
         "modes.png",
         "cnr.png",
+        "gate_sweep.png",
+        "depth.png",
     }
+
+
+def test_gated_cli_bare_json_flag_prints_json(tmp_path, capsys):
+    assert main(["gated", "--waveforms", "--part", "icx659", "--pulses", "3", "--out", str(tmp_path / "w"),
+                 "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["parts"]["icx659"]["readout_gates"] == ["V1", "V3"]
+
+
+def test_gated_waveforms_files(tmp_path, capsys):
+    out = tmp_path / "w"
+    assert main(["gated", "--waveforms", "--part", "all", "--pulses", "4", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "ICX445ALA" in text and "VHLD+VST" in text and "1001 ns" in text
+    for part in ("icx618", "icx445", "icx279", "icx659"):
+        for ext in ("png", "svg", "csv", "vcd"):
+            assert (out / f"waveforms_{part}.{ext}").stat().st_size > 0
+    assert (out / "waveforms_icx618.vcd").read_text().splitlines()[0].startswith("$version")
 
 
 def test_gated_cli_bad_input_one_line(capsys, tmp_path):
@@ -28,9 +51,10 @@ def test_gated_cli_bad_input_one_line(capsys, tmp_path):
         (["--gate-m", "-1"], "gate_m"),
         (["--pulses", "1000"], "pulses"),
         (["--gate-m", "20000"], "gate_range_m"),
+        (["--waveforms", "--gate-m", "20000"], "gate_range_m"),
     ):
         out, js = tmp_path / "figs", tmp_path / "r.json"
-        assert main(["gated", *args, "--out", str(out), "--json", str(js)]) == 2
+        assert main(["gated", *args, "--out", str(out), "--json-file", str(js)]) == 2
         err = capsys.readouterr().err.strip()
         assert name in err and "\n" not in err and err.startswith("viform: error:")
         assert not out.exists() and not js.exists()  # no partial output

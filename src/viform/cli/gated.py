@@ -6,10 +6,12 @@ prints what the model predicts next to the seed's figures.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import click
+import numpy as np
 
 from viform._validate import check_non_negative, check_positive
 from viform.cli.app import cli
@@ -29,7 +31,13 @@ def run_gated(
 ) -> dict:
     """Compute everything ``viform gated`` reports; write figures to ``out`` if given."""
     from viform.light.active import Medium, field_test_scene, fog_scene
-    from viform.measure.gated_metrics import expected_cnr, measured_cnr, pulses_needed_vs_ambient
+    from viform.measure.gated_metrics import (
+        expected_glint_visibility,
+        gate_sweep,
+        measured_glint_visibility,
+        pulses_both_ways,
+        pulses_needed_vs_ambient,
+    )
     from viform.sensors.gated_ccd import MODES, GatedInterlineCCD
 
     check_non_negative("gate_m", gate_m)
@@ -64,17 +72,21 @@ def run_gated(
         frame = sensor.capture_frame(scene, seed=seed)
         frames[mode] = frame.electrons
         rows = []
+        full = sensor.parameters.pixel.full_well_electrons * frame.readouts
         for r in scene.retroreflectors:
-            exp = expected_cnr(sensor, scene, r.row, r.col, per_pulse=pp)
+            exp = expected_glint_visibility(sensor, scene, r.row, r.col, per_pulse=pp)
+            sim = measured_glint_visibility(frame.electrons, r.row, r.col, full)
             rows.append(
                 {
                     "label": r.label,
                     "range_m": r.range_m,
-                    "cnr": exp.cnr,
-                    "cnr_simulated": measured_cnr(frame.electrons, r.row, r.col),
-                    "visible": bool(exp.cnr >= threshold),
-                    "signal_electrons": exp.signal_electrons,
-                    "background_electrons": exp.background_electrons,
+                    "cnr": exp.visibility,
+                    "cnr_simulated": sim.visibility,
+                    "visible": bool(exp.visibility >= threshold),
+                    "saturated": exp.saturated_pixels > 0,
+                    "glint_area_px": exp.area_px,
+                    "signal_electrons": exp.peak_electrons,
+                    "background_electrons": exp.ring_electrons,
                 }
             )
         modes[mode] = {"frame_rate_hz": 1.0 / sensor.frame_time_s(), "readouts": frame.readouts, "targets": rows}
@@ -85,6 +97,13 @@ def run_gated(
     result["pulses_needed"] = pulses_needed_vs_ambient((300.0, 800.0), ambients, threshold)
     for row in result["pulses_needed"]:
         row["seed_figure"] = SEED_PULSES.get(row["range_m"]) if row["ambient_lux"] == 1e5 else None
+
+    # 2b. the same counts read as thresholds and as operating points
+    result["pulses_both_ways"] = pulses_both_ways(threshold, ambient_lux)
+
+    # 2c. the field procedure: raise the gate until each glint vanishes
+    sw = gate_sweep(scene, np.arange(0.0, 401.0, 10.0), pulses, threshold)
+    result["gate_sweep"] = sw
 
     # 3. fog: gated vs un-gated
     fog = fog_scene(visibility_m=fog_visibility_m, ambient_lux=min(ambient_lux, 1.0))
@@ -127,17 +146,33 @@ def run_gated(
             " (one grey scale for both)",
             shared_scale=True,
         )
-        gp.plot_images(
+        gp.plot_modes(
             out / "modes.png",
             {f"{m}, X={pulses}": im for m, im in frames.items()},
+            ccd.parameters.pixel.full_well_electrons,
             f"reflectors 50/100/200/300 m, gate {gate_m:g} m, {ambient_lux:g} lx",
         )
         gp.plot_cnr(
             out / "cnr.png",
-            [dict(r, label=f"{m[:5]} {r['label']}") for m in MODES for r in modes[m]["targets"]],
+            [{"target": r["label"], "mode": m, "cnr": r["cnr"], "saturated": r["saturated"]}
+             for m in MODES for r in modes[m]["targets"]],
             threshold,
-            f"CNR per target, X = {pulses}",
+            f"glint visibility per reflector and mode, X = {pulses}, gate {gate_m:g} m (hatched: saturated)",
         )
+        sweep = result["gate_sweep"]
+        gp.plot_gate_sweep(out / "gate_sweep.png", sweep)
+        from viform.light.active import depth_scene
+        from viform.measure.gated_metrics import depth_from_sweep
+
+        dscene = depth_scene()
+        depth = depth_from_sweep(dscene, np.arange(10.0, 101.0, 2.0), pulses=250, seed=seed)
+        gp.plot_depth(out / "depth.png", depth, "depth from a gate sweep (10–100 m in 2 m steps, X = 250, "
+                      "night): ground, boards at 45/52/58 m, reflectors")
+        ok = depth["valid"] & np.isfinite(dscene.range_m)
+        err = np.abs(depth["depth_m"][ok] - dscene.range_m[ok])
+        result["depth_from_sweep"] = {"valid_fraction": float(ok.mean()),
+                                      "median_abs_error_m": float(np.median(err)) if err.size else None,
+                                      "p95_abs_error_m": float(np.percentile(err, 95)) if err.size else None}
         result["figures"] = sorted(str(p) for p in out.glob("*.png"))
     return result
 
@@ -147,12 +182,13 @@ def format_report(res: dict) -> str:
     lines = [
         f"gate {g['gate_range_m']:g} m: opens {g['open_s'] * 1e9:.0f} ns after the pulse, "
         f"width {g['width_s'] * 1e9:.0f} ns, sees {g['range_window_m'][0]:.0f}–{g['range_window_m'][1]:.0f} m",
-        f"field test, X = {res['pulses']}, {res['ambient_lux']:g} lx, CNR ≥ {res['cnr_threshold']:g} = visible"
-        " (seed: 200 and 300 m visible, 50 and 100 m not)",
+        f"field test, X = {res['pulses']}, {res['ambient_lux']:g} lx, visibility ≥ {res['cnr_threshold']:g} = "
+        "visible (*) (paper: 200 and 300 m visible, 50 and 100 m not)",
     ]
     for mode, m in res["modes"].items():
-        cells = ", ".join(f"{t['label']}: {t['cnr']:.1f}{'*' if t['visible'] else ''}" for t in m["targets"])
-        lines.append(f"  {mode:<10} {m['frame_rate_hz']:6.1f} Hz  CNR {cells}")
+        cells = ", ".join(f"{t['label']}: {t['cnr']:.1f}{'*' if t['visible'] else ''}"
+                          f"{' (sat)' if t['saturated'] else ''}" for t in m["targets"])
+        lines.append(f"  {mode:<10} {m['frame_rate_hz']:6.1f} Hz  visibility {cells}")
     lines.append(
         "pulses needed (accumulate mode, gate 50 m before the reflector, CNR ≥ "
         f"{res['cnr_threshold']:g}) — model vs seed:"
@@ -165,8 +201,25 @@ def format_report(res: dict) -> str:
             if x is None
             else f" ({row['frame_rate_hz_at_x']:.0f} Hz{'' if row['fits_frame_rate'] else ', > 25 Hz limit'})"
         )
-        seed = f"   seed: {row['seed_figure']}" if row.get("seed_figure") else ""
+        seed = f"   paper: {row['seed_figure']}" if row.get("seed_figure") else ""
         lines.append(f"  {row['range_m']:5.0f} m  {row['ambient_lux']:>8g} lx  X = {xs}{fr}{seed}")
+    lines.append("the same counts read two ways (sunny day; threshold = smallest X with CNR ≥ "
+                 f"{res['cnr_threshold']:g}; operating point = CNR at the paper's X):")
+    lines.append(f"  {'optics':<38} {'range':>6}  {'paper X':>7}  {'threshold X':>11}  CNR at paper's X")
+    for row in res["pulses_both_ways"]:
+        xs = "-".join(str(v) for v in row["seed_pulses"])
+        th = "not reached" if row["threshold_pulses"] is None else str(row["threshold_pulses"])
+        at = ", ".join(f"X={a['pulses']}: {a['cnr']:.3g}{' sat' if a['saturated'] else ''}"
+                       for a in row["at_seed_pulses"])
+        lines.append(f"  {row['optics']:<38} {row['range_m']:>4.0f} m  {xs:>7}  {th:>11}  {at}")
+    sw = res["gate_sweep"]
+    cells = ", ".join(f"{lab} → {'never' if v is None else f'{v:g} m'}" for lab, v in sw["vanish_gate_m"].items())
+    lines.append(f"gate sweep 0–400 m, X = {sw['pulses']}: glint vanishes at gate {cells}")
+    if "depth_from_sweep" in res:
+        d = res["depth_from_sweep"]
+        lines.append(f"depth from a gate sweep (test range 40–65 m, night, X = 250): {100 * d['valid_fraction']:.0f} % "
+                     f"of pixels, median |error| {d['median_abs_error_m']:.2f} m, 95 % within "
+                     f"{d['p95_abs_error_m']:.2f} m")
     f = res["fog"]
     lines.append(f"fog V = {f['visibility_m']:g} m, X = {f['pulses']}, gate {f['gate_range_m']:g} m:")
     for mode, m in f["modes"].items():
@@ -204,14 +257,76 @@ def format_report(res: dict) -> str:
 @click.option("--threshold", type=float, default=5.0, show_default=True, help="CNR needed to 'stand out'.")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Folder for the figures.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write all numbers as JSON.")
-def gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold, seed, out, json_path):
-    """Range-gated imaging with an interline CCD (seed 004): field test, pulses needed, fog."""
+@click.option("--waveforms", is_flag=True,
+              help="Only write the drive waveforms (laser, SUB, V1-V4) of one gated frame: timing diagram "
+                   "(PNG and SVG), CSV and VCD traces, into --out (default gated_waveforms).")
+@click.option("--part", type=click.Choice(["icx618", "icx445", "icx279", "icx659", "all"]), default="icx618",
+              show_default=True, help="CCD whose drive --waveforms writes.")
+@click.option("--json", "as_json", is_flag=True, help="Print all numbers as JSON instead of the table.")
+@click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON to this file.")
+def gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold, seed, out, waveforms, part,
+          as_json, json_file):
+    """Range-gated imaging with an interline CCD: field test, gate sweep, depth, pulses needed, fog,
+    and the CCD drive waveforms (--waveforms)."""
     from viform._io import write_json
 
     if not math.isfinite(threshold) or threshold <= 0:
         check_positive("threshold", threshold)
-    res = run_gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold, seed, out)
-    click.echo(format_report(res))
-    if json_path:
-        write_json(json_path, res)
+    if waveforms:
+        res = run_waveforms(part, gate_m, pulses, out or "gated_waveforms")
+        text = format_waveforms(res)
+    else:
+        res = run_gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold, seed, out)
+        text = format_report(res)
+    if json_file:
+        write_json(json_file, res)
+    click.echo(json.dumps(res, indent=2, default=_jsonable) if as_json else text)
+
+
+def _jsonable(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    raise TypeError(type(v).__name__)
+
+
+def run_waveforms(part: str, gate_m: float, pulses: int, out) -> dict:
+    """Write the drive waveforms of ``part`` (or all four parts) and return their timing."""
+    from viform._io import atomic_open
+    from viform.sensors import gated_waveforms as gw
+
+    parts = list(gw.DRIVES) if part == "all" else [part]
+    traces = {p: gw.drive_waveforms(p, gate_m, pulses) for p in parts}  # validates before writing
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    res = {"parts": {}}
+    for p, tr in traces.items():
+        short = gw.drive_waveforms(p, gate_m, min(pulses, 4), lines=3)
+        for ext in ("png", "svg"):
+            gw.plot_waveforms(out / f"waveforms_{p}.{ext}", short, tr)
+        with atomic_open(out / f"waveforms_{p}.csv", "w") as f:
+            f.write(gw.trace_csv(tr))
+        with atomic_open(out / f"waveforms_{p}.vcd", "w") as f:
+            f.write(gw.trace_vcd(tr))
+        res["parts"][p] = {**{k: v for k, v in tr.info.items() if k != "drive"},
+                           "events": int(tr.times_s.size),
+                           "files": [f"waveforms_{p}.{e}" for e in ("png", "svg", "csv", "vcd")],
+                           "note": tr.drive.note}
+    res["out"] = str(out)
+    return res
+
+
+def format_waveforms(res: dict) -> str:
+    lines = [f"{'part':<11} {'readout on':<10} {'extra':<9} {'delay 2R/c':>10} {'window':>8} {'period':>8} "
+             f"{'X':>4} {'exposure':>9} {'lines':>5} {'frame':>8}"]
+    for p in res["parts"].values():
+        lines.append(f"{p['part']:<11} {'+'.join(p['readout_gates']):<10} {'+'.join(p['extra_signals']) or '-':<9} "
+                     f"{p['delay_s'] * 1e9:>7.0f} ns {p['accumulation_window_s'] * 1e9:>5.0f} ns "
+                     f"{p['pulse_period_s'] * 1e6:>5.0f} µs {p['pulses']:>4} {p['exposure_s'] * 1e6:>6.2f} µs "
+                     f"{p['lines']:>5} {p['frame_s'] * 1e3:>5.2f} ms")
+    lines.append("levels: SUB 0 / +20 V; V1-V4 -5.5 / 0 V, readout +15 V")
+    for p in res["parts"].values():
+        lines.append(f"{p['part']}: {p['note']}")
+    lines.append(f"wrote waveforms_<part>.png/.svg/.csv/.vcd in {res['out']}")
+    return "\n".join(lines)

@@ -93,22 +93,128 @@ def plot_images(path, images: dict, title: str = "", percentile: float = 99.5, s
     save_figure(path, fig)
 
 
+def plot_modes(path, images: dict, full_well_electrons: float, title: str = "") -> None:
+    """The modes' frames on ONE logarithmic electron scale (1 e⁻ … the well) with a colour bar,
+    so a saturated frame shows as saturated, not as stretched noise."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    n = len(images)
+    fig, axes = plt.subplots(1, n, figsize=(3.7 * n + 1.2, 3.4), squeeze=False)
+    norm = LogNorm(vmin=1.0, vmax=float(full_well_electrons))
+    for ax, (name, img) in zip(axes[0], images.items(), strict=True):
+        im = ax.imshow(np.clip(img, 1.0, None), cmap="gray", norm=norm, interpolation="nearest")
+        sat = float(np.mean(img >= 0.98 * full_well_electrons))
+        ax.set_title(f"{name}\n{100 * sat:.0f} % of pixels saturated", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.85, label="electrons per pixel (log; one scale for all)")
+    fig.suptitle(title, fontsize=10)
+    save_figure(path, fig)
+
+
 def plot_cnr(path, rows: list[dict], threshold: float, title: str = "") -> None:
-    """Bar chart of CNR per target (rows with 'label' and 'cnr'), threshold line."""
+    """Grouped bars: CNR per target (x) for each mode (colour); symmetric-log axis so a CNR of
+    0 is drawn as 0; saturated targets hatched. ``rows`` have 'target', 'mode', 'cnr' and
+    optionally 'saturated'."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    labels = [r["label"] for r in rows]
-    vals = [max(r["cnr"], 1e-3) for r in rows]
-    ax.bar(labels, vals, color=["C2" if v >= threshold else "C3" for v in vals])
-    ax.axhline(threshold, color="k", ls="--", label=f"CNR = {threshold:g}")
-    ax.set_yscale("log")
-    ax.set_ylabel("CNR")
-    ax.tick_params(axis="x", labelsize=8)
-    ax.legend()
+    targets = list(dict.fromkeys(r["target"] for r in rows))
+    modes = list(dict.fromkeys(r["mode"] for r in rows))
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    w = 0.8 / len(modes)
+    for j, m in enumerate(modes):
+        for i, t in enumerate(targets):
+            r = next((r for r in rows if r["target"] == t and r["mode"] == m), None)
+            if r is None:
+                continue
+            v = max(float(r["cnr"]), 0.0)
+            ax.bar(i + (j - (len(modes) - 1) / 2) * w, v, w * 0.95, color=f"C{j}",
+                   hatch="//" if r.get("saturated") else None, edgecolor="k", lw=0.4,
+                   label=m if i == 0 else None)
+    ax.axhline(threshold, color="k", ls="--", lw=1, label=f"visible: ≥ {threshold:g}")
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_ylim(0, None)
+    ax.set_xticks(range(len(targets)), targets)
+    ax.set_xlabel("reflector range")
+    ax.set_ylabel("glint visibility (0–1 linear, log above)")
+    ax.legend(fontsize=8, loc="upper left")
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
+    save_figure(path, fig)
+
+
+def plot_gate_sweep(path, sweep: dict) -> None:
+    """Visibility of each reflector against the gate's near range (the seed's field
+    procedure: raise the range until the glint vanishes), true ranges marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4))
+    g = sweep["gates_m"]
+    for j, (lab, rng) in enumerate(zip(sweep["labels"], sweep["ranges_m"], strict=True)):
+        ax.plot(g, np.maximum(sweep["visibility"][:, j], 0.0), color=f"C{j}", label=f"reflector at {lab}")
+        ax.axvline(rng, color=f"C{j}", ls=":", lw=1)
+        v = sweep["vanish_gate_m"][lab]
+        if v is not None:
+            ax.plot([v], [sweep["threshold"]], "v", color=f"C{j}", ms=7)
+    ax.axhline(sweep["threshold"], color="k", ls="--", lw=1, label=f"visible: ≥ {sweep['threshold']:g}")
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_ylim(0, None)
+    ax.set_xlabel("gate near range R (m)  — dotted: true range; ▼: glint vanishes")
+    ax.set_ylabel("glint visibility (peak − ring) / noise")
+    ax.set_title(f"Gate sweep, X = {sweep['pulses']} pulses: a glint vanishes 20–30 m (≈ cτ/2) "
+                 "beyond its range", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    save_figure(path, fig)
+
+
+def plot_depth(path, depth: dict, title: str = "") -> None:
+    """True range, range from the gate sweep and its error (m), plus the signal against the
+    gate range for a few pixels (the range–intensity profile the depth is read from)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    true = np.where(np.isfinite(depth["true_range_m"]), depth["true_range_m"], np.nan)
+    est = depth["depth_m"]
+    lo, hi = np.nanpercentile(true, [1, 99])
+    fig, axes = plt.subplots(1, 4, figsize=(17, 3.9), layout="constrained",
+                             gridspec_kw={"width_ratios": [1, 1, 1, 1.15]})
+    for ax, img, name in ((axes[0], true, "true range"), (axes[1], est, "range from the gate sweep")):
+        im = ax.imshow(img, cmap="viridis", vmin=lo, vmax=hi, interpolation="nearest")
+        ax.set_title(name, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.colorbar(im, ax=axes[1], shrink=0.8, label="range (m), same scale as the true range")
+    err = est - true
+    e = float(np.nanpercentile(np.abs(err), 95)) if np.isfinite(err).any() else 1.0
+    im2 = axes[2].imshow(err, cmap="RdBu_r", vmin=-e, vmax=e, interpolation="nearest")
+    med = float(np.nanmedian(np.abs(err))) if np.isfinite(err).any() else float("nan")
+    axes[2].set_title(f"error, median |e| {med:.2f} m\n(red blobs: the reflectors' halos)", fontsize=9)
+    axes[2].set_xticks([])
+    axes[2].set_yticks([])
+    fig.colorbar(im2, ax=axes[2], shrink=0.8, label="estimated − true (m)")
+    g = depth["gates_m"]
+    s = depth["frames_electrons"]
+    h, w = true.shape
+    picks = [(h - 2, w // 2), (int(np.nanargmin(np.abs(true[:, int(0.5 * w)] - 52.0))), int(0.5 * w))]
+    for k, (r, c) in enumerate(picks):
+        axes[3].plot(g, s[:, r, c], color=f"C{k}", label=f"pixel ({r},{c}), true {true[r, c]:.1f} m")
+        axes[3].axvline(true[r, c], color=f"C{k}", ls=":")
+    axes[3].set_xlabel("gate near range R (m)")
+    axes[3].set_ylabel("electrons per frame")
+    axes[3].set_title("range–intensity profile (dotted: true range)", fontsize=9)
+    axes[3].legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
     save_figure(path, fig)

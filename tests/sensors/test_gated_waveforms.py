@@ -1,0 +1,73 @@
+"""Drive waveforms of the gated interline CCD (seed 004, Figs. 2–3 and the four-stage text)."""
+
+import pytest
+
+from viform._validate import ViformError
+from viform.light.laser import PulsedLaser, round_trip_time_s
+from viform.sensors.gated_waveforms import (
+    SUB_HIGH_V,
+    SUB_LOW_V,
+    V_LOW_V,
+    V_MID_V,
+    V_READ_V,
+    drive_waveforms,
+    trace_csv,
+    trace_vcd,
+)
+
+
+def test_icx618_four_stage_sequence_matches_fig3():
+    """Seed 004 Fig. 3: each laser pulse is followed, t_откл = 2R/c later, by the falling edge
+    of SUB; V2 and V3 go to +15 V t_нак = τ + t_min after that; this repeats X times with the
+    laser period; then one vertical transfer. Exposure = X · t_нак. Times exact to 1 ps."""
+    laser = PulsedLaser(pulse_width_s=135e-9, repetition_hz=12.5e3)
+    tr = drive_waveforms("icx618", gate_range_m=150.0, pulses=4, laser=laser, lines=5)
+    fires = tr.edges("LASER", laser.peak_power_w)
+    sub_fall = tr.edges("SUB", SUB_LOW_V)
+    read = tr.edges("V2", V_READ_V)
+    assert len(fires) == len(sub_fall) == len(read) == 4
+    assert (tr.edges("V3", V_READ_V) == read).all()
+    assert len(tr.edges("V1", V_READ_V)) == 0 and len(tr.edges("V4", V_READ_V)) == 0
+    delay = round_trip_time_s(150.0)
+    assert delay == pytest.approx(1.0007e-6, rel=1e-4)                 # 2R/c at 150 m
+    assert sub_fall - fires == pytest.approx([delay] * 4, abs=1e-12)
+    assert read - sub_fall == pytest.approx([135e-9 + 1e-6] * 4, abs=1e-12)
+    assert fires[1:] - fires[:-1] == pytest.approx([80e-6] * 3, abs=1e-12)  # t_изл = 1/12.5 kHz
+    assert tr.info["exposure_s"] == pytest.approx(4 * (135e-9 + 1e-6))
+    # the photodiodes are erased (SUB high) whenever they are not integrating a gate
+    assert tr.level_at("SUB", fires[0] + delay / 2) == SUB_HIGH_V
+    # levels the seed gives: V-phases −5.5 / 0 V, readout +15 V; SUB 0 / +20 V
+    for v in ("V1", "V2", "V3", "V4"):
+        assert set(tr.levels[v]) <= {V_LOW_V, V_MID_V, V_READ_V}
+    assert set(tr.levels["SUB"]) == {SUB_LOW_V, SUB_HIGH_V}
+    # no readout pulse during the vertical transfer (stage 4): all +15 V edges come first
+    assert read.max() < dict((s[0][0], s[1]) for s in tr.stages)["4"]
+
+
+def test_part_differences_named_by_the_seed():
+    """ICX659: +15 V on V1 and V3 (seed); ICX445: needs VHLD and VST too; ICX279: interlaced."""
+    t659 = drive_waveforms("icx659", 150.0, 2, lines=2)
+    assert len(t659.edges("V1", V_READ_V)) == 2 and len(t659.edges("V3", V_READ_V)) == 2
+    assert len(t659.edges("V2", V_READ_V)) == 0
+    t445 = drive_waveforms("icx445", 150.0, 2, lines=2)
+    assert {"VHLD", "VST"} <= set(t445.levels)
+    assert t445.info["drive"]["cols"] == 1280 and t445.info["drive"]["rows"] == 600
+    assert drive_waveforms("icx279", 150.0, 1, lines=1).info["interlaced"]
+
+
+def test_csv_and_vcd_traces():
+    tr = drive_waveforms("icx618", 75.0, 2, lines=1)
+    csv = trace_csv(tr).splitlines()
+    assert csv[0].startswith("time_s,LASER_w,RETURN_rel,SUB_v,V1_v")
+    assert len(csv) == tr.times_s.size + 1
+    vcd = trace_vcd(tr).splitlines()
+    stamps = [int(v[1:]) for v in vcd if v.startswith("#")]
+    assert stamps == sorted(stamps) and stamps[0] == 0
+    assert "$var real 64 # SUB $end" in vcd
+
+
+def test_gate_beyond_pulse_period_is_refused():
+    with pytest.raises(ViformError, match="gate_range_m"):
+        drive_waveforms("icx618", 20_000.0, 2)
+    with pytest.raises(ViformError, match="part"):
+        drive_waveforms("icx999", 150.0, 2)
