@@ -25,7 +25,7 @@ PREVIEW_FORMATS = (".png", ".mp4", ".gif")
 EXTRA_SENSORS = {
     "cmos-short": "conventional CMOS, 1 ms exposure at 30 fps",
     "highspeed": "high-speed camera (1 667 fps at 1280×720) with auto-exposure",
-    "gated": "range-gated CCD with a 905 nm pulsed laser (scenes with range: night-road-fog)",
+    "gated": "range-gated CCD, 905 nm laser, 200 pulses a frame, gate from 40 m (scenes with range: night-road-fog)",
 }
 
 
@@ -184,13 +184,13 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         meta["sensor"] = {**result.config, "timing": result.timing, "link": result.plan}
         meta["auto_exposure_cycles"] = result.exposure_cycles
     elif sensor_name == "gated":
-        from viform.sensors.gated_ccd import GatedInterlineCCD
+        from viform.measure.comparison import make_compare_sensor
 
         active = getattr(scene, "active", None)
         if active is None:
             raise ViformError(f"SCENE = {scene.name!r} has no range: the gated camera needs a laser-lit scene with "
                               "distances (built-in: night-road-fog)")
-        sensor = GatedInterlineCCD(gate_range_m=50.0)
+        sensor = make_compare_sensor("gated")
         stack = sensor.capture(active, duration_s, seed=seed)
         frames, starts, exposures = stack.frames_dn, stack.start_times_s, stack.exposure_s
         units = (f"DN (sum of {sensor.pulses} gated exposures in the vertical register, black "
@@ -198,9 +198,9 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         meta["sensor"] = sensor.describe()
     else:
         if sensor_name == "cmos-short":
-            from viform.sensors.frame import FramePixelParameters, FrameSensor
+            from viform.measure.comparison import make_compare_sensor
 
-            sensor = FrameSensor(FramePixelParameters(), exposure_s=1e-3, frame_rate_hz=30.0)
+            sensor = make_compare_sensor("cmos-short")
         else:
             from viform.sensors.presets import make_sensor
 

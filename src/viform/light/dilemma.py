@@ -172,6 +172,16 @@ class DilemmaScene(Scene):
         lux[self.led] = self.led_on_lux if self.led_is_on(float(t_s)) else self.led_off_lux
         return lux
 
+    def moving_mask(self, t_s: float) -> np.ndarray:
+        """Pixels covered at ``t_s`` by the fast-moving parts (propeller blades, vehicle)."""
+        mask = np.zeros(self.shape, bool)
+        front = self.vehicle_front_px(t_s)
+        v0, v1 = self.vehicle_rows
+        mask[v0:v1, (self._x[0] <= front) & (self._x[0] > front - self.vehicle_length_px)] = True
+        phase = self._disc_theta - self.prop_omega_rad_per_s * t_s
+        mask.ravel()[self._disc_index[np.cos(3.0 * phase) > math.cos(3.0 * math.radians(14.0))]] = True
+        return mask
+
     def max_speed_px_per_s(self) -> float:
         return max(self.prop_tip_speed_px_per_s, self.vehicle_speed_px_per_s, self.object_speed_px_per_s)
 
@@ -263,7 +273,7 @@ class NightRoadFogScene(Scene):
 
     name = "night-road-fog"
 
-    def __init__(self, height: int = 96, width: int = 160, visibility_m: float = 100.0,
+    def __init__(self, height: int = 96, width: int = 160, visibility_m: float = 150.0,
                  brightness: float = 1.0, speed: float = 0.0, duration_s: float | None = None):
         from viform.light.active import ActiveScene, Medium
 

@@ -48,9 +48,11 @@ SENSOR_DESCRIPTIONS = {
     "seed003-4t": "plain 4T pixel, 33.3 ms integration at 30 fps",
     "seed003-overflow": "conditional-overflow pixel, three integrations in 33.3 ms",
     "highspeed": "high-speed camera with auto-exposure, 1 667 fps",
-    "gated": "range-gated CCD with a 905 nm pulsed laser (scenes with range only)",
+    "gated": "range-gated CCD, 905 nm laser, 200 pulses a frame, gate from 40 m (scenes with range only)",
 }
 DEFAULT_SENSORS = tuple(SENSOR_DESCRIPTIONS)
+#: Gated camera of the comparison: laser pulses per frame and near edge of the gate, m.
+GATED_PULSES, GATED_RANGE_M = 200, 40.0
 #: Spike reconstructions reported as separate rows.
 SPIKE_METHODS = ("accumulation", "interval", "best")
 #: Accumulation window of the spike camera's accumulation image, s.
@@ -102,7 +104,9 @@ def make_compare_sensor(key: str, scene=None):
     if key == "gated":
         from viform.sensors.gated_ccd import GatedInterlineCCD
 
-        return GatedInterlineCCD(gate_range_m=50.0)
+        # 200 pulses accumulated in the vertical register (fits a 25 fps frame), gate from 40 m:
+        # the fog closer than 40 m, which would veil everything, is not recorded (seed 004).
+        return GatedInterlineCCD(pulses=GATED_PULSES, gate_range_m=GATED_RANGE_M)
     return make_sensor(key)
 
 
@@ -220,36 +224,36 @@ def spike_estimates(stream, instants_s, method: str, window_s: float = ACCUMULAT
     return out
 
 
-def best_spike_method_name() -> str:
-    """Name of the reconstruction used as "best" (the imaging package's best public method)."""
+#: Public reconstructions of :mod:`viform.imaging` better than accumulation and interval, best first.
+BEST_METHODS = ("motion_compensated_image", "best_image")
+
+
+def best_spike_method_name() -> str | None:
+    """Name of the reconstruction used as "best" (the imaging package's best public method), or
+    None when the package offers nothing beyond accumulation and interval imaging."""
     import viform.imaging as imaging
 
-    for name in ("best_image", "adaptive_image", "hybrid_image"):
+    for name in BEST_METHODS:
         if hasattr(imaging, name):
-            return name.replace("_image", "")
-    return "interval + accumulation fallback"
+            return name.replace("_image", "").replace("_", "-")
+    return None
 
 
 def best_spike_image(stream, t_s: float) -> Estimate:
-    """The best reconstruction available: the imaging package's own when it offers one, else
-    interval imaging where the interval is complete and a 4 ms accumulation where it is cut."""
+    """The imaging package's best reconstruction at ``t_s``."""
     import viform.imaging as imaging
 
-    for name in ("best_image", "adaptive_image", "hybrid_image"):
-        if hasattr(imaging, name):
-            img = getattr(imaging, name)(stream, t_s)
-            lux = img.lux
-            tau = img.info.get("tau_ticks")
-            sat = (tau <= 1) if tau is not None else np.zeros(lux.shape, bool)
-            under = img.censored if img.censored is not None else ~(lux > 0)
-            return Estimate(lux, sat, under, (t_s, t_s))
-    itv = imaging.interval_image(stream, t_s)
-    acc = imaging.accumulation_image(stream, t_s, 4e-3)
-    cut = itv.censored if itv.censored is not None else np.zeros(itv.lux.shape, bool)
-    lux = np.where(cut, acc.lux, itv.lux)
-    n = acc.info.get("window_ticks", 1)
-    count = acc.spikes_per_s * n / stream.clock_hz
-    return Estimate(lux, itv.info["tau_ticks"] <= 1, cut & (count < 0.5), (t_s, t_s))
+    name = next(n for n in BEST_METHODS if hasattr(imaging, n))
+    img = getattr(imaging, name)(stream, t_s)
+    lux = np.nan_to_num(img.lux) if img.lux is not None else np.zeros(stream.shape[1:])
+    window = img.info.get("window_ticks")
+    if window:
+        count = img.spikes_per_s * window / stream.clock_hz
+        sat, under = count >= 0.98 * window, count < 0.5
+    else:
+        sat = img.spikes_per_s >= 0.98 * stream.clock_hz
+        under = img.censored if img.censored is not None else ~(lux > 0)
+    return Estimate(lux, sat, under, (t_s, t_s))
 
 
 def highspeed_estimates(result, config, instants_s) -> list:
@@ -301,20 +305,24 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
         par = sensor.parameters
         rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
         shots = []
-        for method in SPIKE_METHODS:
+        methods = [m for m in SPIKE_METHODS if m != "best" or best_spike_method_name() is not None]
+        for method in methods:
             label = {"accumulation": f"spike · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
-                     "interval": "spike · interval", "best": f"spike · best ({best_spike_method_name()})"}[method]
+                     "interval": "spike · interval", "best": f"spike · {best_spike_method_name()}"}[method]
             ests = spike_estimates(stream, instants_s, method)
             if method == "accumulation":
                 tres = ACCUMULATION_WINDOW_S
                 lat = ACCUMULATION_WINDOW_S + 1 / par.clock_hz
             else:
-                # a pixel shows a change at its next spike: the typical interval at this light
-                taus = []
+                # Each pixel integrates its own interval: report the median interval where the scene
+                # moves (all pixels if it does not); a pixel shows a change at its next spike.
                 from viform.imaging import interval_image
 
+                taus = []
                 for t in instants_s:
-                    taus.append(np.median(interval_image(stream, t).info["tau_ticks"]) / par.clock_hz)
+                    tau = interval_image(stream, t).info["tau_ticks"] / par.clock_hz
+                    mask = scene.moving_mask(t) if hasattr(scene, "moving_mask") else np.ones(tau.shape, bool)
+                    taus.append(np.median(tau[mask] if mask.any() else tau))
                 tres = float(np.median(taus))
                 lat = tres + 1 / par.clock_hz
             shots.append(Shot(f"spike-{method}", label, f"{desc}, {preset}", ests,
@@ -455,8 +463,12 @@ def target_cnr(image, targets: dict) -> dict:
     from scipy.ndimage import binary_dilation
 
     out = {}
+    anything = np.zeros(np.shape(image), bool)
+    for mask in targets.values():
+        anything |= binary_dilation(mask, iterations=1)
     for name, mask in targets.items():
-        ring = binary_dilation(mask, iterations=3) & ~binary_dilation(mask, iterations=1)
+        # the surround: a ring 2–3 px out, clear of every target (another sign is not background)
+        ring = binary_dilation(mask, iterations=3) & ~anything
         if not ring.any():
             continue
         noise = float(np.std(image[ring])) or 1e-12
@@ -509,6 +521,15 @@ def verdict(shots, demand: dict | None) -> list[str]:
     s, v, worst = best("latency_s", higher=False)
     if s is not None:
         lines.append(f"Shortest latency: {s.label}, {v:.3g} s; longest: {worst[1].label}, {worst[0]:.3g} s.")
+    cnr = [(s, s.metrics["target_cnr"]) for s in shots if not s.skipped and s.metrics.get("target_cnr")]
+    if cnr:
+        seen = {s.label: [k for k, v in c.items() if v >= 3] for s, c in cnr}
+        best_s, best_c = max(cnr, key=lambda sc: sum(v >= 3 for v in sc[1].values()) + max(sc[1].values()) / 1e3)
+        others = [label for label, targets in seen.items() if not targets]
+        lines.append(f"Targets seen through the fog (contrast-to-noise ≥ 3): {best_s.label} sees "
+                     f"{', '.join(seen[best_s.label]) or 'none'} (best contrast-to-noise "
+                     f"{max(best_c.values()):.1f}); "
+                     + (f"{len(others)} of {len(cnr)} sensors see none." if others else "every sensor sees some."))
     if demand and rows:
         meets = [r.label for r in rows
                  if r.metrics.get("dr_captured_db", 0) >= demand["dynamic_range_db"] - 6

@@ -165,13 +165,21 @@ def figure_dilemma(result):
 
     shots = [s for s in result["shots"] if not s.skipped and s.lux_units]
     fig, ax = plt.subplots(figsize=(8.5, 5.6), constrained_layout=True)
-    markers = "osD^v<>phX*P"
+    markers = "osD^v<>phXP"
+    colours = plt.get_cmap("tab10").colors
+    placed: list[tuple[float, float]] = []
     for i, s in enumerate(shots):
         x = s.time_resolution_s
         y = s.metrics.get("dr_captured_db", math.nan)
         if not (math.isfinite(x) and math.isfinite(y)):
             continue
-        ax.scatter([x], [y], s=70, marker=markers[i % len(markers)], label=s.label, zorder=3)
+        ax.scatter([x], [y], s=70, marker=markers[i % len(markers)], color=colours[i % len(colours)],
+                   label=s.label, zorder=3, edgecolor="black", linewidth=0.5)
+        # short label beside the point; nudged down when a label already sits close by
+        near = sum(1 for (px, py) in placed if abs(math.log10(px / x)) < 0.35 and abs(py - y) < 6)
+        ax.annotate(s.label, (x, y), xytext=(7, 4 - 11 * near), textcoords="offset points", fontsize=7,
+                    color=colours[i % len(colours)])
+        placed.append((x, y))
     d = result["demand"]
     if d and math.isfinite(d["time_resolution_s"]):
         ax.scatter([d["time_resolution_s"]], [d["dynamic_range_db"]], marker="*", s=320, color="gold",
