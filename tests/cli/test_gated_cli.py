@@ -47,8 +47,8 @@ def test_gated_waveforms_files(tmp_path, capsys):
 
 def test_gated_cli_bad_input_one_line(capsys, tmp_path):
     for args, name in (
-        (["--visibility-m", "-5"], "visibility_m"),
-        (["--gate-m", "-1"], "gate_m"),
+        (["--visibility-m", "-5"], "--visibility-m"),
+        (["--gate-m", "-1"], "--gate-m"),
         (["--pulses", "1000"], "pulses"),
         (["--gate-m", "20000"], "gate_range_m"),
         (["--waveforms", "--gate-m", "20000"], "gate_range_m"),

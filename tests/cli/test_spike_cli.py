@@ -55,9 +55,9 @@ def test_zarr_output_keeps_sensor_metadata_so_lux_comes_back(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args,needle", [
-    (["simulate", "translating", "--duration", "0.001", "--out", "{tmp}/x.dat", "-q", "0"], "threshold_electrons"),
-    (["simulate", "translating", "--duration", "0.001", "--out", "{tmp}/x.dat", "--clock-hz", "-5"], "clock_hz"),
-    (["simulate", "translating", "--duration", "-1", "--out", "{tmp}/x.dat"], "duration_s"),
+    (["simulate", "translating", "--duration", "0.001", "--out", "{tmp}/x.dat", "-q", "0"], "--threshold-electrons"),
+    (["simulate", "translating", "--duration", "0.001", "--out", "{tmp}/x.dat", "--clock-hz", "-5"], "--clock-hz"),
+    (["simulate", "translating", "--duration", "-1", "--out", "{tmp}/x.dat"], "--duration"),
     (["simulate", "no-such-scene", "--duration", "0.001", "--out", "{tmp}/x.dat"], "built-in scene"),
     (["simulate", "translating", "--duration", "0.001", "--out", "{tmp}/x.txt"], "suffix"),
     (["simulate", "{tmp}/broken.mp4", "--duration", "0.001", "--out", "{tmp}/x.dat", "--frame-rate-hz", "30"],
@@ -72,7 +72,7 @@ def test_zarr_output_keeps_sensor_metadata_so_lux_comes_back(tmp_path, capsys):
       "--out", "{tmp}/x.jpg"], "--out"),
     (["reconstruct", "{tmp}/good.dat", "--method", "accumulation", "--display", "seed", "--at", "0",
       "--height", "4", "--width", "8", "--out", "{tmp}/x.png"], "--display"),
-    (["info", "{tmp}/good.dat", "--height", "4", "--width", "8", "--clock-hz", "0"], "clock_hz"),
+    (["info", "{tmp}/good.dat", "--height", "4", "--width", "8", "--clock-hz", "0"], "--clock-hz"),
     (["info", "{tmp}/broken.mp4"], "unknown spike file type"),
     (["info", "{tmp}/text.npz"], "not a .npz"),
     (["simulate", "translating", "--duration", "0.001", "--out", "{tmp}/file.dat/x.dat"], "--out"),

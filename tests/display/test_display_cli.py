@@ -30,7 +30,7 @@ def test_lightcomm_cli_errors_are_one_line(capsys):
     for args, text in ((["--bitrate", "50000"], "above what the readout clock"),
                        (["--modulation", "qam"], "not known to the receiver"),
                        (["--message", ""], "empty"),
-                       (["--distance-m", "-3"], "distance_m")):
+                       (["--distance-m", "-3"], "--distance-m")):
         rc = main(["lightcomm", *args, "--no-max"])
         err = capsys.readouterr().err
         assert rc == 2

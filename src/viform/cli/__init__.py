@@ -33,8 +33,27 @@ COMMAND_MODULES = [
 
 
 def _load_commands() -> None:
+    from viform.cli._types import install
+
     for module in COMMAND_MODULES:
         importlib.import_module(module)
+    install(cli)  # bounded numeric options and flag names in errors, for every command
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is so that atomic writers clean up as for Ctrl-C."""
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated()
+
+
+def _install_sigterm() -> None:
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _on_sigterm)
 
 
 def _first_line(exc: BaseException) -> str:
@@ -43,8 +62,15 @@ def _first_line(exc: BaseException) -> str:
 
 
 def main(argv=None) -> int:
-    """Entry point: bad input prints one line on stderr and exits 2; no traceback."""
-    _load_commands()
+    """Entry point: bad input prints one line on stderr and exits 2; no traceback.
+
+    SIGTERM is handled as Ctrl-C (temporary outputs removed; exit 143).
+    """
+    _install_sigterm()
+    try:
+        _load_commands()
+    except KeyboardInterrupt:
+        return 130
     try:
         cli.main(args=argv, prog_name="viform", standalone_mode=False)
     except click.exceptions.Exit as exc:
@@ -55,9 +81,15 @@ def main(argv=None) -> int:
     except click.Abort:
         click.echo("viform: interrupted", err=True)
         return 130
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         click.echo("viform: interrupted; no partial output was left", err=True)
-        return 130
+        return 143 if isinstance(exc, _Terminated) else 130
+    except MemoryError:
+        if os.environ.get("VIFORM_DEBUG"):
+            raise
+        click.echo("viform: error: not enough memory for this request; reduce its size (--duration, --height, "
+                   "--width, --frames) or run it on a bigger machine", err=True)
+        return 2
     except (ViformError, ValueError, OSError) as exc:
         if os.environ.get("VIFORM_DEBUG"):
             raise

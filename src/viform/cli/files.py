@@ -1,4 +1,4 @@
-"""CLI: ``viform info`` — what a spike file or coded file holds."""
+"""CLI: ``viform info`` (what a spike file or coded file holds) and ``viform verify`` (is it whole)."""
 
 from __future__ import annotations
 
@@ -9,35 +9,173 @@ import click
 from viform.cli._common import open_source as _open
 from viform.cli.app import cli
 
+#: Units shown after the values of ``info`` (by the summary's key).
+_UNITS = {"clock_hz": "Hz", "duration_s": "s", "start_time_s": "s", "threshold_electrons": "e⁻",
+          "spikes_per_s": "spikes/s", "mean_firing_rate_hz": "Hz", "raw_data_rate_bit_per_s": "bit/s",
+          "raw_data_rate_mb_per_s": "MB/s", "mean_firing_rate_per_tick": "per tick",
+          "dark_current_e_per_s": "e⁻/s", "bytes": "bytes"}
 
-@cli.command()
-@click.argument("file", type=click.Path(exists=True))
-@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-@click.option("--height", type=int, default=None, help="Height of a .dat file.")
-@click.option("--width", type=int, default=None, help="Width of a .dat file.")
-@click.option("--clock-hz", type=float, default=None, help="Clock of a .dat/.npz file (default 40 kHz).")
-@click.option("--allow-partial", is_flag=True, help="Keep the whole frames of a .dat with trailing bytes.")
-def info(file, as_json, height, width, clock_hz, allow_partial):
-    """Resolution, duration, ticks, spike count, firing and data rates of a viform (or a coded file)."""
-    summary = _coded_file_summary(file)
-    if summary is None:
-        source = _open(file, height, width, clock_hz, allow_partial=allow_partial)
-        summary = {"file": str(file), **source.summary()}
-    if as_json:
-        click.echo(json.dumps(summary, indent=2, default=str))
-        return
-    for key, value in summary.items():
-        click.echo(f"{key:>28}: {value:.6g}" if isinstance(value, float) else f"{key:>28}: {value}")
+_file_options = [
+    click.option("--height", type=int, default=None, help="Height of a .dat file without a sidecar."),
+    click.option("--width", type=int, default=None, help="Width of a .dat file without a sidecar."),
+    click.option("--clock-hz", type=float, default=None,
+                 help="Readout clock, Hz, when the file does not record it (default 40 kHz)."),
+    click.option("--allow-partial", is_flag=True, help="Keep the whole frames of a .dat with trailing bytes."),
+    click.option("--key", default=None, help="Array name in a .npz (default: spk, then spikes)."),
+    click.option("--axes", default=None,
+                 help="Axis order of a .npz array that does not declare it: thw (ticks, rows, columns) or hwt."),
+]
+
+
+def _apply(options):
+    def decorator(f):
+        for option in reversed(options):
+            f = option(f)
+        return f
+
+    return decorator
+
+
+def _coded_module():
+    try:
+        from viform.coding import aer_file
+    except ImportError:
+        return None
+    return aer_file
 
 
 def _coded_file_summary(file):
     """The first-spike coding module's description of a coded file, if FILE is one."""
-    try:
-        from viform.coding import aer_file
-    except ImportError:
+    aer_file = _coded_module()
+    if aer_file is None:
         return None
     describe = getattr(aer_file, "describe_coded_file", None)
     is_coded = getattr(aer_file, "is_coded_file", None)
     if describe is None or is_coded is None or not is_coded(file):
         return None
     return describe(file)
+
+
+def _verify_coded(file) -> dict | None:
+    """Full check of a coded file through the coding module (None when FILE is not one)."""
+    aer_file = _coded_module()
+    if aer_file is None:
+        return None
+    is_coded = getattr(aer_file, "is_coded_file", None)
+    if is_coded is None or not is_coded(file):
+        return None
+    verify = getattr(aer_file, "verify_coded_file", None)
+    if verify is not None:
+        result = verify(file)
+        if isinstance(result, dict):
+            return {"file": str(file), "format": "vfc", "verified": True, **result}
+    coded = aer_file.CodedFile(file)
+    spikes = coded.verify()  # decodes every segment, checking each one's checksum
+    return {"file": str(file), "format": "vfc", "verified": True,
+            "checks": [f"every segment decoded and checked ({spikes} spikes)"]}
+
+
+def _fmt(key: str, value) -> str:
+    unit = _UNITS.get(key, "")
+    if isinstance(value, bool) or value is None:
+        text = {True: "yes", False: "no", None: "unknown"}[value]
+    elif isinstance(value, float):
+        text = f"{value:,.0f}" if value.is_integer() and 1e4 <= abs(value) < 1e9 else f"{value:.4g}"
+    elif isinstance(value, int):
+        text = f"{value:,}"
+    else:
+        text = str(value)
+    return f"{text} {unit}".rstrip() if value is not None else text
+
+
+def _label(key: str) -> str:
+    """``clock_hz`` → ``clock`` (the unit goes after the value)."""
+    if key in _UNITS:
+        for suffix in ("_bit_per_s", "_mb_per_s", "_e_per_s", "_per_s", "_per_tick", "_hz", "_s", "_electrons"):
+            if key.endswith(suffix):
+                key = key[: -len(suffix)] + ("_rate" if suffix.endswith("per_s") and "rate" not in key else "")
+                break
+    return key.replace("_", " ")
+
+
+def _table(summary: dict) -> None:
+    width = max(len(k) for k in summary)
+    for key, value in summary.items():
+        if isinstance(value, (dict, list)):
+            value = json.dumps(value, default=str)
+            value = value if len(value) <= 100 else value[:99] + "…"
+        click.echo(f"{_label(key):>{width}}: {_fmt(key, value)}")
+
+
+@cli.command()
+@click.argument("file", type=click.Path(exists=True))
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@_apply(_file_options)
+def info(file, as_json, height, width, clock_hz, allow_partial, key, axes):
+    """Resolution, duration, ticks, spike count, firing and data rates of a spike stream (or a coded file).
+
+    Reading the stream checks it: zarr chunk checksums, the .npz zip checksums, a .dat
+    file's size and checksum against its sidecar. The last line says what was verified.
+    """
+    summary = _coded_file_summary(file)
+    if summary is None:
+        source = _open(file, height, width, clock_hz, allow_partial=allow_partial, axes=axes, key=key)
+        summary = {"file": str(file), "format": source.metadata.get("format"), **source.summary()}
+        meta = source.metadata
+        for field in ("scene", "seed", "viform_version", "utc_date"):
+            if meta.get(field) is not None:
+                summary[field] = meta[field].get("name", meta[field]) if isinstance(meta[field], dict) else meta[field]
+        summary.update(_verification(source))
+    else:
+        summary = dict(summary)
+        summary.setdefault("verified", False)
+        summary.setdefault("verification", "segment checksums not checked here: run viform verify")
+    if as_json:
+        click.echo(json.dumps(summary, indent=2, default=str))
+        return
+    _table(summary)
+
+
+def _verification(source) -> dict:
+    """What reading the stream checked (summary() has read every tick)."""
+    fmt = source.metadata.get("format")
+    if fmt == "zarr":
+        if getattr(source, "checked", False):
+            return {"verified": True, "verification": "header and every chunk's CRC-32 checked"}
+        return {"verified": False, "verification": "store written without checksums (older viform)"}
+    if fmt == "npz":
+        return {"verified": True, "verification": "zip CRC-32 of the spike array checked; values are 0/1"}
+    if fmt == "dat":
+        if getattr(source, "sidecar", None) is None:
+            return {"verified": False, "verification": "no sidecar: nothing to check the file against"}
+        result = source.verify()
+        return {"verified": result["verified"], "verification": "; ".join(result["checks"])}
+    return {"verified": False, "verification": "not checked"}
+
+
+@cli.command()
+@click.argument("file", type=click.Path(exists=True))
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+@_apply(_file_options)
+def verify(file, as_json, height, width, clock_hz, allow_partial, key, axes):
+    """Check that FILE (.dat with its sidecar, .npz, .zarr or .vfc) is whole and consistent.
+
+    Reads everything: a .dat against the size and checksum in its sidecar, every member of a
+    .npz against its zip checksum, every chunk of a zarr store against its checksum manifest,
+    every segment of a .vfc. Exit status 0 when whole, 2 (with one line naming the damage)
+    otherwise.
+    """
+    from viform.stream.io import verify_spikes
+
+    result = _verify_coded(file)
+    if result is None:
+        result = verify_spikes(file, height=height, width=width, clock_hz=clock_hz, allow_partial=allow_partial,
+                               key=key, axes=axes)
+    if as_json:
+        click.echo(json.dumps(result, indent=2, default=str))
+        return
+    if not result["verified"]:
+        click.echo(f"{file}: readable, but not verified: {'; '.join(result['checks'])}")
+        return
+    click.echo(f"{file}: OK ({'; '.join(result['checks'])})")
+

@@ -1,0 +1,282 @@
+"""Central bounds on every command's options, applied after the command modules load.
+
+Command modules declare options with plain ``type=float`` / ``type=int``; :func:`install`
+walks every command and
+
+- replaces float and int types by :class:`BoundedFloat` / :class:`BoundedInt`: finite, and
+  |x| ≤ 1e12 for floats, |n| ≤ 2^31 for whole numbers (values past those overflow, hang or
+  exhaust memory downstream); the error names the flag the user typed (``--duration``);
+  an option may declare its own limit with ``param.viform_limit``;
+- wraps each command so that a :class:`~viform._validate.ViformError` naming a Python
+  parameter (``duration_s``) names the flag instead (``--duration``);
+- refuses, before any work, requests too big for memory (``--height × --width`` above
+  :func:`max_pixels`, ``VIFORM_MAX_PIXELS`` to raise it; pixel-ticks of ``--duration`` ×
+  ``--clock-hz`` × pixels above :func:`max_pixel_ticks`, ``VIFORM_MAX_PIXEL_TICKS``), output
+  paths that cannot be written (an existing folder where a file goes, an unwritable folder),
+  and inputs that are not regular files or folders (a FIFO would block the reader).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import re
+from pathlib import Path
+
+import click
+
+from viform._validate import ViformError
+
+#: Largest magnitude of a float option unless the option declares ``viform_limit``.
+FLOAT_LIMIT = 1e12
+#: Largest magnitude of an int option.
+INT_LIMIT = 2**31
+#: Default caps on the size of a request (environment variables raise them).
+DEFAULT_MAX_PIXELS = 4096 * 4096
+DEFAULT_MAX_PIXEL_TICKS = 1e12
+
+#: Option names that hold an output path.
+OUTPUT_NAMES = ("out", "out_path", "out_dir", "output", "json_file", "json_path", "preview", "dst")
+#: Suffixes that name files (an existing folder of that name cannot be replaced by a file).
+FILE_SUFFIXES = (".dat", ".npz", ".vfc", ".png", ".json", ".gif", ".mp4", ".html", ".csv", ".txt", ".yaml")
+
+
+def _env_number(name: str, default: float) -> float:
+    text = os.environ.get(name)
+    if not text:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        raise ViformError(f"environment variable {name} = {text!r} must be a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise ViformError(f"environment variable {name} = {text!r} must be a finite number > 0")
+    return value
+
+
+def max_pixels() -> float:
+    """Largest height × width a command accepts (``VIFORM_MAX_PIXELS``, default 4096²)."""
+    return _env_number("VIFORM_MAX_PIXELS", DEFAULT_MAX_PIXELS)
+
+
+def max_pixel_ticks() -> float:
+    """Largest ticks × pixels a command accepts (``VIFORM_MAX_PIXEL_TICKS``, default 1e12)."""
+    return _env_number("VIFORM_MAX_PIXEL_TICKS", DEFAULT_MAX_PIXEL_TICKS)
+
+
+class BoundedFloat(click.ParamType):
+    """A finite float with |x| ≤ ``limit``, then the original type's own checks (ranges)."""
+
+    name = "float"
+
+    def __init__(self, inner: click.ParamType | None = None, limit: float = FLOAT_LIMIT):
+        self.inner = inner if inner is not None else click.FLOAT
+        self.limit = float(limit)
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, bool):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        try:
+            number = float(value)
+        except (TypeError, ValueError, OverflowError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not allowed: give a finite number", param, ctx)
+        if abs(number) > self.limit:
+            self.fail(f"{value!r} is not allowed: its magnitude must be at most {self.limit:g}", param, ctx)
+        return self.inner.convert(number if isinstance(value, str) else value, param, ctx)
+
+    def get_metavar(self, param, ctx=None):
+        return self.inner.get_metavar(param, ctx) if ctx is not None else None
+
+    def __repr__(self):
+        return "FLOAT"
+
+
+class BoundedInt(click.ParamType):
+    """A whole number with |n| ≤ ``limit``, then the original type's own checks (ranges)."""
+
+    name = "integer"
+
+    def __init__(self, inner: click.ParamType | None = None, limit: int = INT_LIMIT):
+        self.inner = inner if inner is not None else click.INT
+        self.limit = int(limit)
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, bool):
+            self.fail(f"{value!r} is not a whole number", param, ctx)
+        if isinstance(value, str):
+            text = value.strip()
+            if not re.fullmatch(r"[+-]?\d{1,30}", text):
+                self.fail(f"{value!r} is not a whole number", param, ctx)
+            number = int(text)
+        elif isinstance(value, int):
+            number = value
+        else:
+            try:
+                f = float(value)
+            except (TypeError, ValueError):
+                self.fail(f"{value!r} is not a whole number", param, ctx)
+            if not (math.isfinite(f) and f.is_integer()):
+                self.fail(f"{value!r} is not a whole number", param, ctx)
+            number = int(f)
+        if abs(number) > self.limit:
+            self.fail(f"{value!r} is not allowed: its magnitude must be at most {self.limit}", param, ctx)
+        return self.inner.convert(number, param, ctx)
+
+    def get_metavar(self, param, ctx=None):
+        return self.inner.get_metavar(param, ctx) if ctx is not None else None
+
+    def __repr__(self):
+        return "INT"
+
+
+def _bounded(kind: click.ParamType, param) -> click.ParamType:
+    if isinstance(kind, (BoundedFloat, BoundedInt)):
+        return kind
+    limit = getattr(param, "viform_limit", None)
+    if isinstance(kind, click.types.FloatParamType):
+        return BoundedFloat(kind, FLOAT_LIMIT if limit is None else limit)
+    if isinstance(kind, click.types.IntParamType):
+        return BoundedInt(kind, INT_LIMIT if limit is None else int(limit))
+    if isinstance(kind, click.Tuple):
+        kind.types = [_bounded(t, param) for t in kind.types]
+    return kind
+
+
+def flag_of(param: click.Parameter) -> str:
+    """The flag the user types for ``param`` (its longest ``--`` form), or its metavar name."""
+    longs = [o for o in param.opts if o.startswith("--")]
+    if longs:
+        return max(longs, key=len)
+    return param.opts[0] if param.opts else param.name
+
+
+def name_flags(message: str, command: click.Command) -> str:
+    """Replace Python parameter names (``duration_s``) in ``message`` by the command's flags.
+
+    Only option names are replaced, only as whole words not inside quotes (file fields such
+    as ``'clock_hz'`` stay), and names without an underscore only when followed by `` = ``.
+    """
+    for param in sorted(command.params, key=lambda p: -len(p.name or "")):
+        if not isinstance(param, click.Option) or not param.name:
+            continue
+        flag = flag_of(param)
+        if flag.lstrip("-") == param.name and "_" not in param.name:
+            pattern = rf"(?<![\w'\"./-]){re.escape(param.name)}(?= = )"
+        elif "_" in param.name:
+            pattern = rf"(?<![\w'\"./-]){re.escape(param.name)}(?![\w'\"-])"
+        else:
+            pattern = rf"(?<![\w'\"./-]){re.escape(param.name)}(?= = )"
+        message = re.sub(pattern, flag, message)
+    return message
+
+
+def _first(kwargs: dict, *names):
+    for name in names:
+        if kwargs.get(name) is not None:
+            return name, kwargs[name]
+    return None, None
+
+
+def _param_default(command: click.Command, name: str):
+    for p in command.params:
+        if p.name == name:
+            return p
+    return None
+
+
+def check_request(command: click.Command, kwargs: dict) -> None:
+    """Refuse requests that would exceed memory, unwritable outputs and non-regular inputs."""
+    flags = {p.name: flag_of(p) for p in command.params}
+    height, width = kwargs.get("height"), kwargs.get("width")
+    size = kwargs.get("size")
+    pixels = None
+    if isinstance(height, int) and isinstance(width, int):
+        if height < 1 or width < 1:
+            raise ViformError(f"{flags['height']} = {height} and {flags['width']} = {width}: both must be ≥ 1")
+        pixels = height * width
+        what = f"{flags['height']} {height} × {flags['width']} {width}"
+    elif isinstance(size, int) and size > 0:
+        pixels = size * size
+        what = f"{flags['size']} {size} (× {size})"
+    if pixels is not None and pixels > max_pixels():
+        raise ViformError(f"{what} = {pixels:.4g} pixels is more than the limit of {max_pixels():.4g} pixels "
+                          "(about 64 bytes of working memory each); raise it with the environment variable "
+                          "VIFORM_MAX_PIXELS if this machine has the memory")
+    _, duration = _first(kwargs, "duration_s")
+    rate_name, rate = _first(kwargs, "clock_hz", "frame_rate_hz")
+    if rate_name is None and "duration_s" in kwargs:
+        p = _param_default(command, "clock_hz")
+        rate = 40_000.0 if p is None else None
+    if pixels is not None and isinstance(duration, (int, float)) and isinstance(rate, (int, float)) \
+            and duration > 0 and rate > 0:
+        pixel_ticks = pixels * duration * rate
+        if pixel_ticks > max_pixel_ticks():
+            raise ViformError(f"{flags['duration_s']} {duration:g} s at {rate:g} Hz over {pixels:.4g} pixels is "
+                              f"{pixel_ticks:.4g} pixel-ticks ({pixel_ticks / 8e9:.4g} GB of raw spike bits), more "
+                              f"than the limit of {max_pixel_ticks():.4g}; raise it with the environment variable "
+                              "VIFORM_MAX_PIXEL_TICKS")
+    for param in command.params:
+        value = kwargs.get(param.name)
+        if value is None or not isinstance(param.type, click.Path) or isinstance(value, (tuple, list)):
+            continue
+        path = Path(value)
+        if param.name in OUTPUT_NAMES:
+            _check_output(flags[param.name], path)
+        elif path.exists() and not (path.is_file() or path.is_dir()):
+            raise ViformError(f"{flags[param.name]}: {str(path)!r} is not a regular file or folder "
+                              "(a FIFO, socket or device cannot be read as data)")
+
+
+def _check_output(flag: str, path: Path) -> None:
+    if path.suffix.lower() in FILE_SUFFIXES and path.is_dir():
+        raise ViformError(f"{flag} = {str(path)!r} is an existing folder; a {path.suffix} file was expected")
+    if path.exists() and not (path.is_file() or path.is_dir()):
+        raise ViformError(f"{flag} = {str(path)!r} is not a regular file or folder")
+    existing = path.parent if path.suffix else path
+    existing = existing if str(existing) else Path(".")
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ViformError(f"{flag} = {str(path)!r} cannot be written: {str(existing)!r} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ViformError(f"{flag} = {str(path)!r} cannot be written: the folder {str(existing)!r} is not writable")
+
+
+def _wrap(command: click.Command) -> None:
+    callback = command.callback
+    if callback is None or getattr(callback, "_viform_wrapped", False):
+        return
+
+    @functools.wraps(callback)
+    def run(*args, **kwargs):
+        try:
+            check_request(command, kwargs)
+            return callback(*args, **kwargs)
+        except ViformError as exc:
+            text = name_flags(str(exc), command)
+            if text == str(exc):
+                raise
+            raise ViformError(text) from None
+
+    run._viform_wrapped = True
+    command.callback = run
+
+
+def walk(group: click.Command):
+    """Every leaf command under ``group``."""
+    if isinstance(group, click.Group):
+        for sub in group.commands.values():
+            yield from walk(sub)
+    else:
+        yield group
+
+
+def install(group: click.Group) -> None:
+    """Bound every numeric option of every command under ``group`` and wrap its callback."""
+    for command in walk(group):
+        for param in command.params:
+            param.type = _bounded(param.type, param)
+        _wrap(command)
