@@ -1,0 +1,117 @@
+"""``viform capture``: every sensor preset shoots a scene and saves its output with the exposure windows."""
+
+import json
+
+import numpy as np
+import pytest
+
+from viform.cli import main
+from viform.cli.capture import capture_sensor_names, is_spike, load_frame_stack
+
+
+def run(args, capsys):
+    code = main(args)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_every_sensor_captures(tmp_path, capsys):
+    """Each preset writes its output; frames carry start times, exposures, units and the sensor."""
+    for name in capture_sensor_names():
+        scene = "night-road-fog" if name == "gated" else "dilemma"
+        out = tmp_path / (f"{name}.npz")
+        code, stdout, err = run(["capture", name, scene, "--duration", "0.004", "--out", str(out),
+                                 "--height", "32", "--width", "48", "--json"], capsys)
+        assert code == 0, (name, err)
+        summary = json.loads(stdout)
+        assert out.exists()
+        if is_spike(name):
+            from viform.stream.io import open_spikes
+
+            stream = open_spikes(out)
+            assert stream.shape[1:] == (32, 48) and stream.n_ticks == summary["n_ticks"] > 0
+            continue
+        data = load_frame_stack(out)
+        n = len(data["frames"])
+        assert n == summary["frames"] >= 1 and data["frames"].shape[1:] == (32, 48)
+        assert data["start_times_s"].shape == data["exposure_s"].shape == (n,)
+        assert np.all(data["exposure_s"] > 0) and data["units"]
+        assert "sensor" in data["metadata"] and "scene" in data["metadata"]
+
+
+def _led_on_fraction(path, scene):
+    """Per frame: the LED's measured on-fraction (from DN, through the linear model) and the exact one."""
+    from viform.light.dilemma import pwm_on_time_s
+    from viform.light.radiometry import PixelOptics
+
+    data = load_frame_stack(path)
+    meta = data["metadata"]["sensor"]
+    gain, black = meta["system_gain_dn_per_e"], meta["black_offset_dn"]
+    e_per_lux_s = PixelOptics(**meta["optics"]).electrons_per_lux_second
+    measured, expected = [], []
+    for frame, t0, t in zip(data["frames"], data["start_times_s"], data["exposure_s"], strict=True):
+        electrons = (frame[scene.led].astype(float).mean() - black) / gain - meta["dark_current_e_per_s"] * t
+        lux = electrons / (e_per_lux_s * t)
+        measured.append((lux - scene.led_off_lux) / (scene.led_on_lux - scene.led_off_lux))
+        expected.append((pwm_on_time_s(t0 + t, 90.0, 0.25) - pwm_on_time_s(t0, 90.0, 0.25)) / t)
+    return np.array(measured), np.array(expected)
+
+
+def test_each_frame_integrates_its_own_window(tmp_path, capsys):
+    """The PWM LED's level in each frame follows the LED's on-time in that frame's own exposure window.
+
+    seed001-normal: 130 µs at 60 fps, so frames alternate between the LED's on and off phases
+    (1/60 s = 1.5 PWM periods). The LED gives ~190 e⁻ a pixel when on: shot + read noise ≈ 14 e⁻,
+    2.5 % of the swing on the 9-pixel LED mean, so 0.1 is a 4σ tolerance.
+    cmos-short: 30 fps is exactly 3 PWM periods, so every frame sees the same phase (the
+    stroboscopic lock of a frame camera on a 90 Hz LED) — the same on-fraction each frame.
+    """
+    from viform.light.dilemma import DilemmaScene
+
+    scene = DilemmaScene(32, 48)
+    for name, n in (("seed001-normal", 6), ("cmos-short", 3)):
+        out = tmp_path / f"{name}.npz"
+        code, _, err = run(["capture", name, "dilemma", "--duration", "0.1", "--out", str(out),
+                            "--height", "32", "--width", "48"], capsys)
+        assert code == 0, err
+        measured, expected = _led_on_fraction(out, scene)
+        assert measured.size == n
+        np.testing.assert_allclose(measured, expected, atol=0.1)
+        if name == "seed001-normal":
+            np.testing.assert_allclose(expected, [1, 0, 1, 0, 1, 0], atol=1e-9)
+        else:
+            np.testing.assert_allclose(expected, expected[0], atol=1e-9)
+
+
+def test_zarr_frames_and_previews(tmp_path, capsys):
+    out, png, mp4 = tmp_path / "f.zarr", tmp_path / "p.png", tmp_path / "p.mp4"
+    code, _, err = run(["capture", "cmos", "dilemma", "--duration", "0.07", "--out", str(out), "--preview",
+                        str(png), "--height", "32", "--width", "48"], capsys)
+    assert code == 0, err
+    data = load_frame_stack(out)
+    assert data["frames"].shape == (2, 32, 48) and data["units"].startswith("DN")
+    np.testing.assert_allclose(data["start_times_s"], [0, 1 / 30])
+    import imageio.v3 as iio
+
+    image = iio.imread(png)
+    assert image.shape == (64, 96) and image.std() > 5  # doubled pixels, not a flat frame
+    code, _, err = run(["capture", "spike", "dilemma", "--duration", "0.003", "--out", str(tmp_path / "s.dat"),
+                        "--preview", str(mp4), "--height", "32", "--width", "48"], capsys)
+    assert code == 0, err
+    assert iio.improps(mp4).shape[0] >= 10
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["capture", "nosuch", "dilemma", "--duration", "0.01", "--out", "{t}/a.npz"], "SENSOR"),
+    (["capture", "gated", "dilemma", "--duration", "0.01", "--out", "{t}/a.npz"], "SCENE"),
+    (["capture", "cmos", "dilemma", "--duration", "0.01", "--out", "{t}/a.dat"], "--out"),
+    (["capture", "spike", "dilemma", "--duration", "0.01", "--out", "{t}/a.png"], "--out"),
+    (["capture", "cmos", "dilemma", "--duration", "-1", "--out", "{t}/a.npz"], "--duration"),
+    (["capture", "cmos", "dilemma", "--duration", "0.01", "--out", "{t}/a.npz", "--preview", "{t}/p.jpg"],
+     "--preview"),
+])
+def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, needle):
+    code, _, err = run([a.replace("{t}", str(tmp_path)) for a in args], capsys)
+    assert code == 2
+    assert needle in err and len(err.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,94 @@
+"""The built-in dilemma and night-road-fog scenes: the demands they pose and their analytic truth."""
+
+import math
+
+import numpy as np
+import pytest
+
+from viform._validate import ViformError
+from viform.light.dilemma import DilemmaScene, NightRoadFogScene, pwm_on_time_s
+from viform.light.scenes import builtin_scene
+
+
+def test_registered_as_builtin_scenes():
+    assert isinstance(builtin_scene("dilemma", 40, 64), DilemmaScene)
+    assert isinstance(builtin_scene("night-road-fog", 40, 64), NightRoadFogScene)
+
+
+@pytest.mark.parametrize("shape", [(32, 48), (64, 128), (97, 151)])
+def test_dilemma_poses_both_demands_at_any_size(shape):
+    """≥ 6 decades in one view and motion ≥ 2 000 px/s, whatever the resolution."""
+    scene = DilemmaScene(*shape)
+    lux = scene.illuminance_lux(0.0123)
+    assert lux.shape == shape
+    assert math.log10(lux.max() / lux.min()) >= 6.0
+    d = scene.demand()
+    assert d["dynamic_range_db"] >= 120.0
+    assert scene.prop_tip_speed_px_per_s >= 2000 and scene.vehicle_speed_px_per_s >= 2000
+    assert d["time_resolution_s"] == pytest.approx(1 / d["max_speed_px_per_s"])
+
+
+def test_led_is_a_90_hz_pwm_with_exact_window_mean():
+    scene = DilemmaScene(32, 48)
+    led = scene.led
+    period = 1 / 90.0
+    on, off = scene.led_on_lux, scene.led_off_lux
+    assert scene.illuminance_lux(0.1 * period)[led] == pytest.approx(on)
+    assert scene.illuminance_lux(0.5 * period)[led] == pytest.approx(off)
+    assert scene.illuminance_lux(3.1 * period)[led] == pytest.approx(on)  # periodic
+    # one whole period: the duty cycle, whatever the phase the window starts at
+    for t0 in (0.0, 0.3 * period, 0.77 * period):
+        mean = scene.mean_illuminance_lux(t0, t0 + period)[led]
+        assert mean == pytest.approx(off + 0.25 * (on - off), rel=1e-9)
+    # on-time bookkeeping: half a period from the start holds the whole on-part
+    assert pwm_on_time_s(period / 2, 90.0, 0.25) == pytest.approx(0.25 * period)
+
+
+def test_truth_moves_at_the_stated_speeds():
+    scene = DilemmaScene(48, 96)
+    dt = 2e-3
+    assert scene.vehicle_front_px(dt) - scene.vehicle_front_px(0.0) == pytest.approx(2500 * dt)
+    a, b = scene.illuminance_lux(0.0), scene.illuminance_lux(dt)
+    static = ~(scene.moving_mask(0.0) | scene.moving_mask(dt))
+    # away from the moving parts and the small object's row only the LED may change
+    rows = np.abs(np.arange(48) - scene.object_row_px) > 6
+    keep = static & ~scene.led & rows[:, None]
+    np.testing.assert_array_equal(a[keep], b[keep])
+    assert not np.array_equal(a[scene.moving_mask(0.0)], b[scene.moving_mask(0.0)])
+
+
+def test_window_mean_matches_the_instantaneous_truth():
+    """mean_illuminance_lux (cached grid, 0.5 px of motion a sample) agrees with a fine midpoint
+    rule of illuminance_lux: the grid puts each sample within half a step (0.25 px) of the fine one,
+    so the two means differ only at pixels an edge crosses, by a fraction of the edge's step."""
+    scene = DilemmaScene(32, 64)
+    t0, t1 = 1e-3, 4e-3
+    fine = np.mean([scene.illuminance_lux(t) for t in np.linspace(t0, t1, 1201)[:-1] + (t1 - t0) / 2400], axis=0)
+    mean = scene.mean_illuminance_lux(t0, t1)
+    rel = np.abs(mean - fine) / fine
+    assert np.median(rel) < 1e-6
+    assert np.percentile(rel, 99) < 0.1
+
+
+def test_brightness_and_speed_scale_the_scene():
+    a, b = DilemmaScene(32, 48), DilemmaScene(32, 48, brightness=4.0, speed=2.0)
+    np.testing.assert_allclose(b.illuminance_lux(0.0), 4 * a.illuminance_lux(0.0))
+    assert b.max_speed_px_per_s() == 2 * a.max_speed_px_per_s()
+
+
+@pytest.mark.parametrize("kw, needle", [({"height": 8}, "height"), ({"led_duty": 1.5}, "led_duty"),
+                                        ({"brightness": -1}, "brightness")])
+def test_bad_parameters_are_named(kw, needle):
+    with pytest.raises(ViformError, match=needle):
+        DilemmaScene(**{"height": 40, "width": 64, **kw})
+
+
+def test_fog_hides_the_signs_from_a_passive_camera_but_not_the_range():
+    """Passive contrast of a sign falls as T(R)² (Koschmieder), its range map does not change."""
+    clear, fog = NightRoadFogScene(48, 96, visibility_m=2000.0), NightRoadFogScene(48, 96, visibility_m=100.0)
+    mask = clear.targets["sign 60 m"]
+    assert mask.any()
+    assert clear.illuminance_lux(0)[mask].mean() > 5 * fog.illuminance_lux(0)[mask].mean()
+    np.testing.assert_array_equal(clear.active.range_m, fog.active.range_m)
+    assert np.all(clear.active.range_m[mask] == 60.0)
+    assert fog.active.medium.extinction_per_m == pytest.approx(3.912 / 100.0)
