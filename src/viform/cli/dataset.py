@@ -87,4 +87,11 @@ def dataset(src, out_dir, preset, height, width, workers, scheduler, worker_memo
     for fail in summary["failed"]:
         click.echo(f"viform: clip {fail['clip']!r} failed: {fail['error']}", err=True)
     if summary["failed"]:
-        raise click.exceptions.Exit(1)
+        raise ClipsFailed(f"{len(summary['failed'])} of {summary['clips']} clips failed (listed above); "
+                          "the others are written, and running the command again retries only the failed ones")
+
+
+class ClipsFailed(click.ClickException):
+    """Some clips failed: exit status 1 (bad options exit 2)."""
+
+    exit_code = 1

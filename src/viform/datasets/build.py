@@ -389,7 +389,7 @@ def _open_client(workers: int, scheduler: str | None, memory_limit):
         except (OSError, TimeoutError) as exc:
             raise ViformError(f"--scheduler {scheduler!r}: could not connect ({one_line(exc)})") from None
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                           dashboard_address=None, silence_logs=logging.ERROR)
+                           dashboard_address=":0", silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
 
@@ -463,8 +463,9 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
             failed[task.clip.name] = error
         _write_manifest(out, settings, rows, failed)
 
+    own_client = client is None
     own_cluster = None
-    if client is None:
+    if own_client:
         client, own_cluster = _open_client(workers, scheduler, memory_limit)
     bar = None
     try:
@@ -491,8 +492,9 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     finally:
         if bar is not None:
             bar.close()
-        if own_cluster is not None:
+        if own_client:
             client.close()
+        if own_cluster is not None:
             own_cluster.close()
     summary = _summary(out, clips, rows, failed, time.perf_counter() - started, n_workers)
     summary["startup_s"] = started - opened

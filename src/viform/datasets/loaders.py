@@ -151,10 +151,16 @@ class SpikeFolder:
             if gt is not None:
                 clip.gt.append(GroundTruth(0, -1, gt))  # tick: the middle one, set once the length is known
             clips.append(clip)
+        self.clips = clips
         for ci, clip in enumerate(clips):
             for g in clip.gt:
                 g.tick = self._n_ticks(ci) // 2
         return clips
+
+    def __getstate__(self):  # DataLoader workers reopen the files instead of copying memory maps
+        state = dict(self.__dict__)
+        state["_sources"] = {}
+        return state
 
     # ------------------------------------------------------------------ access
     def source(self, clip):

@@ -1,0 +1,52 @@
+"""PyTorch dataset of spike windows and ground truth (optional extra: ``pip install 'viform[torch]'``).
+
+Use it as ``viform.torch.SpikeDataset``. Each item is a Spike-Zoo-style sample::
+
+    {"spike": float32 tensor (T, H, W) of 0/1, "gt_img": float32 tensor (1, H, W) in [0, 1],
+     "rate": float, "clip": str, "tick": int}
+
+``T`` ticks are centred on a ground-truth frame (see :mod:`viform.datasets.loaders`), and
+``spike.mean(0) / rate`` estimates ``gt_img`` (seed 000 §3.2: the firing rate is proportional
+to the light below saturation).
+"""
+
+from __future__ import annotations
+
+try:
+    import torch
+    from torch.utils.data import Dataset
+except ImportError as exc:  # pragma: no cover - exercised only without torch
+    raise ImportError("viform's PyTorch dataset needs PyTorch: pip install 'viform[torch]'") from exc
+
+from viform.datasets.loaders import DEFAULT_WINDOW_TICKS, SpikeFolder
+
+
+class SpikeDataset(Dataset):
+    """A spike dataset folder (viform, Spike-Zoo or SpikeCV layout) as a map-style torch dataset.
+
+    Parameters
+    ----------
+    root : path
+        The dataset folder.
+    window_ticks : int
+        Ticks per sample (41 by default).
+    transform : callable, optional
+        Applied to each sample dict before it is returned (augmentation, cropping).
+    **kwargs
+        Passed to :class:`viform.datasets.loaders.SpikeFolder` (``height``, ``width``,
+        ``rate``, ``split``, ``npz_key``, ``npz_axes``, ``flip``).
+    """
+
+    def __init__(self, root, *, window_ticks: int = DEFAULT_WINDOW_TICKS, transform=None, **kwargs):
+        self.folder = SpikeFolder(root, window_ticks=window_ticks, **kwargs)
+        self.transform = transform
+
+    def __len__(self) -> int:
+        return len(self.folder)
+
+    def __getitem__(self, index: int) -> dict:
+        sample = self.folder[index]
+        item = {"spike": torch.from_numpy(sample["spike"]).to(torch.float32),
+                "gt_img": torch.from_numpy(sample["gt_img"]),
+                "rate": float(sample["rate"]), "clip": sample["clip"], "tick": int(sample["tick"])}
+        return self.transform(item) if self.transform is not None else item
