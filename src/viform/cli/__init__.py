@@ -70,8 +70,9 @@ def main(argv=None) -> int:
     _install_sigterm()
     try:
         _load_commands()
-    except KeyboardInterrupt:
-        return 130
+    except KeyboardInterrupt as exc:
+        click.echo("viform: interrupted", err=True)
+        return 143 if isinstance(exc, _Terminated) else 130
     try:
         cli.main(args=argv, prog_name="viform", standalone_mode=False)
     except click.exceptions.Exit as exc:
@@ -79,9 +80,9 @@ def main(argv=None) -> int:
     except click.ClickException as exc:
         click.echo(f"viform: error: {exc.format_message()}", err=True)
         return exc.exit_code if exc.exit_code else 2
-    except click.Abort:
-        click.echo("viform: interrupted", err=True)
-        return 130
+    except click.Abort as exc:  # click turns Ctrl-C (and our SIGTERM) into Abort
+        click.echo("viform: interrupted; no partial output was left", err=True)
+        return 143 if isinstance(exc.__cause__, _Terminated) else 130
     except KeyboardInterrupt as exc:
         click.echo("viform: interrupted; no partial output was left", err=True)
         return 143 if isinstance(exc, _Terminated) else 130
