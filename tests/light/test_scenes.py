@@ -12,6 +12,7 @@ from viform.light.scenes import (
     StillScene,
     TranslatingScene,
     VideoScene,
+    builtin_scene,
     image_to_lux,
     load_scene,
 )
@@ -114,3 +115,53 @@ def test_mp4_video_declares_its_frame_rate(tmp_path):
     # lossy codec: compare the frame means with a few grey levels of slack
     assert np.mean(video.illuminance_lux(0.0)) == pytest.approx(0.0, abs=4)
     assert np.mean(video.illuminance_lux(0.13)) == pytest.approx(120.0, abs=4)  # frame 3
+
+
+CORE_SCENES = ("translating", "moving-edge", "rotating", "hdr", "step", "flicker")
+
+
+def _compiled_scenes():
+    rng = np.random.default_rng(0)
+    frames = rng.uniform(0.0, 3.0, (5, 12, 20))
+    pattern = TranslatingScene(12, 20, velocity_px_per_s=(900.0, -300.0), period_px=6.0)
+    return {
+        **{name: builtin_scene(name, 12, 20) for name in CORE_SCENES},
+        "video-hold": VideoScene(frames, 300.0, "hold"),
+        "video-linear": VideoScene(frames, 300.0, "linear"),
+        "bars-rotating": RotatingScene(12, 20, pattern="bars", period_px=5.0),
+        "step-pattern": StepScene(pattern, step_time_s=0.004, factor=3.0),
+        "square-flicker-pattern": FlickerScene(pattern, frequency_hz=450.0, depth=0.5, waveform="square"),
+    }
+
+
+@pytest.mark.parametrize("name", ["translating", "moving-edge", "rotating", "hdr", "step", "flicker", "video-hold",
+                                  "video-linear", "bars-rotating", "step-pattern", "square-flicker-pattern"])
+def test_compiled_light_is_the_scene_light(name):
+    """What the kernel evaluates equals the NumPy scene to rounding (float32 video frames:
+    2^-24 relative); patterns may differ only exactly on a discontinuity (no pixel here)."""
+    from viform.light.compiled import evaluate
+
+    scene = _compiled_scenes()[name]
+    light = scene.compiled_light()
+    assert light is not None
+    times = np.array([0.0, 1.3e-4, 2.1e-3, 4.0e-3, 4.2e-3, 7.77e-3, 0.02])
+    expected = scene.illuminance_lux_many(times)
+    got = evaluate(light, times)
+    assert got.shape == expected.shape
+    np.testing.assert_allclose(got, expected, rtol=2e-7, atol=1e-12)
+
+
+def test_scenes_that_change_their_light_fall_back_to_numpy():
+    """A subclass overriding the light (or an arbitrary Scene) has no compiled form."""
+
+    class Brighter(StillScene):
+        def illuminance_lux(self, t_s):
+            return 2 * super().illuminance_lux(t_s)
+
+    class Wobbly(TranslatingScene):
+        def illuminance_lux(self, t_s):
+            return super().illuminance_lux(t_s) * (1 + 0.1 * np.sin(t_s))
+
+    assert Brighter(np.ones((2, 2))).compiled_light() is None
+    assert Wobbly(4, 4).compiled_light() is None
+    assert StillScene(np.ones((2, 2))).compiled_light() is not None

@@ -166,7 +166,8 @@ def test_vectorized_noise_free_kernel_matches_the_event_kernel(reset):
         out = np.empty((last - first, 1000), dtype=bool)
         lux = scene.illuminance_lux_many((np.arange(first, last) + 0.5) / sensor.parameters.clock_hz)
         rates = sensor._fixed_point_rates(lux.reshape(last - first, -1), 20, 50)
-        module._run_block(out, rates, first, 1, first, state.charge, state.target, state.counter,
+        seg_end = np.arange(first + 1, last + 1, dtype=np.int64)
+        module._run_block(out, rates, seg_end, first, state.charge, state.target, state.counter,
                           q, index, *tables, state.keys, False, reset == "readout", 0.0)
         blocks.append(out.reshape(-1, 20, 50))
     assert np.array_equal(vectorized, np.concatenate(blocks))
@@ -442,3 +443,59 @@ def test_dead_time_after_readout_reset():
     se = math.sqrt((n_ticks * expected * var_interval / mean_interval ** 2 + 1) / side ** 2) / n_ticks
     assert abs(rate - expected) < 5 * se + 1 / n_ticks
     assert expected < 1 / (q / per_tick + dead_ticks)  # rounding up to the readout costs rate
+
+
+def _light_scenes():
+    from viform.light.scenes import FlickerScene, VideoScene
+
+    frames = np.random.default_rng(1).uniform(0.05, 3.0, (4, 10, 14))
+    return {
+        "hdr": builtin_scene("hdr", 10, 14),
+        "step": builtin_scene("step", 10, 14, step_time_s=0.002, factor=8.0),
+        "video-hold": VideoScene(frames, 2000.0, "hold"),
+        "video-linear": VideoScene(frames, 2000.0, "linear"),
+        "translating": builtin_scene("translating", 10, 14),
+        "rotating": builtin_scene("rotating", 10, 14),
+        "moving-edge": builtin_scene("moving-edge", 10, 14),
+        "flicker": FlickerScene(builtin_scene("hdr", 10, 14, decades=2.0), frequency_hz=700.0),
+    }
+
+
+@pytest.mark.parametrize("name", ["hdr", "step", "video-hold", "video-linear", "translating", "rotating",
+                                  "moving-edge", "flicker"])
+@pytest.mark.parametrize("noise", [True, False])
+def test_compiled_light_gives_the_numpy_path_bits_whatever_the_blocks(name, noise):
+    """Light evaluated in the kernel: the same bits as the NumPy per-tick path (the charge
+    rates are equal to the fixed-point unit; a rate off by 2^-32 e⁻ at a rounding tie could
+    move a spike, which these 56,000 pixel-ticks do not show), and the same bits whatever
+    the block size and light-sample grid."""
+    sensor = SpikeSensor(photon_noise=noise, gain_spread_fraction=0.05, dark_current_spread_fraction=0.3,
+                         threshold_electrons=20)
+    scene = _light_scenes()[name]
+    duration = 400 / 40e3
+    reference = sensor.capture(scene, duration, seed=7, block_ticks=400)
+    numpy_path = np.concatenate([b for _, b in sensor.simulate(scene, duration, seed=7, compiled_light=False)])
+    assert np.array_equal(reference.spikes, numpy_path)
+    assert np.array_equal(reference.spikes, sensor.capture(scene, duration, seed=7, block_ticks=29).spikes)
+    held = sensor.capture(scene, duration, seed=7, block_ticks=53, light_sample_ticks=3).spikes
+    held_numpy = np.concatenate([b for _, b in sensor.simulate(scene, duration, seed=7, block_ticks=400,
+                                                               light_sample_ticks=3, compiled_light=False)])
+    assert np.array_equal(held, held_numpy)
+    assert 0.001 < reference.spikes.mean() < 1.0
+
+
+def test_block_size_follows_a_memory_budget():
+    """Blocks hold about BLOCK_BYTES whatever the resolution: 1 byte a pixel-tick of spikes."""
+    from viform.sensors.spike import BLOCK_BYTES
+
+    sensor = SpikeSensor()
+    for h, w in ((250, 400), (1000, 1000)):
+        scene = builtin_scene("translating", h, w)
+        ticks = sensor.default_block_ticks(scene, 1, scene.compiled_light())
+        assert ticks * h * w <= BLOCK_BYTES
+        assert ticks * h * w * 1.1 + 64 * (h + w) * ticks >= BLOCK_BYTES * 0.5
+        numpy_ticks = sensor.default_block_ticks(scene, 1, None)
+        assert numpy_ticks * h * w * 33 <= BLOCK_BYTES or numpy_ticks == 1
+    lazy = sensor.stream(builtin_scene("hdr", 1000, 1000), 0.01)
+    first, block = next(lazy.iter_blocks(4096))
+    assert first == 0 and block.shape[0] * 1000 * 1000 <= BLOCK_BYTES

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +78,19 @@ class Scene(ABC):
         for t in times:
             acc += self.illuminance_lux(float(t))
         return acc / samples
+
+    def compiled_light(self):
+        """A :class:`~viform.light.compiled.CompiledLight` the simulator evaluates in compiled
+        code, or None (the default: the simulator calls :meth:`illuminance_lux_many`).
+
+        Scenes that implement it return None when a subclass overrides their light.
+        """
+        return None
+
+    def _own_light(self, cls) -> bool:
+        """True when ``illuminance_lux`` is ``cls``'s own (a subclass may have changed the light)."""
+        return type(self).illuminance_lux is cls.illuminance_lux and \
+            type(self).illuminance_lux_many is Scene.illuminance_lux_many
 
     def describe(self) -> dict:
         """Metadata saved with captures."""
@@ -155,6 +169,14 @@ class StillScene(Scene):
     def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
         return self._lux
 
+    def compiled_light(self):
+        if not self._own_light(StillScene):
+            return None
+        from viform.light.compiled import CompiledLight
+
+        return CompiledLight("frames", self.height, self.width, frames=self._lux[None],
+                             frame_index=lambda times: np.zeros(np.shape(times), np.int64))
+
 
 class VideoScene(Scene):
     """An image sequence at a declared frame rate.
@@ -174,6 +196,7 @@ class VideoScene(Scene):
         self.interpolation = check_choice("interpolation", interpolation, ("hold", "linear"))
         super().__init__(frames.shape[1], frames.shape[2], duration_s=frames.shape[0] / self.frame_rate_hz)
         self._frames = frames
+        self._frames32 = None
 
     @classmethod
     def from_file(cls, path, frame_rate_hz: float | None = None, max_lux: float = 1000.0,
@@ -224,6 +247,24 @@ class VideoScene(Scene):
         w = position - k
         return (1 - w) * self._frames[k] + w * self._frames[k + 1]
 
+    def _frame_index(self, times) -> np.ndarray:
+        # the frame illuminance_lux holds at each instant (same arithmetic, elementwise)
+        position = np.maximum(0.0, np.asarray(times, dtype=np.float64) * self.frame_rate_hz)
+        return np.minimum(np.floor(position), self._frames.shape[0] - 1).astype(np.int64)
+
+    def compiled_light(self):
+        if not self._own_light(VideoScene):
+            return None
+        from viform.light.compiled import CompiledLight
+
+        if self.interpolation == "hold" or self._frames.shape[0] == 1:
+            return CompiledLight("frames", self.height, self.width, frames=self._frames,
+                                 frame_index=self._frame_index)
+        if self._frames32 is None:
+            self._frames32 = self._frames.astype(np.float32)  # the kernel reads two frames a tick
+        return CompiledLight("video-linear", self.height, self.width, frames=self._frames32,
+                             frame_rate_hz=self.frame_rate_hz)
+
 
 # ----------------------------------------------------------------- synthetic scenes
 
@@ -270,6 +311,23 @@ class _PatternScene(Scene):
         value = PATTERNS[self.pattern](u, v, self.period_px)
         return self.min_lux + (self.max_lux - self.min_lux) * value
 
+    def _motion(self) -> tuple:
+        raise NotImplementedError
+
+    def _pattern_light(self, modulation=("none",)):
+        """The compiled form of this pattern scene (None when a subclass changed the light)."""
+        cls = getattr(type(self), "_light_class", None)
+        if cls is None or not self._own_light(cls):
+            return None
+        from viform.light.compiled import CompiledLight
+
+        return CompiledLight("pattern", self.height, self.width, pattern=self.pattern, min_lux=self.min_lux,
+                             max_lux=self.max_lux, period_px=self.period_px, motion=self._motion(),
+                             modulation=modulation)
+
+    def compiled_light(self):
+        return self._pattern_light()
+
 
 class TranslatingScene(_PatternScene):
     """A pattern translating at a constant velocity (pixels per second).
@@ -279,6 +337,7 @@ class TranslatingScene(_PatternScene):
     """
 
     name = "translating"
+    _light_class = None  # set below: the class whose illuminance_lux the compiled form mirrors
 
     def __init__(self, height=250, width=400, velocity_px_per_s=(2000.0, 0.0), pattern="texture",
                  min_lux=0.2, max_lux=4.0, period_px=48.0, origin_px=None, duration_s=None):
@@ -294,6 +353,9 @@ class TranslatingScene(_PatternScene):
     def illuminance_lux(self, t_s: float) -> np.ndarray:
         vx, vy = self.velocity_px_per_s
         return self._lux(self._x - self.origin_px[0] - vx * t_s, self._y - self.origin_px[1] - vy * t_s)
+
+    def _motion(self) -> tuple:
+        return ("translate", *self.origin_px, *self.velocity_px_per_s)
 
 
 class RotatingScene(_PatternScene):
@@ -313,6 +375,13 @@ class RotatingScene(_PatternScene):
         u = math.cos(a) * dx - math.sin(a) * dy
         v = math.sin(a) * dx + math.cos(a) * dy
         return self._lux(u, v)
+
+    def _motion(self) -> tuple:
+        return ("rotate", self._cx, self._cy, self.angular_speed_rad_per_s)
+
+
+TranslatingScene._light_class = TranslatingScene
+RotatingScene._light_class = RotatingScene
 
 
 class HDRScene(StillScene):
@@ -359,6 +428,21 @@ class StepScene(Scene):
     def illuminance_lux(self, t_s: float) -> np.ndarray:
         lux = self.base.illuminance_lux(t_s)
         return lux * self.factor if t_s >= self.step_time_s else lux
+
+    def compiled_light(self):
+        if not self._own_light(StepScene):
+            return None
+        base = self.base.compiled_light()
+        if base is None:
+            return None
+        if base.kind == "frames" and base.frames.shape[0] == 1:
+            step = self.step_time_s
+            frames = np.stack([base.frames[0], base.frames[0] * self.factor])
+            return replace(base, frames=frames,
+                           frame_index=lambda times: (np.asarray(times) >= step).astype(np.int64))
+        if base.kind == "pattern" and base.modulation[0] == "none":
+            return replace(base, modulation=("step", self.step_time_s, self.factor))
+        return None
 
     def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
         if t1_s <= self.step_time_s or t0_s >= self.step_time_s or t1_s == t0_s:
@@ -412,6 +496,19 @@ class FlickerScene(Scene):
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
         return self.base.illuminance_lux(t_s) * self.modulation(t_s)
+
+    def compiled_light(self):
+        if not self._own_light(FlickerScene) or type(self).modulation is not FlickerScene.modulation:
+            return None
+        base = self.base.compiled_light()
+        if base is None:
+            return None
+        modulation = (self.waveform, self.frequency_hz, self.depth)
+        if base.kind == "frames" and base.frames.shape[0] == 1:
+            return replace(base, kind="frames-modulated", modulation=modulation, frame_index=None)
+        if base.kind == "pattern" and base.modulation[0] == "none":
+            return replace(base, modulation=modulation)
+        return None
 
     def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
         if isinstance(self.base, StillScene):

@@ -50,6 +50,7 @@ from viform._validate import (
     check_non_negative,
     check_positive,
 )
+from viform.light.compiled import pixel_lux
 from viform.light.radiometry import PixelOptics
 from viform.light.scenes import Scene
 from viform.sensors._gamma import (
@@ -77,6 +78,8 @@ CLOCK_20KHZ = 20_000.0
 _TILE = 256  # pixels per work item
 _WINDOW = 64  # ticks per window: the tile's output (16 KB) stays in L1 while it is written
 _WIDE_TILE = 2048  # pixels per work item of the vectorized noise-free kernel
+#: Default memory budget of one simulated block (spike bits + light), bytes.
+BLOCK_BYTES = 48 << 20
 #: Largest threshold, e⁻: targets (≈ Q·2^32 in fixed point) plus a tick's charge stay inside int64.
 MAX_THRESHOLD_ELECTRONS = 1 << 26
 
@@ -318,7 +321,8 @@ class SpikeSensor(Sensor):
         rates += b
         if rates.size and float(rates.max()) >= MAX_RATE_FIXED_POINT:
             raise self._too_bright(float(lux.max()))
-        return np.rint(rates).astype(np.int64)
+        rates += 0.5  # round half up, as the compiled light does: int64(a·lux + b + 0.5)
+        return np.floor(rates, out=rates).astype(np.int64)
 
     def _too_bright(self, lux_max: float) -> ViformError:
         p = self.parameters
@@ -351,10 +355,16 @@ class SpikeSensor(Sensor):
     def simulate(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
                  light_sample_ticks: int = 1, progress: bool = False,
                  state: SpikeSimulationState | None = None,
-                 reuse_buffer: bool = False) -> Iterator[tuple[int, np.ndarray]]:
+                 reuse_buffer: bool = False, compiled_light: bool = True) -> Iterator[tuple[int, np.ndarray]]:
         """Simulate tick by tick in time blocks; yields ``(first_tick, spikes)`` with bool (T, H, W).
 
-        Memory is bounded by the block (default: about 32 MB of light samples and bits).
+        Memory is bounded by the block (default: about :data:`BLOCK_BYTES` of spike bits and
+        light, see :meth:`default_block_ticks`), whatever the resolution and duration.
+
+        Light: a scene that describes itself (``scene.compiled_light()``, see
+        :mod:`viform.light.compiled`: still images, image sequences, the built-in synthetic
+        scenes) is evaluated inside the compiled kernel; any other scene is evaluated by
+        NumPy (``illuminance_lux_many``) per light sample.
 
         Parameters
         ----------
@@ -377,6 +387,8 @@ class SpikeSensor(Sensor):
             A fresh :meth:`initial_state` (t = 0) that the simulation updates in place, so a
             caller can read the pixels' charge between blocks. The stream always starts at
             tick 0: a state already advanced is refused rather than restarted.
+        compiled_light : bool
+            Use the scene's compiled light when it has one (True); False forces the NumPy path.
         """
         check_positive("duration_s", duration_s)
         p = self.parameters
@@ -384,11 +396,14 @@ class SpikeSensor(Sensor):
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
         sample = check_int("light_sample_ticks", light_sample_ticks, 1)
+        light = scene.compiled_light() if compiled_light else None
         if block_ticks is None:
-            # about 32 MB of spike bits and light samples a block (cache-friendly, bounded)
-            block_ticks = max(1, (32 << 20) // max(1, pixels * (1 + 16 // sample)))
+            block_ticks = self.default_block_ticks(scene, sample, light)
         block_ticks = check_int("block_ticks", block_ticks, 1)
         q, shapes, index, tables = self._pixel_tables(height, width)
+        a, b = self._pixel_light(height, width)
+        if light is not None and float(a.max()) * light.lux_max + float(b.max()) >= MAX_RATE_FIXED_POINT:
+            raise self._too_bright(light.lux_max)
         if state is None:
             state = self.initial_state(height, width, seed)
         elif state.next_tick != 0:
@@ -396,6 +411,16 @@ class SpikeSensor(Sensor):
                               "so pass a fresh initial_state")
         reset_readout = p.reset == "readout"
         dead_ticks = p.dead_time_s * p.clock_hz
+        per_tick_light = light is not None and light.kind != "frames"
+        if per_tick_light:
+            from viform.light.compiled import tick_buffers, tick_scalars
+
+            kind, params, frames = light.kernel_kind(), light.parameters(), light.flat_frames()
+            scalars, xtab, ytab = tick_buffers(light, min(block_ticks, n_ticks))
+            rows = np.arange(height, dtype=np.int64)
+            px = np.tile(np.arange(width, dtype=np.int64), height)
+            py = np.repeat(rows, width)
+        segments = _Segments(self, scene, light, sample, height, width)
         buffer = None
         bar = None
         if progress:
@@ -405,23 +430,28 @@ class SpikeSensor(Sensor):
         try:
             for first in range(0, n_ticks, block_ticks):
                 last = min(first + block_ticks, n_ticks)
-                j0, j1 = first // sample, -(-last // sample)
-                # light sampled at the middle of each interval of `sample` ticks, held over it
-                times = (np.arange(j0, j1) + 0.5) * (sample / p.clock_hz)
-                lux = scene.illuminance_lux_many(times).reshape(times.size, pixels)
-                rates = self._fixed_point_rates(lux, height, width)
                 if reuse_buffer:
                     if buffer is None or buffer.shape[0] < last - first:
                         buffer = np.empty((last - first, pixels), dtype=np.bool_)
                     out = buffer[: last - first]
                 else:
                     out = np.empty((last - first, pixels), dtype=np.bool_)
-                if not p.photon_noise and dead_ticks == 0:
-                    _run_block_deterministic(out, rates, first, sample, j0, state.charge, state.target,
-                                             reset_readout)
+                if per_tick_light:
+                    # light at the middle of each interval of `sample` ticks, held over it
+                    times = (np.arange(first, last) // sample + 0.5) * (sample / p.clock_hz)
+                    n = last - first
+                    tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
+                    _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, px, py,
+                                     state.charge, state.target, state.counter, q, index, *tables, state.keys,
+                                     p.photon_noise, reset_readout, dead_ticks)
                 else:
-                    _run_block(out, rates, first, sample, j0, state.charge, state.target, state.counter,
-                               q, index, *tables, state.keys, p.photon_noise, reset_readout, dead_ticks)
+                    rates, seg_end = segments.block(first, last)
+                    if not p.photon_noise and dead_ticks == 0:
+                        _run_block_deterministic(out, rates, seg_end, first, state.charge, state.target,
+                                                 reset_readout)
+                    else:
+                        _run_block(out, rates, seg_end, first, state.charge, state.target, state.counter,
+                                   q, index, *tables, state.keys, p.photon_noise, reset_readout, dead_ticks)
                 state.next_tick = last
                 if bar is not None:
                     bar.update(last - first)
@@ -429,6 +459,25 @@ class SpikeSensor(Sensor):
         finally:
             if bar is not None:
                 bar.close()
+
+    def default_block_ticks(self, scene: Scene, light_sample_ticks: int = 1, light=None,
+                            budget_bytes: int | None = None) -> int:
+        """Ticks per block so that a block's buffers take about ``budget_bytes`` (default
+        :data:`BLOCK_BYTES`): spike bits (1 byte per pixel-tick) plus the light it needs
+        (compiled light: a few per-tick scalars; otherwise float64 light and int64 charge
+        rates, plus the scene's own temporaries, per light sample)."""
+        height, width = self.check_scene(scene, self.height, self.width)
+        pixels = height * width
+        budget = BLOCK_BYTES if budget_bytes is None else budget_bytes
+        if light is None:
+            per_tick = pixels * (1 + 32 / light_sample_ticks)
+        elif light.kind == "frames":
+            per_tick = pixels * (1 + 8 / light_sample_ticks)  # at most one rate row per sample
+        else:
+            from viform.light.compiled import tick_bytes
+
+            per_tick = pixels + tick_bytes(light)
+        return max(1, int(budget // per_tick))
 
     def capture(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
                 light_sample_ticks: int = 1, progress: bool = False) -> SpikeStream:
@@ -483,6 +532,10 @@ class SimulatedSpikes(SpikeSource):
                     reuse_buffer: bool | None = None):
         stop = self.n_ticks if stop is None else min(stop, self.n_ticks)
         reuse = self.reuse_buffer if reuse_buffer is None else reuse_buffer
+        # the caller's block size, but never more than the memory budget allows
+        block_ticks = min(check_int("block_ticks", block_ticks, 1),
+                          self.sensor.default_block_ticks(self.scene, self.light_sample_ticks,
+                                                          self.scene.compiled_light()))
         sim = self.sensor.simulate(self.scene, self.n_ticks / self.clock_hz, seed=self.seed,
                                    block_ticks=block_ticks, light_sample_ticks=self.light_sample_ticks,
                                    progress=self.progress, reuse_buffer=reuse)
@@ -497,6 +550,44 @@ class SimulatedSpikes(SpikeSource):
     def read_ticks(self, start: int, stop: int) -> np.ndarray:
         parts = [b for _, b in self.iter_blocks(max(1, stop - start), start, stop, reuse_buffer=False)]
         return np.concatenate(parts) if parts else np.zeros((0, self.height, self.width), bool)
+
+
+class _Segments:
+    """Charge rates of a block as runs of constant light: (rates (n, H·W) int64, seg_end (n,)).
+
+    ``seg_end[s]`` is the absolute tick where run s ends (exclusive). Compiled "frames"
+    light (still image, step, image sequence held) gives one run per frame in effect;
+    any other scene one run per light sample, evaluated by NumPy.
+    """
+
+    def __init__(self, sensor, scene, light, sample, height, width):
+        self.sensor, self.scene, self.light, self.sample = sensor, scene, light, sample
+        self.height, self.width = height, width
+        self._cached = (None, None)  # (frame index, rates) of the last frame used
+
+    def block(self, first: int, last: int):
+        sample = self.sample
+        j0, j1 = first // sample, -(-last // sample)
+        clock = self.sensor.parameters.clock_hz
+        # light sampled at the middle of each interval of `sample` ticks, held over it
+        times = (np.arange(j0, j1) + 0.5) * (sample / clock)
+        if self.light is None or self.light.kind != "frames":
+            lux = self.scene.illuminance_lux_many(times).reshape(times.size, -1)
+            return (self.sensor._fixed_point_rates(lux, self.height, self.width),
+                    (np.arange(j0, j1, dtype=np.int64) + 1) * sample)
+        index = np.asarray(self.light.frame_index(times), dtype=np.int64)
+        change = np.flatnonzero(np.diff(index)) + 1
+        starts = np.concatenate(([0], change))
+        ends = np.concatenate((change, [index.size]))
+        seg_end = (j0 + ends).astype(np.int64) * sample
+        rates = np.empty((starts.size, self.height * self.width), dtype=np.int64)
+        for i, start in enumerate(starts):
+            k = int(index[start])
+            if self._cached[0] != k:
+                lux = self.light.frames[k].reshape(1, -1)
+                self._cached = (k, self.sensor._fixed_point_rates(lux, self.height, self.width)[0])
+            rates[i] = self._cached[1]
+        return rates, seg_end
 
 
 # ---------------------------------------------------------------------- kernels
@@ -645,13 +736,14 @@ def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, co
 
 
 @njit(cache=True, parallel=True)
-def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter, q, index,
+def _run_block(out, rates, seg_end, first_tick, charge, target, counter, q, index,
                bins, keys, noise, reset_readout, dead_ticks):
     """Integrate-and-fire over one block of ticks, event-driven per pixel.
 
-    ``rates[j, p]`` is the fixed-point charge per tick of pixel p in light-sample interval
-    j (ticks [(sample0 + j)·sample, (sample0 + j + 1)·sample)). Within an interval the
-    charge grows linearly, so the tick of the next crossing is one integer division.
+    ``rates[s, p]`` is the fixed-point charge per tick of pixel p in run s of constant
+    light, which ends (exclusive) at absolute tick ``seg_end[s]``; the runs cover the block.
+    Within a run the charge grows linearly, so the tick of the next crossing is one integer
+    division: a still scene costs per spike, not per tick.
     Work goes in tiles of pixels × windows of ticks so the output being written stays in
     cache; ``out`` need not be zeroed beforehand.
     """
@@ -660,20 +752,22 @@ def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter,
     for tile in prange(n_tiles):
         p0 = tile * _TILE
         p1 = min(p0 + _TILE, n_pixels)
+        s_first = 0
         for w0 in range(0, n_ticks, _WINDOW):
             w1 = min(w0 + _WINDOW, n_ticks)
             for row in range(w0, w1):
                 out[row, p0:p1] = False
-            j_first = (first_tick + w0) // sample  # the sample grid is shared by all pixels
+            while seg_end[s_first] <= first_tick + w0:  # the runs are shared by all pixels
+                s_first += 1
             for p in range(p0, p1):
                 c = charge[p]
                 t = target[p]
                 k = w0
-                j = j_first
-                j_end = (j + 1) * sample - first_tick
+                s = s_first
+                j_end = seg_end[s] - first_tick
                 while k < w1:
                     end = min(j_end, w1)
-                    e = rates[j - sample0, p]
+                    e = rates[s, p]
                     inv_e = 1.0 / e if e > 0 else 0.0
                     while e > 0:
                         # ticks until the charge reaches the target, ceil((t − c)/e), by a float
@@ -694,11 +788,42 @@ def _run_block(out, rates, first_tick, sample, sample0, charge, target, counter,
                                      reset_readout, counter)
                     c += (end - k) * e
                     k = end
-                    if k == j_end:
-                        j += 1
-                        j_end += sample
+                    if k == j_end and s + 1 < seg_end.size:
+                        s += 1
+                        j_end = seg_end[s] - first_tick
                 charge[p] = c
                 target[p] = t
+
+
+@njit(cache=True, parallel=True)
+def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, px, py, charge, target,
+                     counter, q, index, bins, keys, noise, reset_readout, dead_ticks):
+    """Integrate-and-fire with the light computed per pixel and tick in compiled code.
+
+    The light of pixel p in tick k is :func:`viform.light.compiled.pixel_lux` from the
+    tick's scalars (row k of ``scalars``, ``xtab``, ``ytab``); its charge that tick is
+    int64(a[p]·lux + b[p] + 0.5) in fixed point (gain and dark current per pixel), added
+    exactly; the pixel fires when the sum reaches its Gamma(Q) target (the same
+    :func:`_fire` as the event-driven kernel). Tiles of pixels × ticks, tick-major within a
+    tile, so the per-tick tables are read once per tile row and the output stays in cache.
+    """
+    n_ticks, n_pixels = out.shape
+    n_tiles = (n_pixels + _TILE - 1) // _TILE
+    for tile in prange(n_tiles):
+        p0 = tile * _TILE
+        p1 = min(p0 + _TILE, n_pixels)
+        for k in range(n_ticks):
+            for p in range(p0, p1):
+                lux = pixel_lux(kind, p, px[p], py[p], k, scalars, xtab, ytab, frames, params)
+                e = np.int64(a[p] * lux + b[p] + 0.5)
+                c = charge[p] + e
+                fired = c >= target[p]
+                if fired:
+                    c, t = _fire(c, target[p], e, dead_ticks, p, q, index, bins, keys, noise,
+                                 reset_readout, counter)
+                    target[p] = t
+                charge[p] = c
+                out[k, p] = fired
 
 
 @njit(cache=True)
@@ -725,7 +850,7 @@ def _tick_readout_reset(c, e, t, row):
 
 
 @njit(cache=True, parallel=True)
-def _run_block_deterministic(out, rates, first_tick, sample, sample0, charge, target, reset_readout):
+def _run_block_deterministic(out, rates, seg_end, first_tick, charge, target, reset_readout):
     """The noise-free model tick by tick, branch-free over pixels so the compiler vectorizes it.
 
     Same fixed-point arithmetic as :func:`_run_block` (the target stays Q), hence the same
@@ -739,8 +864,11 @@ def _run_block_deterministic(out, rates, first_tick, sample, sample0, charge, ta
         p1 = min(p0 + _WIDE_TILE, n_pixels)
         c = charge[p0:p1].copy()
         t = target[p0:p1].copy()
+        s = 0
         for k in range(n_ticks):
-            e = rates[(first_tick + k) // sample - sample0, p0:p1]
+            while seg_end[s] <= first_tick + k:
+                s += 1
+            e = rates[s, p0:p1]
             if reset_readout:
                 _tick_readout_reset(c, e, t, out[k, p0:p1])
             elif _tick_self_reset(c, e, t, out[k, p0:p1]):
