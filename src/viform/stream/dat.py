@@ -31,6 +31,9 @@ DEFAULT_DAT_CLOCK_HZ = 40_000.0
 MAX_SIDE = 1 << 16
 #: Bytes read or written per block (bounded memory whatever the file length).
 BLOCK_BYTES = 16 << 20
+#: Files up to this size are checked against their sidecar's checksum when opened (bigger
+#: ones by ``viform info`` / ``viform verify``, which read them whole anyway), bytes.
+VERIFY_ON_OPEN_BYTES = 256 << 20
 
 
 def _agree(path, name, given, declared):
@@ -58,10 +61,13 @@ class DatFile(SpikeSource):
     ----------
     path : path-like
         The file.
-    height, width : int
-        Image size (upright, without padding). Required: the file does not store them.
-    flip : bool
-        True (default) for files stored bottom-up, as the cameras and SpikeCV write them.
+    height, width : int or None
+        Image size (upright, without padding). Required unless the file has a sidecar
+        (``clip.dat.json``, :mod:`viform.stream.sidecar`), which gives them, the clock, Q and
+        the row order; a value contradicting the sidecar is refused.
+    flip : bool or None
+        True for files stored bottom-up, as the cameras and SpikeCV write them; None (default)
+        takes the sidecar's row order, else True.
     stored_width : int or None
         Columns per stored row (416 for old 400-wide recordings); None detects it.
     clock_hz : float
@@ -71,12 +77,15 @@ class DatFile(SpikeSource):
     allow_partial : bool
         When the file size is not a whole number of frames: False (default) refuses the
         file; True keeps the whole frames and ignores the trailing bytes.
+    verify : bool or None
+        Check the file against its sidecar's size and BLAKE2b checksum at open; None (default)
+        does so for files up to :data:`VERIFY_ON_OPEN_BYTES`.
     """
 
     def __init__(self, path, height: int | None = None, width: int | None = None, *, flip: bool | None = None,
                  stored_width: int | None = None, clock_hz: float | None = None,
                  threshold_electrons: float | None = None, allow_partial: bool = False,
-                 start_time_s: float | None = None, use_sidecar: bool = True):
+                 start_time_s: float | None = None, use_sidecar: bool = True, verify: bool | None = None):
         path = Path(path)
         if not path.is_file():
             raise ViformError(f"spike file {str(path)!r} does not exist")
@@ -130,6 +139,8 @@ class DatFile(SpikeSource):
         self.metadata.update({"source": str(path), "format": "dat", "flip": self.flip,
                               "stored_width": self.stored_width})
         self._bytes = np.memmap(path, dtype=np.uint8, mode="r", shape=(whole, self.frame_bytes))
+        if verify or (verify is None and not allow_partial and size <= VERIFY_ON_OPEN_BYTES):
+            self.verify()
 
     def verify(self) -> dict:
         """Check the file against its sidecar: size, and the BLAKE2b checksum when recorded.

@@ -101,12 +101,29 @@ def write_sidecar(data_path, metadata: dict) -> Path:
 
     if not isinstance(metadata, dict):
         raise ViformError(f"sidecar metadata must be a dict, got {type(metadata).__name__}")
+    from viform._io import _jsonable
+
     body = {"format": SIDECAR_FORMAT, "version": SIDECAR_VERSION}
     body.update({k: v for k, v in provenance().items() if k not in metadata})
     body.update(metadata)
+    body.pop(DIGEST_KEY, None)
+    body = json.loads(json.dumps(body, default=_jsonable))
+    body[DIGEST_KEY] = _digest(body)
     path = sidecar_path(data_path)
     write_json(path, body)
     return path
+
+
+#: Field holding the BLAKE2b of the rest of the sidecar (damage or edits are noticed on read).
+DIGEST_KEY = "sidecar_blake2b"
+
+
+def _digest(body: dict) -> str:
+    import hashlib
+
+    rest = {k: v for k, v in body.items() if k != DIGEST_KEY}
+    text = json.dumps(rest, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
 
 
 def read_sidecar(data_path) -> dict | None:
@@ -129,6 +146,9 @@ def read_sidecar(data_path) -> dict | None:
         raise ViformError(f"{str(path)!r} is not a readable JSON sidecar: {_short(exc)}") from None
     if not isinstance(header, dict):
         raise ViformError(f"{str(path)!r}: a sidecar must hold a JSON object, not {type(header).__name__}")
+    if DIGEST_KEY in header and header[DIGEST_KEY] != _digest(header):
+        raise ViformError(f"{str(path)!r}: the sidecar is damaged or was edited (its checksum differs); "
+                          f"to accept hand edits, delete its {DIGEST_KEY!r} field")
     return validate_header(header, path, required=())
 
 
