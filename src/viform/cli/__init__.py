@@ -30,6 +30,7 @@ COMMAND_MODULES = [
     "viform.cli.capture",  # capture (issue 12)
     "viform.cli.compare",  # compare (issue 12)
     "viform.cli.chip_figures",  # chip-figures (issue 16)
+    "viform.cli.calibrate",  # calibrate (issue 10)
 ]
 
 

@@ -1,0 +1,520 @@
+"""Calibrate a spike-sensor model from a recording of a (mostly) static scene.
+
+What a spike recording of steady light tells about the sensor (seed 000 §5.1, §4.4):
+
+**Effective threshold Q_eff.** A self-reset pixel under steady light λ e⁻/tick fires at the
+crossings of a renewal process whose intervals, in continuous time, are X = G/λ with
+G ~ Gamma(Q): mean μ = Q/λ ticks, variance σ² = μ²/Q (seed 000 §5.1: RSD = 1/√Q). Every
+other per-spike charge noise (reset, comparator) adds variance ∝ μ² too, so the measured
+Q_eff lumps them. The readout rounds each crossing up to its tick, so the observed
+interval is Y_k = X_k + e_k − e_{k−1} (e = rounding of a crossing time). Derivation of the
+rounding correction: write T_k = ⌈t_k⌉ for the spike ticks. Given an n-interval span S of
+continuous length x that starts at a uniformly distributed tick phase,
+⌈u + x⌉ − ⌈u⌉ = ⌊x⌋ + Bernoulli(frac x), so E[T_{k+n} − T_k | S = x] = x exactly and the
+rounding adds variance g(x) = frac(x)(1 − frac(x)). Hence the spike-time variogram
+
+    V(n) = var(T_{k+n} − T_k) = n·σ² + G_n,   G_n = E g(S_n),
+
+and for the intervals γ₀ = V(1), γ₁ = (V(2) − 2V(1))/2. The mean-free statistic used here,
+D₁ = E(Y_k − Y_{k+1})²/2 = γ₀ − γ₁, is therefore
+
+    D₁ = σ² + 2·G₁ − G₂/2.
+
+With g's Fourier series g(x) = 1/6 − Σ_k cos(2πkx)/(π²k²) and S_n ≈ Normal(nμ, nσ²),
+G_n = 1/6 − Σ_k cos(2πknμ)·exp(−2π²k²nσ²)/(π²k²), evaluated per pixel from its own mean
+interval (:func:`rounding_variance`). When the phases frac(μ) are spread over a tick or
+the interval jitter exceeds ~0.5 tick, G₁ = G₂ = 1/6 and D₁ = σ² + 1/4, γ₁ = −1/12, and
+successive intervals of a regular pixel have lag-1 correlation γ₁/γ₀ → −1/2 — what real
+recordings show. Q_eff = μ²/σ² is fitted over all pairs of successive intervals (weighted
+least squares of σ² on μ², iterated because G depends on σ).
+
+**Static or not.** A stationary pixel has D₂ − D₁ = γ₁ − γ₂ < 0 (≈ −1/12); light that
+changes over the recording (motion, flicker) makes successive intervals positively
+correlated and D₂ − D₁ > 0. The image is cut into tiles, each tile split like a
+checkerboard: a tile's black pixels are judged static by the *white* pixels' D₂ − D₁ and
+vice versa, so the pixels used for Q_eff are not selected by their own fluctuations (that
+would bias Q_eff up). A recording with too few static pairs gives no Q_eff, only a bound.
+
+**Gain spread (PRNU).** In a tile, the pixel rates 1/μ_p around a fitted plane (scene
+gradients removed) spread by the gain spread plus the finite-window noise of μ_p,
+var(μ_p) = σ²/(n_p − 1) + 1/(6(n_p − 1)²) (interval noise and the rounding of the first and
+last spikes), which is subtracted. Scene texture at the pixel scale cannot be told from
+PRNU in one static recording, so the flattest quarter of the tiles is used and the figure
+is an upper bound wherever texture remains.
+
+**Dark current, hot and dead pixels.** Dark current shows only as spikes of pixels
+without light, at I_d/Q per second: in a recording much shorter than Q/I_d (seconds to
+minutes for Q ~ 10⁴ e⁻) it is not measurable, and only a bound is given. Hot pixels: rates
+far above their neighbourhood; dead pixels: silent where the neighbourhood fires often.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from viform._validate import ViformError, check_int
+from viform.stream.container import SpikeSource
+
+#: Shortest mean interval (ticks) used for Q_eff: below it the rounding dominates σ² by far.
+MIN_INTERVAL_TICKS = 4.0
+#: Pixels need this many intervals inside the recording (so the window selects no interval lengths).
+MIN_INTERVALS_PER_PIXEL = 5
+#: Static pairs needed before Q_eff is reported.
+MIN_PAIRS_FOR_Q = 2000
+#: Tile side (pixels) for the static test and the flat-field spread.
+TILE = 8
+_FOURIER_TERMS = 12
+
+
+def rounding_variance(mean_ticks, jitter_var_ticks2) -> np.ndarray:
+    """G = E[frac(S)(1 − frac(S))] for S ~ Normal(mean, var): variance that tick rounding adds.
+
+    Fourier series of the periodic parabola, g(x) = 1/6 − Σ_k cos(2πkx)/(π²k²); each term is
+    damped by the characteristic function of the jitter, exp(−2π²k²·var). Tends to 1/6 as
+    the jitter grows past ~0.5 tick (module notes).
+    """
+    mean = np.asarray(mean_ticks, dtype=np.float64)
+    var = np.asarray(jitter_var_ticks2, dtype=np.float64)
+    g = np.full(np.broadcast(mean, var).shape, 1.0 / 6.0)
+    for k in range(1, _FOURIER_TERMS + 1):
+        g = g - np.cos(2 * np.pi * k * mean) * np.exp(-2 * np.pi**2 * k * k * var) / (np.pi**2 * k * k)
+    return g
+
+
+@dataclass
+class PixelIntervals:
+    """Spike intervals of every pixel of a recording (ticks).
+
+    Attributes
+    ----------
+    height, width, n_ticks : int
+    clock_hz : float
+    n_spikes, first_tick, last_tick : ndarray (H·W,)
+    intervals : ndarray of float
+        Complete intervals, pixel by pixel in time order.
+    pixel : ndarray of int
+        Pixel index of each interval.
+    """
+
+    height: int
+    width: int
+    n_ticks: int
+    clock_hz: float
+    n_spikes: np.ndarray
+    first_tick: np.ndarray
+    last_tick: np.ndarray
+    intervals: np.ndarray
+    pixel: np.ndarray
+
+    @property
+    def mean_interval(self) -> np.ndarray:
+        """Per-pixel mean interval (last − first)/(n − 1), ticks; NaN below two spikes."""
+        n = self.n_spikes
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(n >= 2, (self.last_tick - self.first_tick) / np.maximum(n - 1, 1), np.nan)
+
+    def lagged(self, lag: int):
+        """Pairs (Y_k, Y_{k+lag}) of the same pixel: (first, second, pixel)."""
+        ok = self.pixel[lag:] == self.pixel[:-lag]
+        return self.intervals[:-lag][ok], self.intervals[lag:][ok], self.pixel[lag:][ok]
+
+
+def pixel_intervals(source: SpikeSource, *, max_ticks: int | None = None, block_ticks: int = 256) -> PixelIntervals:
+    """Read a spike stream block by block and collect every pixel's intervals.
+
+    Memory: the spikes' tick indices (8 bytes a spike) plus per-pixel counters.
+    """
+    h, w = source.height, source.width
+    n_ticks = source.n_ticks if max_ticks is None else min(source.n_ticks, check_int("max_ticks", max_ticks, 2))
+    ticks, pixels = [], []
+    for first, block in source.iter_blocks(block_ticks, 0, n_ticks):
+        t, p = np.nonzero(block.reshape(block.shape[0], -1))
+        ticks.append(t.astype(np.int64) + first)
+        pixels.append(p.astype(np.int64))
+    t = np.concatenate(ticks) if ticks else np.zeros(0, np.int64)
+    p = np.concatenate(pixels) if pixels else np.zeros(0, np.int64)
+    order = np.lexsort((t, p))
+    t, p = t[order], p[order]
+    npx = h * w
+    n_spikes = np.bincount(p, minlength=npx)
+    first_tick = np.full(npx, -1, np.int64)
+    last_tick = np.full(npx, -1, np.int64)
+    first_tick[p[::-1]] = t[::-1]
+    last_tick[p] = t
+    same = p[1:] == p[:-1]
+    intervals = np.diff(t)[same].astype(np.float64)
+    return PixelIntervals(h, w, n_ticks, float(source.clock_hz), n_spikes, first_tick, last_tick, intervals,
+                          p[1:][same])
+
+
+def _checkerboard_static(iv: PixelIntervals, tile: int) -> tuple[np.ndarray, dict]:
+    """Per pixel: is its tile static, judged by the other checkerboard colour (module notes)?
+
+    Statistic per (tile, colour): mean of d = ((Y_k − Y_{k+2})² − (Y_k − Y_{k+1})²)/2 over
+    the colour's interval triples; static when mean(d) < its standard error (a stationary
+    pixel has E d = γ₁ − γ₂ ≈ −1/12 < 0).
+    """
+    h, w = iv.height, iv.width
+    y, x = np.divmod(np.arange(h * w), w)
+    ty, tx = y // tile, x // tile
+    n_tx = (w + tile - 1) // tile
+    colour = (y + x) % 2
+    group = (ty * n_tx + tx) * 2 + colour
+    n_groups = int(group.max()) + 1 if group.size else 0
+    ok = (iv.pixel[2:] == iv.pixel[:-2])
+    a, b, c = iv.intervals[:-2][ok], iv.intervals[1:-1][ok], iv.intervals[2:][ok]
+    g = group[iv.pixel[2:][ok]]
+    d = ((a - c) ** 2 - (a - b) ** 2) / 2
+    cnt = np.bincount(g, minlength=n_groups)
+    s1 = np.bincount(g, d, n_groups)
+    s2 = np.bincount(g, d * d, n_groups)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = s1 / cnt
+        se = np.sqrt(np.maximum(s2 / cnt - mean**2, 0) / np.maximum(cnt - 1, 1))
+    judged = cnt >= 8
+    static_group = judged & (mean < -se)
+    # a pixel is judged by the other colour of its own tile
+    other = group ^ 1
+    static = static_group[other] & judged[other]
+    info = {"tiles_judged": int(judged.sum()), "tiles_static": int(static_group.sum()),
+            "static_fraction_of_judged": float(static_group.sum() / judged.sum()) if judged.any() else None}
+    return static, info
+
+
+def _rounding_term(mu, s2, statistic: str):
+    """Rounding part of a statistic's expectation (module notes), from G_n = G(n·μ, n·σ²)."""
+    g1 = rounding_variance(mu, s2)
+    g2 = rounding_variance(2 * mu, 2 * s2)
+    if statistic == "lag1":
+        return 2 * g1 - g2 / 2
+    g3 = rounding_variance(3 * mu, 3 * s2)
+    return 15 * g1 - 6 * g2 + g3
+
+
+#: σ² coefficient of each statistic: D₁ = σ² + …, E(Y_k − 2Y_{k+1} + Y_{k+2})² = 6σ² + …
+_SIGMA_COEFFICIENT = {"lag1": 1.0, "second": 6.0}
+
+
+def _fit_inverse_q(mu, stat, pix, n_pix, statistic: str, q0: float = 1e4, iterations: int = 8):
+    """Weighted least squares of (stat − rounding)/k = σ² on μ²: returns (1/Q, its standard error).
+
+    Pairs are summed per pixel first so the standard error (ratio estimator over pixels)
+    allows for the pairs of one pixel sharing intervals.
+    """
+    k = _SIGMA_COEFFICIENT[statistic]
+    # μ, the weight and the rounding term are per pixel: sum each pixel's pairs first
+    count = np.bincount(pix, minlength=n_pix).astype(np.float64)
+    total = np.bincount(pix, stat, n_pix)
+    mu_pix = np.zeros(n_pix)
+    mu_pix[pix] = mu
+    has = count > 0
+    count, total, mu_pix = count[has], total[has], mu_pix[has]
+    floor_term = _rounding_term(mu_pix, np.ones_like(mu_pix), statistic)  # the rounding of wide jitter
+    inv_q = 1.0 / q0
+    se = math.inf
+    for _ in range(iterations):
+        s2 = mu_pix * mu_pix * max(inv_q, 0.0)
+        corr = _rounding_term(mu_pix, s2, statistic)
+        wgt = 1.0 / (k * s2 + floor_term) ** 2  # var of one pair's statistic ∝ its mean²
+        num = wgt * (total - count * corr) / k * mu_pix**2
+        den = wgt * count * mu_pix**4
+        new = float(num.sum() / den.sum())
+        resid = num - den * new
+        se = float(np.sqrt(np.sum(resid**2)) / den.sum())
+        if abs(new - inv_q) <= 1e-4 * abs(new) + 1e-12:
+            inv_q = new
+            break
+        inv_q = new
+    return inv_q, se
+
+
+#: Largest excess of a bin's lag-1 correlation over a steady pixel's that still counts as static.
+LAG1_TOLERANCE = 0.15
+
+
+def _check_static(table: list[dict], inv_q: float) -> None:
+    """Add each bin's expected lag-1 correlation at Q_eff and whether the bin agrees with it.
+
+    A steady tick-rounded pixel with uniformly spread phases has γ₀ = σ² + 1/6,
+    γ₁ = −1/12 (module notes); light that changes during the recording raises γ₁.
+    """
+    for row in table:
+        mu = row["mean_interval_ticks"]
+        rho = -(1 / 12) / (mu * mu * inv_q + 1 / 6)
+        row["expected_lag1_correlation"] = rho
+        row["static_consistent"] = bool(row["lag1_correlation"] <= rho + LAG1_TOLERANCE)
+
+
+def _bins(lo: float, hi: float) -> np.ndarray:
+    edges = [lo]
+    while edges[-1] * 1.5 < hi:
+        edges.append(edges[-1] * 1.5)
+    edges.append(hi)
+    return np.array(edges)
+
+
+def interval_table(iv: PixelIntervals, use_pixel: np.ndarray, edges) -> list[dict]:
+    """Per mean-interval bin: pixels, pairs, RSD of the intervals (rounding included), lag-1 correlation.
+
+    ``rsd`` = √γ₀/μ with γ₀ the pooled within-pixel variance of the intervals (n − 1
+    divisor); ``rsd_detrended`` the same after removing each pixel's linear trend of the
+    intervals over the recording (n − 2 divisor), so light that drifts slowly does not count
+    as noise; ``lag1_correlation`` = γ₁/γ₀ with γ₁ = γ₀ − D₁ (−1/2 for a tick-rounded
+    regular pixel, module notes).
+    """
+    npx = iv.height * iv.width
+    mu_p = iv.mean_interval
+    y = iv.intervals
+    px_of = iv.pixel
+    n_int = np.bincount(px_of, minlength=npx).astype(np.float64)
+    start = np.concatenate([[0], np.cumsum(n_int)[:-1]]).astype(np.int64)
+    k = np.arange(y.size) - start[px_of]
+    s1 = np.bincount(px_of, k, npx)
+    s2 = np.bincount(px_of, k * k, npx)
+    sy = np.bincount(px_of, y, npx)
+    sky = np.bincount(px_of, k * y, npx)
+    syy = np.bincount(px_of, y * y, npx)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ss = syy - sy * sy / n_int  # within-pixel sum of squares about the mean
+        sxx = s2 - s1 * s1 / n_int
+        sxy = sky - s1 * sy / n_int
+        rss = ss - np.where(sxx > 0, sxy * sxy / sxx, 0.0)  # about the pixel's linear trend
+    a, b, pp = iv.lagged(1)
+    rows = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        px = use_pixel & (mu_p >= lo) & (mu_p < hi) & (n_int >= MIN_INTERVALS_PER_PIXEL - 1)
+        if px.sum() < 20:
+            continue
+        gamma0 = ss[px].sum() / (n_int[px] - 1).sum()
+        gamma0_detrended = rss[px].sum() / (n_int[px] - 2).sum()
+        sel = px[pp]
+        d1 = float(np.mean((a[sel] - b[sel]) ** 2) / 2) if sel.any() else math.nan
+        mean_mu = float(np.mean(mu_p[px]))
+        rows.append({"interval_from_ticks": float(lo), "interval_to_ticks": float(hi),
+                     "mean_interval_ticks": mean_mu, "pixels": int(px.sum()), "pairs": int(sel.sum()),
+                     "rsd": float(math.sqrt(gamma0) / mean_mu),
+                     "rsd_detrended": float(math.sqrt(max(gamma0_detrended, 0.0)) / mean_mu),
+                     "lag1_correlation": float((gamma0 - d1) / gamma0)})
+    return rows
+
+
+def _gain_spread(iv: PixelIntervals, sigma2_per_mu2: float, tile: int, min_spikes: int):
+    """Flat-field relative spread of the pixel rates after the finite-window noise (module notes)."""
+    h, w = iv.height, iv.width
+    mu = iv.mean_interval
+    n = iv.n_spikes
+    valid = (n >= min_spikes) & np.isfinite(mu) & (mu > 0)
+    rate = np.where(valid, 1.0 / np.where(valid, mu, 1.0), np.nan)
+    # relative variance of 1/μ_p from its finite window (interval noise + end rounding)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.maximum(n - 1, 1)
+        noise_rel = (sigma2_per_mu2 / k) + 1.0 / (6.0 * k * k * np.where(valid, mu, 1.0) ** 2)
+    spreads, dof = [], []
+    for y0 in range(0, h - tile + 1, tile):
+        for x0 in range(0, w - tile + 1, tile):
+            ys, xs = np.mgrid[y0:y0 + tile, x0:x0 + tile]
+            idx = (ys * w + xs).ravel()
+            ok = valid[idx]
+            m = int(ok.sum())
+            if m < 0.75 * tile * tile:
+                continue
+            r = rate[idx][ok]
+            design = np.column_stack([np.ones(m), (ys.ravel()[ok] - y0), (xs.ravel()[ok] - x0)])
+            coef, *_ = np.linalg.lstsq(design, r, rcond=None)
+            fit = design @ coef
+            rel = (r - fit) / fit
+            total = float(np.sum(rel**2) / (m - 3))
+            spreads.append(total - float(np.mean(noise_rel[idx][ok])))
+            dof.append(m - 3)
+    if len(spreads) < 8:
+        return None, {"tiles": len(spreads)}
+    spreads = np.array(spreads)
+    order = np.sort(spreads)
+    quarter = order[: max(1, len(order) // 4)]
+    # The lower quartile of χ²_ν/ν tiles sits below 1 by ≈ 0.674·√(2/ν): undo that so a
+    # uniform flat field is unbiased; the mean of the lowest quarter sits ≈ 1.27·√(2/ν) below.
+    nu = float(np.median(dof))
+    factor = 1 - 1.27 * math.sqrt(2 / nu)
+    var = float(np.mean(quarter)) / factor
+    info = {"tiles": int(len(spreads)), "median_tile_spread": float(math.sqrt(max(np.median(spreads), 0.0))),
+            "flattest_quarter_spread": float(math.sqrt(max(var, 0.0)))}
+    return (math.sqrt(var) if var > 0 else 0.0), info
+
+
+def _hot_dead(iv: PixelIntervals, q_electrons: float | None):
+    from scipy import ndimage
+
+    h, w = iv.height, iv.width
+    counts = iv.n_spikes.reshape(h, w).astype(np.float64)
+    local = ndimage.median_filter(counts, size=5, mode="nearest")
+    # hot: ≥ 4× the neighbourhood and ≥ 10 spikes more (a Poisson-safe margin even for Q = 1)
+    hot = (counts >= 4 * local) & (counts - local >= 10)
+    # dead: silent where the neighbourhood gives ≥ 10 spikes (P(0) < e^-10 for a live pixel)
+    dead = (counts == 0) & (local >= 10)
+    duration_s = iv.n_ticks / iv.clock_hz
+    out = {"hot_pixels": int(hot.sum()), "hot_pixel_fraction": float(hot.mean()),
+           "dead_pixels": int(dead.sum()), "dead_pixel_fraction": float(dead.mean())}
+    if hot.any() and q_electrons is not None:
+        excess = (counts - local)[hot] / duration_s * q_electrons
+        out["hot_pixel_dark_current_e_per_s"] = float(np.median(excess))
+    # dark current: only the darkest pixels bound it (they may still see light)
+    live = counts[~dead]
+    darkest = float(np.percentile(live, 1)) if live.size else 0.0
+    out["darkest_percentile_spikes"] = darkest
+    return out, hot, dead
+
+
+def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = TILE) -> dict:
+    """Estimate Q_eff, the flat-field gain spread, hot/dead pixels and a dark-current bound.
+
+    Returns a JSON-ready dict; every figure that the recording cannot support is ``None``
+    with a ``reason`` (and a bound where one exists) — never a made-up value.
+    """
+    tile = check_int("tile", tile, 2, 64)
+    iv = pixel_intervals(source, max_ticks=max_ticks)
+    if iv.n_ticks < 20:
+        raise ViformError(f"the recording has {iv.n_ticks} ticks; calibration needs at least 20")
+    npx = iv.height * iv.width
+    mu_p = iv.mean_interval
+    n_int = np.bincount(iv.pixel, minlength=npx)
+    duration_s = iv.n_ticks / iv.clock_hz
+    result: dict = {"height": iv.height, "width": iv.width, "n_ticks": iv.n_ticks, "clock_hz": iv.clock_hz,
+                    "duration_s": duration_s, "spikes": int(iv.n_spikes.sum()),
+                    "mean_firing_rate_per_tick": float(iv.n_spikes.sum() / (npx * iv.n_ticks))}
+    static, sinfo = _checkerboard_static(iv, tile)
+    result["static"] = sinfo
+
+    # ---- Q_eff
+    mu_hi = iv.n_ticks / (MIN_INTERVALS_PER_PIXEL + 1)
+    use = static & (n_int >= MIN_INTERVALS_PER_PIXEL) & (mu_p >= MIN_INTERVAL_TICKS) & (mu_p <= mu_hi)
+    a, b, pp = iv.lagged(1)
+    sel = use[pp]
+    ok3 = iv.pixel[2:] == iv.pixel[:-2]
+    y0, y1, y2 = iv.intervals[:-2][ok3], iv.intervals[1:-1][ok3], iv.intervals[2:][ok3]
+    p3 = iv.pixel[2:][ok3]
+    sel3 = use[p3]
+    q_info: dict = {"pairs": int(sel.sum()), "triples": int(sel3.sum()), "pixels": int(use.sum()),
+                    "mean_interval_range_ticks": [MIN_INTERVAL_TICKS, float(mu_hi)]}
+    q_eff = None
+    if mu_hi <= MIN_INTERVAL_TICKS:
+        q_info["reason"] = (f"recording too short: {iv.n_ticks} ticks hold fewer than {MIN_INTERVALS_PER_PIXEL} "
+                            f"intervals of ≥ {MIN_INTERVAL_TICKS:g} ticks")
+    elif sel3.sum() < MIN_PAIRS_FOR_Q:
+        q_info["reason"] = (f"too few static interval triples ({int(sel3.sum())} < {MIN_PAIRS_FOR_Q}): the recording "
+                            "is too short, too dark or not static enough")
+    else:
+        # drift-robust: second differences of the intervals cancel light that changes linearly
+        inv_q, se = _fit_inverse_q(mu_p[p3[sel3]], (y0[sel3] - 2 * y1[sel3] + y2[sel3]) ** 2, p3[sel3], npx,
+                                   "second")
+        # check: successive-interval differences, which linear drift inflates
+        inv_q1, se1 = _fit_inverse_q(mu_p[pp[sel]], (a[sel] - b[sel]) ** 2 / 2, pp[sel], npx, "lag1")
+        q_info.update(inverse_q=inv_q, inverse_q_standard_error=se, inverse_q_lag1=inv_q1,
+                      inverse_q_lag1_standard_error=se1)
+        q_info["drift_free"] = bool(abs(inv_q1 - inv_q) <= 2 * math.hypot(se, se1))
+        if inv_q - 2 * se > 0:
+            q_eff = 1.0 / inv_q
+            q_info["q_eff_range_electrons"] = [1.0 / (inv_q + 2 * se), 1.0 / (inv_q - 2 * se)]
+        else:
+            q_info["reason"] = ("interval noise not resolved above tick rounding: the intervals are as regular as "
+                                "rounding allows")
+            q_info["q_eff_lower_bound_electrons"] = 1.0 / (max(inv_q, 0.0) + 2 * se)
+    edges = _bins(2.0, max(3.0, mu_hi))
+    table = interval_table(iv, static & (n_int >= MIN_INTERVALS_PER_PIXEL - 1), edges)
+    if q_eff:
+        _check_static(table, 1.0 / q_eff)
+        pairs_ok = sum(r["pairs"] for r in table if r["static_consistent"])
+        pairs_all = sum(r["pairs"] for r in table) or 1
+        q_info["static_consistent_pair_fraction"] = pairs_ok / pairs_all
+        if pairs_ok / pairs_all < 0.5:
+            # light that changes only adds interval variance: the fit bounds Q_eff from below
+            q_info["reason"] = ("not static enough: successive intervals are less anti-correlated than a steady "
+                                "pixel's (see the interval table), so the light changed during the recording; the "
+                                "fitted value is a lower bound")
+            q_info["q_eff_lower_bound_electrons"] = q_info["q_eff_range_electrons"][0]
+            q_info["q_eff_fit_electrons"] = q_eff
+            q_eff = None
+    q_info["q_eff_electrons"] = q_eff
+    result["threshold"] = q_info
+    result["interval_table"] = table
+
+    # ---- gain spread
+    s2_rel = 1.0 / q_eff if q_eff else (1.0 / q_info.get("q_eff_lower_bound_electrons", math.inf)
+                                        if q_info.get("q_eff_lower_bound_electrons") else 0.0)
+    spread, ginfo = _gain_spread(iv, s2_rel, tile, MIN_INTERVALS_PER_PIXEL + 1)
+    if spread is None:
+        ginfo["reason"] = f"fewer than 8 {tile}×{tile} tiles with ≥ {MIN_INTERVALS_PER_PIXEL + 1} spikes a pixel"
+    ginfo["gain_spread_fraction"] = spread
+    ginfo["note"] = "upper bound where scene texture at the pixel scale remains (cannot be told from PRNU)"
+    result["gain_spread"] = ginfo
+
+    # ---- hot / dead / dark
+    # hot-pixel dark current at the threshold a preset would use (the estimate, else its bound)
+    hd, _, _ = _hot_dead(iv, q_eff or q_info.get("q_eff_lower_bound_electrons"))
+    dark: dict = {"dark_current_e_per_s": None}
+    darkest_rate_per_s = hd["darkest_percentile_spikes"] / duration_s
+    if q_eff:
+        bound = max(darkest_rate_per_s, 1.0 / duration_s) * q_eff
+        dark["dark_current_upper_bound_e_per_s"] = bound
+    dark["reason"] = (f"the recording ({duration_s * 1e3:.3g} ms) is far shorter than Q/I_d (the dark interval); "
+                      "its darkest pixels still see light, so only an upper bound follows")
+    result["dark_current"] = dark
+    result["defects"] = hd
+    return result
+
+
+def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_threshold_electrons=None):
+    """A :class:`~viform.sensors.spike_presets.SpikePreset` from :func:`calibrate`'s result.
+
+    The measured figures go into the sensor; a figure the recording could not give keeps
+    the chip preset's value (``fallback_threshold_electrons`` or the default chip level)
+    and the preset's ``calibration`` record says which.
+    """
+    from viform.sensors.spike_presets import (
+        DEFAULT_THRESHOLD_LEVEL,
+        SpikePreset,
+        _chip_parameters,
+        threshold_level_electrons,
+    )
+
+    measured, assumed, bounds = {}, {}, {}
+    q = result["threshold"].get("q_eff_electrons")
+    q_low = result["threshold"].get("q_eff_lower_bound_electrons")
+    if q:
+        measured["threshold_electrons"] = float(round(q))
+    elif q_low:
+        # the recording bounds Q_eff from below: the least regular sensor it allows
+        measured["threshold_electrons"] = float(round(q_low))
+        bounds["threshold_electrons"] = "lower bound (the recording is not steady enough for an estimate)"
+    else:
+        q_fb = fallback_threshold_electrons or threshold_level_electrons(DEFAULT_THRESHOLD_LEVEL)
+        assumed["threshold_electrons"] = float(q_fb)
+    g = result["gain_spread"].get("gain_spread_fraction")
+    if g is not None:
+        measured["gain_spread_fraction"] = float(g)
+    d = result["defects"]
+    if d.get("hot_pixels") and d.get("hot_pixel_dark_current_e_per_s"):
+        measured["hot_pixel_fraction"] = d["hot_pixel_fraction"]
+        measured["hot_pixel_dark_current_e_per_s"] = d["hot_pixel_dark_current_e_per_s"]
+    elif d.get("hot_pixels") == 0:
+        measured["hot_pixel_fraction"] = 0.0
+    params = _chip_parameters(result["clock_hz"])
+    import dataclasses
+
+    fields = {f.name for f in dataclasses.fields(params)}
+    params = dataclasses.replace(params, **{k: v for k, v in {**measured, **assumed}.items() if k in fields})
+    what = ", ".join(f"{k} = {v:.4g}" + (" (lower bound)" if k in bounds else "")
+                     for k, v in measured.items()) or "nothing"
+    description = f"calibrated from a {result['height']}×{result['width']} recording: measured {what}"
+    if assumed:
+        description += "; assumed " + ", ".join(f"{k} = {v:.4g}" for k, v in assumed.items())
+    calibration = {"measured": measured, "assumed": assumed, "bounds": bounds,
+                   "threshold": {k: v for k, v in result["threshold"].items()},
+                   "gain_spread": result["gain_spread"], "defects": result["defects"],
+                   "dark_current": result["dark_current"], "static": result["static"],
+                   "interval_table": result["interval_table"]}
+    if "source" in result:
+        calibration["source"] = result["source"]
+    return SpikePreset(name, description, result["height"], result["width"], params, None, calibration)
