@@ -9,7 +9,8 @@ from viform.cli import main
 
 def test_characterize_cmos_writes_pngs_and_json(tmp_path, capsys):
     rc = main(
-        ["characterize", "cmos", "--out", str(tmp_path / "figs"), "--json", str(tmp_path / "r.json"), "--size", "32"]
+        ["characterize", "cmos", "--out", str(tmp_path / "figs"), "--json-file", str(tmp_path / "r.json"), "--size",
+         "32"]
     )
     assert rc == 0
     for name in ("ptc.png", "snr.png", "response.png"):
@@ -17,11 +18,39 @@ def test_characterize_cmos_writes_pngs_and_json(tmp_path, capsys):
     data = json.loads((tmp_path / "r.json").read_text())
     e = data["emva1288"]
     assert abs(e["dynamic_range_db"] - e["expected"]["dynamic_range_db"]) < 1.0
-    assert "DR" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "dynamic range" in text and " dB" in text and "{" not in text  # a table with units
+
+
+def test_characterize_bare_json_flag_prints_json(capsys):
+    assert main(["characterize", "cmos", "--size", "8", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["sensor"] == "cmos" and "emva1288" in data
+
+
+def test_response_figure_differs_per_sensor(tmp_path):
+    """response.png used to be byte-identical for every sensor; now the characterized one is
+    drawn bold (and named in the title), and curves start where SNR reaches 1."""
+    import numpy as np
+
+    from viform._io import save_figure
+    from viform.report.response_plots import meaningful, response_figure
+
+    lux = np.geomspace(0.1, 100, 20)
+    out = np.minimum(lux / 10, 1.0)
+    curves = {"a": {"lux": lux, "output": out, "snr": np.sqrt(lux * 10)},
+              "b": {"lux": lux, "output": out / 2, "snr": np.sqrt(lux)}}
+    save_figure(tmp_path / "a.png", response_figure(curves, "A", highlight="a"))
+    save_figure(tmp_path / "b.png", response_figure(curves, "B", highlight="b"))
+    assert (tmp_path / "a.png").read_bytes() != (tmp_path / "b.png").read_bytes()
+    ok = meaningful(curves["a"])
+    assert not ok[lux * 10 < 1].any()                     # SNR < 1: not drawn
+    # stops at the first saturated point (output ≥ 99.5 % of the plateau, 10 lux)
+    assert ok.sum() == np.sum((lux * 10 >= 1) & (lux < 9.95)) + 1
 
 
 def test_characterize_seed_preset_prints_seed_figures(tmp_path, capsys):
-    rc = main(["characterize", "seed001-2seg", "--json", str(tmp_path / "s.json"), "--size", "16"])
+    rc = main(["characterize", "seed001-2seg", "--json-file", str(tmp_path / "s.json"), "--size", "16"])
     assert rc == 0
     data = json.loads((tmp_path / "s.json").read_text())
     assert abs(data["seed_comparison"]["model"]["extension_db"] - 10.88) < 1.0
@@ -41,14 +70,14 @@ def test_bad_size(size, capsys):
 
 
 def test_unwritable_json_fails_before_any_figure_is_written(tmp_path, capsys):
-    """A --json path under a regular file is refused up front: one line, exit 2, no PNGs."""
+    """A --json-file path under a regular file is refused up front: one line, exit 2, no PNGs."""
     blocker = tmp_path / "not_a_dir"
     blocker.write_text("x")
     out = tmp_path / "figs"
-    rc = main(["characterize", "cmos", "--size", "8", "--out", str(out), "--json", str(blocker / "r.json")])
+    rc = main(["characterize", "cmos", "--size", "8", "--out", str(out), "--json-file", str(blocker / "r.json")])
     assert rc == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--json" in err
+    assert err.count("\n") == 1 and "--json-file" in err
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["not_a_dir"]
 
@@ -63,7 +92,7 @@ def test_out_under_a_file_is_refused(tmp_path, capsys):
 
 def test_seed003_preset_reports_equation_gain(tmp_path):
     """The seed-003 comparison carries the measured gain and the closed form (55.5 dB)."""
-    rc = main(["characterize", "seed003-overflow", "--json", str(tmp_path / "o.json"), "--size", "8"])
+    rc = main(["characterize", "seed003-overflow", "--json-file", str(tmp_path / "o.json"), "--size", "8"])
     assert rc == 0
     model = json.loads((tmp_path / "o.json").read_text())["seed_comparison"]["model"]
     assert model["dr_gain_equations_db"] == pytest.approx(55.53, abs=0.01)

@@ -1,4 +1,4 @@
-"""CLI commands: frame sensors (issue 3) — ``viform characterize SENSOR [--out DIR] [--json FILE]``.
+"""CLI commands: frame sensors (issue 3) — ``viform characterize SENSOR [--out DIR] [--json] [--json-file FILE]``.
 
 Registered on :data:`viform.cli.app.cli`.
 """
@@ -98,6 +98,31 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
     return {}
 
 
+#: Labels of the comparison curves, by preset name.
+COMPARISON_LABELS = {
+    "seed001-normal": "normal (seed 001, 130 µs)",
+    "seed001-3seg": "segmented, 3 segments (seed 001)",
+    "seed003-4t": "plain 4T APS (seed 003, 33 ms)",
+    "seed003-overflow": "conditional overflow (seed 003)",
+}
+
+
+def _fmt(v) -> str:
+    """A number (or list of numbers) to 4 significant figures."""
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    if isinstance(v, (float, np.floating)):
+        return f"{float(v):.4g}"
+    return str(v)
+
+
+#: Units of the seed-comparison fields (printed in the table).
+_UNITS = {"normal_saturation": "× unit lux", "hdr_saturation": "× unit lux", "extension_db": "dB",
+          "knee_intensity": "× unit lux", "knee_dn": "DN", "4t_saturation_a": "A", "B_a": "A", "C_a": "A",
+          "D_a": "A", "E_a": "A", "max_usable_a": "A", "dr_gain_db": "dB", "dr_gain_equations_db": "dB",
+          "row_share_time_s": "s", "max_rows": "rows"}
+
+
 def _comparison_curves(size: int, seed: int) -> dict:
     """Normal, segmented, overflow (and spike) responses on a common illuminance axis."""
     from viform.report.response_plots import frame_response_curve, spike_response_curve
@@ -105,12 +130,7 @@ def _comparison_curves(size: int, seed: int) -> dict:
 
     lux = np.geomspace(0.01, 1e6, 120)
     curves = {}
-    for key, label in (
-        ("seed001-normal", "normal (seed 001, 130 µs)"),
-        ("seed001-3seg", "segmented, 3 segments (seed 001)"),
-        ("seed003-4t", "plain 4T APS (seed 003, 33 ms)"),
-        ("seed003-overflow", "conditional overflow (seed 003)"),
-    ):
+    for key, label in COMPARISON_LABELS.items():
         kw = {"height": size, "width": size} if key == "seed003-overflow" else {}
         curves[label] = frame_response_curve(presets.make_sensor(key, **kw), lux, size=size, seed=seed)
     if presets.spike_available():
@@ -143,12 +163,13 @@ def _jsonable(obj):
     default=None,
     help="Folder for the PNG figures (response, SNR, photon transfer).",
 )
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of the table.")
 @click.option(
-    "--json",
+    "--json-file",
     "json_path",
     type=click.Path(dir_okay=False),
     default=None,
-    help="Write the figures (EMVA 1288 / seed comparison) as JSON here.",
+    help="Also write the results (EMVA 1288 / paper comparison) as JSON to this file.",
 )
 @click.option(
     "--size",
@@ -158,7 +179,7 @@ def _jsonable(obj):
     help="Flat-field size in pixels (square) for the EMVA 1288 sweep.",
 )
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
-def characterize(sensor, out_dir, json_path, size, seed):
+def characterize(sensor, out_dir, as_json, json_path, size, seed):
     """Characterize a preset SENSOR (EMVA 1288 R4.0 for frame sensors; seed 000 §4 for spikes).
 
     SENSOR is one of: cmos, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
@@ -177,8 +198,8 @@ def characterize(sensor, out_dir, json_path, size, seed):
         check_output_folder("--out", Path(out_dir))
     if json_path is not None:
         if Path(json_path).is_dir():
-            raise ViformError(f"--json: {json_path} is a folder; give a file name")
-        check_output_folder("--json", Path(json_path).resolve().parent)
+            raise ViformError(f"--json-file: {json_path} is a folder; give a file name")
+        check_output_folder("--json-file", Path(json_path).resolve().parent)
     presets.describe_preset(sensor)  # clear error for an unknown name
     result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
     figures = {}
@@ -212,14 +233,17 @@ def characterize(sensor, out_dir, json_path, size, seed):
             figures["ptc.png"] = plots.ptc_figure(r)
             e = r["expected"]
             lines += [
-                f"K            {r['system_gain_dn_per_e']:.4g} DN/e-  (parameters {e['system_gain_dn_per_e']:.4g})",
-                f"QE           {r['quantum_efficiency']:.3f}",
-                f"dark noise   {r['temporal_dark_noise_electrons']:.3g} e-",
-                f"saturation   {r['saturation_capacity_electrons']:.4g} e-",
-                f"threshold    {r['absolute_sensitivity_threshold_photons']:.3g} photons",
-                f"DR           {r['dynamic_range_db']:.2f} dB  (parameters {e['dynamic_range_db']:.2f} dB)",
-                f"DSNU         {r['dsnu_electrons']:.3g} e-   PRNU {r['prnu_percent']:.3g} %",
-                f"linearity    {r['linearity_error_percent']:.3g} %",
+                f"{'quantity':<22} {'measured':>12}  {'from parameters':>15}",
+                f"{'system gain K':<22} {r['system_gain_dn_per_e']:>7.4g} DN/e-  "
+                f"{e['system_gain_dn_per_e']:>9.4g} DN/e-",
+                f"{'quantum efficiency':<22} {r['quantum_efficiency']:>12.3g}",
+                f"{'dark noise':<22} {r['temporal_dark_noise_electrons']:>9.3g} e-",
+                f"{'saturation capacity':<22} {r['saturation_capacity_electrons']:>9.4g} e-",
+                f"{'sensitivity threshold':<22} {r['absolute_sensitivity_threshold_photons']:>5.3g} photons",
+                f"{'dynamic range':<22} {r['dynamic_range_db']:>9.4g} dB  {e['dynamic_range_db']:>12.4g} dB",
+                f"{'DSNU':<22} {r['dsnu_electrons']:>9.3g} e-",
+                f"{'PRNU':<22} {r['prnu_percent']:>10.3g} %",
+                f"{'linearity error':<22} {r['linearity_error_percent']:>10.3g} %",
             ]
             lines += [f"warning: {w}" for w in r["warnings"]]
         lux = np.geomspace(1e-5, 1e6, 200)
@@ -227,22 +251,32 @@ def characterize(sensor, out_dir, json_path, size, seed):
         dr = emva.dynamic_range_from_response(own["raw"])
         result["response_dynamic_range"] = dr
         lines.append(
-            f"response DR  {dr['dynamic_range_db']:.2f} dB (SNR = 1 at "
-            f"{dr['lux_min']:.3g} lux to plateau at {dr['lux_sat']:.3g} lux)"
+            f"{'response DR':<22} {dr['dynamic_range_db']:>9.4g} dB  (SNR = 1 at "
+            f"{dr['lux_min']:.3g} lux to the plateau at {dr['lux_sat']:.3g} lux)"
         )
         figures["snr.png"] = plots.snr_figure({sensor: own})
         seed_fig = _seed_figures(sensor, min(size, 32), seed)
         if seed_fig:
             result["seed_comparison"] = seed_fig
+            unit_lux = seed_fig.get("intensity_unit_lux")
+            lines.append(f"paper comparison ({seed_fig['source'].replace('seed', 'paper')}"
+                         + (f"; intensity unit = {unit_lux:.4g} lux" if unit_lux else "") + "):")
+            lines.append(f"  {'quantity':<22} {'model':>26}  {'paper':>14}  unit")
             for k, v in seed_fig["model"].items():
                 ref = seed_fig["seed"].get(k)
-                lines.append(
-                    f"{k:<18} model {json.dumps(_jsonable(v))}"
-                    + (f"   seed {json.dumps(ref)}" if ref is not None else "")
-                )
+                lines.append(f"  {k:<22} {_fmt(v):>26}  {_fmt(ref) if ref is not None else '-':>14}  "
+                             f"{_UNITS.get(k, '')}")
     if out_dir is not None:
+        curves = _comparison_curves(16, seed)
+        label = COMPARISON_LABELS.get(sensor)
+        if label is None:  # this sensor is not among the comparison curves: add it, bold
+            label = f"{sensor} (this sensor)"
+            if sensor.startswith("spike"):
+                curves[label] = plots.spike_response_curve(dev, np.geomspace(0.01, 1e4, 40), seed=seed)
+            else:
+                curves[label] = own
         figures["response.png"] = plots.response_figure(
-            _comparison_curves(16, seed), "Response of the frame and spike sensors"
+            curves, f"Response of {sensor} (bold) against the other frame and spike sensors", highlight=label
         )
         out = Path(out_dir)
         for fname, fig in figures.items():
@@ -258,8 +292,14 @@ def characterize(sensor, out_dir, json_path, size, seed):
             if key in result:
                 result[key] = {k: v for k, v in result[key].items() if k not in ("curves",)}
         write_json(json_path, _jsonable(result))
+    if not lines:
+        raise ViformError(f"nothing was measured for {sensor!r}")
+    if as_json:
+        for key in ("emva1288", "spike"):
+            if key in result:
+                result[key] = {k: v for k, v in result[key].items() if k not in ("curves",)}
+        click.echo(json.dumps(_jsonable(result), indent=2))
+        return
     click.echo(f"{sensor}: {result['description']}")
     for line in lines:
         click.echo("  " + line)
-    if not lines:
-        raise ViformError(f"nothing was measured for {sensor!r}")

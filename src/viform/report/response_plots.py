@@ -41,18 +41,40 @@ def spike_response_curve(sensor, lux_values, *, pixels: int = 32, seed: int = 0)
     return {"lux": c["lux"], "output": c["rate_per_tick"], "snr": c["snr"], "raw": c}
 
 
-def response_figure(curves: dict, title: str = "Response curves"):
-    """Output vs illuminance for each named curve: linear axes (left), log axes (right)."""
+def meaningful(c: dict, sat_fraction: float = 0.995) -> np.ndarray:
+    """Points of a curve where the quantity means something: SNR ≥ 1 (above the noise floor)
+    and not past saturation (the output has reached ``sat_fraction`` of its plateau; the first
+    saturated point is kept so the curve ends at the knee into the plateau)."""
+    snr = np.asarray(c.get("snr", np.ones(len(c["lux"]))), dtype=np.float64)
+    out = np.asarray(c["output"], dtype=np.float64)
+    ok = np.isfinite(snr) & (snr >= 1.0)
+    sat = np.nonzero(out >= sat_fraction * np.nanmax(out))[0]
+    if sat.size:
+        ok[sat[0] + 1:] = False
+    return ok
+
+
+def response_figure(curves: dict, title: str = "Response curves", highlight: str | None = None):
+    """Output vs illuminance for each named curve: linear axes (left), log axes (right).
+
+    Each curve starts where its SNR reaches 1 (below, the output is noise); the plateau past
+    saturation is drawn flat on the linear axes only. ``highlight`` names the curve drawn
+    bold (the sensor being characterized)."""
     plt = _plt()
     fig, (ax_lin, ax_log) = plt.subplots(1, 2, figsize=(11, 4.2))
     for name, c in curves.items():
-        ax_lin.plot(c["lux"], c["output"], label=name)
-        ax_log.loglog(c["lux"], np.maximum(c["output"], 1e-6), label=name)
+        lux, out = np.asarray(c["lux"]), np.asarray(c["output"])
+        snr = np.asarray(c.get("snr", np.ones(len(lux))), dtype=np.float64)
+        ok = np.isfinite(snr) & (snr >= 1.0)
+        lw, z = (2.6, 3) if name == highlight else (1.2, 2)
+        ax_lin.plot(lux[ok], out[ok], label=name, lw=lw, zorder=z)
+        ax_log.loglog(lux[ok], out[ok], label=name, lw=lw, zorder=z)
     # Linear panel: up to a little past the last sensor's saturation, so the knees show.
     onsets = [float(np.asarray(c["lux"])[np.argmax(np.asarray(c["output"]) >= 0.999)]) for c in curves.values()]
     ax_lin.set_xlim(0, 1.3 * max(onsets))
     ax_lin.set(xlabel="illuminance on the sensor (lux)", ylabel="output / max output", title="linear axes")
-    ax_log.set(xlabel="illuminance on the sensor (lux)", ylabel="output / max output", title="log axes")
+    ax_log.set(xlabel="illuminance on the sensor (lux)", ylabel="output / max output",
+               title="log axes (from SNR = 1)")
     for ax in (ax_lin, ax_log):
         ax.grid(True, which="both", alpha=0.3)
     ax_log.legend(fontsize=8)
@@ -62,14 +84,24 @@ def response_figure(curves: dict, title: str = "Response curves"):
 
 
 def snr_figure(curves: dict, title: str = "SNR vs irradiance"):
-    """SNR in dB vs illuminance (input-referred for frame sensors, interval SNR for spikes)."""
+    """SNR in dB vs illuminance (input-referred for frame sensors, interval SNR for spikes).
+
+    Curves stop where SNR means nothing: below SNR = 1 (0 dB) and past saturation (see
+    :func:`meaningful`); saturation is marked with a cross."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    for name, c in curves.items():
+    for j, (name, c) in enumerate(curves.items()):
         snr = np.asarray(c["snr"], dtype=np.float64)
-        ok = np.isfinite(snr) & (snr > 0)
-        ax.semilogx(np.asarray(c["lux"])[ok], 20 * np.log10(snr[ok]), label=name)
+        lux = np.asarray(c["lux"])
+        ok = meaningful(c) if "output" in c else (np.isfinite(snr) & (snr >= 1.0))
+        ax.semilogx(lux[ok], 20 * np.log10(snr[ok]), label=name, color=f"C{j}")
+        if "output" in c and ok.any():
+            last = np.nonzero(ok)[0][-1]
+            if np.asarray(c["output"])[last] >= 0.995 * np.nanmax(c["output"]):
+                ax.plot(lux[last], 20 * np.log10(snr[last]), "x", color=f"C{j}", ms=8)
+    ax.plot([], [], "kx", label="saturation (curve ends)")
     ax.axhline(0.0, color="k", lw=0.8, ls=":")
+    ax.set_ylim(bottom=0.0)
     ax.set(xlabel="illuminance on the sensor (lux)", ylabel="SNR (dB)", title=title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
