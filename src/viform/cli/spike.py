@@ -11,34 +11,96 @@ import click
 from viform._validate import ViformError
 from viform.cli.app import cli
 
+#: sensor options → SpikeSensorParameters fields (None: not given, keep the preset's / default)
+_FIELDS = {"clock_hz": "clock_hz", "threshold_electrons": "threshold_electrons",
+           "dark_current_e_per_s": "dark_current_e_per_s", "threshold_spread": "threshold_spread_fraction",
+           "gain_spread": "gain_spread_fraction", "dark_current_spread": "dark_current_spread_fraction",
+           "hot_pixel_fraction": "hot_pixel_fraction",
+           "hot_pixel_dark_current_e_per_s": "hot_pixel_dark_current_e_per_s", "dead_time_s": "dead_time_s",
+           "reset": "reset"}
+_FLAGS = {"threshold_electrons": "--threshold-electrons", "clock_hz": "--clock-hz",
+          "dark_current_e_per_s": "--dark-current-e-per-s", "threshold_spread": "--threshold-spread",
+          "gain_spread": "--gain-spread", "dark_current_spread": "--dark-current-spread",
+          "hot_pixel_fraction": "--hot-pixel-fraction",
+          "hot_pixel_dark_current_e_per_s": "--hot-pixel-dark-current-e-per-s", "dead_time_s": "--dead-time-s",
+          "quantum_efficiency": "--quantum-efficiency", "pixel_pitch_um": "--pixel-pitch-um",
+          "fill_factor": "--fill-factor"}
 
-def _sensor_from_options(clock_hz, threshold_electrons, dark_current_e_per_s, quantum_efficiency, pixel_pitch_um,
-                         fill_factor, threshold_spread, reset, no_noise, no_random_initial):
-    from viform.light.radiometry import PixelOptics
+
+def _sensor_from_options(preset, threshold_level, quantum_efficiency, pixel_pitch_um, fill_factor, no_noise,
+                         no_random_initial, **given):
+    """(SpikeSensor, preset or None): the preset's (or the default) parameters, then every option given."""
+    import dataclasses
+
     from viform.sensors.spike import SpikeSensor, SpikeSensorParameters
 
-    optics = PixelOptics(pixel_pitch_m=pixel_pitch_um * 1e-6, fill_factor=fill_factor,
-                         quantum_efficiency=quantum_efficiency)
-    params = SpikeSensorParameters(optics=optics, threshold_electrons=threshold_electrons, clock_hz=clock_hz,
-                                   dark_current_e_per_s=dark_current_e_per_s,
-                                   threshold_spread_fraction=threshold_spread, reset=reset,
-                                   photon_noise=not no_noise, random_initial_charge=not no_random_initial)
-    return SpikeSensor(params)
+    loaded = None
+    if preset is not None:
+        from viform.sensors.spike_presets import load_spike_preset
+
+        loaded = load_spike_preset(preset)  # its errors name --preset and the offending key
+    base = loaded.parameters if loaded is not None else SpikeSensorParameters()
+    if threshold_level is not None:
+        from viform.sensors.spike_presets import threshold_level_electrons
+
+        if given.get("threshold_electrons") is not None:
+            raise ViformError("give either --threshold-level or --threshold-electrons, not both")
+        try:
+            given["threshold_electrons"] = threshold_level_electrons(threshold_level)
+        except ViformError:
+            raise ViformError(f"--threshold-level = {threshold_level!r} is not allowed: it must be a whole "
+                              "number in [0, 15] (the chip's 16 levels)") from None
+    changes = {_FIELDS[k]: v for k, v in given.items() if v is not None}
+    optics = {"quantum_efficiency": quantum_efficiency, "fill_factor": fill_factor,
+              "pixel_pitch_m": None if pixel_pitch_um is None else pixel_pitch_um * 1e-6}
+    optics = {k: v for k, v in optics.items() if v is not None}
+    if no_noise:
+        changes["photon_noise"] = False
+    if no_random_initial:
+        changes["random_initial_charge"] = False
+    try:
+        if optics:
+            changes["optics"] = dataclasses.replace(base.optics, **optics)
+        params = dataclasses.replace(base, **changes)
+    except ViformError as exc:
+        message = str(exc)
+        for option, flag in _FLAGS.items():
+            name = _FIELDS.get(option, option)
+            if message.startswith(name + " ") or message.startswith(name + "="):
+                message = flag + message[len(name):]
+                break
+        raise ViformError(message) from None
+    return SpikeSensor(params), loaded
 
 
 sensor_options = [
-    click.option("--clock-hz", type=float, default=40_000.0, show_default=True,
-                 help="Readout clock, Hz (the chip: 40 kHz, or 20 kHz mode)."),
-    click.option("--threshold-electrons", "-q", type=float, default=100.0, show_default=True,
-                 help="Accumulation threshold Q, electrons."),
-    click.option("--dark-current-e-per-s", type=float, default=20.0, show_default=True, help="Dark current, e-/s."),
-    click.option("--quantum-efficiency", type=float, default=0.7, show_default=True),
-    click.option("--pixel-pitch-um", type=float, default=10.0, show_default=True, help="Pixel pitch, µm."),
-    click.option("--fill-factor", type=float, default=1.0, show_default=True),
-    click.option("--threshold-spread", type=float, default=0.0, show_default=True,
-                 help="Fixed-pattern spread of Q across pixels (std/mean)."),
-    click.option("--reset", type=click.Choice(["self", "readout"]), default="self", show_default=True,
-                 help="Self-reset at the threshold, or reset at the next readout tick."),
+    click.option("--preset", default=None, metavar="NAME|FILE.json",
+                 help="Start from a spike-camera preset: spikeone (400×250, 40 kHz), spiketwo (1000×1000, "
+                      "20 kHz), spiketwo-40k, or a preset file (e.g. from viform calibrate). Options given "
+                      "below override it."),
+    click.option("--threshold-level", type=int, default=None,
+                 help="The chip's threshold level 0–15 (sets the threshold Q)."),
+    click.option("--clock-hz", type=float, default=None,
+                 help="Readout clock, Hz (the chip: 40 kHz, or 20 kHz mode).  [default: 40000]"),
+    click.option("--threshold-electrons", "-q", type=float, default=None,
+                 help="Accumulation threshold Q, electrons.  [default: 100]"),
+    click.option("--dark-current-e-per-s", type=float, default=None, help="Mean dark current, e-/s.  [default: 20]"),
+    click.option("--quantum-efficiency", type=float, default=None, help="[default: 0.7]"),
+    click.option("--pixel-pitch-um", type=float, default=None, help="Pixel pitch, µm.  [default: 10]"),
+    click.option("--fill-factor", type=float, default=None, help="[default: 1]"),
+    click.option("--threshold-spread", type=float, default=None,
+                 help="Fixed-pattern spread of Q across pixels (std/mean).  [default: 0]"),
+    click.option("--gain-spread", type=float, default=None,
+                 help="Pixel-to-pixel gain spread, PRNU (std/mean).  [default: 0]"),
+    click.option("--dark-current-spread", type=float, default=None,
+                 help="Pixel-to-pixel dark-current spread (std/mean, log-normal).  [default: 0]"),
+    click.option("--hot-pixel-fraction", type=float, default=None, help="Fraction of hot pixels.  [default: 0]"),
+    click.option("--hot-pixel-dark-current-e-per-s", type=float, default=None,
+                 help="Mean dark current of a hot pixel, e-/s.  [default: 10000]"),
+    click.option("--dead-time-s", type=float, default=None,
+                 help="Reset dead time after each spike, s (no charge collected).  [default: 0]"),
+    click.option("--reset", type=click.Choice(["self", "readout"]), default=None,
+                 help="Self-reset at the threshold, or reset at the next readout tick.  [default: self]"),
     click.option("--no-noise", is_flag=True, help="Deterministic model: no photon noise."),
     click.option("--no-random-initial", is_flag=True, help="Start every pixel with an empty well."),
 ]
@@ -59,8 +121,9 @@ def _apply(options):
 @click.option("--out", "out_path", type=click.Path(dir_okay=True), required=True,
               help="Output file: .dat (spike-camera layout), .zarr (chunked, with metadata) or .npz.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Photon-noise seed.")
-@click.option("--height", type=int, default=250, show_default=True, help="Resolution of built-in scenes.")
-@click.option("--width", type=int, default=400, show_default=True)
+@click.option("--height", type=int, default=None,
+              help="Resolution of built-in scenes (and of files with --resize).  [default: the preset's, or 250]")
+@click.option("--width", type=int, default=None, help="[default: the preset's, or 400]")
 @click.option("--max-lux", type=float, default=4.0, show_default=True,
               help="Illuminance on the sensor of full-scale image/video pixels, lux.")
 @click.option("--frame-rate-hz", type=float, default=None, help="Frame rate of a video or image folder.")
@@ -68,37 +131,58 @@ def _apply(options):
               help="Light between video frames.")
 @click.option("--light-sample-ticks", type=int, default=1, show_default=True,
               help="Evaluate the scene every N ticks (held in between).")
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the line of text.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
+@click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 @_apply(sensor_options)
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
-             light_sample_ticks, as_json, **sensor_kw):
-    """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the viform.
+             light_sample_ticks, as_json, json_file, **sensor_kw):
+    """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the spike stream.
 
     Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
+    Memory stays bounded (blocks of about 50 MB) whatever the resolution and duration.
     """
-    from viform._io import check_output_folder
+    from viform._io import check_output_folder, write_json
     from viform.light.scenes import load_scene
     from viform.stream.io import FORMATS, save_spikes
 
     if Path(out_path).suffix.lower() not in FORMATS:
         raise ViformError(f"--out = {out_path!r}: the suffix must be one of {', '.join(FORMATS)}")
     check_output_folder("--out", Path(out_path).resolve().parent)
-    sensor = _sensor_from_options(**sensor_kw)
+    if json_file:
+        check_output_folder("--json-file", Path(json_file).resolve().parent)
+    sensor, preset = _sensor_from_options(**sensor_kw)
+    height = height if height is not None else (preset.height if preset is not None else 250)
+    width = width if width is not None else (preset.width if preset is not None else 400)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
                        interpolation=interpolation)
     # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
     reuse = Path(out_path).suffix.lower() in (".dat", ".zarr")
     stream = sensor.stream(light, duration_s, seed=seed, light_sample_ticks=light_sample_ticks, progress=True,
                            reuse_buffer=reuse)
+    if preset is not None:
+        stream.metadata["preset"] = preset.name
     started = time.perf_counter()
-    save_spikes(out_path, stream, block_ticks=1024)
+    # the simulator caps each block at its memory budget (SpikeSensor.default_block_ticks)
+    save_spikes(out_path, stream, block_ticks=1 << 20)
     elapsed = time.perf_counter() - started
     pixel_ticks = stream.n_ticks * stream.height * stream.width
+    p = sensor.parameters
+    summary = {"file": str(out_path), "n_ticks": stream.n_ticks, "height": stream.height,
+               "width": stream.width, "clock_hz": stream.clock_hz,
+               "threshold_electrons": stream.threshold_electrons, "seed": seed,
+               "preset": None if preset is None else preset.name,
+               "gain_spread_fraction": p.gain_spread_fraction, "dead_time_s": p.dead_time_s,
+               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed}
+    if json_file:
+        write_json(json_file, summary)
     if as_json:
-        click.echo(json.dumps({"file": str(out_path), "n_ticks": stream.n_ticks, "height": stream.height,
-                               "width": stream.width, "clock_hz": stream.clock_hz,
-                               "threshold_electrons": stream.threshold_electrons, "seed": seed,
-                               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed}, indent=2))
+        click.echo(json.dumps(summary, indent=2))
         return
-    click.echo(f"wrote {out_path}: {stream.n_ticks} ticks × {stream.height}×{stream.width} at "
-               f"{stream.clock_hz:g} Hz ({pixel_ticks / elapsed:.3g} pixel-ticks/s)")
+    rows = [("file", str(out_path)), ("ticks", f"{stream.n_ticks}"),
+            ("size", f"{stream.height} × {stream.width} pixels"), ("clock", f"{stream.clock_hz:,.0f} Hz"),
+            ("threshold Q", f"{stream.threshold_electrons:.4g} e-"),
+            ("preset", "none" if preset is None else preset.name),
+            ("speed", f"{pixel_ticks / elapsed:.3g} pixel-ticks/s")]
+    width_ = max(len(k) for k, _ in rows)
+    for k, v in rows:
+        click.echo(f"{k:<{width_}}  {v}")
