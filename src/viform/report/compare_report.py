@@ -92,6 +92,30 @@ def _panel_grid(n):
     return math.ceil(n / cols), cols
 
 
+def _image_grid(n_panels: int, shape):
+    """A grid of image panels with room for titles, a suptitle and one colour bar on the right.
+
+    Laid out by hand (no constrained layout: it costs seconds per figure on a busy machine).
+    """
+    import matplotlib.pyplot as plt
+
+    rows, cols = _panel_grid(n_panels)
+    h, w = shape
+    panel_w = 3.3
+    panel_h = panel_w * h / w + 0.45  # image + two title lines
+    fig_w, fig_h = panel_w * cols + 1.6, panel_h * rows + 0.6
+    fig, axes = plt.subplots(rows, cols, figsize=(fig_w, fig_h), squeeze=False,
+                             gridspec_kw=dict(left=0.01, right=1 - 1.5 / fig_w, bottom=0.02, top=1 - 0.8 / fig_h,
+                                              wspace=0.06, hspace=0.45 / (panel_h - 0.45) + 0.05))
+    cax = fig.add_axes([1 - 1.15 / fig_w, 0.08, 0.16 / fig_w, 0.78])
+    for ax in axes.flat:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    for ax in list(axes.flat)[n_panels:]:
+        ax.axis("off")
+    return fig, axes, cax
+
+
 def _when(est, t):
     a, b = est.source_time_s
     if a == b:
@@ -101,16 +125,12 @@ def _when(est, t):
 
 def figure_instant(result, index: int):
     """Truth and every sensor's image at one instant, one log-lux colour map and colour bar."""
-    import matplotlib.pyplot as plt
 
     t = result["instants_s"][index]
     scene = result["scene"]
     shots = [s for s in result["shots"] if not s.skipped and s.lux_units]
     norm = _lux_norm(result)
-    rows, cols = _panel_grid(len(shots) + 1)
-    h, w = scene.shape
-    fig, axes = plt.subplots(rows, cols, figsize=(3.3 * cols + 1.2, 3.3 * rows * h / w + 0.9), squeeze=False,
-                             constrained_layout=True)
+    fig, axes, cax = _image_grid(len(shots) + 1, scene.shape)
     floor = norm.vmin
     im = None
     panels = [("truth", scene.illuminance_lux(t), f"at {t * 1e3:.2f} ms")]
@@ -118,11 +138,7 @@ def figure_instant(result, index: int):
     for ax, (title, lux, when) in zip(axes.flat, panels, strict=False):
         im = ax.imshow(np.maximum(np.nan_to_num(lux), floor), cmap=LUX_CMAP, norm=norm, interpolation="nearest")
         ax.set_title(f"{title}\n{when}", fontsize=8)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    for ax in list(axes.flat)[len(panels):]:
-        ax.axis("off")
-    fig.colorbar(im, ax=axes, shrink=0.8, label="illuminance on the sensor (lux, log scale)")
+    fig.colorbar(im, cax=cax, label="illuminance on the sensor (lux, log scale)")
     fig.suptitle(f"Scene '{scene.name}' at t = {t * 1e3:.2f} ms: truth and each sensor's image "
                  "(same colour map; black = at or below the scene's darkest level)", fontsize=10)
     return fig
@@ -130,7 +146,6 @@ def figure_instant(result, index: int):
 
 def figure_errors(result, index: int):
     """log10(estimate / truth) per sensor at one instant, one diverging scale in decades."""
-    import matplotlib.pyplot as plt
 
     t = result["instants_s"][index]
     scene = result["scene"]
@@ -138,10 +153,7 @@ def figure_errors(result, index: int):
     d = result["demand"] or {"min_lux": 1e-4, "max_lux": 1e6}
     lo, hi = d["min_lux"] / 2, d["max_lux"] * 2
     truth = cmp.log_lux(scene.illuminance_lux(t), lo, hi)
-    rows, cols = _panel_grid(len(shots))
-    h, w = scene.shape
-    fig, axes = plt.subplots(rows, cols, figsize=(3.3 * cols + 1.2, 3.3 * rows * h / w + 0.9), squeeze=False,
-                             constrained_layout=True)
+    fig, axes, cax = _image_grid(len(shots), scene.shape)
     im = None
     for ax, s in zip(axes.flat, shots, strict=False):
         err = cmp.log_lux(s.estimates[index].lux, lo, hi) - truth
@@ -149,11 +161,7 @@ def figure_errors(result, index: int):
                        interpolation="nearest")
         ax.set_title(f"{s.label}\nsaturated {s.estimates[index].saturated.mean():.0%}, "
                      f"under-exposed {s.estimates[index].underexposed.mean():.0%}", fontsize=8)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    for ax in list(axes.flat)[len(shots):]:
-        ax.axis("off")
-    fig.colorbar(im, ax=axes, shrink=0.8,
+    fig.colorbar(im, cax=cax,
                  label="error: log10(estimate / truth), decades (red = too bright, blue = too dark)")
     fig.suptitle(f"Error against the truth at t = {t * 1e3:.2f} ms (one scale for every sensor)", fontsize=10)
     return fig
@@ -164,7 +172,8 @@ def figure_dilemma(result):
     import matplotlib.pyplot as plt
 
     shots = [s for s in result["shots"] if not s.skipped and s.lux_units]
-    fig, ax = plt.subplots(figsize=(8.5, 5.6), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(10.5, 5.6))
+    fig.subplots_adjust(left=0.08, right=0.64, bottom=0.11, top=0.92)
     markers = "osD^v<>phXP"
     colours = plt.get_cmap("tab10").colors
     placed: list[tuple[float, float]] = []
@@ -193,7 +202,7 @@ def figure_dilemma(result):
     if d and math.isfinite(d["time_resolution_s"]):
         xs.append(d["time_resolution_s"])
     if xs:
-        ax.set_xlim(min(xs) / 3, max(xs) * 3)
+        ax.set_xlim(min(xs) / 3, max(xs) * 12)  # room for the labels right of the points
     ys = [s.metrics.get("dr_captured_db", 0) for s in shots] + ([d["dynamic_range_db"]] if d else [])
     ax.set_ylim(0, max(ys) * 1.15 + 5)
     ax.set_xlabel("integration time per image (s, log scale): shorter = sharper motion")
@@ -213,7 +222,8 @@ def figure_gated(result):
     if not shots:
         return None
     scene = result["scene"]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    fig.subplots_adjust(left=0.01, right=0.93, bottom=0.04, top=0.84, wspace=0.25)
     truth = scene.illuminance_lux(result["instants_s"][0])
     im0 = axes[0].imshow(truth, cmap=LUX_CMAP, norm=_lux_norm(result), interpolation="nearest")
     axes[0].set_title("passive light on the sensor (truth, lux)", fontsize=9)
