@@ -203,3 +203,112 @@ def test_bad_pixel_parameters_are_refused(kwargs, name):
 
 def test_normal_mode_is_a_frame_sensor():
     assert type(make_sensor("seed001-normal")) is FrameSensor
+
+
+# ----------------------------------------------------------------------------- issue 16: Rpd, families, SNR
+
+def test_rpd_code_voltage_and_clamp_mapping_fig7():
+    """Seed 001 Fig. 7: codes in 0.025 V steps ("28" hex = 40 → 1 V; up to 2.4 V), exposure
+    in 48 MHz Iclk counts; a higher Rpd voltage gives a lower clamp. Every curve follows the
+    same line until its clamp, then all rise with one slope (1 − f1)·r until saturation."""
+    from viform.sensors.segmented import (
+        RpdBarrier,
+        exposure_s_from_iclk,
+        response_vs_exposure_dn,
+        rpd_voltage_v,
+    )
+
+    assert rpd_voltage_v(0x28) == pytest.approx(1.0) and rpd_voltage_v(96) == pytest.approx(2.4)
+    assert exposure_s_from_iclk(48) == pytest.approx(1e-6)
+    barrier = RpdBarrier()
+    fr = barrier.clamp_fraction([rpd_voltage_v(c) for c in range(40, 97)])
+    assert np.all(np.diff(fr) < 0)                                   # higher voltage, lower clamp
+    assert barrier.voltage_for_fraction(5 / 12) == pytest.approx(1.8333, abs=1e-3)
+    t = exposure_s_from_iclk(np.arange(0, 14_400, 16))
+    rate, f1, fw, k = 1e8, 5 / 6, 1e4, 0.0748
+    curves = [response_vs_exposure_dn(rate, t, f1, b * fw, fw, k) for b in fr[::8]]
+    lowest_clamp_t = fr[::8].min() * fw / (rate * f1)
+    early = t < lowest_clamp_t
+    for c in curves[1:]:
+        np.testing.assert_array_equal(c[early], curves[0][early])     # identical before any clamp
+    for b, c in zip(fr[::8], curves, strict=True):
+        mid = (t > b * fw / (rate * f1) * 1.05) & (c < 0.99 * fw * k)
+        if mid.sum() > 2:
+            slope = np.diff(c[mid]) / np.diff(t[mid])
+            assert slope == pytest.approx(np.full(slope.size, (1 - f1) * rate * k), rel=1e-9)
+
+
+def test_fraction_family_fig8():
+    """Seed 001 Fig. 8: with one barrier, curves for clamped fractions k/8 coincide below the
+    knee (intensity 15, 374 DN for the 8/8 fit); the normal mode saturates at 30 and 8/8 at
+    105 (seed: 10.88 dB). Exact, noise-free."""
+    from viform.sensors.segmented import segmented_charge_electrons
+
+    b1, f1max = 5 / 12, 5 / 6
+    x = np.linspace(0.01, 120, 12_000)
+    rate = x / 30.0
+    sats = {}
+    for kk in range(9):
+        f1 = kk / 8 * f1max
+        q = np.minimum(segmented_charge_electrons(rate, (f1, 1 - f1), (b1, 1.0)), 1.0) if kk else np.minimum(rate, 1)
+        np.testing.assert_allclose(q[x < 15], rate[x < 15])              # small signals untouched
+        sats[kk] = x[np.argmax(q >= 1.0)]
+    assert sats[0] == pytest.approx(30, abs=0.02) and sats[8] == pytest.approx(105, abs=0.02)
+    assert 20 * np.log10(sats[8] / sats[0]) == pytest.approx(10.88, abs=0.01)
+    assert all(sats[kk] == pytest.approx(30, abs=0.02) for kk in range(1, 5))  # f1 ≤ b1: never binds
+    assert all(sats[kk] < sats[kk + 1] for kk in range(4, 8))
+
+
+def test_three_segment_fit_is_a_one_parameter_family():
+    """Seed 001 Fig. 9 gives knees at 348 and 669.8 DN (of 748) and saturation 440 (normal 35):
+    three numbers for four unknowns. Every member of the family reproduces all three
+    (checked on the noise-free response); the preset 0.74 : 0.25 : 0.01 is the f3 = 0.01
+    member; the second knee's intensity runs from ≈ 36 to ≈ 355 across the family, so it
+    (not given in the seed's text) is what pins f3."""
+    from viform.sensors.segmented import knee_rates_e_per_s, segmented_charge_electrons, three_segment_family
+
+    fam = three_segment_family(np.linspace(0.0005, 0.08, 400))
+    assert 0.0085 < fam[0]["fractions"][2] < 0.0095 and 0.043 < fam[-1]["fractions"][2] < 0.045
+    for row in fam[::20]:
+        f, b = row["fractions"], (*row["barriers_fw"], 1.0)
+        knees = knee_rates_e_per_s(f, b)            # in full wells per exposure
+        out = [segmented_charge_electrons(np.array([r]), f, b)[0] * 748 for r in knees[:-1]]
+        assert out == pytest.approx([348, 669.8], abs=0.05)
+        assert knees[-1] * 35 == pytest.approx(440, rel=1e-6)
+    k2 = [r["knee2_intensity_units"] for r in fam]
+    assert np.all(np.diff(k2) > 0) and k2[0] < 40 and k2[-1] > 340
+    mid = three_segment_family([0.01])[0]
+    assert mid["fractions"] == pytest.approx((0.74, 0.25, 0.01), abs=1e-3)
+    assert mid["barriers_fw"] == pytest.approx((0.344, 0.874), abs=1e-3)
+
+
+def test_snr_dips_at_the_knees_against_the_no_snr_loss_claim():
+    """Seed 001 §1.2 claims the method costs no SNR. Model: identical SNR below the first
+    knee (the claim holds for small signals), then drops of 10·lg(T/T_after): 5.85 dB and
+    14.15 dB for 0.74 : 0.25 : 0.01. Monte Carlo on 4 096 pixels (no PRNU) confirms the
+    post-knee variance r·T_after (tolerance 4·√(2/N) ≈ 9 % on a variance)."""
+    from viform.light.scenes import StillScene
+    from viform.sensors import presets
+    from viform.sensors.segmented import SegmentedExposureSensor, expected_snr, snr_knee_dips_db
+
+    t = np.array([0.74, 0.25, 0.01]) * 130e-6
+    dips = snr_knee_dips_db(t)
+    assert dips == pytest.approx([5.85, 14.15], abs=0.01)
+    b = (3440.0, 8740.0, 10_000.0)
+    r1 = b[0] / t[0]
+    below, above = expected_snr([r1 * 0.999, r1 * 1.001], t, b)
+    assert 20 * np.log10(below / above) == pytest.approx(dips[0], abs=0.01)
+    small = np.geomspace(1e3, 0.9 * r1, 20)
+    np.testing.assert_allclose(expected_snr(small, t, b), expected_snr(small, [t.sum()], [1e9]))
+
+    p = presets.seed001_pixel_parameters(prnu_fraction=0.0)
+    s = SegmentedExposureSensor(p, t, b[:2], frame_rate_hz=60.0)
+    lux = p.optics.lux_from_electrons_per_s(1.3 * r1 - p.dark_current_e_per_s)
+    pix = s.pixel_array(64, 64)
+    q = s.charge_electrons(StillScene(np.full((64, 64), lux)), 0.0, t.sum(), pix.rng(5, 0), 64, 64)
+    var_expected = 1.3 * r1 * (t[1] + t[2])
+    assert q.var() == pytest.approx(var_expected, rel=4 * np.sqrt(2 / q.size))
+    # with a 2 % barrier spread the clamp itself varies: variance + (0.02·B1)²
+    s2 = SegmentedExposureSensor(p, t, b[:2], frame_rate_hz=60.0, barrier_spread_fraction=0.02)
+    q2 = s2.charge_electrons(StillScene(np.full((64, 64), lux)), 0.0, t.sum(), pix.rng(5, 0), 64, 64)
+    assert q2.var() == pytest.approx(var_expected + (0.02 * b[0]) ** 2, rel=4 * np.sqrt(2 / q.size))

@@ -46,17 +46,30 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
             if two
             else {"normal_saturation": 35, "hdr_saturation": 440, "extension_db": 21.99, "knee_dn": [348, 669.8]}
         )
+        from viform.sensors.segmented import RpdBarrier, snr_knee_dips_db, three_segment_family
+
+        fw = hdr.parameters.full_well_electrons
+        model = {
+            "normal_saturation": sat["seed001-normal"],
+            "hdr_saturation": sat[name],
+            "extension_db": _db(sat[name] / sat["seed001-normal"]),
+            "knee_intensity": (knees[:-1] / unit).tolist(),
+            "knee_dn": knee_dn.tolist(),
+            "snr_dip_db": snr_knee_dips_db(hdr.segment_times_s).tolist(),
+            "rpd_voltage_v": RpdBarrier().voltage_for_fraction(np.asarray(hdr.clamp_levels_electrons[:-1]) / fw)
+            .tolist(),
+        }
+        seed_vals["snr_dip_db"] = "none claimed"
+        if not two:
+            fam = three_segment_family(np.linspace(0.0005, 0.08, 800))
+            model["family_f3_range"] = [fam[0]["fractions"][2], fam[-1]["fractions"][2]]
+            model["family_knee2_intensity_range"] = [fam[0]["knee2_intensity_units"],
+                                                     fam[-1]["knee2_intensity_units"]]
         return {
             "source": "seed 001 fig. 8" if two else "seed 001 fig. 9",
             "intensity_unit_lux": unit,
             "seed": seed_vals,
-            "model": {
-                "normal_saturation": sat["seed001-normal"],
-                "hdr_saturation": sat[name],
-                "extension_db": _db(sat[name] / sat["seed001-normal"]),
-                "knee_intensity": (knees[:-1] / unit).tolist(),
-                "knee_dn": knee_dn.tolist(),
-            },
+            "model": model,
         }
     if name == "seed003-overflow":
         from viform.light.radiometry import ELEMENTARY_CHARGE_C
@@ -117,7 +130,9 @@ def _fmt(v) -> str:
 
 
 #: Units of the seed-comparison fields (printed in the table).
-_UNITS = {"normal_saturation": "× unit lux", "hdr_saturation": "× unit lux", "extension_db": "dB",
+_UNITS = {"snr_dip_db": "dB", "rpd_voltage_v": "V (assumed mapping)", "family_f3_range": "of T",
+          "family_knee2_intensity_range": "× unit lux",
+          "normal_saturation": "× unit lux", "hdr_saturation": "× unit lux", "extension_db": "dB",
           "knee_intensity": "× unit lux", "knee_dn": "DN", "4t_saturation_a": "A", "B_a": "A", "C_a": "A",
           "D_a": "A", "E_a": "A", "max_usable_a": "A", "dr_gain_db": "dB", "dr_gain_equations_db": "dB",
           "row_share_time_s": "s", "max_rows": "rows"}
@@ -278,6 +293,18 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
         figures["response.png"] = plots.response_figure(
             curves, f"Response of {sensor} (bold) against the other frame and spike sensors", highlight=label
         )
+        if sensor in ("seed001-2seg", "seed001-3seg"):
+            from viform.sensors.segmented import SegmentedExposureSensor, three_segment_family
+
+            figures["fig7_rpd_voltage.png"] = plots.rpd_fig7_figure()
+            figures["fig8_fractions.png"] = plots.fraction_family_figure()
+            if sensor == "seed001-3seg":
+                figures["fig9_three_segment_family.png"] = plots.three_segment_family_figure(
+                    three_segment_family([0.0095, 0.01, 0.015, 0.02, 0.03, 0.04]))
+            spread = SegmentedExposureSensor(dev.parameters, dev.segment_times_s, dev.clamp_levels_electrons,
+                                             frame_rate_hz=60.0, barrier_spread_fraction=0.02)
+            figures["snr_knees.png"] = plots.snr_knees_figure(dev, presets.make_sensor("seed001-normal"), spread,
+                                                              measured=own)
         out = Path(out_dir)
         for fname, fig in figures.items():
             save_figure(out / fname, fig)

@@ -128,3 +128,138 @@ def ptc_figure(result: dict, title: str = "Photon transfer curve (EMVA 1288)"):
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
+
+
+# ----------------------------------------------------------------------------- seed 001 figures
+
+def rpd_fig7_figure(codes=(40, 48, 56, 64, 72, 80, 88, 96), first_fraction: float = 5 / 6, barrier=None,
+                    full_well_electrons: float = 10_000.0, gain_dn_per_e: float = 0.0748,
+                    saturating_exposure_s: float = 100e-6):
+    """Seed 001 Fig. 7 from the model: output against exposure (Iclk counts) at one light for
+    several Rpd segment voltages; every curve follows the same line until its clamp, a
+    higher voltage clamps lower, then all rise with the same slope to saturation."""
+    from viform.sensors.segmented import (
+        ICLK_HZ,
+        RpdBarrier,
+        exposure_s_from_iclk,
+        response_vs_exposure_dn,
+        rpd_voltage_v,
+    )
+
+    plt = _plt()
+    barrier = barrier or RpdBarrier()
+    counts = np.linspace(0, 3.0 * saturating_exposure_s * ICLK_HZ, 400)
+    rate = full_well_electrons / saturating_exposure_s
+    fig, ax = plt.subplots(figsize=(7.5, 4.4))
+    cmap = plt.get_cmap("viridis")
+    for i, code in enumerate(codes):
+        v = rpd_voltage_v(code)
+        b = barrier.clamp_fraction(v) * full_well_electrons
+        dn = response_vs_exposure_dn(rate, exposure_s_from_iclk(counts), first_fraction, b, full_well_electrons,
+                                     gain_dn_per_e)
+        ax.plot(counts, dn, color=cmap(i / max(1, len(codes) - 1)),
+                label=f"code {code} (0x{code:02X}) = {v:.3f} V, clamp {b / full_well_electrons:.2f} FW")
+    ax.set(xlabel="exposure (Iclk counts, 48 MHz = 20.83 ns)", ylabel="output (DN above black)",
+           title=f"Output against exposure at one light, two segments (first {first_fraction:.3g} clamped)")
+    ax.legend(fontsize=7, title="Rpd segment voltage", title_fontsize=8)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def fraction_family_figure(barrier_fw: float = 5 / 12, f1_max: float = 5 / 6, normal_saturation: float = 30.0,
+                           full_scale_dn: float = 748.0):
+    """Seed 001 Fig. 8 from the model: output against intensity (the seed's units; the normal
+    mode saturates at 30) for clamped-segment fractions k/8 of the largest (k = 0 … 8), one
+    barrier. All curves coincide below the first knee; the range grows with k."""
+    from viform.sensors.segmented import segmented_charge_electrons
+
+    plt = _plt()
+    x = np.linspace(0, 120, 600)
+    rate = x / normal_saturation  # full wells per exposure
+    fig, ax = plt.subplots(figsize=(7.5, 4.4))
+    cmap = plt.get_cmap("plasma")
+    for k in range(9):
+        f1 = k / 8 * f1_max
+        if k == 0:
+            q = np.minimum(rate, 1.0)
+        else:
+            q = np.minimum(segmented_charge_electrons(rate, (f1, 1 - f1), (barrier_fw, 1.0)), 1.0)
+        sat = x[np.argmax(q >= 1.0)] if (q >= 1.0).any() else float("nan")
+        ax.plot(x, q * full_scale_dn, color=cmap(k / 9), label=f"{k}/8 (f1 = {f1:.3f}): saturates at {sat:.0f}"
+                + (" (barrier never binds)" if 0 < k and f1 <= barrier_fw else ""))
+    ax.axhline(barrier_fw / f1_max * full_scale_dn, color="0.5", ls=":", lw=0.8)
+    ax.set(xlabel="light intensity (paper's units; normal mode saturates at 30)", ylabel="output (DN above black)",
+           title=f"Segment-fraction family, barrier {barrier_fw:.3f} FW (paper Fig. 8: 30 → 105 at 8/8)")
+    ax.legend(fontsize=7)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def three_segment_family_figure(rows, full_scale_dn: float = 748.0):
+    """The one-parameter family of three-segment fits of seed 001 Fig. 9: every member passes
+    through 348 DN, 669.8 DN and saturates at 440; they differ in where the second knee is."""
+    from viform.sensors.segmented import segmented_charge_electrons
+
+    plt = _plt()
+    x = np.geomspace(1, 600, 800)
+    rate = x / 35.0
+    fig, ax = plt.subplots(figsize=(7.5, 4.4))
+    for j, r in enumerate(rows):
+        q = np.minimum(segmented_charge_electrons(rate, r["fractions"], (*r["barriers_fw"], 1.0)), 1.0)
+        f = r["fractions"]
+        ax.semilogx(x, q * full_scale_dn, color=f"C{j}",
+                    label=f"f = {f[0]:.3f}:{f[1]:.3f}:{f[2]:.3f}, b = {r['barriers_fw'][0]:.3f}/"
+                          f"{r['barriers_fw'][1]:.3f}; knee 2 at {r['knee2_intensity_units']:.0f}")
+        ax.plot([r["knee2_intensity_units"]], [669.8], "o", color=f"C{j}", ms=4)
+    for y in (348, 669.8):
+        ax.axhline(y, color="0.5", ls=":", lw=0.8)
+    ax.axvline(440, color="0.5", ls="--", lw=0.8)
+    ax.axvline(35, color="0.7", ls="--", lw=0.8)
+    ax.set(xlabel="light intensity (paper's units; normal mode saturates at 35)", ylabel="output (DN above black)",
+           title="Three-segment fits of paper Fig. 9 (knees 348 / 669.8 DN, saturation 440):\n"
+                 "a one-parameter family")
+    ax.legend(fontsize=6.5, title="the second knee's intensity pins the member", title_fontsize=7)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def snr_knees_figure(sensor, normal, spread_sensor=None, measured: dict | None = None):
+    """SNR against illuminance of a segmented sensor and the normal mode (analytic, shot +
+    read noise), the dip at each knee annotated; optionally with a barrier spread (fixed
+    pattern above the knees) and measured points."""
+    from viform.sensors.segmented import expected_snr, snr_knee_dips_db
+
+    plt = _plt()
+    p = sensor.parameters
+    lux = np.geomspace(0.3, 2e5, 1500)
+    rate = p.optics.electrons_per_s(lux) + p.dark_current_e_per_s
+    fig, ax = plt.subplots(figsize=(7.5, 4.4))
+    sn = expected_snr(rate, [normal.exposure_s], [p.full_well_electrons], p.read_noise_electrons)
+    ax.semilogx(lux, 20 * np.log10(sn), "k--", lw=1, label="normal mode (saturates)")
+    s = expected_snr(rate, sensor.segment_times_s, sensor.clamp_levels_electrons, p.read_noise_electrons)
+    ax.semilogx(lux, 20 * np.log10(s), "C0", lw=1.8, label="segmented (shot + read noise)")
+    if spread_sensor is not None:
+        s2 = expected_snr(rate, sensor.segment_times_s, sensor.clamp_levels_electrons, p.read_noise_electrons,
+                          spread_sensor.barrier_spread_fraction)
+        ax.semilogx(lux, 20 * np.log10(s2), "C3", lw=1.2,
+                    label=f"segmented, barrier spread {100 * spread_sensor.barrier_spread_fraction:g} % (FPN)")
+    if measured is not None:
+        m = np.asarray(measured["snr"], dtype=np.float64)
+        ok = meaningful(measured)
+        ax.semilogx(np.asarray(measured["lux"])[ok], 20 * np.log10(m[ok]), "C0.", ms=3,
+                    label="simulated (temporal + spatial)")
+    dips = snr_knee_dips_db(sensor.segment_times_s)
+    for k, x in enumerate(sensor.knee_lux()[:-1]):
+        y = 20 * np.log10(np.nanmax(s[lux <= x]))
+        ax.annotate(f"knee {k + 1}: −{dips[k]:.1f} dB", xy=(x, y), fontsize=8,
+                    xytext=(x * (0.05 if k == 0 else 2.5), y + 2 + 2 * k), arrowprops=dict(arrowstyle="->", lw=0.7))
+    ax.set_ylim(bottom=0)
+    ax.set(xlabel="illuminance on the sensor (lux)", ylabel="SNR (dB), input-referred",
+           title="SNR of the segmented exposure: the paper claims no SNR loss; each knee costs SNR")
+    ax.legend(fontsize=7.5, loc="lower right")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    return fig

@@ -133,6 +133,10 @@ class SegmentedExposureSensor(FrameSensor):
         being capped by the full well, or N values). Must increase strictly.
     frame_rate_hz, height, width, noise, fixed_pattern_seed
         As :class:`~viform.sensors.frame.FrameSensor`.
+    barrier_spread_fraction : float
+        Pixel-to-pixel spread (std / mean, Gaussian, fixed pattern) of every barrier: the Rpd
+        threshold varies across the array, so above a knee the clamped charge — and the output
+        — differs from pixel to pixel (fixed-pattern noise above the knees). Default 0.
 
     Notes
     -----
@@ -155,8 +159,10 @@ class SegmentedExposureSensor(FrameSensor):
         width: int | None = None,
         noise: bool = True,
         fixed_pattern_seed: int = 1288,
+        barrier_spread_fraction: float = 0.0,
     ):
         parameters = parameters or FramePixelParameters(full_well_electrons=10_000.0)
+        self.barrier_spread_fraction = check_non_negative("barrier_spread_fraction", barrier_spread_fraction)
         check_positive("frame_rate_hz", frame_rate_hz)
         times, levels = check_segments(
             segment_times_s,
@@ -175,9 +181,22 @@ class SegmentedExposureSensor(FrameSensor):
         )
         self.segment_times_s = times
         self.clamp_levels_electrons = levels
+        self._barrier_maps: dict = {}
 
-    @property
-    def n_segments(self) -> int:
+    def barrier_map_electrons(self, height: int, width: int) -> np.ndarray:
+        """Per-pixel barriers (N, H, W), e⁻: the nominal ones times 1 + s·N(0, 1) (fixed
+        pattern, seeded by ``fixed_pattern_seed``), clipped to [0, full well]."""
+        key = (height, width)
+        if key not in self._barrier_maps:
+            base = np.asarray(self.clamp_levels_electrons)[:, None, None]
+            if self.barrier_spread_fraction > 0:
+                rng = np.random.default_rng([self.fixed_pattern_seed, 0xB44])
+                spread = 1 + self.barrier_spread_fraction * rng.standard_normal((len(base), height, width))
+                m = np.clip(base * spread, 0.0, self.parameters.full_well_electrons)
+            else:
+                m = np.broadcast_to(base, (len(base), height, width))
+            self._barrier_maps[key] = m
+        return self._barrier_maps[key]
         return len(self.segment_times_s)
 
     def scaled_segments_s(self, exposure_s: float) -> np.ndarray:
@@ -200,7 +219,7 @@ class SegmentedExposureSensor(FrameSensor):
         q = np.zeros((height, width))
         t0 = float(start_s)
         for t, b in zip(
-            self.scaled_segments_s(exposure_s), self.clamp_levels_electrons, strict=True
+            self.scaled_segments_s(exposure_s), self.barrier_map_electrons(height, width), strict=True
         ):
             lux = scene.mean_illuminance_lux(t0, t0 + t)
             # Excess above the barrier is drained over Rpd (seed 001, §3.1).
@@ -246,5 +265,151 @@ class SegmentedExposureSensor(FrameSensor):
             model=self.name,
             segment_times_s=list(self.segment_times_s),
             clamp_levels_electrons=list(self.clamp_levels_electrons),
+            barrier_spread_fraction=self.barrier_spread_fraction,
         )
         return d
+
+
+# ----------------------------------------------------------------------------- Rpd drive
+
+#: Seed 001 Fig. 7: exposure counted in periods of the 48 MHz clock Iclk (20.83 ns).
+ICLK_HZ = 48e6
+#: Seed 001 Fig. 7: Rpd mid (segment) voltage set in 0.025 V steps, codes 40…96 = 1…2.4 V.
+RPD_STEP_V = 0.025
+
+
+def rpd_voltage_v(code: int) -> float:
+    """Rpd segment voltage of a DAC code (seed 001 Fig. 7: "28" hex = 40 → 1.000 V)."""
+    return float(code) * RPD_STEP_V
+
+
+def exposure_s_from_iclk(counts) -> np.ndarray:
+    """Exposure in seconds from Iclk counts (48 MHz, seed 001 Fig. 7)."""
+    return np.asarray(counts, dtype=np.float64) / ICLK_HZ
+
+
+class RpdBarrier:
+    """Clamp level of the photodiode set by the Rpd gate's segment voltage (seed 001 §3.1, Fig. 7).
+
+    The barrier under Rpd is the gate's channel potential, which follows the gate voltage
+    linearly (a constant body factor); the photodiode holds charge until its potential falls
+    to that barrier. So the clamp charge falls linearly with the voltage — a higher voltage
+    lowers the barrier and the clamp (seed 001: "the larger Rpd's middle voltage, the lower
+    the barrier … the less full-well charge") — and is clipped at 0 and at the full well:
+
+        B(V) = FW · clip((V_zero − V) / (V_zero − V_full), 0, 1)
+
+    Two numbers pin it; the seed gives neither. Defaults (assumptions): V_full = 0.9 V (a
+    gate this low no longer limits the well) and V_zero = 2.5 V (the barrier is below the
+    empty photodiode's potential), so the seed's 1.0–2.4 V sweep spans clamps of 94 % down to
+    6 % of the full well and the Fig. 8 barrier (5/12 FW) sits at 1.833 V (code 73).
+    """
+
+    def __init__(self, v_full_well_v: float = 0.9, v_zero_v: float = 2.5):
+        if not v_zero_v > v_full_well_v:
+            raise ViformError(f"v_zero_v = {v_zero_v!r} must be above v_full_well_v = {v_full_well_v!r} "
+                              "(a higher Rpd voltage lowers the barrier)")
+        self.v_full_well_v = float(v_full_well_v)
+        self.v_zero_v = float(v_zero_v)
+
+    def clamp_fraction(self, voltage_v) -> np.ndarray:
+        """Clamp level as a fraction of the full well."""
+        v = np.asarray(voltage_v, dtype=np.float64)
+        return np.clip((self.v_zero_v - v) / (self.v_zero_v - self.v_full_well_v), 0.0, 1.0)
+
+    def voltage_for_fraction(self, fraction) -> np.ndarray:
+        """Rpd voltage whose clamp is ``fraction`` of the full well."""
+        f = np.asarray(fraction, dtype=np.float64)
+        return self.v_zero_v - f * (self.v_zero_v - self.v_full_well_v)
+
+
+def response_vs_exposure_dn(rate_e_per_s, exposure_s, first_fraction: float, clamp_electrons: float,
+                            full_well_electrons: float, gain_dn_per_e: float) -> np.ndarray:
+    """Seed 001 Fig. 7: noise-free output (DN above black) against the exposure at a fixed
+    light, two segments (the first ``first_fraction`` of the exposure clamped at
+    ``clamp_electrons``), clipped at the full well."""
+    t = np.asarray(exposure_s, dtype=np.float64)
+    q = segmented_charge_electrons(np.full(t.shape, float(rate_e_per_s)), [], [])  # zeros
+    q = np.minimum(q + rate_e_per_s * first_fraction * t, clamp_electrons)
+    q = np.minimum(q + rate_e_per_s * (1 - first_fraction) * t, full_well_electrons)
+    return q * gain_dn_per_e
+
+
+def three_segment_family(f3_values, knee1_fw: float = 348 / 748, knee2_fw: float = 669.8 / 748,
+                         extension: float = 440 / 35) -> list[dict]:
+    """The three-segment fits of seed 001 Fig. 9, one per last-segment fraction f3.
+
+    The seed gives three numbers for the three-segment curve: first knee at 348 DN, second
+    at 669.8 DN (of 748 DN full scale) and saturation at 12.57 × the normal mode's. The
+    model has four unknowns (f1, f2 with f3 = 1 − f1 − f2; barriers b1, b2 in full wells),
+    so the fits form a one-parameter family. Noise-free, with r in full wells per exposure:
+
+    * knee 1 where b1 binds: output b1/f1 = knee1  →  b1 = knee1 · f1;
+    * saturation: (1 − b2)/f3 = extension  →  b2 = 1 − extension · f3;
+    * knee 2 where b2 binds: output b2 + (b2 − b1) f3/f2 = knee2, solved for f1.
+
+    Each member's second knee falls at a different illuminance, 35 (b2 − b1)/f2 in the
+    seed's units: reading that knee's intensity off Fig. 9 would pin f3. Members with
+    f1, f2 > 0 and 0 < b1 < b2 < 1 are returned.
+    """
+    rows = []
+    for f3 in np.atleast_1d(np.asarray(f3_values, dtype=np.float64)):
+        b2 = 1.0 - extension * f3
+        # b2 + (b2 − knee1·f1)·f3/(1 − f1 − f3) = knee2  →  linear in f1
+        a = knee2_fw - b2
+        # a·(1 − f3 − f1) = (b2 − knee1·f1)·f3  →  f1 (a − knee1 f3) = a(1 − f3) − b2 f3
+        den = a - knee1_fw * f3
+        if den == 0:
+            continue
+        f1 = (a * (1 - f3) - b2 * f3) / den
+        f2 = 1 - f1 - f3
+        b1 = knee1_fw * f1
+        if not (f1 > 0 and f2 > 0 and 0 < b1 < b2 < 1):
+            continue
+        rows.append({"fractions": (float(f1), float(f2), float(f3)), "barriers_fw": (float(b1), float(b2)),
+                     "knee2_intensity_units": float(35.0 * (b2 - b1) / f2),
+                     "knee1_intensity_units": float(35.0 * knee1_fw)})
+    return rows
+
+
+def snr_knee_dips_db(segment_times_s) -> np.ndarray:
+    """SNR lost at each knee, dB (noise-free clamp, shot-noise limited).
+
+    Above knee k the kept charge is the clamp B_k (no noise: the excess drained) plus the
+    Poisson charge of the segments after k, so the input-referred SNR is √(r·T_after)
+    instead of √(r·T_before), with T_before the integration that counted just below the
+    knee: a drop of 10·lg(T_before/T_after) — 10·lg(1/(f2 + f3)) = 5.85 dB and
+    10·lg((f2 + f3)/f3) = 14.1 dB for the 0.74 : 0.25 : 0.01 fit. Seed 001 (§1.2) claims no
+    SNR loss; that holds below the first knee only.
+    """
+    t = np.asarray(segment_times_s, dtype=np.float64)
+    tails = np.cumsum(t[::-1])[::-1]  # T, T − T1, …
+    return 10 * np.log10(tails[:-1] / tails[1:])
+
+
+def expected_snr(rate_e_per_s, segment_times_s, clamp_levels_electrons, read_noise_electrons: float = 0.0,
+                 barrier_spread_fraction: float = 0.0, full_well_electrons: float | None = None) -> np.ndarray:
+    """Input-referred SNR of the segmented pixel against the photo-rate (noise-free clamps).
+
+    Below every knee: signal r·T, noise √(r·T + σ_r²) → SNR = r·T/√(r·T + σ_r²). Above knee
+    k (the last barrier that binds): the output is B_k + r·T_after with slope T_after and
+    noise √(r·T_after + σ_r² + (s·B_k)²), s the pixel-to-pixel barrier spread (fixed
+    pattern), so SNR = r·T_after / noise. NaN past saturation (where it means nothing).
+    """
+    r = np.atleast_1d(np.asarray(rate_e_per_s, dtype=np.float64))
+    t = np.asarray(segment_times_s, dtype=np.float64)
+    b = np.asarray(clamp_levels_electrons, dtype=np.float64)
+    q = np.zeros_like(r)
+    t_after = np.full_like(r, t.sum())
+    bound = np.zeros_like(r)
+    for i, (ti, bi) in enumerate(zip(t, b, strict=True)):
+        q = q + r * ti
+        hit = q >= bi
+        q = np.minimum(q, bi)
+        # a binding barrier resets the count: what follows is all that adds noise
+        t_after = np.where(hit, t[i + 1:].sum(), t_after)
+        bound = np.where(hit, bi, bound)
+    noise = np.sqrt(r * t_after + read_noise_electrons ** 2 + (barrier_spread_fraction * bound) ** 2)
+    snr = np.where(noise > 0, r * t_after / np.where(noise > 0, noise, 1.0), 0.0)
+    fw = b[-1] if full_well_electrons is None else full_well_electrons
+    return np.where((t_after > 0) & (q < fw * (1 - 1e-12)), snr, np.nan)
