@@ -245,7 +245,9 @@ def _check_static(table: list[dict], inv_q: float) -> None:
         mu = row["mean_interval_ticks"]
         rho = -(1 / 12) / (mu * mu * inv_q + 1 / 6)
         row["expected_lag1_correlation"] = rho
-        row["static_consistent"] = bool(row["lag1_correlation"] <= rho + LAG1_TOLERANCE)
+        # light that changes slowly raises γ₁; light that changes within an interval can also
+        # push it below any steady pixel's (≥ −1/2)
+        row["static_consistent"] = bool(abs(row["lag1_correlation"] - rho) <= LAG1_TOLERANCE)
 
 
 def _bins(lo: float, hi: float) -> np.ndarray:
@@ -350,16 +352,18 @@ def _hot_dead(iv: PixelIntervals, q_electrons: float | None):
     h, w = iv.height, iv.width
     counts = iv.n_spikes.reshape(h, w).astype(np.float64)
     local = ndimage.median_filter(counts, size=5, mode="nearest")
-    # hot: ≥ 4× the neighbourhood and ≥ 10 spikes more (a Poisson-safe margin even for Q = 1)
-    hot = (counts >= 4 * local) & (counts - local >= 10)
+    # hot: more spikes than the neighbourhood by ≥ 10 (Poisson-safe even at Q = 1) and by
+    # ≥ 8 robust standard deviations of that excess over the image (PRNU, texture)
+    excess = counts - local
+    scale = 1.4826 * float(np.median(np.abs(excess - np.median(excess))))
+    hot = excess >= max(10.0, 8.0 * scale)
     # dead: silent where the neighbourhood gives ≥ 10 spikes (P(0) < e^-10 for a live pixel)
     dead = (counts == 0) & (local >= 10)
     duration_s = iv.n_ticks / iv.clock_hz
     out = {"hot_pixels": int(hot.sum()), "hot_pixel_fraction": float(hot.mean()),
            "dead_pixels": int(dead.sum()), "dead_pixel_fraction": float(dead.mean())}
     if hot.any() and q_electrons is not None:
-        excess = (counts - local)[hot] / duration_s * q_electrons
-        out["hot_pixel_dark_current_e_per_s"] = float(np.median(excess))
+        out["hot_pixel_dark_current_e_per_s"] = float(np.median(excess[hot]) / duration_s * q_electrons)
     # dark current: only the darkest pixels bound it (they may still see light)
     live = counts[~dead]
     darkest = float(np.percentile(live, 1)) if live.size else 0.0
@@ -399,6 +403,8 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
     q_info: dict = {"pairs": int(sel.sum()), "triples": int(sel3.sum()), "pixels": int(use.sum()),
                     "mean_interval_range_ticks": [MIN_INTERVAL_TICKS, float(mu_hi)]}
     q_eff = None
+    edges = _bins(2.0, max(3.0, mu_hi))
+    table = interval_table(iv, static & (n_int >= MIN_INTERVALS_PER_PIXEL - 1), edges)
     if mu_hi <= MIN_INTERVAL_TICKS:
         q_info["reason"] = (f"recording too short: {iv.n_ticks} ticks hold fewer than {MIN_INTERVALS_PER_PIXEL} "
                             f"intervals of ≥ {MIN_INTERVAL_TICKS:g} ticks")
@@ -414,28 +420,25 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
         q_info.update(inverse_q=inv_q, inverse_q_standard_error=se, inverse_q_lag1=inv_q1,
                       inverse_q_lag1_standard_error=se1)
         q_info["drift_free"] = bool(abs(inv_q1 - inv_q) <= 2 * math.hypot(se, se1))
-        if inv_q - 2 * se > 0:
-            q_eff = 1.0 / inv_q
-            q_info["q_eff_range_electrons"] = [1.0 / (inv_q + 2 * se), 1.0 / (inv_q - 2 * se)]
-        else:
-            q_info["reason"] = ("interval noise not resolved above tick rounding: the intervals are as regular as "
-                                "rounding allows")
-            q_info["q_eff_lower_bound_electrons"] = 1.0 / (max(inv_q, 0.0) + 2 * se)
-    edges = _bins(2.0, max(3.0, mu_hi))
-    table = interval_table(iv, static & (n_int >= MIN_INTERVALS_PER_PIXEL - 1), edges)
-    if q_eff:
-        _check_static(table, 1.0 / q_eff)
+        _check_static(table, max(inv_q, 0.0))
         pairs_ok = sum(r["pairs"] for r in table if r["static_consistent"])
         pairs_all = sum(r["pairs"] for r in table) or 1
         q_info["static_consistent_pair_fraction"] = pairs_ok / pairs_all
+        lower = 1.0 / (max(inv_q, 0.0) + 2 * se)
         if pairs_ok / pairs_all < 0.5:
             # light that changes only adds interval variance: the fit bounds Q_eff from below
-            q_info["reason"] = ("not static enough: successive intervals are less anti-correlated than a steady "
-                                "pixel's (see the interval table), so the light changed during the recording; the "
-                                "fitted value is a lower bound")
-            q_info["q_eff_lower_bound_electrons"] = q_info["q_eff_range_electrons"][0]
-            q_info["q_eff_fit_electrons"] = q_eff
-            q_eff = None
+            q_info["reason"] = ("not static enough: successive intervals are not anti-correlated as a steady "
+                                "pixel's are (see the interval table), so the light changed during the recording; "
+                                "the fitted value is a lower bound")
+            q_info["q_eff_lower_bound_electrons"] = lower
+            q_info["q_eff_fit_electrons"] = 1.0 / inv_q if inv_q > 0 else None
+        elif inv_q - 2 * se <= 0:
+            q_info["reason"] = ("interval noise not resolved above tick rounding: the intervals are as regular as "
+                                "rounding allows")
+            q_info["q_eff_lower_bound_electrons"] = lower
+        else:
+            q_eff = 1.0 / inv_q
+            q_info["q_eff_range_electrons"] = [1.0 / (inv_q + 2 * se), 1.0 / (inv_q - 2 * se)]
     q_info["q_eff_electrons"] = q_eff
     result["threshold"] = q_info
     result["interval_table"] = table
