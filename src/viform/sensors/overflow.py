@@ -48,7 +48,22 @@ Noise model: Poisson photo + dark charge per integration window (exact at small 
 PRNU/DSNU, read noise and ADC from :class:`~viform.sensors.frame.FramePixelArray`.
 Charge is tracked as the photodiode voltage drop in electrons, ``n = (V_res − V)·C_PD/q``,
 so the pixel's full well is ``(V_res − V_sat)·C_PD/q`` and its conversion gain q/C_PD.
-The kTC noise of resetting C_F is not modelled (the seed gives no figure for it).
+Reset (kTC) noise (issue 16), optional (``ktc_noise=True``): the seed's readout samples the
+signal *before* resetting the photodiode and the reset level after it (§3: "read the signal
+… then PM1 and NM3 reset the photodiode, read the reset noise"), so the two samples carry
+the kTC noise of two different resets and it does not cancel: √(kT·C_PD)/q = 120 e⁻ rms per
+reset at 88.9 fF and 300 K, √2 × 120 = 170 e⁻ in the difference. Each conditional sharing
+adds the kTC noise of C_F's reset to VF, scaled by C_F/(C_F + C_PD) onto the photodiode, and
+the partition noise of opening the switch, kT·C_PD·C_F/(C_PD + C_F):
+√(44² + 110²) = 118 e⁻ at the photodiode (:func:`share_ktc_noise_electrons`).
+
+The seed's PGA (§2: CDS → PGA → ADC) is the pixel's ``analog_gain`` (``pga_gain``).
+
+:func:`lofic_pixel_parameters` is the lateral-overflow-integration-capacitor pixel the seed
+compares against (Fig. 5(b), DR_b = 20·lg(E4/E2)): the photodiode and an in-pixel C_S
+integrate together and are read at the low conversion gain q/(C_PD + C_S), so the well is
+(C_PD + C_S)/C_PD times larger but the input-referred read and kTC noise grow too — the
+poorer low-light sensitivity and SNR the seed describes.
 """
 
 from __future__ import annotations
@@ -59,6 +74,29 @@ from viform._validate import ViformError, check_int, check_positive, check_range
 from viform.light.radiometry import ELEMENTARY_CHARGE_C
 from viform.light.scenes import Scene, StillScene
 from viform.sensors.frame import FramePixelParameters, FrameSensor
+
+#: Boltzmann constant, J/K.
+BOLTZMANN_J_PER_K = 1.380649e-23
+
+
+def ktc_noise_electrons(capacitance_f: float, temperature_k: float = 300.0) -> float:
+    """Reset (kTC) noise of a node, electrons rms: √(k·T·C)/q (≈ 120 e⁻ at 88.9 fF, 300 K)."""
+    check_positive("capacitance_f", capacitance_f)
+    check_positive("temperature_k", temperature_k)
+    return float(np.sqrt(BOLTZMANN_J_PER_K * temperature_k * capacitance_f) / ELEMENTARY_CHARGE_C)
+
+
+def share_ktc_noise_electrons(c_pd_f: float, c_f_f: float, temperature_k: float = 300.0) -> float:
+    """Noise one conditional sharing adds at the photodiode, electrons rms (seed 003, eq. 1).
+
+    C_F is reset to VF with kTC noise √(kT/C_F) in volts; sharing puts C_F/(C_F + C_PD) of
+    it on the photodiode: √(kT·C_F)/q · C_PD/(C_F + C_PD) electrons. Opening the switch
+    then partitions the thermal charge of the pair: variance kT·C_PD·C_F/(C_PD + C_F)/q².
+    """
+    from_cf = ktc_noise_electrons(c_f_f, temperature_k) * c_pd_f / (c_f_f + c_pd_f)
+    partition = ktc_noise_electrons(c_pd_f * c_f_f / (c_pd_f + c_f_f), temperature_k)
+    return float(np.hypot(from_cf, partition))
+
 
 #: Seed 003 §3 integration times: long, medium, short (s), in a 33.33 ms frame.
 SEED003_INTEGRATIONS_S = (32.8e-3, 0.5e-3, 0.03e-3)
@@ -170,6 +208,11 @@ class OverflowSensor(FrameSensor):
         Frames per second (seed 003: 30).
     height, width, noise, fixed_pattern_seed
         As :class:`~viform.sensors.frame.FrameSensor`.
+    ktc_noise : bool
+        Add the reset noise as the seed's readout samples it (see the module notes). Default
+        False (the seed's own analysis ignores it).
+    temperature_k : float
+        Temperature of the kTC noise, K.
     """
 
     name = "overflow"
@@ -187,8 +230,12 @@ class OverflowSensor(FrameSensor):
         width: int | None = None,
         noise: bool = True,
         fixed_pattern_seed: int = 1288,
+        ktc_noise: bool = False,
+        temperature_k: float = 300.0,
     ):
         parameters = parameters or seed003_pixel_parameters()
+        self.ktc_noise = bool(ktc_noise)
+        self.temperature_k = check_positive("temperature_k", temperature_k)
         frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
         period = 1.0 / frame_rate_hz
         times = tuple(np.atleast_1d(np.asarray(integration_times_s, dtype=np.float64)).tolist())
@@ -299,6 +346,9 @@ class OverflowSensor(FrameSensor):
         row_offset_s = (1.0 / self.frame_rate_hz) / height
         static = isinstance(scene, StillScene)
         n = np.zeros((height, width))
+        ktc = self.ktc_noise and self.noise
+        if ktc:  # the reset that starts the frame leaves kTC charge on C_PD
+            n = n + self.reset_ktc_electrons * rng.standard_normal(n.shape)
         t0 = float(start_s)
         for k, t in enumerate(times):
             lux = self._window_lux(scene, t0, t, row_offset_s, static)
@@ -306,8 +356,13 @@ class OverflowSensor(FrameSensor):
                 n + pixels.collect_electrons(lux, t, rng, self.noise), fw
             )  # eq. 3, V ≥ V_sat
             if k < 2:
+                shared = self.v_reset_v - n * self.parameters.conversion_gain_v_per_e < self.v_f_v
                 n = self._share_electrons(n)  # eqs. 1, 5, 6
+                if ktc:  # C_F's reset noise and the switch's partition noise, where it shared
+                    n = n + np.where(shared, self.share_ktc_electrons * rng.standard_normal(n.shape), 0.0)
             t0 += t
+        if ktc:  # the reference sample is taken after a new, independent reset
+            n = n - self.reset_ktc_electrons * rng.standard_normal(n.shape)
         # CDS: V_res − V3 is the signal; offsets cancel (seed 003, §3).
         return pixels.digitize(n, rng, self.noise)
 
@@ -320,6 +375,22 @@ class OverflowSensor(FrameSensor):
             for r in range(scene.height)
         ]
         return np.stack(rows)
+
+    # ------------------------------------------------------------------ reset noise
+    @property
+    def reset_ktc_electrons(self) -> float:
+        """kTC noise of one photodiode reset, e⁻ rms (≈ 120 e⁻ at 88.9 fF, 300 K)."""
+        return ktc_noise_electrons(self.c_pd_f, self.temperature_k)
+
+    @property
+    def share_ktc_electrons(self) -> float:
+        """Noise added at the photodiode by one conditional sharing, e⁻ rms."""
+        return share_ktc_noise_electrons(self.c_pd_f, self.overflow_capacitance_f, self.temperature_k)
+
+    def readout_reset_noise_electrons(self, shares: int = 0) -> float:
+        """Reset noise in the output difference (signal sampled before the reset, reference
+        after a new one): √2 × the per-reset kTC, plus ``shares`` sharings' noise, e⁻ rms."""
+        return float(np.sqrt(2 * self.reset_ktc_electrons ** 2 + shares * self.share_ktc_electrons ** 2))
 
     # ------------------------------------------------------------------ analytic helpers
     def photocurrent_a(self, lux):
@@ -375,6 +446,9 @@ class OverflowSensor(FrameSensor):
             c_pd_f=self.c_pd_f,
             share_use_time_s=self.share_use_time_s,
             row_share_time_s=self.row_share_time_s,
+            ktc_noise=self.ktc_noise,
+            reset_ktc_electrons=self.reset_ktc_electrons,
+            share_ktc_electrons=self.share_ktc_electrons,
         )
         return d
 
@@ -403,6 +477,48 @@ def seed003_pixel_parameters(**overrides) -> FramePixelParameters:
         adc_bits=12,
         black_offset_dn=64.0,
         adc_range_v=3.2,
+    )
+    kw.update(overrides)
+    return FramePixelParameters(**kw)
+
+
+def lofic_pixel_parameters(lateral_capacitance_f: float = 500e-15, temperature_k: float = 300.0,
+                           **overrides) -> FramePixelParameters:
+    """The lateral-overflow-integration-capacitor (LOFIC) pixel of seed 003 Fig. 5(b) (DR_b).
+
+    Same photodiode and readout chain as :func:`seed003_pixel_parameters` (C_PD = 88.9 fF,
+    3.0 V swing, 60 e⁻ read noise at C_PD = 108 µV), plus an in-pixel C_S (default 500 fF,
+    the seed's C_F) that collects the overflow during the whole integration; PD + C_S are
+    read together at the low conversion gain q/(C_PD + C_S):
+
+    * full well (C_PD + C_S)·3.0 V/q = 11.0 Me⁻ (6.6 × the 4T's 1.67 Me⁻);
+    * read noise 108 µV / (q/(C_PD + C_S)) = 397 e⁻, and the readout's kTC noise of the
+      total node, √2·√(kT(C_PD + C_S))/q = 436 e⁻, together 590 e⁻ rms (the 4T: 60 e⁻ plus
+      √2 × 120 e⁻ when its reset noise is counted the same way).
+
+    So the LOFIC's low end E2 sits ≈ 10 × above the 4T's E1 while its top end rises 6.6 ×:
+    the compressed low-light sensitivity and SNR of the seed's DR_b.
+    """
+    base = seed003_pixel_parameters()
+    c_pd = ELEMENTARY_CHARGE_C / base.conversion_gain_v_per_e
+    c_s = check_positive("lateral_capacitance_f", lateral_capacitance_f)
+    c_tot = c_pd + c_s
+    cg = ELEMENTARY_CHARGE_C / c_tot
+    swing_v = base.full_well_electrons * base.conversion_gain_v_per_e
+    read_v = base.read_noise_electrons * base.conversion_gain_v_per_e
+    ktc = np.sqrt(2.0) * ktc_noise_electrons(c_tot, temperature_k)
+    kw = dict(
+        optics=base.optics,
+        full_well_electrons=swing_v / cg,
+        conversion_gain_v_per_e=cg,
+        read_noise_electrons=float(np.hypot(read_v / cg, ktc)),
+        dark_current_e_per_s=base.dark_current_e_per_s,
+        dsnu_electrons=base.dsnu_electrons * c_tot / c_pd,
+        prnu_fraction=base.prnu_fraction,
+        analog_gain=base.analog_gain,
+        adc_bits=base.adc_bits,
+        black_offset_dn=base.black_offset_dn,
+        adc_range_v=base.adc_range_v,
     )
     kw.update(overrides)
     return FramePixelParameters(**kw)

@@ -9,6 +9,8 @@ name                   sensor
 ``seed001-3seg``       seed 001 fig. 9, three segments
 ``seed003-4t``         seed 003's reference plain 4T APS (33.33 ms integration)
 ``seed003-overflow``   seed 003's conditional-overflow triple-integration pixel
+``seed003-overflow-ktc``  the same with the readout's reset (kTC) noise
+``seed003-lofic``      seed 003 fig. 5(b): lateral-overflow capacitor pixel (DR_b baseline)
 ``spike``              seed 000's spike camera (Q = 100 e⁻, 40 kHz), if
                        :mod:`viform.sensors.spike` is installed
 =====================  ===========================================================
@@ -39,7 +41,7 @@ from collections.abc import Callable
 from viform._validate import ViformError, check_choice
 from viform.light.radiometry import PixelOptics
 from viform.sensors.frame import FramePixelParameters, FrameSensor
-from viform.sensors.overflow import OverflowSensor, seed003_pixel_parameters
+from viform.sensors.overflow import OverflowSensor, lofic_pixel_parameters, seed003_pixel_parameters
 from viform.sensors.segmented import SegmentedExposureSensor
 
 #: Seed 001 total exposure, s (fig. 8: "总曝光时间为 130 us").
@@ -145,6 +147,20 @@ PRESETS: dict[str, tuple[str, Callable]] = {
     "seed003-overflow": (
         "seed 003 conditional-overflow pixel, CF = 500 fF, t = 32.8/0.5/0.03 ms at 30 fps",
         lambda **kw: OverflowSensor(seed003_pixel_parameters(), **kw),
+    ),
+    "seed003-overflow-ktc": (
+        "seed 003 conditional-overflow pixel with the readout's reset (kTC) noise (120 e- per reset)",
+        lambda **kw: OverflowSensor(seed003_pixel_parameters(), ktc_noise=True, **kw),
+    ),
+    "seed003-lofic": (
+        "seed 003 fig. 5(b): lateral-overflow capacitor pixel, C_S = 500 fF read with the photodiode "
+        "at low gain, 33.33 ms at 30 fps",
+        lambda **kw: FrameSensor(
+            lofic_pixel_parameters(),
+            exposure_s=sum((32.8e-3, 0.5e-3, 0.03e-3)),
+            frame_rate_hz=30.0,
+            **kw,
+        ),
     ),
 }
 
