@@ -9,12 +9,18 @@ Thresholds. The seed gives Q only as worked examples (100 e⁻, §4.3; 10⁴ e�
 interval RSD falls below 1 %, §5.1). Real recordings settle it: the intervals of steady
 pixels are nearly pure tick-rounded integrate-and-fire, which needs an *effective*
 threshold of order 10⁴ e⁻ (every per-spike charge noise — photon, reset, comparator —
-lumped into one Gamma(Q_eff) law, :mod:`viform.measure.calibration`). The built-in presets
-therefore use chip level :data:`DEFAULT_THRESHOLD_LEVEL` of :func:`threshold_level_electrons`.
+lumped into one Gamma(Q_eff) law, :mod:`viform.measure.calibration`). Light that changes
+during a recording only adds interval noise, so every recording bounds Q_eff from below:
+static recordings quoted in issue 10 give ≈ 9,500 e⁻ (RSD 0.025 at 17.9 ticks), and
+``viform calibrate`` on the shared 40 kHz clip ``real_uhsr_250x250.npz`` gives
+Q_eff ≥ 16,345 e⁻ (95 % lower bound from its steadiest tiles; fit 20,160 e⁻). The
+built-in presets use the chip level nearest that bound, :data:`DEFAULT_THRESHOLD_LEVEL`
+(16,250 e⁻): the noisiest sensor the real data allow.
 
 The 16 levels are not listed in the seed. viform assumes a linear threshold DAC
 (Q = C·ΔV with ΔV in 16 equal steps): level k (0…15) gives (k + 1) · 1,250 e⁻, i.e.
-1,250 … 20,000 e⁻ (C ≈ 3.2 fF at a 1 V full swing). This is an assumption; a calibrated
+1,250 … 20,000 e⁻ (C ≈ 3.2 fF at a 1 V full swing), so the measured real thresholds fall
+inside the range. This is an assumption; a calibrated
 preset (``viform calibrate``) states its own measured Q instead.
 
 Preset JSON (``save_spike_preset`` writes it; ``load_spike_preset`` validates it)::
@@ -50,9 +56,10 @@ PRESET_VERSION = 1
 THRESHOLD_LEVEL_STEP_ELECTRONS = 1250.0
 #: Number of chip threshold levels (seed 000 §6).
 N_THRESHOLD_LEVELS = 16
-#: Level used by the built-in chip presets: 10,000 e⁻, the effective threshold real
-#: recordings need (see :mod:`viform.measure.calibration` and docs/calibration.md).
-DEFAULT_THRESHOLD_LEVEL = 7
+#: Level used by the built-in chip presets: 16,250 e⁻, the level nearest the lower bound of
+#: the effective threshold measured on the shared real recording (module notes,
+#: docs/calibration.md).
+DEFAULT_THRESHOLD_LEVEL = 12
 
 _TOP_KEYS = ("format", "version", "name", "description", "height", "width", "threshold_level", "sensor",
              "calibration")
@@ -145,8 +152,9 @@ def _chip_parameters(clock_hz: float, **extra) -> SpikeSensorParameters:
     return SpikeSensorParameters(**kw)
 
 
-#: Pixel-to-pixel photo-response (gain) spread of a flat field, std/mean: about 3 % on real
-#: recordings (issue 10 "Realism"; ``viform calibrate`` measures it).
+#: Pixel-to-pixel photo-response (gain) spread of a flat field, std/mean: ≈ 3 % in the flat
+#: regions of static real recordings (issue 10 "Realism"). The shared clip gives ≤ 8.1 %
+#: (``viform calibrate``: an upper bound, the displayed picture's grain included).
 CHIP_GAIN_SPREAD_FRACTION = 0.03
 
 
