@@ -21,7 +21,7 @@ def test_static_light_is_recovered_in_lux():
     sensor = SpikeSensor(threshold_electrons=100, dark_current_e_per_s=20.0)
     lux = 2.0
     stream = sensor.capture(StillScene(np.full((32, 32), lux)), 0.05, seed=5)
-    image = accumulation_image(stream, 0.0499, 0.04)
+    image = accumulation_image(stream, 0.0499, 0.04, align="end")
     spikes = image.spikes_per_s.mean() * 0.04
     # per-pixel counts have relative sd ≈ 1/√(n·Q); the mean over 1024 pixels 32× less
     rel = 1 / np.sqrt(spikes * 100) / 32
@@ -94,7 +94,7 @@ def test_moving_edge_interval_stays_sharp_where_long_accumulation_blurs():
     band = slice(45, 75)
     swept = slice(50, 62)
     interval = interval_image(stream, t).lux
-    accumulation = accumulation_image(stream, t, 0.010).lux
+    accumulation = accumulation_image(stream, t, 0.010, align="end").lux
     err_interval = np.sqrt(np.mean((interval[:, swept] - truth[:, swept]) ** 2))
     err_accumulation = np.sqrt(np.mean((accumulation[:, swept] - truth[:, swept]) ** 2))
     assert err_interval < 0.5 * err_accumulation

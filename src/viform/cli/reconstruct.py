@@ -1,7 +1,8 @@
-"""CLI: ``viform reconstruct`` — images of a spike stream at any instant (seed 000 §3.3)."""
+"""CLI: ``viform reconstruct`` — images of a spike stream at any instant, or a whole-stream video (seed 000 §3.3)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
@@ -10,89 +11,207 @@ import numpy as np
 from viform._validate import ViformError
 from viform.cli._common import open_source as _open
 from viform.cli._common import parse_times as _parse_times
-from viform.cli._common import report as _report
 from viform.cli.app import cli
+
+VIDEO_SUFFIXES = (".mp4", ".gif")
+
+
+def _png(method, display, scale, image, rate_per_tick, peak):
+    """8-bit picture of one image: one fixed mapping for every frame of a run (no flicker)."""
+    from viform.imaging import interval_8bit, inverse_tau_display_8bit, tau_display_8bit
+
+    if method == "interval" and display in ("seed", "inverse"):
+        tau = image.info["tau_ticks"]
+        return tau_display_8bit(tau) if display == "seed" else inverse_tau_display_8bit(tau)
+    if method == "interval" and display == "8bit":
+        return interval_8bit(image.info["tau_ticks"], scale)
+    full = scale if display == "8bit" else peak
+    return np.clip(np.rint(rate_per_tick * 255.0 / full), 0, 255).astype(np.uint8)
 
 
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
-@click.option("--method", type=click.Choice(["accumulation", "interval"]), required=True)
-@click.option("--at", "at", required=True, help="Instant(s) in seconds, comma-separated: --at 0.01,0.02")
+@click.option("--method", type=click.Choice(["accumulation", "interval", "multi-interval", "motion"]), required=True,
+              help="accumulation: spike count over a window; interval: Q/τ of the interval holding the instant; "
+                   "multi-interval: the K spikes on each side (adaptive K); motion: accumulation along the "
+                   "estimated motion over ±120 ticks, falling back to short windows where that fails.")
+@click.option("--at", "at", default=None, help="Instant(s) in seconds, comma-separated: --at 0.01,0.02")
+@click.option("--every", "every", type=int, default=None,
+              help="Whole stream: one image every N ticks (instead of --at).")
 @click.option("--window", "window_s", type=float, default=None,
-              help="Accumulation window before each instant, seconds (default: 40 ticks).")
-@click.option("--out", "out_path", type=click.Path(), required=True,
-              help="A .png for one instant, or a folder (PNGs + light.npz with e-/s and lux).")
+              help="Accumulation window, seconds (default: 41 ticks, the common TFP window).")
+@click.option("--align", type=click.Choice(["centre", "center", "end", "start"]), default="centre", show_default=True,
+              help="Accumulation window placement: centred on the instant (the convention of published "
+                   "spike-camera figures), ending at it (causal, live use) or starting at it.")
+@click.option("--spikes-per-side", "spikes_per_side", type=int, default=3, show_default=True,
+              help="multi-interval: spikes used on each side of the instant (K; 2K − 1 intervals).")
+@click.option("--fixed-k", is_flag=True, help="multi-interval: always use K spikes a side (no adaptive shrinking).")
+@click.option("--out", "out_path", type=click.Path(), default=None,
+              help="A .png for one instant, or a folder (PNGs + light.npz with spikes/s, e-/s and lux).")
+@click.option("--video", "video", type=click.Path(), default=None,
+              help="Also write the images as a video (.mp4 or .gif).")
+@click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of --video.")
+@click.option("--no-png", is_flag=True, help="Folder output without the per-instant PNGs (light.npz only).")
 @click.option("--height", type=int, default=None, help="Height of a .dat file.")
 @click.option("--width", type=int, default=None, help="Width of a .dat file.")
 @click.option("--clock-hz", type=float, default=None, help="Clock of a .dat/.npz file (default 40 kHz).")
 @click.option("--no-flip", is_flag=True, help=".dat rows stored upright (some simulators).")
 @click.option("--display", type=click.Choice(["linear", "seed", "inverse", "8bit"]), default="linear",
               show_default=True,
-              help="PNG mapping: linear light (/max), the seed's 255−τ, 1/τ, or the common TFP/TFI 8-bit.")
+              help="PNG/video mapping: linear light (the first image's 99.9th percentile is white, for every "
+                   "image), interval's 255−τ (seed) or 1/τ (inverse), or the common TFP/TFI 8-bit (--scale).")
 @click.option("--scale", type=float, default=1.0, show_default=True,
               help="Full-scale firing rate per tick for --display 8bit (0.6 for REDS simulations).")
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary of what was written.")
-def reconstruct(file, method, at, window_s, out_path, height, width, clock_hz, no_flip, display, scale, as_json):
-    """Images of the viform in FILE at any instant, by accumulation or interval imaging.
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
+@click.option("--json-file", "json_file", type=click.Path(dir_okay=False), default=None,
+              help="Also write the JSON summary to this file.")
+def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed_k, out_path, video, fps, no_png,
+                height, width, clock_hz, no_flip, display, scale, as_json, json_file):
+    """Images of the spike stream in FILE at chosen instants (--at) or over the whole stream (--every).
 
-    PNG mappings (--display): accumulation shows linear light or, with 8bit, the common TFP
-    image; interval shows 1/τ (linear, inverse), the seed's 255 − τ (seed) or the common TFI
-    image (8bit).
+    Accumulation windows are centred on each instant by default (--align), as in published
+    spike-camera figures: the 8-bit TFP image of REDS clips is
+    --method accumulation --display 8bit --scale 0.6 (41 ticks). Whole-stream output
+    (--every N) is written frame by frame in bounded memory, with a progress bar.
     """
-    from viform._io import atomic_path, check_output_folder, save_image
-    from viform.imaging import accumulation_image, interval_8bit, interval_image, inverse_tau_display_8bit
-    from viform.imaging.interval import tau_display_8bit
+    from viform._io import atomic_path, check_output_folder, save_image, write_json
+    from viform.imaging.sequence import NpzFrameWriter, reconstruct_ticks
 
-    out = Path(out_path)
-    if out.suffix.lower() != ".png" and out.suffix and not out.is_dir():
+    # ---- validate everything before any work
+    if (at is None) == (every is None):
+        raise ViformError("give either --at (instants in seconds) or --every N (ticks, whole stream), not both "
+                          "or neither")
+    if every is not None and every < 1:
+        raise ViformError(f"--every = {every!r} is not allowed: give a whole number of ticks ≥ 1")
+    if out_path is None and video is None:
+        raise ViformError("nothing to write: give --out (a .png or a folder) and/or --video (.mp4 or .gif)")
+    out = Path(out_path) if out_path is not None else None
+    if out is not None and out.suffix.lower() != ".png" and out.suffix and not out.is_dir():
         raise ViformError(f"--out = {out_path!r} is not allowed: give a .png file (one instant) or a folder")
-    if method == "accumulation" and display == "seed":
-        raise ViformError("--display seed (255 − τ) is not allowed with --method accumulation: it maps intervals")
+    if video is not None and Path(video).suffix.lower() not in VIDEO_SUFFIXES:
+        raise ViformError(f"--video = {video!r} is not allowed: give a path ending in {' or '.join(VIDEO_SUFFIXES)}")
+    if not fps > 0:
+        raise ViformError(f"--fps = {fps!r} is not allowed: it must be > 0")
+    if display == "seed" and method != "interval" or display == "inverse" and method != "interval":
+        raise ViformError(f"--display {display} is not allowed with --method {method}: it maps intervals "
+                          "(use --method interval, or --display linear / 8bit)")
     if not scale > 0:
         raise ViformError(f"--scale = {scale!r} is not allowed: it must be > 0")
-    check_output_folder("--out", (out.parent if out.suffix.lower() == ".png" else out).resolve())
+    if spikes_per_side < 1:
+        raise ViformError(f"--spikes-per-side = {spikes_per_side!r} is not allowed: give a whole number ≥ 1")
+    if window_s is not None and not window_s > 0:
+        raise ViformError(f"--window = {window_s!r} is not allowed: it must be > 0 seconds")
+    if out is not None:
+        check_output_folder("--out", (out.parent if out.suffix.lower() == ".png" else out).resolve())
+    if video is not None:
+        check_output_folder("--video", Path(video).resolve().parent)
+    if json_file is not None:
+        check_output_folder("--json-file", Path(json_file).resolve().parent)
     source = _open(file, height, width, clock_hz, flip=not no_flip)
-    times = _parse_times(at)
-    ticks = [source.tick_of(t, "--at") for t in times]
-    if window_s is None:
-        window_s = 40 / source.clock_hz
-    images, pngs = [], []
-    for t in times:
-        if method == "accumulation":
-            image = accumulation_image(source, t, window_s)
-            rate_per_tick = image.spikes_per_s / source.clock_hz
-            if display == "8bit":
-                png = np.clip(np.rint(rate_per_tick * 255 / scale), 0, 255).astype(np.uint8)
-            else:
-                peak = image.spikes_per_s.max()
-                png = np.zeros(image.spikes_per_s.shape, np.uint8) if peak == 0 else \
-                    np.rint(image.spikes_per_s / peak * 255).astype(np.uint8)
-        else:
-            image = interval_image(source, t)
-            tau = image.info["tau_ticks"]
-            png = {"seed": tau_display_8bit, "inverse": inverse_tau_display_8bit,
-                   "linear": inverse_tau_display_8bit}.get(display, lambda x: interval_8bit(x, scale))(tau)
-        images.append(image)
-        pngs.append(png)
-    if out.suffix.lower() == ".png":
-        if len(times) != 1:
-            raise ViformError(f"--out = {out_path!r} is one PNG but --at gives {len(times)} instants: give a folder")
-        save_image(out, pngs[0])
-        _report(as_json, f"wrote {out}", {"files": [str(out)], "times_s": times, "ticks": ticks})
+    if at is not None:
+        times = _parse_times(at)
+        ticks = [source.tick_of(t, "--at") for t in times]
+    else:
+        ticks = list(range(every // 2, source.n_ticks, every)) or [source.n_ticks // 2]
+        times = [source.start_time_s + (k + 0.5) / source.clock_hz for k in ticks]
+    if len(set(ticks)) != len(ticks) or ticks != sorted(ticks):
+        raise ViformError(f"--at = {at!r} is not allowed: give instants in increasing order, one per tick")
+    if out is not None and out.suffix.lower() == ".png" and len(ticks) != 1:
+        raise ViformError(f"--out = {out_path!r} is one PNG but there are {len(ticks)} instants: give a folder")
+    window_ticks = 41 if window_s is None else max(1, int(round(window_s * source.clock_hz)))
+
+    # ---- reconstruct and write frame by frame
+    files = []
+    folder = out if out is not None and out.suffix.lower() != ".png" else None
+    writer = video_writer = None
+    npz_context = None
+    peak = None
+    summary_rows = []
+    try:
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            npz_context = atomic_path(folder / "light.npz")
+            tmp = npz_context.__enter__()
+            from viform.imaging.units import sensor_parameters_of
+
+            params = sensor_parameters_of(source)
+            arrays = {"spikes_per_s": np.float32}
+            if params is not None or source.threshold_electrons is not None:
+                arrays["electrons_per_s"] = np.float32
+            if params is not None:
+                arrays["lux"] = np.float32
+            arrays["censored"] = np.bool_
+            writer = NpzFrameWriter(tmp, len(ticks), (source.height, source.width), arrays)
+            writer.add_array("times_s", np.array(times))
+            writer.add_array("ticks", np.array(ticks))
+        if video is not None:
+            import imageio.v2 as imageio
+
+            video_context = atomic_path(Path(video))
+            video_tmp = video_context.__enter__()
+            kwargs = {"fps": fps, "macro_block_size": 2} if Path(video).suffix.lower() == ".mp4" else \
+                {"duration": 1000.0 / fps, "loop": 0}
+            video_writer = imageio.get_writer(video_tmp, **kwargs)
+        frames = reconstruct_ticks(source, method, ticks, window_ticks=window_ticks, align=align,
+                                   spikes_per_side=spikes_per_side, adaptive=not fixed_k,
+                                   progress=len(ticks) > 1)
+        for (k, image), t in zip(frames, times, strict=True):
+            rate = image.spikes_per_s / source.clock_hz
+            if peak is None:
+                peak = float(np.percentile(rate, 99.9)) or float(rate.max()) or 1.0
+            png = _png(method, display, scale, image, rate, peak)
+            if folder is not None:
+                writer.append("spikes_per_s", image.spikes_per_s)
+                if "electrons_per_s" in arrays:
+                    writer.append("electrons_per_s", image.electrons_per_s)
+                if "lux" in arrays:
+                    writer.append("lux", image.lux)
+                writer.append("censored", np.zeros(rate.shape, bool) if image.censored is None else image.censored)
+                if not no_png:
+                    path = folder / f"{method}_{k:07d}_{t:.6f}s.png"
+                    save_image(path, png)
+                    files.append(str(path))
+            elif out is not None:
+                save_image(out, png)
+                files.append(str(out))
+            if video_writer is not None:
+                video_writer.append_data(png)
+            summary_rows.append((k, t, float(np.mean(rate)), None if image.lux is None else float(np.mean(image.lux))))
+        if writer is not None:
+            writer.close()
+            writer = None
+            npz_context.__exit__(None, None, None)
+            npz_context = None
+            files.append(str(folder / "light.npz"))
+        if video_writer is not None:
+            video_writer.close()
+            video_writer = None
+            video_context.__exit__(None, None, None)
+            files.append(str(video))
+    except BaseException as exc:
+        if video_writer is not None:
+            video_writer.close()
+            video_context.__exit__(type(exc), exc, exc.__traceback__)
+        if npz_context is not None:
+            npz_context.__exit__(type(exc), exc, exc.__traceback__)
+        raise
+    summary = {"method": method, "align": align if method == "accumulation" else None,
+               "window_ticks": window_ticks if method == "accumulation" else None,
+               "frames": len(ticks), "times_s": times, "ticks": ticks,
+               "mean_firing_rate_per_tick": [r[2] for r in summary_rows],
+               "mean_lux": [r[3] for r in summary_rows], "files": files}
+    if json_file is not None:
+        write_json(json_file, summary)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
         return
-    out.mkdir(parents=True, exist_ok=True)
-    files = [out / f"{method}_{t:.6f}s.png" for t in times]
-    for path, png in zip(files, pngs, strict=True):
-        save_image(path, png)
-    arrays = {"times_s": np.array(times), "ticks": np.array(ticks),
-              "spikes_per_s": np.stack([i.spikes_per_s for i in images])}
-    if images[0].electrons_per_s is not None:
-        arrays["electrons_per_s"] = np.stack([i.electrons_per_s for i in images])
-    if images[0].lux is not None:
-        arrays["lux"] = np.stack([i.lux for i in images])
-    if images[0].censored is not None:
-        arrays["censored"] = np.stack([i.censored for i in images])
-    with atomic_path(out / "light.npz") as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, **arrays)
-    _report(as_json, f"wrote {len(times)} PNG(s) and light.npz to {out}",
-            {"files": [str(f) for f in files] + [str(out / "light.npz")], "times_s": times, "ticks": ticks})
+    click.echo(f"{method} images of {file}: {len(ticks)} frame(s)")
+    click.echo(f"{'tick':>8} {'time (s)':>11} {'rate (/tick)':>13} {'mean (lux)':>11}")
+    shown = summary_rows if len(summary_rows) <= 12 else summary_rows[:5] + [None] + summary_rows[-5:]
+    for row in shown:
+        if row is None:
+            click.echo(f"{'…':>8}")
+            continue
+        k, t, r, lux = row
+        click.echo(f"{k:>8d} {t:>11.6f} {r:>13.4g} {'—' if lux is None else format(lux, '.4g'):>11}")
+    click.echo(f"wrote {len(files)} file(s)" + (f" to {folder}" if folder is not None else f": {', '.join(files)}"))

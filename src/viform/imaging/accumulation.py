@@ -1,9 +1,15 @@
-"""Accumulation imaging: a virtual exposure over any window of the viform (seed 000 §3.3.1).
+"""Accumulation imaging: a virtual exposure over any window of the spike stream (seed 000 §3.3.1).
 
-The image at instant T2 counts the spikes in the window [T1, T2) before it; more spikes
-mean more light. Each spike stands for Q electrons, so the mean photo-current over the
-window is count·Q / (T2 − T1) electrons per second. T1 and T2 are free: sliding the
-window gives continuous imaging, widening it trades motion blur for noise.
+The image counts the spikes in a window [T1, T2); more spikes mean more light. Each spike
+stands for Q electrons, so the mean photo-current over the window is count·Q / (T2 − T1)
+electrons per second. T1 and T2 are free: sliding the window gives continuous imaging,
+widening it trades motion blur for noise.
+
+Window alignment: the seed's eq. has the window end at the instant (``align="end"``); the
+spike-camera literature's "TFP" image (texture from playback, e.g. Spike-Zoo, SpikeCV and
+the published REDS figures) centres it on the instant, which is what sharpens the image of
+a moving scene at that instant. viform's default is ``"centre"``, the published
+convention; ``"end"`` (causal, for live use) and ``"start"`` are available.
 """
 
 from __future__ import annotations
@@ -11,17 +17,38 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from viform._validate import ViformError, check_int, check_positive
+from viform._validate import ViformError, check_choice, check_int, check_positive
 from viform.imaging.units import LightImage, light_from_rate
 from viform.stream.container import SpikeSource
 
+#: Window alignments: the window is centred on the instant's tick, ends with it, or starts with it.
+ALIGNMENTS = ("centre", "end", "start")
+DEFAULT_ALIGN = "centre"
 
-def window_ticks(source: SpikeSource, t_s: float, window_s: float) -> tuple[int, int]:
-    """Ticks [k0, k1) of the window of length ``window_s`` ending at instant ``t_s`` (inclusive of its tick)."""
+
+def check_align(align: str, name: str = "align") -> str:
+    """``align`` validated (``"center"`` accepted as a spelling of ``"centre"``)."""
+    if align == "center":
+        return "centre"
+    return check_choice(name, align, ALIGNMENTS)
+
+
+def window_bounds(tick: int, n: int, n_ticks: int, align: str = DEFAULT_ALIGN) -> tuple[int, int]:
+    """Ticks [k0, k1) of an ``n``-tick window aligned on ``tick``, clipped to [0, ``n_ticks``).
+
+    ``centre``: ticks tick − ⌊n/2⌋ … (odd n is symmetric: 41 ticks = the instant ± 20);
+    ``end``: the n ticks up to and including ``tick``; ``start``: the n ticks from ``tick`` on.
+    """
+    align = check_align(align)
+    k0 = {"centre": tick - n // 2, "end": tick - n + 1, "start": tick}[align]
+    return max(0, k0), min(n_ticks, k0 + n)
+
+
+def window_ticks(source: SpikeSource, t_s: float, window_s: float, align: str = DEFAULT_ALIGN) -> tuple[int, int]:
+    """Ticks [k0, k1) of the window of length ``window_s`` aligned on the tick of instant ``t_s``."""
     check_positive("window_s", window_s)
-    k1 = source.tick_of(t_s) + 1
     n = max(1, int(round(window_s * source.clock_hz)))
-    return max(0, k1 - n), k1
+    return window_bounds(source.tick_of(t_s), n, source.n_ticks, align)
 
 
 def spike_counts(source: SpikeSource, start_tick: int, stop_tick: int, block_ticks: int = 4096) -> np.ndarray:
@@ -35,18 +62,21 @@ def spike_counts(source: SpikeSource, start_tick: int, stop_tick: int, block_tic
 
 
 def accumulation_image(source: SpikeSource, t_s: float, window_s: float,
-                       sensor_parameters=None) -> LightImage:
-    """Light at instant ``t_s`` from the spikes of the ``window_s`` before it (seed 000 §3.3.1).
+                       sensor_parameters=None, align: str = DEFAULT_ALIGN) -> LightImage:
+    """Light at instant ``t_s`` from the spikes of a ``window_s`` window (seed 000 §3.3.1).
 
-    The window is clipped at the stream's start; the rate uses the window's actual length.
+    ``align``: ``"centre"`` (default; the window is centred on the instant, the convention
+    of published TFP figures), ``"end"`` (the window ends at the instant, as in the seed:
+    causal) or ``"start"``. The window is clipped at the stream's ends; the rate uses the
+    window's actual length.
     Returns a :class:`~viform.imaging.units.LightImage` (spikes/s, e⁻/s and lux when Q and
     the sensor are known).
     """
-    k0, k1 = window_ticks(source, t_s, window_s)
+    k0, k1 = window_ticks(source, t_s, window_s, align)
     counts = spike_counts(source, k0, k1)
     duration = (k1 - k0) / source.clock_hz
     return light_from_rate(counts / duration, source, sensor_parameters, method="accumulation",
-                           window_ticks=k1 - k0)
+                           window_ticks=k1 - k0, first_tick=k0, align=check_align(align))
 
 
 def accumulation_8bit(source: SpikeSource, tick: int, half_window_ticks: int = 20, scale: float = 1.0) -> np.ndarray:
