@@ -6,8 +6,9 @@ three times in this process: serially without dask (the plain reference: the sam
 ``build_dataset`` on a LocalCluster of 1 worker and of 2 workers (processes, 1 thread each).
 Each cluster is warmed up on a one-clip set first, so the rates count conversion, not start-up
 (the start-up time is printed separately). Prints clips/s, pixel-ticks/s, the ratio to the
-reference, the speed-up of 2 workers over 1, the workers' peak resident memory, the load
-average, and checks that the three runs wrote identical bits.
+reference, the speed-up of 2 workers over 1, the conversion rate per CPU-second of a worker
+(what one free core would give: not skewed by other load on a shared machine), the workers'
+peak resident memory, the load average, and checks that the three runs wrote identical bits.
 
 Run:  python benchmarks/bench_dataset.py [--clips 8] [--frames 10] [--height 125] [--width 200] [--json out.json]
 """
@@ -100,10 +101,12 @@ def main() -> None:
     print(f"{args.clips} clips of {args.frames} frames at 1 kHz, {args.width}×{args.height} px, 40 kHz clock: "
           f"{pixel_ticks / args.clips:.3g} pixel-ticks a clip")
     print(f"load average (1 min) before {load_before[0]:.2f}, after {load_after[0]:.2f}; {os.cpu_count()} CPU cores")
-    print(f"{'run':<22}{'clips/s':>10}{'Mpixel-ticks/s':>16}{'vs serial':>11}{'start-up s':>12}{'peak RSS MB':>13}")
+    print(f"{'run':<18}{'clips/s':>9}{'Mpixel-ticks/s':>16}{'vs serial':>11}{'Mpx-ticks/CPU-s':>17}"
+          f"{'start-up s':>12}{'peak RSS MB':>13}")
     for name, s in (("serial, no dask", serial), ("dask, 1 worker", one), ("dask, 2 workers", two)):
-        print(f"{name:<22}{s['clips_per_s']:>10.3g}{s['pixel_ticks_per_s'] / 1e6:>16.4g}"
+        print(f"{name:<18}{s['clips_per_s']:>9.3g}{s['pixel_ticks_per_s'] / 1e6:>16.4g}"
               f"{s['pixel_ticks_per_s'] / serial['pixel_ticks_per_s']:>11.3g}"
+              f"{pixel_ticks / s['cpu_seconds'] / 1e6:>17.4g}"
               f"{s.get('startup_s', 0.0):>12.3g}{s['worker_peak_rss_mb']:>13.4g}")
     speedup = two["pixel_ticks_per_s"] / one["pixel_ticks_per_s"]
     print(f"speed-up, 2 workers over 1: {speedup:.3g}× (goal ≥ 1.7× on 2 free cores)")

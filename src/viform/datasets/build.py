@@ -229,6 +229,7 @@ def convert_clip(task: ClipTask) -> dict:
     from numba import get_num_threads, set_num_threads
 
     started = time.perf_counter()
+    cpu_started = time.thread_time()  # this worker thread's CPU time: a rate that other load does not skew
     clip, out = task.clip, Path(task.out)
     dat = out / SPIKE_DIR / f"{clip.name}.dat"
     _remove_stale(out, clip.name)
@@ -238,7 +239,9 @@ def convert_clip(task: ClipTask) -> dict:
     threads = get_num_threads()
     set_num_threads(1)  # one clip per worker thread: parallelism comes from the workers
     try:
-        return _convert(task, dat, started)
+        result = _convert(task, dat, started)
+        result["cpu_seconds"] = time.thread_time() - cpu_started
+        return result
     finally:
         set_num_threads(threads)
 
@@ -525,6 +528,7 @@ def _summary(out, clips, rows, failed, seconds, workers) -> dict:
         "bytes": sum(r["bytes"] for r in rows.values()),
         "pixel_ticks_converted": pixel_ticks,
         "seconds": seconds,
+        "cpu_seconds": sum(r.get("cpu_seconds", 0.0) for r in converted),
         "clips_per_s": len(converted) / seconds if seconds > 0 else 0.0,
         "pixel_ticks_per_s": pixel_ticks / seconds if seconds > 0 else 0.0,
         "workers": workers,
