@@ -51,6 +51,17 @@ SENSOR_DESCRIPTIONS = {
     "gated": "range-gated CCD, 905 nm laser, 200 pulses a frame, gate from 40 m (scenes with range only)",
 }
 DEFAULT_SENSORS = tuple(SENSOR_DESCRIPTIONS)
+#: Short labels for tables and figures (the key, as given to ``--sensors``, in brackets).
+SENSOR_LABELS = {
+    "cmos-short": "CMOS 1 ms (cmos-short)",
+    "cmos": "CMOS 10 ms (cmos)",
+    "seed001-2seg": "segmented, 2 segments (seed001-2seg)",
+    "seed001-3seg": "segmented, 3 segments (seed001-3seg)",
+    "seed003-4t": "plain 4T 33 ms (seed003-4t)",
+    "seed003-overflow": "conditional overflow (seed003-overflow)",
+    "highspeed": "high-speed 1 667 fps, AE (highspeed)",
+    "gated": "gated CCD, laser returns (gated)",
+}
 #: Gated camera of the comparison: laser pulses per frame and near edge of the gate, m.
 GATED_PULSES, GATED_RANGE_M = 200, 40.0
 #: Spike reconstructions reported as separate rows.
@@ -119,6 +130,7 @@ class Estimate:
     saturated: np.ndarray
     underexposed: np.ndarray
     source_time_s: tuple  # (start, end) of the light this image integrates
+    integration_s: np.ndarray | None = None  # per pixel, where each pixel integrates its own time
 
 
 @dataclass
@@ -217,7 +229,7 @@ def spike_estimates(stream, instants_s, method: str, window_s: float = ACCUMULAT
             tau = img.info["tau_ticks"]
             saturated = firing_every_tick(stream, t)
             under = img.censored if img.censored is not None else np.zeros(tau.shape, bool)
-            out.append(Estimate(img.lux, saturated, under, (t, t)))
+            out.append(Estimate(img.lux, saturated, under, (t, t), tau * tick))
         else:
             best = best_spike_image(stream, t)
             out.append(best)
@@ -225,7 +237,7 @@ def spike_estimates(stream, instants_s, method: str, window_s: float = ACCUMULAT
 
 
 #: Public reconstructions of :mod:`viform.imaging` better than accumulation and interval, best first.
-BEST_METHODS = ("motion_compensated_image", "best_image")
+BEST_METHODS = ("motion_compensated_image", "multi_interval_image")
 
 
 def firing_every_tick(stream, t_s: float, ticks: int = 8) -> np.ndarray:
@@ -265,7 +277,10 @@ def best_spike_image(stream, t_s: float) -> Estimate:
     else:
         sat = firing_every_tick(stream, t_s)
         under = img.censored if img.censored is not None else ~(lux > 0)
-    return Estimate(lux, sat, under, (t_s, t_s))
+    integration = None
+    if "reach_ticks" in img.info:  # motion-compensated: ticks accumulated before and after the instant
+        integration = (np.asarray(img.info["reach_ticks"]).sum(axis=0) + 1) / stream.clock_hz
+    return Estimate(lux, sat, under, (t_s, t_s), integration)
 
 
 def highspeed_estimates(result, config, instants_s) -> list:
@@ -297,7 +312,7 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
     if key == "gated":
         active = getattr(scene, "active", None)
         if active is None:
-            return [Shot(key, key, desc, skipped="the scene has no range (the gated camera needs a "
+            return [Shot(key, SENSOR_LABELS[key], desc, skipped="the scene has no range (the gated camera needs a "
                                                    "laser-lit scene with distances, e.g. night-road-fog)")]
         sensor = make_compare_sensor(key)
         frame = sensor.capture_frame(active, seed=seed)
@@ -305,7 +320,7 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
         p = sensor.parameters.pixel
         est = Estimate(np.maximum(e, 0.0), frame.dn >= p.max_dn * frame.readouts,
                        e < _noise_floor_electrons(p, 0.0), (0.0, sensor.frame_time_s()))
-        shot = Shot(key, "gated CCD (laser returns, e⁻)", desc, [est] * len(instants_s), sensor.describe(),
+        shot = Shot(key, SENSOR_LABELS[key], desc, [est] * len(instants_s), sensor.describe(),
                     time_resolution_s=sensor.pulses * sensor.timing.width_s,
                     latency_s=1.0 / sensor.frame_rate_hz + sensor.frame_time_s(),
                     data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
@@ -326,13 +341,15 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
                 tres = ACCUMULATION_WINDOW_S
                 lat = ACCUMULATION_WINDOW_S + 1 / par.clock_hz
             else:
-                # Each pixel integrates its own interval: report the median interval where the scene
-                # moves (all pixels if it does not); a pixel shows a change at its next spike.
+                # Each pixel integrates its own time: report the median where the scene moves (all
+                # pixels if it does not); a pixel shows a change at its next spike.
                 from viform.imaging import interval_image
 
                 taus = []
-                for t in instants_s:
-                    tau = interval_image(stream, t).info["tau_ticks"] / par.clock_hz
+                for t, est in zip(instants_s, ests, strict=True):
+                    tau = est.integration_s
+                    if tau is None:
+                        tau = interval_image(stream, t).info["tau_ticks"] / par.clock_hz
                     mask = scene.moving_mask(t) if hasattr(scene, "moving_mask") else np.ones(tau.shape, bool)
                     taus.append(np.median(tau[mask] if mask.any() else tau))
                 tres = float(np.median(taus))
@@ -356,7 +373,7 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
         config = replace(base, n_frames=n, seed=seed, scene_samples=8)
         result = run_highspeed(scene, config)
         ests = highspeed_estimates(result, config, instants_s)
-        return [Shot(key, "high-speed camera (AE)", desc, ests,
+        return [Shot(key, SENSOR_LABELS[key], desc, ests,
                      {**result.config, "timing": result.timing, "link": result.plan},
                      time_resolution_s=float(np.median(result.exposure_s)), latency_s=period,
                      data_rate_mb_per_s=data_rate_mb_per_s(h, w, config.pixel_parameters.adc_bits, 1 / period),
@@ -365,12 +382,12 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
     try:
         stack = sensor.capture(scene, duration_s, seed=seed)
     except ViformError as exc:
-        return [Shot(key, key, desc, skipped=str(exc))]
+        return [Shot(key, SENSOR_LABELS[key], desc, skipped=str(exc))]
     kind = {"seed001-2seg": "segmented", "seed001-3seg": "segmented", "seed003-overflow": "overflow"}.get(key,
                                                                                                          "linear")
     ests = frame_estimates(sensor, stack, instants_s, kind)
     p = sensor.parameters
-    return [Shot(key, key, desc, ests, sensor.describe(), time_resolution_s=sensor.exposure_s,
+    return [Shot(key, SENSOR_LABELS[key], desc, ests, sensor.describe(), time_resolution_s=sensor.exposure_s,
                  latency_s=1.0 / sensor.frame_rate_hz,
                  data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
                  frame_rate_hz=sensor.frame_rate_hz, raw=stack)]

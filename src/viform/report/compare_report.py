@@ -341,7 +341,8 @@ def write_report(result, out_dir, command: str = "") -> dict:
                  f"images compared at {', '.join(f'{t * 1e3:.2f} ms' for t in instants)}.{e(demand_text)} "
                  f"Every sensor sees the same light (illuminance on the sensor plane) and is used at its "
                  f"documented settings.{' Command: <code>' + e(command) + '</code>.' if command else ''}"
-                 + (f" Run time {result['run_time_s']:.1f} s." if result.get("run_time_s") else "") + "</p>")
+                 + (f" Shooting and scoring took {result['run_time_s']:.1f} s." if result.get("run_time_s") else "")
+                 + "</p>")
     parts.append("<section id='verdict'><h2>Who wins on what</h2><ul class='verdict'>")
     parts += [f"<li>{e(line)}</li>" for line in result["verdict"]]
     parts.append("</ul><p class='note'>Derived from the metrics below each time the report is made.</p></section>")
