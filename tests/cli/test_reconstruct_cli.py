@@ -1,0 +1,78 @@
+"""viform reconstruct: alignment, every method, whole-stream video and light.npz, bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from viform.cli import main
+from viform.light.scenes import TranslatingScene
+from viform.sensors.spike import SpikeSensor
+from viform.stream.io import save_spikes
+
+
+def run(args, capsys):
+    code = main(args)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    sensor = SpikeSensor(threshold_electrons=1000.0)
+    scene = TranslatingScene(32, 48, velocity_px_per_s=(2000.0, 0.0), min_lux=5.0, max_lux=50.0, period_px=16)
+    path = tmp_path_factory.mktemp("clip") / "clip.zarr"
+    save_spikes(path, sensor.capture(scene, 200 / 40_000, seed=1))
+    return path
+
+
+@pytest.mark.parametrize("method", ["accumulation", "interval", "multi-interval", "motion"])
+def test_whole_stream_every_method(clip, tmp_path, capsys, method):
+    out = tmp_path / "frames"
+    video = tmp_path / "movie.mp4"
+    code, stdout, err = run(["reconstruct", str(clip), "--method", method, "--every", "50", "--out", str(out),
+                             "--video", str(video), "--json"], capsys)
+    assert code == 0, err
+    summary = json.loads(stdout)
+    assert summary["ticks"] == [25, 75, 125, 175]
+    light = np.load(out / "light.npz")
+    assert light["lux"].shape == (4, 32, 48) and np.all(light["lux"] >= 0)
+    assert np.all(np.isfinite(light["lux"])) and light["ticks"].tolist() == [25, 75, 125, 175]
+    # the scene's light is 5–50 lux: every method's frame mean lies in it
+    assert np.all((light["lux"].mean(axis=(1, 2)) > 5) & (light["lux"].mean(axis=(1, 2)) < 50))
+    assert video.stat().st_size > 0 and len(list(out.glob("*.png"))) == 4
+
+
+def test_align_moves_the_window(clip, tmp_path, capsys):
+    results = {}
+    for align in ("centre", "end", "start"):
+        code, stdout, err = run(["reconstruct", str(clip), "--method", "accumulation", "--at", "0.0025",
+                                 "--align", align, "--out", str(tmp_path / f"{align}.png"), "--json"], capsys)
+        assert code == 0, err
+        results[align] = json.loads(stdout)
+    assert results["centre"]["align"] == "centre" and results["centre"]["window_ticks"] == 41
+    images = {a: (tmp_path / f"{a}.png").read_bytes() for a in results}
+    assert images["centre"] != images["end"] != images["start"]
+
+
+def test_table_and_json_file(clip, tmp_path, capsys):
+    code, stdout, err = run(["reconstruct", str(clip), "--method", "interval", "--at", "0.001,0.002",
+                             "--out", str(tmp_path / "f"), "--json-file", str(tmp_path / "s.json")], capsys)
+    assert code == 0, err
+    assert "rate (/tick)" in stdout and "mean (lux)" in stdout
+    assert json.loads((tmp_path / "s.json").read_text())["ticks"] == [40, 80]
+
+
+@pytest.mark.parametrize("args, flag", [
+    (["--every", "0"], "--every"),
+    (["--at", "0.001", "--every", "5"], "--every"),
+    (["--at", "0.001", "--video", "x.avi"], "--video"),
+    (["--at", "0.001", "--fps", "0", "--video", "x.mp4"], "--fps"),
+    (["--at", "0.001", "--spikes-per-side", "0"], "--spikes-per-side"),
+    (["--at", "0.002,0.001"], "--at"),
+])
+def test_bad_input_is_one_line_naming_the_flag(clip, tmp_path, capsys, args, flag):
+    code, _, err = run(["reconstruct", str(clip), "--method", "multi-interval", "--out", str(tmp_path / "o"), *args],
+                       capsys)
+    assert code == 2 and flag in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o" / "light.npz").exists()
