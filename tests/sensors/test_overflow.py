@@ -243,3 +243,68 @@ def test_row_stagger_for_time_varying_scenes():
 def test_bad_input_names_the_parameter(kwargs, name):
     with pytest.raises(ViformError, match=name):
         OverflowSensor(**kwargs)
+
+
+# ----------------------------------------------------------------------------- issue 16: kTC, LOFIC, PGA
+
+def test_reset_ktc_noise_as_the_seed_samples_it():
+    """Seed 003 §3 reads the signal, then resets the photodiode and reads the reset level, so
+    the two samples hold two independent resets' kTC noise: √(kT·C_PD)/q = 119.8 e⁻ per reset
+    at 88.9 fF and 300 K (issue 16: ≈ 120 e⁻), √2 × that = 169.4 e⁻ in the difference. A
+    sharing adds √(kT·C_F)/q · C_PD/(C_F + C_PD) (C_F's reset) ⊕ √(kT·C_PD·C_F/(C_PD + C_F))/q
+    (the switch's partition) = 118.4 e⁻."""
+    from viform.sensors.overflow import ktc_noise_electrons, share_ktc_noise_electrons
+
+    s = OverflowSensor(seed003_pixel_parameters(), ktc_noise=True)
+    assert s.c_pd_f == pytest.approx(88.9e-15, rel=1e-3)
+    assert s.reset_ktc_electrons == pytest.approx(120.0, abs=0.5)
+    assert s.readout_reset_noise_electrons() == pytest.approx(np.sqrt(2) * 119.76, abs=0.1)
+    assert share_ktc_noise_electrons(88.9e-15, 500e-15) == pytest.approx(
+        np.hypot(ktc_noise_electrons(500e-15) * 88.9 / 588.9, ktc_noise_electrons(88.9 * 500 / 588.9 * 1e-15)))
+    assert s.share_ktc_electrons == pytest.approx(118.4, abs=0.2)
+
+
+def test_ktc_noise_adds_its_variance_in_the_dark():
+    """Monte Carlo, 64 × 64 dark pixels, 16-bit ADC (1 DN = 27 e⁻, quantization negligible):
+    turning the kTC noise on adds 2 × 119.8² e⁻² of variance (no sharing in the dark).
+    Tolerance 4·√(2/N) of the total variance (N = 4 096)."""
+    p = seed003_pixel_parameters(adc_bits=16, dsnu_electrons=0.0)
+    dark = StillScene(np.zeros((64, 64)))
+    var = {}
+    for ktc in (False, True):
+        s = OverflowSensor(p, ktc_noise=ktc, height=64, width=64)
+        dn = s.capture_frame(dark, 0.0, seed=11).astype(float)
+        var[ktc] = (dn / p.system_gain_dn_per_e).var()
+    added = var[True] - var[False]
+    assert added == pytest.approx(2 * 119.76 ** 2, abs=4 * np.sqrt(2 / 4096) * var[True])
+
+
+def test_lofic_baseline_fig5_drb():
+    """Seed 003 Fig. 5: (a) plain 4T, DR_a = 20 lg E3/E1; (b) lateral-overflow capacitor read
+    at low gain, DR_b = 20 lg E4/E2 — a larger well but a higher floor ("low sensitivity and
+    SNR at low light"); (c) this pixel, DR_c = 20 lg E4/E1. Model with C_S = 500 fF: the
+    LOFIC's saturation is (C_PD + C_S)/C_PD = 6.6 × the 4T's (±10 %: plateau detection on a
+    150-point grid), its floor E2 ≥ 5 × E1, so DR_b stays within 6 dB of DR_a, while DR_c
+    exceeds DR_a by the 55.5 dB the equations give (±3 dB: floors measured on 16 × 16 px)."""
+    from viform.report.response_plots import seed003_fig5
+    from viform.sensors.overflow import lofic_pixel_parameters
+
+    p = lofic_pixel_parameters()
+    assert p.full_well_electrons == pytest.approx(3.0 * 588.9e-15 / 1.602176634e-19, rel=1e-3)
+    assert p.read_noise_electrons == pytest.approx(590, abs=2)
+    r = seed003_fig5(size=12)
+    a, b, c = r.values()
+    assert b["i_sat_a"] / a["i_sat_a"] == pytest.approx(588.9 / 88.9, rel=0.1)
+    assert b["i_min_a"] / a["i_min_a"] > 5
+    assert abs(b["dynamic_range_db"] - a["dynamic_range_db"]) < 6
+    assert c["dynamic_range_db"] - a["dynamic_range_db"] == pytest.approx(55.5, abs=3)
+
+
+def test_pga_gain_scales_the_system_gain():
+    """Seed 003 §2: CDS → PGA → ADC. A PGA gain g multiplies K by g (one DN is 1/g of the
+    electrons) and the ADC then clips at 1/g of the photodiode swing."""
+    p1, p4 = seed003_pixel_parameters(), seed003_pixel_parameters(analog_gain=4.0)
+    assert p4.system_gain_dn_per_e == pytest.approx(4 * p1.system_gain_dn_per_e)
+    s = OverflowSensor(p4, height=4, width=4, noise=False)
+    bright = StillScene(np.full((4, 4), 1e4))
+    assert s.capture_frame(bright, 0.0).max() == p4.max_dn

@@ -83,7 +83,11 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
             r = measure_response(s, lux, height=size, width=size, seed=seed)
             sat[key] = plateau_onset(currents, r["signal_dn"])
         b = over.segment_boundaries_a()
+        from viform.report.response_plots import seed003_fig5
+
+        fig5 = seed003_fig5(size=min(size, 16), seed=seed)
         return {
+            "fig5": fig5,
             "source": "seed 003 §5–6, fig. 6",
             "seed": {
                 "4t_saturation_a": 8e-12,
@@ -103,6 +107,11 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
                 "dr_gain_equations_db": over.dynamic_range_gain_db(),
                 "row_share_time_s": over.row_share_time_s,
                 "max_rows": over.max_rows(),
+                "reset_ktc_e": over.reset_ktc_electrons,
+                "readout_reset_noise_e": over.readout_reset_noise_electrons(),
+                "share_ktc_e": over.share_ktc_electrons,
+                **{f"dr_{k}_db": v["dynamic_range_db"] for k, v in zip(("a_4t", "b_lofic", "c_overflow"),
+                                                                       fig5.values(), strict=True)},
             },
             "note": "not reproduced: eqs. 1-6 give E/I_4T = (T/t3)(VF - V_sat)/(V_res - V_sat)"
             "·C_F/(C_F + C_PD) = 55.5 dB, below 20 lg((T/t3)·VF/V_res) = 57.4 dB for any "
@@ -135,7 +144,9 @@ _UNITS = {"snr_dip_db": "dB", "rpd_voltage_v": "V (assumed mapping)", "family_f3
           "normal_saturation": "× unit lux", "hdr_saturation": "× unit lux", "extension_db": "dB",
           "knee_intensity": "× unit lux", "knee_dn": "DN", "4t_saturation_a": "A", "B_a": "A", "C_a": "A",
           "D_a": "A", "E_a": "A", "max_usable_a": "A", "dr_gain_db": "dB", "dr_gain_equations_db": "dB",
-          "row_share_time_s": "s", "max_rows": "rows"}
+          "row_share_time_s": "s", "max_rows": "rows", "reset_ktc_e": "e- rms per reset",
+          "readout_reset_noise_e": "e- rms (signal before reset)", "share_ktc_e": "e- rms per sharing",
+          "dr_a_4t_db": "dB (4T)", "dr_b_lofic_db": "dB (lateral overflow)", "dr_c_overflow_db": "dB (this pixel)"}
 
 
 def _comparison_curves(size: int, seed: int) -> dict:
@@ -271,6 +282,9 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
         )
         figures["snr.png"] = plots.snr_figure({sensor: own})
         seed_fig = _seed_figures(sensor, min(size, 32), seed)
+        fig5 = seed_fig.pop("fig5", None)
+        if fig5 is not None:
+            figures["fig5_dr_abc.png"] = plots.seed003_fig5_figure(fig5)
         if seed_fig:
             result["seed_comparison"] = seed_fig
             unit_lux = seed_fig.get("intensity_unit_lux")
