@@ -37,6 +37,10 @@ def _lines(file, r: dict, out) -> list[str]:
     lines.append(f"  {'flat-field spread':<22}" + (f"{100 * g:.3g} % (pixel-to-pixel gain spread; an upper bound "
                                                   "where the scene has fine texture)" if g is not None
                                                   else f"not estimated: {gs.get('reason')}"))
+    levels = gs.get("spread_by_level") or []
+    if levels:
+        lines.append(f"  {'':<22}median tile spread by light level: " + ", ".join(
+            f"{100 * v['median_spread']:.3g} % at {v['mean_interval_ticks']:.3g} ticks" for v in levels))
     lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} ({100 * d['hot_pixel_fraction']:.3g} %)"
                  + (f", about {d['hot_pixel_dark_current_e_per_s']:.3g} e⁻/s each"
                     if d.get("hot_pixel_dark_current_e_per_s") else ""))

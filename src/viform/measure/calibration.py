@@ -314,7 +314,7 @@ def _gain_spread(iv: PixelIntervals, sigma2_per_mu2: float, tile: int, min_spike
     with np.errstate(invalid="ignore", divide="ignore"):
         k = np.maximum(n - 1, 1)
         noise_rel = (sigma2_per_mu2 / k) + 1.0 / (6.0 * k * k * np.where(valid, mu, 1.0) ** 2)
-    spreads, dof = [], []
+    spreads, dof, tile_mu = [], [], []
     for y0 in range(0, h - tile + 1, tile):
         for x0 in range(0, w - tile + 1, tile):
             ys, xs = np.mgrid[y0:y0 + tile, x0:x0 + tile]
@@ -331,6 +331,7 @@ def _gain_spread(iv: PixelIntervals, sigma2_per_mu2: float, tile: int, min_spike
             total = float(np.sum(rel**2) / (m - 3))
             spreads.append(total - float(np.mean(noise_rel[idx][ok])))
             dof.append(m - 3)
+            tile_mu.append(float(np.mean(mu[idx][ok])))
     if len(spreads) < 8:
         return None, {"tiles": len(spreads)}
     spreads = np.array(spreads)
@@ -343,6 +344,17 @@ def _gain_spread(iv: PixelIntervals, sigma2_per_mu2: float, tile: int, min_spike
     var = float(np.mean(quarter)) / factor
     info = {"tiles": int(len(spreads)), "median_tile_spread": float(math.sqrt(max(np.median(spreads), 0.0))),
             "flattest_quarter_spread": float(math.sqrt(max(var, 0.0)))}
+    # how the spread depends on the light: a gain spread is the same at every level, an
+    # offset (e.g. dark-current) spread grows as the light falls
+    tile_mu = np.array(tile_mu)
+    by_level = []
+    edges = np.quantile(tile_mu, [0, 0.25, 0.5, 0.75, 1.0])
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        inside = (tile_mu >= lo) & (tile_mu <= hi)
+        if inside.sum() >= 4:
+            by_level.append({"mean_interval_ticks": float(np.mean(tile_mu[inside])), "tiles": int(inside.sum()),
+                             "median_spread": float(math.sqrt(max(np.median(spreads[inside]), 0.0)))})
+    info["spread_by_level"] = by_level
     return (math.sqrt(var) if var > 0 else 0.0), info
 
 
