@@ -170,3 +170,15 @@ def test_real_recording_and_a_simulation_from_its_preset():
         assert row["rsd"] >= 0.98 * other["rsd"]
         compared += 1
     assert compared >= 2
+
+
+def test_reading_stops_at_the_spike_budget():
+    """Memory is bounded: reading stops at the block where the spike budget is reached."""
+    rec = _ramp_recording(10_000, 0.03, size=32, ticks=400)
+    whole = pixel_intervals(rec, block_ticks=50)
+    part = pixel_intervals(rec, block_ticks=50, max_spikes=whole.n_spikes.sum() // 3)
+    assert part.n_ticks < whole.n_ticks and part.n_ticks % 50 == 0
+    assert part.n_spikes.sum() < whole.n_spikes.sum()
+    # the same spikes as the first part of the whole read
+    spikes = rec.spikes[: part.n_ticks]
+    assert np.array_equal(part.n_spikes, spikes.reshape(part.n_ticks, -1).sum(axis=0))

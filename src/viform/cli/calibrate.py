@@ -21,6 +21,8 @@ def _lines(file, r: dict, out) -> list[str]:
              f"  {r['height']}×{r['width']} pixels, {r['n_ticks']} ticks at {r['clock_hz'] / 1e3:.4g} kHz "
              f"({r['duration_s'] * 1e3:.4g} ms), mean firing rate {r['mean_firing_rate_per_tick']:.4g} per tick",
              ""]
+    if r["n_ticks"] < r["recording_ticks"]:
+        lines.insert(2, f"  (the first {r['n_ticks']} of {r['recording_ticks']} ticks: enough spikes for every figure)")
     frac = st.get("static_fraction_of_judged")
     lines.append(f"  {'steady tiles':<22}{_fmt(None if frac is None else 100 * frac)} % of {st['tiles_judged']} "
                  "tiles judged (successive intervals anti-correlated)")

@@ -122,18 +122,32 @@ class PixelIntervals:
         return self.intervals[:-lag][ok], self.intervals[lag:][ok], self.pixel[lag:][ok]
 
 
-def pixel_intervals(source: SpikeSource, *, max_ticks: int | None = None, block_ticks: int = 256) -> PixelIntervals:
+#: Spikes read at most (≈ 24 bytes each while sorting): calibration memory stays bounded.
+MAX_SPIKES = 20_000_000
+
+
+def pixel_intervals(source: SpikeSource, *, max_ticks: int | None = None, block_ticks: int | None = None,
+                    max_spikes: int = MAX_SPIKES) -> PixelIntervals:
     """Read a spike stream block by block and collect every pixel's intervals.
 
-    Memory: the spikes' tick indices (8 bytes a spike) plus per-pixel counters.
+    Reading stops at ``max_ticks`` or at the block where ``max_spikes`` spikes have been
+    read (``n_ticks`` of the result says how far it got), so memory is bounded whatever
+    the recording's length.
     """
     h, w = source.height, source.width
     n_ticks = source.n_ticks if max_ticks is None else min(source.n_ticks, check_int("max_ticks", max_ticks, 2))
+    if block_ticks is None:
+        block_ticks = max(1, min(256, (8 << 20) // max(1, h * w)))  # ≈ 8 MB of bits a block
     ticks, pixels = [], []
+    read, end = 0, n_ticks
     for first, block in source.iter_blocks(block_ticks, 0, n_ticks):
         t, p = np.nonzero(block.reshape(block.shape[0], -1))
-        ticks.append(t.astype(np.int64) + first)
+        ticks.append((t + first).astype(np.int64))
         pixels.append(p.astype(np.int64))
+        read += t.size
+        if read >= max_spikes:
+            end = first + block.shape[0]
+            break
     t = np.concatenate(ticks) if ticks else np.zeros(0, np.int64)
     p = np.concatenate(pixels) if pixels else np.zeros(0, np.int64)
     order = np.lexsort((t, p))
@@ -146,7 +160,7 @@ def pixel_intervals(source: SpikeSource, *, max_ticks: int | None = None, block_
     last_tick[p] = t
     same = p[1:] == p[:-1]
     intervals = np.diff(t)[same].astype(np.float64)
-    return PixelIntervals(h, w, n_ticks, float(source.clock_hz), n_spikes, first_tick, last_tick, intervals,
+    return PixelIntervals(h, w, end, float(source.clock_hz), n_spikes, first_tick, last_tick, intervals,
                           p[1:][same])
 
 
@@ -397,7 +411,8 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
     mu_p = iv.mean_interval
     n_int = np.bincount(iv.pixel, minlength=npx)
     duration_s = iv.n_ticks / iv.clock_hz
-    result: dict = {"height": iv.height, "width": iv.width, "n_ticks": iv.n_ticks, "clock_hz": iv.clock_hz,
+    result: dict = {"height": iv.height, "width": iv.width, "n_ticks": iv.n_ticks,
+                    "recording_ticks": int(source.n_ticks), "clock_hz": iv.clock_hz,
                     "duration_s": duration_s, "spikes": int(iv.n_spikes.sum()),
                     "mean_firing_rate_per_tick": float(iv.n_spikes.sum() / (npx * iv.n_ticks))}
     static, sinfo = _checkerboard_static(iv, tile)
