@@ -50,7 +50,7 @@ from viform._validate import (
     check_non_negative,
     check_positive,
 )
-from viform.light.compiled import pixel_lux
+from viform.light.compiled import row_lux
 from viform.light.radiometry import PixelOptics
 from viform.light.scenes import Scene
 from viform.sensors._gamma import (
@@ -417,9 +417,6 @@ class SpikeSensor(Sensor):
 
             kind, params, frames = light.kernel_kind(), light.parameters(), light.flat_frames()
             scalars, xtab, ytab = tick_buffers(light, min(block_ticks, n_ticks))
-            rows = np.arange(height, dtype=np.int64)
-            px = np.tile(np.arange(width, dtype=np.int64), height)
-            py = np.repeat(rows, width)
         segments = _Segments(self, scene, light, sample, height, width)
         buffer = None
         bar = None
@@ -441,7 +438,7 @@ class SpikeSensor(Sensor):
                     times = (np.arange(first, last) // sample + 0.5) * (sample / p.clock_hz)
                     n = last - first
                     tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
-                    _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, px, py,
+                    _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, width,
                                      state.charge, state.target, state.counter, q, index, *tables, state.keys,
                                      p.photon_noise, reset_readout, dead_ticks)
                 else:
@@ -795,8 +792,12 @@ def _run_block(out, rates, seg_end, first_tick, charge, target, counter, q, inde
                 target[p] = t
 
 
+_ROWS = 8  # image rows per work item of the per-tick-light kernel
+_LIGHT_WINDOW = 16  # ticks per window there: the window's light tables stay in cache
+
+
 @njit(cache=True, parallel=True)
-def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, px, py, charge, target,
+def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, width, charge, target,
                      counter, q, index, bins, keys, noise, reset_readout, dead_ticks):
     """Integrate-and-fire with the light computed per pixel and tick in compiled code.
 
@@ -804,26 +805,43 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, px, p
     tick's scalars (row k of ``scalars``, ``xtab``, ``ytab``); its charge that tick is
     int64(a[p]·lux + b[p] + 0.5) in fixed point (gain and dark current per pixel), added
     exactly; the pixel fires when the sum reaches its Gamma(Q) target (the same
-    :func:`_fire` as the event-driven kernel). Tiles of pixels × ticks, tick-major within a
-    tile, so the per-tick tables are read once per tile row and the output stays in cache.
+    :func:`_fire` as the event-driven kernel). Per image row and tick: one vectorizable
+    pass for the light, the charge and the comparison, then the (few) pixels that fired.
+    Work items are bands of rows × windows of ticks, so the light tables stay in cache.
     """
     n_ticks, n_pixels = out.shape
-    n_tiles = (n_pixels + _TILE - 1) // _TILE
-    for tile in prange(n_tiles):
-        p0 = tile * _TILE
-        p1 = min(p0 + _TILE, n_pixels)
-        for k in range(n_ticks):
-            for p in range(p0, p1):
-                lux = pixel_lux(kind, p, px[p], py[p], k, scalars, xtab, ytab, frames, params)
-                e = np.int64(a[p] * lux + b[p] + 0.5)
-                c = charge[p] + e
-                fired = c >= target[p]
-                if fired:
-                    c, t = _fire(c, target[p], e, dead_ticks, p, q, index, bins, keys, noise,
-                                 reset_readout, counter)
-                    target[p] = t
-                charge[p] = c
-                out[k, p] = fired
+    height = n_pixels // width
+    n_bands = (height + _ROWS - 1) // _ROWS
+    for band in prange(n_bands):
+        y0 = band * _ROWS
+        y1 = min(y0 + _ROWS, height)
+        lux = np.empty(width)
+        rate = np.empty(width, dtype=np.int64)
+        for w0 in range(0, n_ticks, _LIGHT_WINDOW):
+            w1 = min(w0 + _LIGHT_WINDOW, n_ticks)
+            for y in range(y0, y1):
+                base = y * width
+                for k in range(w0, w1):
+                    row_lux(kind, k, y, width, scalars, xtab, ytab, frames, params, lux)
+                    fired = 0
+                    for x in range(width):
+                        p = base + x
+                        e = np.int64(a[p] * lux[x] + b[p] + 0.5)
+                        rate[x] = e
+                        c = charge[p] + e
+                        charge[p] = c
+                        f = c >= target[p]
+                        out[k, p] = f
+                        fired += f
+                    if fired == 0:
+                        continue
+                    for x in range(width):
+                        p = base + x
+                        if out[k, p]:
+                            c, t = _fire(charge[p], target[p], rate[x], dead_ticks, p, q, index, bins, keys,
+                                         noise, reset_readout, counter)
+                            charge[p] = c
+                            target[p] = t
 
 
 @njit(cache=True)
