@@ -36,13 +36,12 @@ def test_gated_cli_bare_json_flag_prints_json(tmp_path, capsys):
 
 def test_gated_waveforms_files(tmp_path, capsys):
     out = tmp_path / "w"
-    assert main(["gated", "--waveforms", "--part", "all", "--pulses", "4", "--out", str(out)]) == 0
+    assert main(["gated", "--waveforms", "--part", "icx445", "--pulses", "4", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "ICX445ALA" in text and "VHLD+VST" in text and "1001 ns" in text
-    for part in ("icx618", "icx445", "icx279", "icx659"):
-        for ext in ("png", "svg", "csv", "vcd"):
-            assert (out / f"waveforms_{part}.{ext}").stat().st_size > 0
-    assert (out / "waveforms_icx618.vcd").read_text().splitlines()[0].startswith("$version")
+    for ext in ("png", "svg", "csv", "vcd"):
+        assert (out / f"waveforms_icx445.{ext}").stat().st_size > 0
+    assert (out / "waveforms_icx445.vcd").read_text().splitlines()[0].startswith("$version")
 
 
 def test_gated_cli_bad_input_one_line(capsys, tmp_path):

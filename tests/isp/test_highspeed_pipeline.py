@@ -83,7 +83,7 @@ def test_cli_writes_video_plot_report(tmp_path):
     (["--target", "300"], "target"),
     (["--exposure-us", "700"], "exposure"),
     (["--interface", "firewire"], "interface"),
-    (["--ae-saturated-cut", "1.5"], "ae_saturated_cut"),
+    (["--ae-saturated-cut", "1.5"], "ae-saturated-cut"),
 ])
 def test_cli_bad_input_one_line_exit_2(tmp_path, capsys, args, name):
     extra = ["--frames", "2", "--render", "16x9", "--out", str(tmp_path / "x")]

@@ -75,7 +75,7 @@ def test_fig4_interval_image_has_no_motion_blur(small_run):
 
 def test_chip_figures_cli(tmp_path, capsys):
     out = tmp_path / "chip"
-    assert main(["chip-figures", "--out", str(out), "--size", "32", "--ticks", "100", "--json"]) == 0
+    assert main(["chip-figures", "--out", str(out), "--size", "24", "--ticks", "60", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["clock_hz"] == 20e3 and data["fig1"]["first_spikes"] == [1, 5, 6, 12, 13]
     for f in data["files"]:
