@@ -82,14 +82,16 @@ def plot_images(path, images: dict, title: str = "", percentile: float = 99.5, s
     if shared_scale:
         common = np.percentile(np.concatenate([np.ravel(im) for im in images.values()]),
                                [100 - percentile, percentile])
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.2), squeeze=False)
+    fig, axes = plt.subplots(1, n, figsize=(3.6 * n + (1.0 if shared_scale else 0.0), 3.4), squeeze=False,
+                             layout="constrained")
     for ax, (name, img) in zip(axes[0], images.items(), strict=True):
         lo, hi = common if common is not None else np.percentile(img, [100 - percentile, percentile])
-        ax.imshow(img, cmap="gray", vmin=lo, vmax=hi if hi > lo else lo + 1)
+        im = ax.imshow(img, cmap="gray", vmin=lo, vmax=hi if hi > lo else lo + 1)
         ax.set_title(name, fontsize=9)
         ax.axis("off")
+    if shared_scale:
+        fig.colorbar(im, ax=axes[0].tolist(), shrink=0.85, label="electrons per pixel (one scale)")
     fig.suptitle(title)
-    fig.tight_layout()
     save_figure(path, fig)
 
 
