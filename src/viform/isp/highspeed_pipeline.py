@@ -486,10 +486,14 @@ def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", s
         ax2.plot(k, result.metered_gray, color="C3", label=f"{cfg['meter']} meter")
     sent = result.transmitted_indices
     ax2.plot(sent, result.mean_gray[sent], "k.", ms=3, label="transmitted")
+    first_step = True
     for t in step_times_s:
+        if t > result.frame_times_s[-1]:
+            continue  # after the recording
         idx = np.searchsorted(result.frame_times_s, t)
         for ax in (ax1, ax2):
-            ax.axvline(idx, color="0.5", ls=":")
+            ax.axvline(idx, color="0.5", ls=":", label="light step" if (first_step and ax is ax2) else None)
+        first_step = False
     ax2.set_ylim(0, 260)
     ax2.set_xlabel("sensor frame")
     ax2.set_ylabel("gray (0–255)")
