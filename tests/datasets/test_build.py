@@ -48,7 +48,7 @@ def test_layout_config_manifest_and_sidecar(reference, settings):
 def test_spike_counts_follow_the_light(reference, settings):
     """Spike count ≈ Σ rate·gt over pixels and ticks: each pixel fires (λΔt)/Q per tick (seed 000 §3.2).
 
-    With Q = 10⁴ e⁻ the count of a pixel over 240 ticks is set by the light to within one spike
+    With the preset's Q (≥ 10⁴ e⁻) the count of a pixel over 240 ticks is set by the light to within one spike
     (photon noise adds √(N/Q)·… ≪ 1 spike), so the total over 768 pixels is within
     768 spikes (quantisation) + 3 % (the preset's PRNU, mean 1, does not bias the sum by
     more than its std/√768) of the expectation from the source frames.
@@ -124,8 +124,8 @@ def test_other_settings_in_an_existing_folder_are_refused(reference, source_clip
 def test_loader_reads_the_built_dataset(reference):
     """Samples are the 41 ticks around each gt frame that fits; mean(spike)/rate estimates gt.
 
-    Tolerance: over a 41-tick window a pixel's count is known to ±1 spike (Q = 10⁴ e⁻: photon
-    noise is ≈1 % of an interval), so the image mean is within 1/(41·rate) ≈ 0.04 /√768 per
+    Tolerance: over a 41-tick window a pixel's count is known to ±1 spike (Q ≥ 10⁴ e⁻: photon
+    noise is ≤ 1 % of an interval), so the image mean is within 1/(41·rate) ≈ 0.04 /√768 per
     pixel on average plus the 3 % PRNU of the preset: 0.03 of full scale.
     """
     from viform.datasets.loaders import open_dataset
