@@ -23,6 +23,8 @@ from viform.measure import comparison as cmp
 
 #: Colour map of light images (perceptually uniform, dark = little light).
 LUX_CMAP = "inferno"
+#: Colour of under-exposed pixels (below the noise floor, or no spike): not a measurement.
+UNDER_COLOUR = "0.62"
 #: Error maps: log10(estimate / truth) in decades, clipped to ± this.
 ERROR_SPAN_DECADES = 2.0
 
@@ -125,6 +127,7 @@ def _when(est, t):
 
 def figure_instant(result, index: int):
     """Truth and every sensor's image at one instant, one log-lux colour map and colour bar."""
+    import matplotlib.pyplot as plt
 
     t = result["instants_s"][index]
     scene = result["scene"]
@@ -133,14 +136,20 @@ def figure_instant(result, index: int):
     fig, axes, cax = _image_grid(len(shots) + 1, scene.shape)
     floor = norm.vmin
     im = None
+    cmap = plt.get_cmap(LUX_CMAP).copy()
+    cmap.set_bad(UNDER_COLOUR)
     panels = [("truth", scene.illuminance_lux(t), f"at {t * 1e3:.2f} ms")]
-    panels += [(s.label, s.estimates[index].lux, _when(s.estimates[index], t)) for s in shots]
+    for s in shots:  # under-exposed pixels in grey: their value is a bound, not a measurement
+        est = s.estimates[index]
+        panels.append((s.label, np.where(est.underexposed, np.nan, np.maximum(np.nan_to_num(est.lux), floor)),
+                       _when(est, t)))
     for ax, (title, lux, when) in zip(axes.flat, panels, strict=False):
-        im = ax.imshow(np.maximum(np.nan_to_num(lux), floor), cmap=LUX_CMAP, norm=norm, interpolation="nearest")
+        im = ax.imshow(np.ma.masked_invalid(np.maximum(lux, floor)), cmap=cmap, norm=norm, interpolation="nearest")
         ax.set_title(f"{title}\n{when}", fontsize=8)
     fig.colorbar(im, cax=cax, label="illuminance on the sensor (lux, log scale)")
-    fig.suptitle(f"Scene '{scene.name}' at t = {t * 1e3:.2f} ms: truth and each sensor's image "
-                 "(same colour map; black = at or below the scene's darkest level)", fontsize=10)
+    fig.suptitle(f"Scene '{scene.name}' at t = {t * 1e3:.2f} ms: truth and each sensor's image (same colour "
+                 "map; black = at or below the scene's darkest level; grey = under-exposed, no measurement)",
+                 fontsize=10)
     return fig
 
 
