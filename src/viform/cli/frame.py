@@ -206,10 +206,10 @@ def _jsonable(obj):
 )
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
 def characterize(sensor, out_dir, as_json, json_path, size, seed):
-    """Characterize a preset SENSOR (EMVA 1288 R4.0 for frame sensors; seed 000 §4 for spikes).
+    """Characterize a preset SENSOR (EMVA 1288 R4.0 for frame sensors; interval dynamic range for spike sensors).
 
     SENSOR is one of: cmos, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
-    seed003-overflow, spike.
+    seed003-overflow, seed003-overflow-ktc, seed003-lofic, spike, spikeone, spiketwo, spiketwo-40k.
     """
     from viform._io import save_figure, write_json
     from viform._validate import ViformError, check_int
