@@ -76,6 +76,28 @@ def test_killed_worker_mid_clip_is_redone_with_the_same_bits(reference, source_c
     assert dataset_files(out) == dataset_files(reference)
 
 
+def test_run_killed_mid_clip_then_rerun_gives_the_same_bits(reference, source_clips, client1, tmp_path,
+                                                            dataset_files):
+    """The whole converting process dies (SIGKILL-like exit) half-way through clip1's .dat."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "killed"
+    code = ("from viform.datasets import make_settings; from viform.datasets.build import convert_serially; "
+            f"s = make_settings(height={H}, width={W}, frame_rate_hz=1000.0, gt_every=2, seed=7); "
+            f"convert_serially({str(source_clips)!r}, {str(out)!r}, s, block_ticks=64, crash=('clip1', 2))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 70, proc.stderr
+    assert (out / "spike" / "clip0.dat").is_file() and not (out / "spike" / "clip1.dat").exists()
+    assert list((out / "spike").glob(".clip1.dat*")), "the kill should leave clip1's partial temporary file"
+    from viform.datasets import build_dataset, make_settings
+
+    again = make_settings(height=H, width=W, frame_rate_hz=1000.0, gt_every=2, seed=7)
+    summary = build_dataset(source_clips, out, again, client=client1, block_ticks=64, progress=False)
+    assert summary["skipped"] == 1 and summary["converted"] == 3, summary
+    assert dataset_files(out) == dataset_files(reference)
+
+
 def test_interrupted_run_resumes_to_the_same_bits(reference, source_clips, settings, client1, tmp_path,
                                                   dataset_files):
     out = tmp_path / "resume"

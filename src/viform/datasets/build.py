@@ -536,8 +536,12 @@ def _summary(out, clips, rows, failed, seconds, workers) -> dict:
     }
 
 
-def convert_serially(src, out, settings: DatasetSettings, block_ticks: int = 4096) -> dict:
-    """Reference path without dask: every clip in this process, one after the other (benchmarks)."""
+def convert_serially(src, out, settings: DatasetSettings, block_ticks: int = 4096,
+                     crash: tuple[str, int] | None = None) -> dict:
+    """Reference path without dask: every clip in this process, one after the other (benchmarks).
+
+    ``crash`` (testing aid, as in :func:`build_dataset`) ends this whole process mid-clip.
+    """
     out = Path(out)
     clips = find_clips(src)
     (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
@@ -546,7 +550,8 @@ def convert_serially(src, out, settings: DatasetSettings, block_ticks: int = 409
     rows, failed = {}, {}
     for c in clips:
         try:
-            rows[c.name] = convert_clip(ClipTask(c, str(out), settings, _provenance(), block_ticks))
+            rows[c.name] = convert_clip(ClipTask(c, str(out), settings, _provenance(), block_ticks,
+                                                 crash[1] if crash is not None and crash[0] == c.name else None))
         except ViformError as exc:
             failed[c.name] = str(exc)
     _write_manifest(out, settings, rows, failed)
