@@ -90,6 +90,7 @@ def snr_figure(curves: dict, title: str = "SNR vs irradiance"):
     :func:`meaningful`); saturation is marked with a cross."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    crossed = False
     for j, (name, c) in enumerate(curves.items()):
         snr = np.asarray(c["snr"], dtype=np.float64)
         lux = np.asarray(c["lux"])
@@ -99,7 +100,9 @@ def snr_figure(curves: dict, title: str = "SNR vs irradiance"):
             last = np.nonzero(ok)[0][-1]
             if np.asarray(c["output"])[last] >= 0.995 * np.nanmax(c["output"]):
                 ax.plot(lux[last], 20 * np.log10(snr[last]), "x", color=f"C{j}", ms=8)
-    ax.plot([], [], "kx", label="saturation (curve ends)")
+                crossed = True
+    if crossed:
+        ax.plot([], [], "kx", label="saturation (curve ends)")
     ax.axhline(0.0, color="k", lw=0.8, ls=":")
     ax.set_ylim(bottom=0.0)
     ax.set(xlabel="illuminance on the sensor (lux)", ylabel="SNR (dB)", title=title)
