@@ -146,7 +146,8 @@ def test_fuzz_forged_payloads_with_valid_crcs(tmp_path):
         while b[pos:pos + 2] == b"SG":
             acc = zlib.crc32(b[pos + 6:pos + 10], acc)
             pos += 10 + struct.unpack_from("<I", b, pos + 2)[0]
-        struct.pack_into("<I", b, len(b) - 4, acc)
+        struct.pack_into("<I", b, len(b) - 8, acc)  # version 3: the end record's own CRC follows
+        struct.pack_into("<I", b, len(b) - 4, zlib.crc32(bytes(b[len(b) - 36:len(b) - 4])))
         try:
             _decode_bytes(tmp_path, bytes(b))
         except ViformError:
@@ -168,7 +169,10 @@ def _resign(header: dict, payloads: list[bytes], n_ticks: int, spikes: int, vers
         crc = zlib.crc32(p)
         out += aer_file._SEG_HEAD.pack(b"SG", len(p), crc) + p
         acc = zlib.crc32(struct.pack("<I", crc), acc)
-    return bytes(out + aer_file._TRAILER.pack(b"EN", n_ticks, len(payloads), spikes, acc))
+    trailer = aer_file._TRAILER.pack(b"EN", n_ticks, len(payloads), spikes, acc)
+    if version >= 3:
+        trailer += struct.pack("<I", zlib.crc32(trailer[2:]))
+    return bytes(out + trailer)
 
 
 def _parts(data: bytes):
@@ -262,18 +266,24 @@ def test_real_file_strict_ratio(tmp_path):
     assert info["ratio_vs_raw"] >= 3.0
 
 
-def test_version1_files_still_read(tmp_path):
-    """Files of the older column layout (version 1) decode exactly; version 2 is written by default."""
+def test_older_versions_still_read(tmp_path):
+    """Files of the older layouts (version 1 columns, version 2 range-coded records) decode exactly; 3 is written."""
     s = _stream(3, (120, 5, 6))
     for mode in ("strict", "statistical"):
-        encode_source(s, tmp_path / f"v1-{mode}.vfc", mode, segment_ticks=32, version=1)
-        encode_source(s, tmp_path / f"v2-{mode}.vfc", mode, segment_ticks=32)
-        v1, v2 = CodedFile(tmp_path / f"v1-{mode}.vfc"), CodedFile(tmp_path / f"v2-{mode}.vfc")
-        assert v1.version == 1 and v2.version == 2
-        assert np.array_equal(v1.read_ticks(0, 120), v2.read_ticks(0, 120))
+        files = []
+        for version in (1, 2, None):
+            path = tmp_path / f"v{version}-{mode}.vfc"
+            if version is None:
+                encode_source(s, path, mode, segment_ticks=32)
+            else:
+                encode_source(s, path, mode, segment_ticks=32, version=version)
+            files.append(CodedFile(path))
+        assert [f.version for f in files] == [1, 2, 3]
+        for f in files[1:]:
+            assert np.array_equal(files[0].read_ticks(0, 120), f.read_ticks(0, 120))
     assert np.array_equal(CodedFile(tmp_path / "v1-strict.vfc").read_ticks(0, 120), s.spikes)
     with pytest.raises(ViformError, match="version"):
-        encode_source(s, tmp_path / "v3.vfc", version=3)
+        encode_source(s, tmp_path / "v4.vfc", version=4)
 
 
 @pytest.mark.parametrize("mode", ["strict", "statistical", "intensity"])

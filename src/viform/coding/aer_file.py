@@ -51,7 +51,7 @@ from numba import njit
 
 from viform._io import atomic_open
 from viform._validate import ViformError, check_int
-from viform.coding import context_model
+from viform.coding import context_model, interval_model
 from viform.coding.first_spike import (
     CodingParameters,
     FirstSpikeDecoder,
@@ -62,10 +62,11 @@ from viform.stream.container import SpikeSource
 
 #: File magic (PNG-style: catches text-mode and truncation damage).
 MAGIC = b"VIFC\x89\r\n\x1a"
-#: Format version written (2: context-modelled range coding); readers take 1 and 2, refuse others.
-VERSION = 2
+#: Format version written (3: per-pixel interval prediction for strict mode, checksummed end record);
+#: readers take 1, 2 and 3, refuse others.
+VERSION = 3
 #: Versions this reader decodes.
-SUPPORTED_VERSIONS = (1, 2)
+SUPPORTED_VERSIONS = (1, 2, 3)
 #: File extension of first-spike coded viforms.
 EXTENSION = ".vfc"
 #: zstd level of the last stage.
@@ -73,6 +74,8 @@ ZSTD_LEVEL = 19
 
 _SEG_HEAD = struct.Struct("<2sII")
 _TRAILER = struct.Struct("<2sQQQI")
+#: version 3 end record: the version-2 fields, then a CRC-32 of them (ticks, segments, spikes, CRC list)
+_TRAILER3 = struct.Struct("<2sQQQII")
 _PAYLOAD_HEAD = struct.Struct("<QIIBQ")
 _NCOLS = 8
 _ESC = 255
@@ -557,6 +560,12 @@ def _decode_payload_v2(payload: bytes, n_pixels: int, width: int, anchor0, ref0,
     if pos + length != len(payload):
         raise ViformError("segment payload length does not match its frame")
     data = np.frombuffer(zc.decompress(payload[pos:], _v2_data_limit(n_rec, n_pixels), "records"), np.uint8)
+    return _decode_records(data, n_pixels, width, anchor0, ref0, strict, start, n_ticks, n_rec, spikes)
+
+
+def _decode_records(data, n_pixels: int, width: int, anchor0, ref0, strict: bool, start: int, n_ticks: int,
+                    n_rec: int, spikes: int):
+    """Range-coded first-spike records (:mod:`viform.coding.context_model`) → a :class:`Segment`."""
     counts = np.empty(n_pixels, np.int64)
     tail_m = np.empty(n_pixels, np.int64)
     tail_g = np.empty(n_pixels, np.int64)
@@ -574,6 +583,133 @@ def _decode_payload_v2(payload: bytes, n_pixels: int, width: int, anchor0, ref0,
         raise ViformError(f"segment at tick {start} is damaged ({context_model.ERRORS[err]})")
     seg = Segment(start, n_ticks, counts, rec_m, rec_g, rec_o, np.zeros(0, np.int64), tail_m, tail_g,
                   np.zeros(0, np.int64))
+    return seg, spikes
+
+
+#: payload flags of version-3 segments: 0 range-coded records in a zstd frame (lossy modes, as version 2);
+#: 1 spikes coded by :mod:`viform.coding.interval_model` (strict); 2 range-coded records, no zstd (strict)
+_FLAG_INTERVALS = 1
+_FLAG_RECORDS = 2
+
+
+def _v3_data_limit(n_spikes: int, n_pixels: int) -> int:
+    """Most bytes an interval-coded segment of ``n_spikes`` spikes may hold (reader and writer agree).
+
+    A spike costs at most a stop decision, a residual (sign, ≤ 2·31 + 2 Elias-gamma bits) —
+    under 9 bytes — and a pixel's first spike a few more.
+    """
+    return 9 * n_spikes + 16 * n_pixels + 4096
+
+
+def _encode_payload_v3(seg: Segment, anchor0, ref0, width: int, ivstate: np.ndarray, ivprobs: np.ndarray) -> bytes:
+    """Version-3 strict payload: every spike tick coded against its pixel's prediction (no zstd stage).
+
+    ``ivstate`` (the per-pixel predictor, :mod:`viform.coding.interval_model`) and ``ivprobs`` (its
+    adaptive probabilities) are advanced in place.
+    """
+    npix = seg.counts.size
+    n_spikes = seg.n_spikes
+    ticks = np.empty(n_spikes + 1, np.int64)
+    tick_counts = np.empty(npix, np.int64)
+    interval_model.ticks_from_records(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
+                                      seg.start_tick, tick_counts, ticks)
+    size = 2 * n_spikes + npix // 4 + 4096
+    start_state, start_probs = ivstate.copy(), ivprobs.copy()
+    while True:
+        ivstate[...] = start_state
+        ivprobs[...] = start_probs
+        out = np.empty(size, np.uint8)
+        n = interval_model.encode_segment(tick_counts, ticks, anchor0, ivstate, ivprobs, seg.start_tick,
+                                          seg.start_tick + seg.n_ticks, width, out)
+        if n <= size:
+            break
+        size = 2 * n
+    flag, body = _FLAG_INTERVALS, out[:n]
+    # the run-length record model (version 2's, without its zstd stage) wins on some streams (fast
+    # scene changes, few spikes per pixel): keep whichever is smaller; the predictor state above is
+    # advanced either way (the reader replays it from the decoded spikes)
+    n_rec = seg.m.size
+    size = 16 * (n_rec + npix) + 4096
+    rec_s = np.empty(n_rec + 1, np.int64)
+    while True:
+        out2 = np.empty(size, np.uint8)
+        n2 = context_model.encode_segment(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
+                                          seg.start_tick, seg.start_tick + seg.n_ticks, width, True, out2, rec_s)
+        if n2 <= size:
+            break
+        size = 2 * n2
+    if n2 < n:
+        flag, body = _FLAG_RECORDS, out2[:n2]
+    if body.size > _v3_data_limit(n_spikes, npix):  # never write what the reader would refuse
+        raise ViformError(f"segment at tick {seg.start_tick} codes to {body.size} bytes, more than the format "
+                          "allows")
+    return _PAYLOAD_HEAD.pack(seg.start_tick, seg.n_ticks, n_rec, flag, n_spikes) + body.tobytes()
+
+
+def _decode_payload_v3(payload: bytes, n_pixels: int, width: int, anchor0, ref0, ivstate: np.ndarray,
+                       ivprobs: np.ndarray, strict: bool,
+                       zc: _Zstd, expected_start: int, segment_ticks: int):
+    """Decode a version-3 segment: interval-coded (flag 1, strict) or range-coded records (flag 0, as version 2)."""
+    if len(payload) < _PAYLOAD_HEAD.size:
+        raise ViformError("segment payload is shorter than its header")
+    flags = payload[_PAYLOAD_HEAD.size - 9]
+    if flags == 0:
+        if strict:
+            raise ViformError("a strict segment must be interval-coded (flag 1)")
+        return _decode_payload_v2(payload, n_pixels, width, anchor0, ref0, strict, zc, expected_start, segment_ticks)
+    start, n_ticks, n_rec, flags, spikes = _PAYLOAD_HEAD.unpack_from(payload)
+    if start != expected_start:
+        raise ViformError(f"segment starts at tick {start}, expected {expected_start}")
+    if flags not in (_FLAG_INTERVALS, _FLAG_RECORDS) or not strict:
+        raise ViformError(f"segment header is invalid (flags {flags})")
+    if not 1 <= n_ticks <= segment_ticks:
+        raise ViformError(f"segment header is invalid (ticks {n_ticks})")
+    if n_rec > spikes or spikes > n_ticks * n_pixels:
+        raise ViformError(f"segment header is invalid ({n_rec} records, {spikes} spikes)")
+    data = np.frombuffer(payload, np.uint8)[_PAYLOAD_HEAD.size:]
+    if data.size > _v3_data_limit(spikes, n_pixels):
+        raise ViformError(f"segment holds {data.size} bytes, more than {spikes} spikes may need")
+    if flags == _FLAG_RECORDS:
+        seg, _ = _decode_records(data, n_pixels, width, anchor0, ref0, True, start, n_ticks, n_rec, spikes)
+        # replay the interval predictor over the decoded spikes (its output is discarded)
+        dec = FirstSpikeDecoder(n_pixels)
+        dec.anchor, dec.tau_ref, dec.next_tick = anchor0.copy(), ref0.copy(), start
+        n_sp = dec.check(seg)
+        if n_sp != spikes:
+            raise ViformError(f"segment at tick {start} decodes to {n_sp} spikes, its header says {spikes}")
+        ticks = np.empty(spikes + 1, np.int64)
+        tick_counts = np.empty(n_pixels, np.int64)
+        interval_model.ticks_from_records(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
+                                          start, tick_counts, ticks)
+        interval_model.encode_segment(tick_counts, ticks, anchor0, ivstate, ivprobs, start, start + n_ticks, width,
+                                      np.empty(1, np.uint8))
+        return seg, spikes
+    tick_counts = np.empty(n_pixels, np.int64)
+    # the tick array grows with the spikes actually decoded (×4 and decode again when full), never to the
+    # stated count up front: a forged count with little data behind it allocates little
+    cap = min(spikes, 64 * data.size + 4096)
+    start_state, start_probs = ivstate.copy(), ivprobs.copy()
+    while True:
+        ivstate[...] = start_state
+        ivprobs[...] = start_probs
+        ticks = np.empty(cap, np.int64)
+        err, _ = interval_model.decode_segment(data, n_pixels, anchor0, ivstate, ivprobs, start, start + n_ticks, width,
+                                               spikes, tick_counts, ticks)
+        if err != 2 or cap >= spikes:
+            break
+        cap = min(spikes, 4 * cap)
+    if err:
+        raise ViformError(f"segment at tick {start} is damaged ({interval_model.ERRORS[err]})")
+    counts = np.empty(n_pixels, np.int64)
+    tail_m = np.empty(n_pixels, np.int64)
+    tail_g = np.empty(n_pixels, np.int64)
+    rec_m, rec_g, rec_o = (np.empty(spikes, np.int64) for _ in range(3))
+    nr = interval_model.records_from_ticks(tick_counts, ticks, anchor0, ref0, counts, rec_m, rec_g, rec_o,
+                                           tail_m, tail_g)
+    if nr != n_rec:
+        raise ViformError(f"segment at tick {start} decodes to {nr} first spikes, its header says {n_rec}")
+    seg = Segment(start, n_ticks, counts, rec_m[:nr], rec_g[:nr], rec_o[:nr], np.zeros(0, np.int64), tail_m,
+                  tail_g, np.zeros(0, np.int64))
     return seg, spikes
 
 
@@ -606,6 +742,8 @@ class CodedWriter:
         self.strict = params.mode == "strict"
         self.encoder = FirstSpikeEncoder(self.height * self.width, params)
         self.state = FirstSpikeDecoder(self.height * self.width)  # mirrors the decoder's state
+        self.ivstate = np.zeros((interval_model.STATE_ROWS, self.height * self.width), np.int64)
+        self.ivprobs = interval_model.new_probabilities()
         self.zc = _Zstd(level)
         self.header = {
             "format": "viform first-spike coded stream", "version": version,
@@ -630,6 +768,9 @@ class CodedWriter:
     def _write(self, seg: Segment) -> None:
         if self.version == 1:
             payload = _encode_payload(seg, self.state.anchor, self.state.tau_ref, self.strict, self.zc)
+        elif self.version == 3 and self.strict:
+            payload = _encode_payload_v3(seg, self.state.anchor, self.state.tau_ref, self.width, self.ivstate,
+                                         self.ivprobs)
         else:
             payload = _encode_payload_v2(seg, self.state.anchor, self.state.tau_ref, self.width, self.strict, self.zc)
         self.state.check(seg, advance=True)  # mirror the reader's state (anchors, widths)
@@ -646,8 +787,13 @@ class CodedWriter:
         if self.encoder.next_tick == 0:
             self.abort()
             raise ViformError("the stream has no ticks to code")
-        self.f.write(_TRAILER.pack(b"EN", self.encoder.next_tick, self.n_segments, self.spikes, self._crcs))
-        self.bytes_written += _TRAILER.size
+        if self.version >= 3:
+            fields = _TRAILER.pack(b"EN", self.encoder.next_tick, self.n_segments, self.spikes, self._crcs)
+            self.f.write(fields + struct.pack("<I", zlib.crc32(fields[2:])))
+            self.bytes_written += _TRAILER3.size
+        else:
+            self.f.write(_TRAILER.pack(b"EN", self.encoder.next_tick, self.n_segments, self.spikes, self._crcs))
+            self.bytes_written += _TRAILER.size
         self._cm.__exit__(None, None, None)
         return self.path
 
@@ -780,12 +926,15 @@ class CodedFile(SpikeSource):
             if len(head) < 2:
                 self._fail("file is truncated: the end record is missing", pos)
             if head[:2] == b"EN":
-                rest = head + f.read(_TRAILER.size - len(head))
-                if len(rest) < _TRAILER.size:
+                tr = _TRAILER3 if self.version >= 3 else _TRAILER
+                rest = head + f.read(tr.size - len(head))
+                if len(rest) < tr.size:
                     self._fail("file is truncated inside the end record", pos)
-                _, n_ticks, n_seg, spikes, crcs = _TRAILER.unpack(rest)
+                _, n_ticks, n_seg, spikes, crcs = _TRAILER.unpack_from(rest)
+                if self.version >= 3 and zlib.crc32(rest[2:_TRAILER.size]) != _TRAILER3.unpack(rest)[-1]:
+                    self._fail("end record checksum mismatch (its tick or spike count is damaged)", pos)
                 if f.read(1):
-                    self._fail("bytes after the end record", pos + _TRAILER.size)
+                    self._fail("bytes after the end record", pos + tr.size)
                 break
             if len(head) < _SEG_HEAD.size or head[:2] != b"SG":
                 self._fail("expected a segment or the end record", pos)
@@ -816,6 +965,8 @@ class CodedFile(SpikeSource):
         """Yield ``(decoder, segment)`` in order, each validated (CRC, structure, spike count)."""
         n_pixels = self.height * self.width
         dec = FirstSpikeDecoder(n_pixels)
+        ivstate = np.zeros((interval_model.STATE_ROWS, n_pixels), np.int64) if self.version >= 3 else None
+        ivprobs = interval_model.new_probabilities() if self.version >= 3 else None
         zc = _Zstd()
         strict = self.mode == "strict"
         total = 0
@@ -829,9 +980,13 @@ class CodedFile(SpikeSource):
                     if self.version == 1:
                         seg, spikes = _decode_payload(payload, n_pixels, dec.anchor, dec.tau_ref, strict, zc,
                                                       n * self.segment_ticks, self.segment_ticks)
-                    else:
+                    elif self.version == 2:
                         seg, spikes = _decode_payload_v2(payload, n_pixels, self.width, dec.anchor, dec.tau_ref,
                                                          strict, zc, n * self.segment_ticks, self.segment_ticks)
+                    else:
+                        seg, spikes = _decode_payload_v3(payload, n_pixels, self.width, dec.anchor, dec.tau_ref,
+                                                         ivstate, ivprobs, strict, zc, n * self.segment_ticks,
+                                                         self.segment_ticks)
                     expect_ticks = min(self.segment_ticks, self.n_ticks - n * self.segment_ticks)
                     if seg.n_ticks != expect_ticks:
                         raise ViformError(f"segment {n} holds {seg.n_ticks} ticks, expected {expect_ticks}")

@@ -1,0 +1,659 @@
+"""Per-pixel interval prediction for lossless (strict) coding of spike streams (``.vfc`` version 3).
+
+A spike pixel integrates photo-charge and fires each time it holds Q electrons (seed 000
+§3.1, eq. (1)); its spike *times* are the crossing times of a continuous charge clock,
+rounded down to the readout tick (seed 000 §4.3: τ̌ is the readout period). Under steady
+light the crossings come every μ = Q/(I·η) seconds with a relative spread 1/√Q (the Gamma
+interval, seed 000 §5.1), so the tick intervals of a steady pixel take the values ⌊μ⌋ and
+⌈μ⌉ in the pattern of the fractional part of μ (successive intervals are anti-correlated,
+ρ ≈ −0.5, because rounding error left in one interval is taken back by the next). Coding
+each interval as a fresh number ignores all of that; this module instead keeps, per pixel,
+a *phase-locked* estimate of the continuous crossing clock and codes each spike's tick as
+the residual from its prediction:
+
+* state per pixel (carried from segment to segment, in fixed point, 16 fractional bits):
+  the interval estimate μ̂, the phase φ ∈ [0, 1) of the last crossing inside its tick,
+  the mean absolute residual (the pixel's own noise level, which is μ/√Q in ticks for a
+  shot-noise limited pixel) and the last residual's sign;
+* prediction of the next spike tick: t_last + ⌊φ + μ̂⌋; the fractional part of φ + μ̂
+  (where the predicted crossing lies inside its tick) is the main context of the
+  "residual = 0?" decision — near a tick boundary the spike may fall either side;
+* after a spike the phase is the prediction projected into the observed tick, μ̂ moves
+  by a fraction of the phase error (a phase-locked loop: fast while the lock is new or
+  the errors keep one sign, slow when they alternate), and a residual far beyond the
+  pixel's noise (a change of the light) restarts the estimate at the observed interval;
+* a pixel that fires for the first time in a segment codes its first full interval
+  against the mean interval of its neighbours (left, up, up-right, right, down — whose
+  state the decoder already holds), then its first spike's phase as a uniform value
+  below that interval (log₂ τ₁ bits);
+* per pixel, "another spike in this segment?" is one binary decision whose context is
+  where the predicted spike lies relative to the segment end.
+
+Pixels are coded in row-major order, each with all its spikes of the segment. Every value
+is coded with the adaptive binary range coder of :mod:`viform.coding.context_model`.
+Decoding is bounded: every interval must lie inside the segment, the spike count may not
+exceed what the segment states, and running out of data is an error.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from viform.coding.context_model import (
+    _EG,
+    _MASK32,
+    _RB,
+    _TOP,
+    _dnorm,
+    _dstart,
+    _dunif,
+    _eflush,
+    _eunif,
+    _rbucket,
+    _shift_low,
+)
+
+# Probabilities: per binary context a 16-bit P(bit = 0) and a count; the estimate moves by
+# 1/(count + 1.5) of the error (the running frequency while a context is young), down to
+# 1/(_LIMIT + 1.5) (then it follows slow drifts of the stream).
+_PB = 16
+_PMAX = (1 << _PB) - 32
+_LIMIT = 30
+_RECIP = np.array([int(65536 / (n + 1.5)) for n in range(_LIMIT + 1)], np.int64)
+_MAXBITS = 40
+
+
+@njit(cache=True, inline="always")
+def _adapt(probs, i, bit):
+    p = probs[2 * i]
+    n = probs[2 * i + 1]
+    target = 0 if bit else 65536
+    p += ((target - p) * _RECIP[n]) >> 16
+    probs[2 * i] = min(max(p, np.int64(32)), np.int64(_PMAX))
+    if n < _LIMIT:
+        probs[2 * i + 1] = n + 1
+
+
+@njit(cache=True, inline="always")
+def _ebit(st, out, probs, i, bit):
+    bound = (st[1] >> _PB) * probs[2 * i]
+    if bit == 0:
+        st[1] = bound
+    else:
+        st[0] += bound
+        st[1] -= bound
+    _adapt(probs, i, bit)
+    while st[1] < _TOP:
+        st[1] <<= 8
+        _shift_low(st, out)
+
+
+@njit(cache=True, inline="always")
+def _ebit_plain(st, out, bit):
+    st[1] >>= 1
+    if bit:
+        st[0] += st[1]
+    while st[1] < _TOP:
+        st[1] <<= 8
+        _shift_low(st, out)
+
+
+@njit(cache=True, inline="always")
+def _dbit(ds, data, probs, i):
+    bound = (ds[0] >> _PB) * probs[2 * i]
+    if ds[1] < bound:
+        ds[0] = bound
+        bit = 0
+    else:
+        ds[1] -= bound
+        ds[0] -= bound
+        bit = 1
+    _adapt(probs, i, bit)
+    _dnorm(ds, data)
+    return bit
+
+
+@njit(cache=True, inline="always")
+def _dbit_plain(ds, data):
+    ds[0] >>= 1
+    bit = 0
+    if ds[1] >= ds[0]:
+        ds[1] -= ds[0]
+        bit = 1
+    _dnorm(ds, data)
+    return bit
+
+
+@njit(cache=True)
+def _euint(st, out, probs, base, v):
+    """Adaptive Elias-gamma code of v ≥ 0 (v < 2**40): unary length, two modelled mantissa bits."""
+    x = v + 1
+    n = 0
+    while (x >> (n + 1)) > 0:
+        n += 1
+    for i in range(n):
+        _ebit(st, out, probs, base + min(i, 23), 1)
+    _ebit(st, out, probs, base + min(n, 23), 0)
+    node = 1
+    nb = min(n, 23)
+    for k in range(n - 1, -1, -1):
+        bit = (x >> k) & 1
+        if n - 1 - k < 2:
+            _ebit(st, out, probs, base + 24 + nb * 3 + node - 1, bit)
+            node = node * 2 + bit if node == 1 else node
+        else:
+            _ebit_plain(st, out, bit)
+
+
+@njit(cache=True)
+def _duint(ds, data, probs, base):
+    n = 0
+    while _dbit(ds, data, probs, base + min(n, 23)) == 1:
+        n += 1
+        if n > _MAXBITS:
+            ds[3] = 1
+            return np.int64(0)
+    x = np.int64(1)
+    node = 1
+    nb = min(n, 23)
+    for k in range(n - 1, -1, -1):
+        if n - 1 - k < 2:
+            bit = _dbit(ds, data, probs, base + 24 + nb * 3 + node - 1)
+            node = node * 2 + bit if node == 1 else node
+        else:
+            bit = _dbit_plain(ds, data)
+        x = (x << 1) | bit
+    return x - 1
+
+
+_FB = 16  # fractional bits of the fixed-point state
+_ONE = np.int64(1) << _FB
+
+#: per-pixel state rows (an int64 array (7, P)): μ̂, φ, mean |residual|, flags (n ≤ 7 | last sign << 3),
+#: the last three intervals
+STATE_ROWS = 7
+
+# context sizes
+_NS = 7  # noise buckets
+_NR = 8  # stop-decision buckets (remaining − predicted)
+_NT = 6  # neighbour trend: −2..2, unknown
+_NZ = 8 * _NS * 5 * 3 * 3 * _NT  # residual = 0 / sign contexts
+
+_P_NEW = 0  # 2: pixel that never fired: fires in this segment? (left neighbour fired)
+_P_TWO = _P_NEW + 2  # _RB + 1: a second spike in the segment?
+_P_FWS = _P_TWO + _RB + 1  # _RB + 1: sign of the first-width residual
+_P_FW = _P_FWS + _RB + 1  # (_RB + 1)·EG: first-width residual magnitude
+_P_PHB = _P_FW + (_RB + 1) * _EG  # 1: phase below the first width?
+_P_PH = _P_PHB + 1  # (_RB + 1)·EG: phase (one spike only, or escape)
+_P_COLD = _P_PH + (_RB + 1) * _EG  # 2: another spike? (no interval known)
+_P_COLDV = _P_COLD + 2  # EG: interval of a pixel with no interval known
+_P_STOP = _P_COLDV + _EG  # _NR·_NS·2
+_P_Z = _P_STOP + _NR * _NS * 2  # _NZ
+_P_SG = _P_Z + _NZ  # _NZ
+_P_ONE = _P_SG + _NZ  # _NS·2·5·_NT
+_P_MAG = _P_ONE + _NS * 2 * 5 * _NT  # _NS·2·_RB·EG
+#: probabilities of the model (the caller keeps them from segment to segment)
+NPROB = _P_MAG + _NS * 2 * _RB * _EG
+
+ERRORS = {1: "value out of range", 2: "more spikes than the segment states", 3: "a spike outside the segment",
+          4: "stream is cut short", 5: "spike count differs from the header"}
+
+
+def new_probabilities() -> np.ndarray:
+    """The model's adaptive probabilities at the start of a stream (p = ½ everywhere)."""
+    probs = np.zeros(2 * NPROB, np.int64)
+    probs[0::2] = 1 << (_PB - 1)
+    return probs
+
+
+# ---------------------------------------------------------------------------- model
+
+@njit(cache=True, inline="always")
+def _sbucket(mad):
+    # mean |residual| in ticks: < 1/16, 1/8, 1/4, 1/2, 1, 2, ≥ 2
+    b = 0
+    lim = _ONE >> 4
+    while b < _NS - 1 and mad >= lim:
+        b += 1
+        lim <<= 1
+    return b
+
+
+@njit(cache=True, inline="always")
+def _predict(mu, ph, lo):
+    """Predicted interval (≥ lo) and the fraction (eighths) of the predicted crossing inside its tick."""
+    x = ph + mu
+    p = x >> _FB
+    f = (x & (_ONE - 1)) >> (_FB - 3)
+    if p < lo:
+        p = lo
+        f = 0
+    return p, f
+
+
+@njit(cache=True, inline="always")
+def _update(st, q, iv, p):
+    """Advance pixel q's state after an interval iv that was predicted as p."""
+    mu = st[0, q]
+    ph = st[1, q]
+    mad = st[2, q]
+    fl = st[3, q]
+    st[6, q] = st[5, q]
+    st[5, q] = st[4, q]
+    st[4, q] = min(iv, np.int64(1) << 40)
+    n = fl & 7
+    last = fl >> 3
+    r = iv - p
+    x = ph + mu  # predicted crossing, relative to the previous spike tick
+    ar = r if r >= 0 else -r
+    if n == 0:
+        st[0, q] = iv << _FB
+        st[1, q] = _ONE >> 1
+        st[2, q] = _ONE >> 1
+        st[3, q] = 1
+        return
+    if ar >= 2 and (ar << _FB) > 4 * mad + (_ONE << 1):
+        # the light changed: restart at the observed interval
+        st[0, q] = iv << _FB
+        st[1, q] = _ONE >> 1
+        st[2, q] = mad + (((ar << _FB) - mad) >> 2)
+        st[3, q] = 1 | (3 << 3)
+        return
+    lo = iv << _FB
+    hi = lo + _ONE - 1
+    xn = x
+    if xn < lo:
+        xn = lo + (_ONE >> 3)
+    elif xn > hi:
+        xn = hi - (_ONE >> 3)
+    err = xn - x
+    if n < 2:
+        sh = 1
+    elif n < 4:
+        sh = 2
+    else:
+        sh = 4
+    sgn = 0 if r == 0 else (1 if r > 0 else 2)
+    if sgn != 0 and sgn == last:
+        sh = max(sh - 2, 1)  # errors of one sign: the light drifts, follow it
+    mu = mu + (err >> sh) if err >= 0 else mu - ((-err) >> sh)
+    if mu < _ONE:
+        mu = _ONE
+    st[0, q] = mu
+    st[1, q] = xn - lo
+    st[2, q] = mad + (((ar << _FB) - mad) >> 4)
+    st[3, q] = min(n + 1, 7) | (sgn << 3)
+
+
+@njit(cache=True, inline="always")
+def _stop_ctx(rem, p, sb):
+    d = rem - p
+    b = min(max(d, -3), 4) + 3
+    return _P_STOP + (b * _NS + sb) * 2 + (1 if d > 2 * p else 0)
+
+
+@njit(cache=True, inline="always")
+def _clip(x, lo, hi):
+    return min(max(x, lo), hi)
+
+
+@njit(cache=True)
+def _nb_iv(n, tau, starts, counts, ticks, last0, ptr, slot):
+    """Interval of neighbour n holding tick tau (−1: not known yet); ptr[slot] follows tau."""
+    lo = starts[n]
+    hi = lo + counts[n]
+    k = min(max(ptr[slot], lo), hi)
+    while k < hi and ticks[k] <= tau:
+        k += 1
+    while k > lo and ticks[k - 1] > tau:
+        k -= 1
+    ptr[slot] = k
+    if k >= hi:
+        return np.int64(-1)
+    prev = ticks[k - 1] if k > lo else last0[n]
+    if prev < 0:
+        return np.int64(-1)
+    return ticks[k] - prev
+
+
+@njit(cache=True)
+def _trend(q, width, a, tp, starts, counts, ticks, last0, ptr):
+    """How the already-coded neighbours' (left, up) intervals changed from tick a to tick tp: 0..4, 5 unknown."""
+    col = q % width
+    tot = np.int64(0)
+    have = 0
+    if col > 0:
+        then = _nb_iv(q - 1, a, starts, counts, ticks, last0, ptr, 0)
+        now = _nb_iv(q - 1, tp, starts, counts, ticks, last0, ptr, 1)
+        if then > 0 and now > 0:
+            tot += now - then
+            have += 1
+    if q >= width:
+        then = _nb_iv(q - width, a, starts, counts, ticks, last0, ptr, 2)
+        now = _nb_iv(q - width, tp, starts, counts, ticks, last0, ptr, 3)
+        if then > 0 and now > 0:
+            tot += now - then
+            have += 1
+    if have == 0:
+        return 5
+    return _clip(tot, -2, 2) + 2
+
+
+@njit(cache=True, inline="always")
+def _zctx(st, q, p, f, sb, tr):
+    h1 = _clip(st[4, q] - p, -2, 2) + 2
+    h2 = _clip(st[5, q] - p, -1, 1) + 1
+    h3 = _clip(st[6, q] - p, -1, 1) + 1
+    return (((((f * _NS + sb) * 5 + h1) * 3 + h2) * 3 + h3) * _NT + tr), h1
+
+
+@njit(cache=True)
+def _nb_mu(st, q, width, npix):
+    """Mean interval estimate (ticks, rounded) of the neighbours that have one; 0 if none."""
+    row = q // width
+    col = q - row * width
+    tot = np.int64(0)
+    cnt = 0
+    for k in range(5):
+        if k == 0:
+            if col == 0:
+                continue
+            n = q - 1
+        elif k == 1:
+            if row == 0:
+                continue
+            n = q - width
+        elif k == 2:
+            if row == 0 or col + 1 >= width:
+                continue
+            n = q - width + 1
+        elif k == 3:
+            if col + 1 >= width:
+                continue
+            n = q + 1
+        else:
+            n = q + width
+            if n >= npix:
+                continue
+        if (st[3, n] & 7) > 0:
+            tot += st[0, n]
+            cnt += 1
+    if cnt == 0:
+        return np.int64(0)
+    return (tot // cnt + (_ONE >> 1)) >> _FB
+
+
+# ---------------------------------------------------------------------------- encoder
+
+@njit(cache=True)
+def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, out):
+    """Code one segment: per pixel (row-major) its spike ticks ``ticks`` (grouped by pixel, ``counts`` each).
+
+    ``last0``: each pixel's last spike tick before the segment (−1: never fired); ``st``: the
+    predictor state (STATE_ROWS, P) and ``probs`` the adaptive probabilities, both advanced in
+    place. Returns the byte count (> out.size: retry bigger from copies of the state).
+    """
+    npix = counts.size
+    es = np.zeros(6, np.int64)
+    es[1] = _MASK32
+    es[3] = 1
+    starts = np.zeros(npix + 1, np.int64)
+    for q in range(npix):
+        starts[q + 1] = starts[q] + counts[q]
+    ptr = np.zeros(4, np.int64)
+    for q in range(npix):
+        c = counts[q]
+        r = starts[q]
+        a = last0[q]
+        k = 0
+        ptr[:] = 0
+        if a < 0:
+            col = q % width
+            lf = 1 if (col > 0 and counts[q - 1] > 0) else 0
+            _ebit(es, out, probs, _P_NEW + lf, 1 if c > 0 else 0)
+            if c == 0:
+                continue
+            base = seg_start - 1
+            phase = ticks[r] - base
+            nb = _nb_mu(st, q, width, npix)
+            fb = _RB if nb <= 0 else _rbucket(nb)
+            two = c >= 2
+            _ebit(es, out, probs, _P_TWO + fb, 1 if two else 0)
+            if two:
+                iv = ticks[r + 1] - ticks[r]
+                e = iv - nb
+                _ebit(es, out, probs, _P_FWS + fb, 1 if e < 0 else 0)
+                _euint(es, out, probs, _P_FW + fb * _EG, e if e >= 0 else -e - 1)
+                below = phase <= iv
+                _ebit(es, out, probs, _P_PHB, 1 if below else 0)
+                if below:
+                    _eunif(es, out, phase - 1, iv)
+                else:
+                    _euint(es, out, probs, _P_PH + _rbucket(iv) * _EG, phase - iv - 1)
+                st[3, q] = 0
+                _update(st, q, iv, iv)
+                a = ticks[r + 1]
+                k = 2
+            else:
+                _euint(es, out, probs, _P_PH + fb * _EG, phase - 1)
+                st[3, q] = 0
+                a = ticks[r]
+                k = 1
+        while True:
+            rem = seg_end - 1 - a
+            lo = max(np.int64(1), seg_start - a)
+            if rem < lo:
+                break
+            more = k < c
+            fl = st[3, q]
+            if (fl & 7) == 0:
+                _ebit(es, out, probs, _P_COLD + (1 if a >= seg_start else 0), 1 if more else 0)
+                if not more:
+                    break
+                iv = ticks[r + k] - a
+                _euint(es, out, probs, _P_COLDV, iv - lo)
+                _update(st, q, iv, iv)
+            else:
+                p, f = _predict(st[0, q], st[1, q], lo)
+                sb = _sbucket(st[2, q])
+                _ebit(es, out, probs, _stop_ctx(rem, p, sb), 1 if more else 0)
+                if not more:
+                    break
+                iv = ticks[r + k] - a
+                d = iv - p
+                tr = _trend(q, width, a, a + p, starts, counts, ticks, last0, ptr)
+                zc, h1 = _zctx(st, q, p, f, sb, tr)
+                _ebit(es, out, probs, _P_Z + zc, 1 if d == 0 else 0)
+                if d != 0:
+                    neg = 1 if d < 0 else 0
+                    _ebit(es, out, probs, _P_SG + zc, neg)
+                    ad = -d if neg else d
+                    _ebit(es, out, probs, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr, 1 if ad == 1 else 0)
+                    if ad > 1:
+                        _euint(es, out, probs, _P_MAG + ((sb * 2 + neg) * _RB + _rbucket(p)) * _EG, ad - 2)
+                _update(st, q, iv, p)
+            a = a + iv
+            k += 1
+    _eflush(es, out)
+    return es[4]
+
+
+# ---------------------------------------------------------------------------- decoder
+
+@njit(cache=True)
+def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_spikes, counts, ticks):
+    """Inverse of :func:`encode_segment`. Returns (error code, spikes decoded); arrays filled in place.
+
+    ``ticks`` must hold the spikes: when it is full the code is 2 (the caller may grow it and
+    decode again from copies of the state, or give up when the segment states fewer spikes).
+    """
+    ds = np.zeros(4, np.int64)
+    _dstart(ds, data)
+    cap = min(n_spikes, ticks.size)
+    starts = np.zeros(npix + 1, np.int64)
+    ptr = np.zeros(4, np.int64)
+    r = 0
+    for q in range(npix):
+        starts[q] = r
+        counts[q] = 0
+        ptr[:] = 0
+        a = last0[q]
+        if a < -1 or a >= seg_start:
+            return 1, r
+        c = 0
+        if a < 0:
+            col = q % width
+            lf = 1 if (col > 0 and counts[q - 1] > 0) else 0
+            if _dbit(ds, data, probs, _P_NEW + lf) == 0:
+                if ds[2] > data.size + 8:
+                    return 4, r
+                continue
+            base = seg_start - 1
+            nb = _nb_mu(st, q, width, npix)
+            fb = _RB if nb <= 0 else _rbucket(nb)
+            two = _dbit(ds, data, probs, _P_TWO + fb) == 1
+            if two:
+                if r + 2 > cap:
+                    return 2, r
+                neg = _dbit(ds, data, probs, _P_FWS + fb)
+                mag = _duint(ds, data, probs, _P_FW + fb * _EG)
+                iv = nb - mag - 1 if neg else nb + mag
+                if iv < 1 or iv >= seg_end - seg_start or ds[3]:
+                    return 1, r
+                if _dbit(ds, data, probs, _P_PHB):
+                    phase = _dunif(ds, data, iv) + 1
+                else:
+                    phase = _duint(ds, data, probs, _P_PH + _rbucket(iv) * _EG) + iv + 1
+                t0 = base + phase
+                if ds[3] or phase > seg_end or t0 + iv >= seg_end:
+                    return 3, r
+                ticks[r] = t0
+                ticks[r + 1] = t0 + iv
+                st[3, q] = 0
+                _update(st, q, iv, iv)
+                a = t0 + iv
+                c = 2
+            else:
+                if r + 1 > cap:
+                    return 2, r
+                phase = _duint(ds, data, probs, _P_PH + fb * _EG) + 1
+                if ds[3] or phase > seg_end - base - 1:
+                    return 3, r
+                ticks[r] = base + phase
+                st[3, q] = 0
+                a = base + phase
+                c = 1
+        counts[q] = c
+        while True:
+            rem = seg_end - 1 - a
+            lo = max(np.int64(1), seg_start - a)
+            if rem < lo:
+                break
+            fl = st[3, q]
+            if (fl & 7) == 0:
+                if _dbit(ds, data, probs, _P_COLD + (1 if a >= seg_start else 0)) == 0:
+                    break
+                iv = _duint(ds, data, probs, _P_COLDV) + lo
+                if ds[3] or iv > rem:
+                    return 3, r + c
+                _update(st, q, iv, iv)
+            else:
+                p, f = _predict(st[0, q], st[1, q], lo)
+                sb = _sbucket(st[2, q])
+                if _dbit(ds, data, probs, _stop_ctx(rem, p, sb)) == 0:
+                    break
+                # the pixel's own spikes so far are visible to _trend only through its neighbours
+                tr = _trend(q, width, a, a + p, starts, counts, ticks, last0, ptr)
+                zc, h1 = _zctx(st, q, p, f, sb, tr)
+                if _dbit(ds, data, probs, _P_Z + zc):
+                    d = np.int64(0)
+                else:
+                    neg = _dbit(ds, data, probs, _P_SG + zc)
+                    if _dbit(ds, data, probs, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr):
+                        ad = np.int64(1)
+                    else:
+                        ad = _duint(ds, data, probs, _P_MAG + ((sb * 2 + neg) * _RB + _rbucket(p)) * _EG) + 2
+                    d = -ad if neg else ad
+                iv = p + d
+                if ds[3] or iv < lo or iv > rem:
+                    return 3, r + c
+                _update(st, q, iv, p)
+            if r + c >= cap:
+                return 2, r + c
+            a = a + iv
+            ticks[r + c] = a
+            c += 1
+            if ds[2] > data.size + 8:
+                return 4, r + c
+        counts[q] = c
+        r += c
+        if ds[2] > data.size + 8:
+            return 4, r
+    if r != n_spikes:
+        return 5, r
+    if ds[2] > data.size + 5:
+        return 4, r
+    return 0, r
+
+
+# ---------------------------------------------------------------------------- records ↔ ticks
+
+@njit(cache=True)
+def ticks_from_records(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_start, tick_counts, ticks):
+    """Spike ticks per pixel (grouped, time order) of a strict segment's first-spike records."""
+    r = 0
+    n = 0
+    for p in range(counts.size):
+        a = anchor0[p]
+        ref = ref0[p]
+        n0 = n
+        for q in range(counts[p] + 1):
+            if q < counts[p]:
+                m = rec_m[r]
+            else:
+                m = tail_m[p]
+            for _ in range(m):
+                a += ref
+                ticks[n] = a
+                n += 1
+            if q < counts[p]:
+                a += rec_o[r]
+                ref = rec_o[r]
+                ticks[n] = a
+                n += 1
+                r += 1
+        tick_counts[p] = n - n0
+    return n
+
+
+@njit(cache=True)
+def records_from_ticks(tick_counts, ticks, anchor0, ref0, counts, rec_m, rec_g, rec_o, tail_m, tail_g):
+    """Strict first-spike records of a segment from its spike ticks (the inverse of :func:`ticks_from_records`).
+
+    Returns the record count.
+    """
+    r = 0
+    n = 0
+    for p in range(tick_counts.size):
+        a = anchor0[p]
+        ref = ref0[p]
+        m = 0
+        r0 = r
+        for _ in range(tick_counts[p]):
+            w = ticks[n] - a
+            n += 1
+            if ref > 0 and w == ref:
+                m += 1
+            else:
+                rec_m[r] = m
+                rec_g[r] = m * ref
+                rec_o[r] = w
+                r += 1
+                m = 0
+                ref = w
+            a += w
+        counts[p] = r - r0
+        tail_m[p] = m
+        tail_g[p] = m * ref
+    return r
