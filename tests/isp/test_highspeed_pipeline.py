@@ -138,3 +138,20 @@ def test_highspeed_figures_table_and_json(tmp_path, capsys):
     assert main(["highspeed-figures", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["cameralink_seed"] == "555 fps"
     del out
+
+
+def test_image_of_another_shape_is_cropped_not_stretched():
+    """Issue 15: a 512 × 512 image was stretched to the 320 × 180 grid. Now its centre
+    512 × 288 (16:9) is kept and resized: a square stays square (rows and columns scale by
+    the same 1.6)."""
+    from viform.isp.highspeed_pipeline import AspectFitScene
+
+    img = np.zeros((512, 512))
+    img[192:320, 192:320] = 100.0                      # a 128-px square in the centre
+    fit = AspectFitScene(StillScene(img), 180, 320)
+    assert fit.crop == (288, 512)
+    out = fit.illuminance_lux(0.0)
+    rows = np.nonzero(out.max(axis=1) > 50)[0]
+    cols = np.nonzero(out.max(axis=0) > 50)[0]
+    assert abs((rows[-1] - rows[0]) - (cols[-1] - cols[0])) <= 1   # still square
+    assert (cols[-1] - cols[0] + 1) == pytest.approx(128 / 1.6, abs=1.5)

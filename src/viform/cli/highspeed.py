@@ -96,7 +96,18 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     window = timing.window(roi)
     rh, rw = _parse_size(render, "render")
     rh, rw = min(rh, window.height), min(rw, window.width)
-    base = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps, resize=True)
+    from viform.light.scenes import BUILTIN_SCENES
+
+    if scene in BUILTIN_SCENES:
+        base = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps)
+    else:  # a file: keep its aspect ratio (centre crop to the grid's), never stretch it
+        from viform.isp.highspeed_pipeline import AspectFitScene
+
+        native = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps, resize=False)
+        base = AspectFitScene(native, rh, rw)
+        if base.crop != (native.height, native.width):
+            click.echo(f"note: {native.width}x{native.height} scene cropped to its centre {base.crop[1]}x"
+                       f"{base.crop[0]} (the {rw}x{rh} grid's aspect ratio) and resized, not stretched", err=True)
     mean0 = float(base.illuminance_lux(0.0).mean())
     if mean0 <= 0:
         raise ViformError(f"scene {scene!r} is black at t = 0; cannot scale it to --lux")

@@ -229,6 +229,41 @@ class ScaledScene(Scene):
         return {**super().describe(), "gain": self.gain, "base": self.base.describe()}
 
 
+class AspectFitScene(Scene):
+    """``base`` cropped at its centre to the aspect ratio of ``height`` × ``width`` and resized
+    to it (area-averaging), so an image of another shape is never stretched."""
+
+    name = "aspect-fit"
+
+    def __init__(self, base: Scene, height: int, width: int):
+        super().__init__(height, width, base.duration_s)
+        self.base = base
+        bh, bw = base.height, base.width
+        if bh * width > bw * height:       # too tall: keep the full width
+            ch, cw = max(1, round(bw * height / width)), bw
+        else:
+            ch, cw = bh, max(1, round(bh * width / height))
+        self.crop = (ch, cw)
+        self._r0, self._c0 = (bh - ch) // 2, (bw - cw) // 2
+
+    def _fit(self, img):
+        from skimage.transform import resize
+
+        c = img[self._r0:self._r0 + self.crop[0], self._c0:self._c0 + self.crop[1]]
+        if c.shape == (self.height, self.width):
+            return c
+        return resize(c, (self.height, self.width), anti_aliasing=True, preserve_range=True)
+
+    def illuminance_lux(self, t_s):
+        return self._fit(self.base.illuminance_lux(t_s))
+
+    def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
+        return self._fit(self.base.mean_illuminance_lux(t0_s, t1_s, samples))
+
+    def describe(self):
+        return {**super().describe(), "crop": list(self.crop), "base": self.base.describe()}
+
+
 class StepsScene(Scene):
     """``base`` multiplied by a piecewise-constant factor: ×f_j from t_j on (exact window mean)."""
 
