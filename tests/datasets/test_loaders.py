@@ -82,3 +82,16 @@ def test_config_yaml_without_size_is_refused(tmp_path):
     (tmp_path / "a.dat").symlink_to((SHARED / "reds_sim_400x250.dat").resolve())
     with pytest.raises(ViformError, match="spike_w"):
         open_dataset(tmp_path)
+
+
+def test_viform_npz_and_spike_zoo_npz_side_by_side(tmp_path):
+    """A .npz written by viform (key 'spikes' + header) and Spike-Zoo's ('spk') open the same way."""
+    from viform.stream.container import SpikeStream
+    from viform.stream.io import save_spikes
+
+    bits = np.random.default_rng(3).random((50, 8, 16)) < 0.2
+    save_spikes(tmp_path / "ours.npz", SpikeStream(bits, 40_000.0, 100.0))
+    (tmp_path / "theirs.npz").symlink_to((SHARED / "real_uhsr_250x250.npz").resolve())
+    ds = open_dataset(tmp_path)
+    assert np.array_equal(ds.source("ours").read_ticks(0, 50), bits)
+    assert ds.source("theirs").shape == (200, 250, 250)

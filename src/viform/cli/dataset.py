@@ -79,7 +79,8 @@ def dataset(src, out_dir, preset, height, width, workers, scheduler, worker_memo
             ("ticks", f"{summary['ticks']:,}"),
             ("spikes", f"{summary['spikes']:,}"),
             ("spike data", f"{_sig(summary['bytes'] / 1e6)} MB"),
-            ("time", f"{_sig(summary['seconds'])} s on {summary['workers']} workers"),
+            ("time", f"{_sig(summary['seconds'])} s on {summary['workers']} "
+                     f"worker{'' if summary['workers'] == 1 else 's'}"),
             ("speed", f"{_sig(summary['clips_per_s'])} clips/s, {_sig(summary['pixel_ticks_per_s'])} pixel-ticks/s"),
         ]
         for name, value in rows:
