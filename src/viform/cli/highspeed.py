@@ -67,9 +67,12 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
 @click.option("--video", "video_format", type=click.Choice(["gif", "mp4"]), default="gif", show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="highspeed_out", show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON instead of the summary.")
+@click.option("--json-file", type=click.Path(dir_okay=False), default=None,
+              help="Also write the report JSON to this file (OUT/report.json is always written).")
 def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray, band_gray,
               ae_saturated_cut, equalize, eq_source, eq_method, n_frames, exposure_us, render, lux, steps, scene_fps,
-              video_format, seed, out_dir):
+              video_format, seed, out_dir, as_json, json_file):
     """Shoot SCENE with a LUX13HS-like high-speed camera (1280x864, up to 3 500 fps).
 
     SCENE is a built-in scene (translating, moving-edge, rotating, hdr, step, flicker), an
@@ -135,6 +138,13 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     with tqdm(total=n_frames, desc="frames", file=sys.stderr, leave=False) as bar:
         result = run_highspeed(sc, cfg, timing, progress=bar.update)
     report = write_outputs(result, out_dir, video_format, [t for t, _ in step_list])
+    if json_file:
+        from viform._io import write_json
+
+        write_json(json_file, report)
+    if as_json:
+        click.echo(json.dumps(report, indent=2, default=float))
+        return
     lk = report["link"]
     click.echo(f"sensor: {window.width}x{window.height} {mode} @ {timing.pixel_clock_hz / 1e6:g} MHz -> "
                f"{report['sensor_frame_rate_hz']:.1f} fps ({report['timing']['cycles_per_frame']} cycles/frame)")
