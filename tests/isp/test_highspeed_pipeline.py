@@ -155,3 +155,12 @@ def test_image_of_another_shape_is_cropped_not_stretched():
     cols = np.nonzero(out.max(axis=0) > 50)[0]
     assert abs((rows[-1] - rows[0]) - (cols[-1] - cols[0])) <= 1   # still square
     assert (cols[-1] - cols[0] + 1) == pytest.approx(128 / 1.6, abs=1.5)
+
+
+def test_cli_json_flag_prints_the_report(tmp_path, capsys):
+    rc = main(["highspeed", "translating", "--frames", "6", "--render", "32x18", "--steps", "none",
+               "--out", str(tmp_path / "o"), "--json", "--json-file", str(tmp_path / "r.json")])
+    assert rc == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["frames_captured"] == 6
+    assert json.loads((tmp_path / "r.json").read_text())["frames_captured"] == 6
