@@ -517,39 +517,47 @@ def verdict(shots, demand: dict | None) -> list[str]:
         if not vals:
             return None, None, None
         vals.sort(key=lambda vs: -vs[0] if higher else vs[0])
-        return vals[0][1], vals[0][0], vals[-1]
+        # the other end is worth naming only when it differs from the winner
+        worst = vals[-1] if len(vals) > 1 and vals[-1][0] != vals[0][0] else None
+        return vals[0][1], vals[0][0], worst
+
+    def tail(worst, text):
+        return text.format(label=worst[1].label, value=worst[0]) if worst else ""
 
     s, v, worst = best("edge_width_px", higher=False)
     if s is not None:
-        lines.append(f"Sharpest motion: {s.label}, with a {v:.3g} px edge (integration {s.time_resolution_s:.3g} s); "
-                     f"the most blurred is {worst[1].label} at {worst[0]:.3g} px, because its integration time is "
-                     f"{worst[1].time_resolution_s:.3g} s.")
+        lines.append(f"Sharpest motion: {s.label}, with a {v:.3g} px edge (integration {s.time_resolution_s:.3g} s)"
+                     + (f"; the most blurred is {worst[1].label} at {worst[0]:.3g} px, because its integration time "
+                        f"is {worst[1].time_resolution_s:.3g} s" if worst else "") + ".")
     s, v, worst = best("dr_captured_db")
     if s is not None:
         need = f" of the {demand['dynamic_range_db']:.0f} dB the scene holds" if demand else ""
         lines.append(f"Widest range rendered within a factor of 2: {s.label}, {v:.0f} dB{need} "
                      f"(saturated {s.metrics['saturated_fraction']:.1%}, under-exposed "
-                     f"{s.metrics['underexposed_fraction']:.1%}); narrowest: {worst[1].label}, {worst[0]:.0f} dB.")
+                     f"{s.metrics['underexposed_fraction']:.1%})" + tail(worst, "; narrowest: {label}, {value:.0f} dB")
+                     + ".")
     s, v, worst = best("saturated_fraction", higher=False)
     if s is not None:
-        lines.append(f"Fewest saturated pixels: {s.label} ({v:.1%}); most: {worst[1].label} ({worst[0]:.1%}).")
+        lines.append(f"Fewest saturated pixels: {s.label} ({v:.1%})" + tail(worst, "; most: {label} ({value:.1%})")
+                     + ".")
     s, v, worst = best("underexposed_fraction", higher=False)
     if s is not None:
-        lines.append(f"Fewest pixels lost in the dark: {s.label} ({v:.1%}); most: {worst[1].label} ({worst[0]:.1%}).")
+        lines.append(f"Fewest pixels lost in the dark: {s.label} ({v:.1%})"
+                     + tail(worst, "; most: {label} ({value:.1%})") + ".")
     s, v, worst = best("flicker_error", higher=False)
     if s is not None:
-        lines.append(f"Flickering LED seen in its true state: {s.label} (error {v:.2f} of the on/off swing); "
-                     f"worst {worst[1].label} ({worst[0]:.2f}).")
+        lines.append(f"Flickering LED seen in its true state: {s.label} (error {v:.2f} of the on/off swing)"
+                     + tail(worst, "; worst {label} ({value:.2f})") + ".")
     s, v, worst = best("psnr_log_db")
     if s is not None:
         lines.append(f"Closest to the truth overall (PSNR of log-lux): {s.label}, {v:.1f} dB "
-                     f"(SSIM {s.metrics['ssim_log']:.2f}); last: {worst[1].label}, {worst[0]:.1f} dB.")
+                     f"(SSIM {s.metrics['ssim_log']:.2f})" + tail(worst, "; last: {label}, {value:.1f} dB") + ".")
     s, v, worst = best("data_rate_mb_per_s", higher=False)
     if s is not None:
-        lines.append(f"Least data: {s.label}, {v:.3g} MB/s; most: {worst[1].label}, {worst[0]:.3g} MB/s.")
+        lines.append(f"Least data: {s.label}, {v:.3g} MB/s" + tail(worst, "; most: {label}, {value:.3g} MB/s") + ".")
     s, v, worst = best("latency_s", higher=False)
     if s is not None:
-        lines.append(f"Shortest latency: {s.label}, {v:.3g} s; longest: {worst[1].label}, {worst[0]:.3g} s.")
+        lines.append(f"Shortest latency: {s.label}, {v:.3g} s" + tail(worst, "; longest: {label}, {value:.3g} s") + ".")
     cnr = [(s, s.metrics["target_cnr"]) for s in shots if not s.skipped and s.metrics.get("target_cnr")]
     if cnr:
         seen = {s.label: [k for k, v in c.items() if v >= 3] for s, c in cnr}

@@ -49,6 +49,9 @@ def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed
     """Shoot ``scene`` with each sensor and score it; returns shots, metrics and the verdict."""
     duration_s = check_positive("--duration", duration_s)
     keys = check_sensors(sensors)
+    if all(k == "gated" for k in keys) and getattr(scene, "active", None) is None:
+        raise ViformError(f"--sensors gated: the gated camera needs a scene with range (night-road-fog); "
+                          f"scene {scene.name!r} has none")
     instants = list(instants_s) if instants_s is not None else default_instants(duration_s)
     for t in instants:
         if not 0 <= t < duration_s:
@@ -308,13 +311,16 @@ def write_report(result, out_dir, command: str = "") -> dict:
     shots = result["shots"]
     instants = result["instants_s"]
     paths = {}
-    save_figure(figs / "dilemma.png", figure_dilemma(result))
-    paths["dilemma"] = figs / "dilemma.png"
+    has_lux = any(not s.skipped and s.lux_units for s in shots)
+    if has_lux:
+        save_figure(figs / "dilemma.png", figure_dilemma(result))
+        paths["dilemma"] = figs / "dilemma.png"
     for i, t in enumerate(instants):
         save_figure(figs / f"images_{i}_{t * 1e3:.2f}ms.png", figure_instant(result, i))
-        save_figure(figs / f"errors_{i}_{t * 1e3:.2f}ms.png", figure_errors(result, i))
         paths[f"images_{i}"] = figs / f"images_{i}_{t * 1e3:.2f}ms.png"
-        paths[f"errors_{i}"] = figs / f"errors_{i}_{t * 1e3:.2f}ms.png"
+        if has_lux:
+            save_figure(figs / f"errors_{i}_{t * 1e3:.2f}ms.png", figure_errors(result, i))
+            paths[f"errors_{i}"] = figs / f"errors_{i}_{t * 1e3:.2f}ms.png"
     gated = figure_gated(result)
     if gated is not None:
         save_figure(figs / "gated.png", gated)
@@ -373,15 +379,18 @@ def write_report(result, out_dir, command: str = "") -> dict:
                  "integration time = the light each image integrates (median interval for the spike "
                  "camera's interval image). n/a: not defined for this sensor or scene.</p></section>")
 
-    parts.append("<section id='dilemma'><h2>The dilemma: time resolution against dynamic range</h2>")
-    parts.append(_img(paths["dilemma"], "time resolution against dynamic range"))
-    parts.append("</section><section id='images'><h2>Images at the chosen instants</h2>"
+    if "dilemma" in paths:
+        parts.append("<section id='dilemma'><h2>The dilemma: time resolution against dynamic range</h2>")
+        parts.append(_img(paths["dilemma"], "time resolution against dynamic range"))
+        parts.append("</section>")
+    parts.append("<section id='images'><h2>Images at the chosen instants</h2>"
                  "<p class='note'>A frame camera shows the frame exposing at that instant, or else the last "
                  "frame it took (as a display holds it); the panel title says which light it integrated.</p>")
     for i, t in enumerate(instants):
         parts.append(f"<h3 id='instant-{i}'>t = {t * 1e3:.2f} ms</h3>")
         parts.append(_img(paths[f"images_{i}"], f"images at {t * 1e3:.2f} ms"))
-        parts.append(_img(paths[f"errors_{i}"], f"error maps at {t * 1e3:.2f} ms"))
+        if f"errors_{i}" in paths:
+            parts.append(_img(paths[f"errors_{i}"], f"error maps at {t * 1e3:.2f} ms"))
     if "gated" in paths:
         parts.append(_img(paths["gated"], "gated camera frame"))
     parts.append("</section><section id='sensors'><h2>Sensors and their parameters</h2>")
