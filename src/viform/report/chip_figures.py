@@ -137,7 +137,7 @@ def accumulation_counts(stream, lengths=FIG3_TICKS) -> dict:
     return out
 
 
-def plot_fig3(path, counts: dict, clock_hz: float) -> None:
+def plot_fig3(path, counts: dict, clock_hz: float, sensor_name: str = "SpikeTwo") -> None:
     """Fig. 3: accumulation images; brightness = spikes per tick (count / n) on ONE scale, so a
     1-tick image is binary (white dots = spikes) and long windows blur the hand."""
     import matplotlib
@@ -158,7 +158,8 @@ def plot_fig3(path, counts: dict, clock_hz: float) -> None:
         ax.set_yticks([])
     fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.7,
                  label=f"spikes per tick (count / n; one scale; white ≥ {vmax:.2f})")
-    fig.suptitle("Accumulation images of the first n ticks: a hand waving, SpikeTwo 20 kHz", fontsize=11)
+    fig.suptitle(f"Accumulation images of the first n ticks: a hand waving, {sensor_name} at {clock_hz / 1e3:g} kHz",
+                 fontsize=11)
     save_figure(path, fig)
 
 
@@ -254,7 +255,8 @@ def plot_fig5(path, stream, instants, pixels, stretch: str = "minmax", n_ticks: 
     ax.set_xlim(-0.015 * n_ticks, n_ticks + 2)
     ax.set_ylim(-0.2, len(pixels))
     ax.set_yticks([])
-    ax.set_xlabel("tick (50 µs at 20 kHz); dotted: the four instants above")
+    ax.set_xlabel(f"tick ({1e6 / stream.clock_hz:g} µs at {stream.clock_hz / 1e3:g} kHz); "
+                  "dotted: the four instants above")
     ax.set_title("pulse-width sequences of the ten pixels: each pulse is width τ × height ∝ 1/τ "
                  "(area = Q, one height scale); bright pixels fire short, tall pulses", fontsize=10)
     save_figure(path, fig)
@@ -278,7 +280,7 @@ def chip_figures(out_dir, size: int = 192, ticks: int = 800, stretch: str = "min
     fig1 = plot_fig1(out / "fig1_spike_train.png")
     counts = accumulation_counts(stream, lengths)
     clock = stream.clock_hz
-    plot_fig3(out / "fig3_accumulation.png", counts, clock)
+    plot_fig3(out / "fig3_accumulation.png", counts, clock, p.name)
     from viform.imaging.interval import interval_ticks
 
     tau_last, cens = interval_ticks(stream, [ticks - 1])
