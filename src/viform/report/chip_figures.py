@@ -274,7 +274,7 @@ def chip_figures(out_dir, size: int = 192, ticks: int = 800, stretch: str = "min
     lengths = tuple(n for n in FIG3_TICKS if n < ticks) + (ticks,)
     # record past the last shown tick so the interval containing it is closed by its next
     # spike (the seed takes the first 800 ticks of a longer recording)
-    stream, scene, p = hand_stream(size, ticks + 64, preset, seed)
+    stream, scene, p = hand_stream(size, ticks + max(128, ticks // 4), preset, seed)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     fig1 = plot_fig1(out / "fig1_spike_train.png")
