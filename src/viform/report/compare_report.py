@@ -139,8 +139,7 @@ def figure_instant(result, index: int):
     fig, axes, cax = _image_grid(len(shots) + 1, scene.shape)
     floor = norm.vmin
     im = None
-    cmap = plt.get_cmap(LUX_CMAP).copy()
-    cmap.set_bad(UNDER_COLOUR)
+    cmap = plt.get_cmap(LUX_CMAP).with_extremes(bad=UNDER_COLOUR)
     panels = [("truth", scene.illuminance_lux(t), f"at {t * 1e3:.2f} ms")]
     for s in shots:  # under-exposed pixels in grey: their value is a bound, not a measurement
         est = s.estimates[index]
