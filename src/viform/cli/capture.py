@@ -279,7 +279,8 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
         click.echo(f"wrote {out_path}: spike stream, {summary['n_ticks']} ticks × {summary['height']}×"
                    f"{summary['width']} at {summary['clock_hz']:g} Hz")
     else:
-        click.echo(f"wrote {out_path}: {summary['frames']} frames × {summary['height']}×{summary['width']}, "
+        frames = f"{summary['frames']} frame{'s' if summary['frames'] != 1 else ''}"
+        click.echo(f"wrote {out_path}: {frames} × {summary['height']}×{summary['width']}, "
                    f"exposure {summary['exposure_s'][0] * 1e3:.4g} ms, {summary['units']}")
     if preview:
         click.echo(f"preview: {preview}")
