@@ -376,7 +376,8 @@ def write_report(result, out_dir, command: str = "") -> dict:
                  "LED over its on/off swing; DR captured = 20·lg(max/min) of the true light rendered within a "
                  "factor of 2; latency = worst-case time from a light change to an image showing it; "
                  "integration time = the light each image integrates (median interval for the spike "
-                 "camera's interval image). n/a: not defined for this sensor or scene.</p></section>")
+                 "camera's interval image). n/a: not defined for this sensor or scene, or no single clean edge in the "
+                 "image (several exposures of the moving edge overlaid, as in the overflow pixel).</p></section>")
 
     if "dilemma" in paths:
         parts.append("<section id='dilemma'><h2>The dilemma: time resolution against dynamic range</h2>")
