@@ -119,7 +119,11 @@ def hand_stream(size: int = 192, n_ticks: int = 800, preset: str = "spiketwo", s
     n_ticks = check_int("ticks", n_ticks, 1)
     p = load_spike_preset(preset)
     sensor = p.sensor(height=size, width=size)
-    scene = WavingHandScene(size, size)
+    # Light levels follow the sensor: the skin fires every 3 ticks, the wall every ≈ 7, the
+    # clothes every ≈ 23 (the spread of the seed's 255 − τ image), whatever Q and clock are.
+    par = sensor.parameters
+    skin = par.threshold_electrons * par.clock_hz / 3.0 / par.optics.electrons_per_s(1.0)
+    scene = WavingHandScene(size, size, wall_lux=skin * 100 / 230, shirt_lux=skin * 30 / 230, skin_lux=skin)
     stream = sensor.capture(scene, n_ticks / sensor.parameters.clock_hz, seed=seed)
     return stream, scene, p
 
