@@ -219,11 +219,13 @@ def spike_estimates(stream, instants_s, method: str, window_s: float = ACCUMULAT
     for t in instants_s:
         if method == "accumulation":
             img = accumulation_image(stream, t, window_s)
-            count = img.spikes_per_s * img.info.get("window_ticks", round(window_s * stream.clock_hz)) * tick
             n = img.info.get("window_ticks", round(window_s * stream.clock_hz))
+            count = img.spikes_per_s * n * tick
             saturated = count >= 0.98 * n
             under = count < 0.5
-            out.append(Estimate(img.lux, saturated, under, (t - n * tick, t)))
+            # the window the imaging package used (centred on t by default; ending at t in older trees)
+            k0 = img.info.get("first_tick", stream.tick_of(t) + 1 - n)
+            out.append(Estimate(img.lux, saturated, under, (k0 * tick, (k0 + n) * tick)))
         elif method == "interval":
             img = interval_image(stream, t)
             tau = img.info["tau_ticks"]
