@@ -104,7 +104,7 @@ class CCDDrive:
 #: The parts of seed 004's experiments.
 DRIVES: dict[str, CCDDrive] = {
     "icx618": CCDDrive("ICX618ALA", False, ("V2", "V3"), rows=494, cols=659,
-                       note="progressive; the seed's Figs. 2-3"),
+                       note="progressive; the paper's Figs. 2-3"),
     "icx445": CCDDrive("ICX445ALA", False, ("V2", "V3"), ("VHLD", "VST"), rows=600, cols=1280,
                        line_time_s=1.0 / 25.0 / 1.3 / 600,
                        note="progressive; needs VHLD and VST as well; 1280x600 centre window "
