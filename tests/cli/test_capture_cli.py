@@ -37,6 +37,11 @@ def test_every_sensor_captures(tmp_path, capsys):
         assert data["start_times_s"].shape == data["exposure_s"].shape == (n,)
         assert np.all(data["exposure_s"] > 0) and data["units"]
         assert "sensor" in data["metadata"] and "scene" in data["metadata"]
+        if name == "highspeed":  # the camera's own output: equalized frames, one in N over the link
+            with np.load(out) as z:
+                sent = z["output_frame_indices"]
+                assert z["output_frames"].shape == (sent.size, 32, 48) and np.all(np.diff(sent) > 0)
+                assert z["auto_exposure_cycles"].shape == (n,)
 
 
 def _led_on_fraction(path, scene):

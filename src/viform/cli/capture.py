@@ -63,8 +63,13 @@ def is_spike(name: str) -> bool:
     return name == "spike" or name in SPIKE_PRESET_NAMES
 
 
-def save_frame_stack(path, frames, start_times_s, exposure_s, units: str, metadata: dict) -> Path:
-    """Write frames with their exposure windows, unit and metadata (.npz or .zarr), atomically."""
+def save_frame_stack(path, frames, start_times_s, exposure_s, units: str, metadata: dict,
+                     extra: dict | None = None) -> Path:
+    """Write frames with their exposure windows, unit and metadata (.npz or .zarr), atomically.
+
+    ``extra``: more named arrays to store beside the frames (e.g. a camera's processed output).
+    """
+    extra = {k: np.asarray(v) for k, v in (extra or {}).items()}
     from viform._io import _jsonable, atomic_path
 
     path = Path(path)
@@ -75,7 +80,7 @@ def save_frame_stack(path, frames, start_times_s, exposure_s, units: str, metada
         with atomic_path(path) as tmp, open(tmp, "wb") as f:
             np.savez_compressed(f, frames=np.asarray(frames), start_times_s=starts, exposure_s=exposures,
                                 end_times_s=starts + exposures, units=np.array(units),
-                                metadata_json=np.array(meta_json))
+                                metadata_json=np.array(meta_json), **extra)
         return path
     import zarr
 
@@ -85,7 +90,8 @@ def save_frame_stack(path, frames, start_times_s, exposure_s, units: str, metada
         arr = np.asarray(frames)
         z = group.create_array("frames", shape=arr.shape, dtype=arr.dtype, chunks=(1, *arr.shape[1:]))
         z[...] = arr
-        for name, data in (("start_times_s", starts), ("exposure_s", exposures), ("end_times_s", starts + exposures)):
+        for name, data in (("start_times_s", starts), ("exposure_s", exposures), ("end_times_s", starts + exposures),
+                           *extra.items()):
             a = group.create_array(name, shape=data.shape, dtype=data.dtype)
             a[...] = data
         group.attrs["viform"] = {"format": "viform-frames", "version": 1, "units": units,
@@ -168,6 +174,7 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
     if suffix not in FRAME_FORMATS:
         raise ViformError(f"--out = {str(out_path)!r}: frames are saved as one of {', '.join(FRAME_FORMATS)}")
     meta = {"scene": scene.describe(), "seed": seed, **provenance()}
+    extra = {}
     if sensor_name == "highspeed":
         from dataclasses import replace
 
@@ -182,7 +189,10 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         frames, starts, exposures = result.gray8, result.frame_times_s - result.exposure_s, result.exposure_s
         units = "8-bit gray: the high 8 bits of the 10-bit code (DN >> 2)"
         meta["sensor"] = {**result.config, "timing": result.timing, "link": result.plan}
-        meta["auto_exposure_cycles"] = result.exposure_cycles
+        # what leaves the camera: one frame in N over the link, equalized (seed 002 §3.2–3.3)
+        extra = {"output_frames": result.output_frames, "output_frame_indices": result.transmitted_indices,
+                 "auto_exposure_cycles": result.exposure_cycles}
+        units += "; output_frames: equalized 8-bit frames sent over the link (indices in output_frame_indices)"
     elif sensor_name == "gated":
         from viform.measure.comparison import make_compare_sensor
 
@@ -211,7 +221,7 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         units = (f"DN ({p.adc_bits}-bit ADC, black offset {p.black_offset_dn:g} DN, "
                  f"K = {p.system_gain_dn_per_e:.4g} DN/e-)")
         meta["sensor"] = sensor.describe()
-    save_frame_stack(out_path, frames, starts, exposures, units, meta)
+    save_frame_stack(out_path, frames, starts, exposures, units, meta, extra)
     if preview:
         write_preview(preview, np.asarray(frames, dtype=np.float64))
     return {"file": str(out_path), "sensor": sensor_name, "kind": "frames", "frames": int(len(frames)),
