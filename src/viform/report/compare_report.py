@@ -194,11 +194,11 @@ def figure_dilemma(result):
         if not (math.isfinite(x) and math.isfinite(y)):
             continue
         ax.scatter([x], [y], s=70, marker=markers[i % len(markers)], color=colours[i % len(colours)],
-                   label=s.label, zorder=3, edgecolor="black", linewidth=0.5)
-        # short label beside the point; nudged down when a label already sits close by
-        near = sum(1 for (px, py) in placed if abs(math.log10(px / x)) < 0.35 and abs(py - y) < 6)
-        ax.annotate(s.label, (x, y), xytext=(7, 4 - 11 * near), textcoords="offset points", fontsize=7,
-                    color=colours[i % len(colours)])
+                   label=f"{i + 1}  {s.label}", zorder=3, edgecolor="black", linewidth=0.5)
+        # the point's number beside it (the legend names it); nudged when another sits close by
+        near = sum(1 for (px, py) in placed if abs(math.log10(px / x)) < 0.2 and abs(py - y) < 5)
+        ax.annotate(str(i + 1), (x, y), xytext=(6, 3 - 10 * near), textcoords="offset points", fontsize=8,
+                    fontweight="bold", color=colours[i % len(colours)])
         placed.append((x, y))
     d = result["demand"]
     if d and math.isfinite(d["time_resolution_s"]):
@@ -213,7 +213,7 @@ def figure_dilemma(result):
     if d and math.isfinite(d["time_resolution_s"]):
         xs.append(d["time_resolution_s"])
     if xs:
-        ax.set_xlim(min(xs) / 3, max(xs) * 12)  # room for the labels right of the points
+        ax.set_xlim(min(xs) / 3, max(xs) * 4)
     ys = [s.metrics.get("dr_captured_db", 0) for s in shots] + ([d["dynamic_range_db"]] if d else [])
     ax.set_ylim(0, max(ys) * 1.15 + 5)
     ax.set_xlabel("integration time per image (s, log scale): shorter = sharper motion")
