@@ -34,7 +34,8 @@ def _png(method, display, scale, image, rate_per_tick, peak):
 @click.option("--method", type=click.Choice(["accumulation", "interval", "multi-interval", "motion"]), required=True,
               help="accumulation: spike count over a window; interval: Q/τ of the interval holding the instant; "
                    "multi-interval: the K spikes on each side (adaptive K); motion: accumulation along the "
-                   "estimated motion over ±120 ticks, falling back to short windows where that fails.")
+                   "estimated motion over ±60 ticks (short windows where that fails), averaged with "
+                   "multi-interval.")
 @click.option("--at", "at", default=None, help="Instant(s) in seconds, comma-separated: --at 0.01,0.02")
 @click.option("--every", "every", type=int, default=None,
               help="Whole stream: one image every N ticks (instead of --at).")
@@ -43,7 +44,7 @@ def _png(method, display, scale, image, rate_per_tick, peak):
 @click.option("--align", type=click.Choice(["centre", "center", "end", "start"]), default="centre", show_default=True,
               help="Accumulation window placement: centred on the instant (the convention of published "
                    "spike-camera figures), ending at it (causal, live use) or starting at it.")
-@click.option("--spikes-per-side", "spikes_per_side", type=int, default=3, show_default=True,
+@click.option("--spikes-per-side", "spikes_per_side", type=int, default=4, show_default=True,
               help="multi-interval: spikes used on each side of the instant (K; 2K − 1 intervals).")
 @click.option("--fixed-k", is_flag=True, help="multi-interval: always use K spikes a side (no adaptive shrinking).")
 @click.option("--out", "out_path", type=click.Path(), default=None,

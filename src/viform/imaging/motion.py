@@ -17,9 +17,11 @@ trade-off where the motion can be estimated. Around the instant's tick k:
    the first anchor that fails, outward, a pixel takes no more ticks, so where alignment
    fails (occlusions, flicker, motion the flow misses) it falls back to the short window
    (the ``flow_window_ticks`` ticks centred on k, always used);
-5. a pixel too dim to collect ``min_spikes`` spikes that way takes the adaptive
-   multi-interval estimate (:mod:`viform.imaging.multi_interval`), whose spikes are
-   searched as far as the data need — so dim light is measured, not read as black.
+5. the adaptive multi-interval estimate (:mod:`viform.imaging.multi_interval`, K = 4),
+   whose spikes are searched as far as the data need, is averaged in with weight
+   ``multi_interval_weight`` (errors of the two are largely independent), and replaces the
+   accumulation where a pixel is too dim to collect ``min_spikes`` spikes along the motion
+   — so dim light is measured, not read as black.
 
 For steady, still light the estimate is the plain accumulation over the whole span (a
 count over n ticks; unbiased). The method is a classical alternative to the learned
@@ -31,11 +33,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from viform._validate import ViformError, check_choice, check_int, check_positive
+from viform._validate import ViformError, check_choice, check_int, check_positive, check_range
 from viform.imaging.units import LightImage, light_from_rate
 from viform.stream.container import SpikeSource
 
 FLOW_METHODS = ("ilk", "tvl1")
+#: K of the multi-interval estimate blended in (and used for dim pixels).
+MULTI_INTERVAL_SPIKES_PER_SIDE = 4
 
 
 def _flow(reference: np.ndarray, moving: np.ndarray, method: str, downscale: int) -> np.ndarray:
@@ -126,7 +130,7 @@ def _window_mean(bits: np.ndarray, centre: int, width: int) -> np.ndarray:
     return bits[a:b].mean(axis=0, dtype=np.float32)
 
 
-def motion_compensated_rate(bits: np.ndarray, tick_index: int, *, flow_window_ticks: int = 21,
+def motion_compensated_rate(bits: np.ndarray, tick_index: int, *, flow_window_ticks: int = 15,
                             anchor_step_ticks: int = 20, flow: str = "ilk", flow_downscale: int = 2,
                             tolerance: float = 3.0, smooth_px: float = 1.5):
     """Firing rate per tick at row ``tick_index`` of ``bits`` (T, H, W), accumulated along the motion.
@@ -183,18 +187,18 @@ def motion_compensated_rate(bits: np.ndarray, tick_index: int, *, flow_window_ti
     return rate, reach, used
 
 
-def motion_compensated_image(source: SpikeSource, t_s: float, *, half_span_ticks: int = 120,
-                             flow_window_ticks: int = 21, anchor_step_ticks: int = 20, flow: str = "ilk",
+def motion_compensated_image(source: SpikeSource, t_s: float, *, half_span_ticks: int = 60,
+                             flow_window_ticks: int = 15, anchor_step_ticks: int = 20, flow: str = "ilk",
                              flow_downscale: int = 2, tolerance: float = 3.0, min_spikes: float = 5.0,
-                             sensor_parameters=None) -> LightImage:
+                             multi_interval_weight: float = 0.5, sensor_parameters=None) -> LightImage:
     """Light at instant ``t_s`` by accumulation along the estimated motion (see the module text).
 
     Parameters
     ----------
     half_span_ticks : int
-        Longest reach before and after the instant, ticks (default 120: 241 ticks in all).
+        Longest reach before and after the instant, ticks (default 60: 121 ticks in all).
     flow_window_ticks : int
-        Length of the short-window images used for the flow and the fallback (default 21).
+        Length of the short-window images used for the flow and the fallback (default 15).
     anchor_step_ticks : int
         Ticks between flow estimates; the flow is interpolated between them (default 20).
     flow : {"ilk", "tvl1"}
@@ -207,6 +211,13 @@ def motion_compensated_image(source: SpikeSource, t_s: float, *, half_span_ticks
     min_spikes : float
         Pixels that collect fewer spikes than this along the motion (dim light) take the
         adaptive multi-interval estimate instead, whose spikes are searched as far as needed.
+    multi_interval_weight : float
+        Weight of the adaptive multi-interval estimate (K = 4) averaged into every pixel
+        (default 0.5; 0 gives motion-compensated accumulation alone). The two estimators'
+        errors are largely independent — one counts spikes along the estimated motion, the
+        other times the spikes nearest the instant — so their mean is closer to the truth:
+        +0.3 to +3.5 dB over either alone on the REDS clips and the simulated scenes of
+        ``benchmarks/bench_reconstruction.py`` (defaults chosen on all of them together).
 
     Returns
     -------
@@ -222,6 +233,7 @@ def motion_compensated_image(source: SpikeSource, t_s: float, *, half_span_ticks
     down = check_int("flow_downscale", flow_downscale, 1)
     check_positive("tolerance", tolerance)
     check_positive("min_spikes", min_spikes)
+    check_range("multi_interval_weight", multi_interval_weight, 0.0, 1.0)
     if min(source.height, source.width) < 2 * down:
         raise ViformError(f"flow_downscale = {down} is too large for a {source.height}×{source.width} stream")
     k = source.tick_of(t_s)
@@ -231,12 +243,14 @@ def motion_compensated_image(source: SpikeSource, t_s: float, *, half_span_ticks
                                                 flow=flow, flow_downscale=down, tolerance=tolerance)
     dim = rate * used < min_spikes
     censored = np.zeros(rate.shape, dtype=bool)
-    if dim.any():  # too few spikes in reach: the multi-interval estimate, searched as far as needed
+    if dim.any() or multi_interval_weight > 0:
+        # the multi-interval estimate, its spikes searched as far as needed: alone where too
+        # few spikes were accumulated (dim light), averaged in elsewhere
         from viform.imaging.multi_interval import multi_interval_rate
 
-        far, _, far_censored = multi_interval_rate(source, k, adaptive=True)
-        rate = np.where(dim, far, rate)
-        censored = dim & far_censored
+        nearest, _, near_censored = multi_interval_rate(source, k, MULTI_INTERVAL_SPIKES_PER_SIDE, adaptive=True)
+        rate = np.where(dim, nearest, (1 - multi_interval_weight) * rate + multi_interval_weight * nearest)
+        censored = dim & near_censored
     image = light_from_rate(rate * source.clock_hz, source, sensor_parameters, censored=censored,
                             method="motion", half_span_ticks=span)
     image.info["reach_ticks"] = reach

@@ -50,8 +50,9 @@ from viform.stream.container import SpikeSource
 
 #: First chunk read on each side of the instant (later chunks double); speed only.
 FIRST_CHUNK_TICKS = 64
-#: Spikes on each side of the instant by default (5 intervals).
-DEFAULT_SPIKES_PER_SIDE = 3
+#: Spikes on each side of the instant by default (7 intervals; chosen on the REDS clips and
+#: simulated scenes of ``benchmarks/bench_reconstruction.py`` together, with adaptive K).
+DEFAULT_SPIKES_PER_SIDE = 4
 #: Q assumed for the adaptive test's noise when the stream does not say (real recordings
 #: show an effective Q of order 10⁴ e⁻; rounding then dominates the interval spread).
 DEFAULT_NOISE_THRESHOLD_ELECTRONS = 1.0e4
@@ -80,13 +81,15 @@ def _collect(block, rows_descending, first, left, found, count, wanted):
 
 
 def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
-                       lookahead_ticks: int | None = None):
+                       lookahead_ticks: int | None = None, pixels_wanted=None):
     """The ``before`` last spikes at or before ``tick`` and the ``after`` first spikes after it.
 
     Returns ``(prev, nxt)``: int64 arrays (before, H·W) and (after, H·W), nearest spike first;
     a spike not found because the stream ended is −1 (prev) or T (nxt). The search reads
     chunks of growing length (the first ``lookahead_ticks``), only for pixels still short of
     spikes, so memory stays bounded and no interval is cut before the stream's ends.
+    ``pixels_wanted`` (flat indices) limits the search to those pixels (the others keep
+    the end markers).
     """
     before = check_int("before", before, 1)
     after = check_int("after", after, 1)
@@ -98,7 +101,7 @@ def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
     nxt = np.full((after, pixels), n_total, dtype=np.int64)
     for found, wanted, forward in ((prev, before, False), (nxt, after, True)):
         count = np.zeros(pixels, dtype=np.int64)
-        left = np.arange(pixels)
+        left = np.arange(pixels) if pixels_wanted is None else np.asarray(pixels_wanted, dtype=np.int64)
         pos = tick + 1
         chunk = min(look, limit)
         while left.size and (pos < n_total if forward else pos > 0):
@@ -199,7 +202,7 @@ def multi_interval_image(source: SpikeSource, t_s: float, spikes_per_side: int =
     Parameters
     ----------
     spikes_per_side : int
-        K (default 3: 5 intervals); K = 1 is plain interval imaging.
+        K (default 4: 7 intervals); K = 1 is plain interval imaging.
     adaptive : bool
         Grow the span one interval at a time, each side stopping at the first interval
         inconsistent with the span's light (shrinks K where the light changes).
@@ -222,3 +225,114 @@ def multi_interval_image(source: SpikeSource, t_s: float, spikes_per_side: int =
                             method="multi-interval", spikes_per_side=spikes_per_side, adaptive=adaptive)
     image.info["intervals"] = used
     return image
+
+
+# ------------------------------------------------------------------ many instants, streamed
+
+@njit(cache=True)
+def _spike_lists(bits, first):
+    """Per-pixel sorted spike ticks of ``bits`` (n, P) as CSR: (offsets (P + 1), ticks)."""
+    n, p = bits.shape
+    counts = np.zeros(p + 1, dtype=np.int64)
+    for i in range(n):
+        for j in range(p):
+            if bits[i, j]:
+                counts[j + 1] += 1
+    for j in range(p):
+        counts[j + 1] += counts[j]
+    ticks = np.empty(counts[p], dtype=np.int64)
+    fill = counts[:-1].copy()
+    for i in range(n):
+        for j in range(p):
+            if bits[i, j]:
+                ticks[fill[j]] = first + i
+                fill[j] += 1
+    return counts, ticks
+
+
+@njit(cache=True, parallel=True)
+def _around_from_lists(offsets, ticks, tick, lo_tick, hi_tick, n_total, prev, nxt, short):
+    """The K spikes each side of ``tick`` from the lists (loaded ticks [lo_tick, hi_tick)).
+
+    A pixel whose lists run out before K spikes, where the stream goes on past the loaded
+    ticks, is flagged ``short`` (searched further by the caller).
+    """
+    kb = prev.shape[0]
+    ka = nxt.shape[0]
+    p = offsets.size - 1
+    for j in prange(p):
+        a = offsets[j]
+        b = offsets[j + 1]
+        # first index with ticks > tick
+        lo = a
+        hi = b
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if ticks[mid] <= tick:
+                lo = mid + 1
+            else:
+                hi = mid
+        short[j] = False
+        for m in range(kb):
+            i = lo - 1 - m
+            if i >= a:
+                prev[m, j] = ticks[i]
+            else:
+                prev[m, j] = -1
+                if lo_tick > 0:
+                    short[j] = True
+        for m in range(ka):
+            i = lo + m
+            if i < b:
+                nxt[m, j] = ticks[i]
+            else:
+                nxt[m, j] = n_total
+                if hi_tick < n_total:
+                    short[j] = True
+
+
+def multi_interval_frames(source: SpikeSource, ticks, spikes_per_side: int = DEFAULT_SPIKES_PER_SIDE, *,
+                          adaptive: bool = True, tolerance: float = 3.0,
+                          noise_threshold_electrons: float | None = None, group_ticks: int = 256,
+                          margin_ticks: int = 256):
+    """Multi-interval rates at many ticks (sorted), streamed: yields ``(tick, rate, intervals, censored)``.
+
+    Ticks are taken in groups of ``group_ticks``; each group reads its ticks plus
+    ``margin_ticks`` on each side once, turns them into per-pixel spike lists, and finds
+    each instant's K spikes a side by binary search. Pixels whose K spikes lie beyond the
+    margin are searched further (:func:`spike_ticks_around`), so the result equals
+    :func:`multi_interval_rate` at every tick, in memory bounded by the group and margin.
+    """
+    k_side = check_int("spikes_per_side", spikes_per_side, 1)
+    check_positive("tolerance", tolerance)
+    group = check_int("group_ticks", group_ticks, 1)
+    margin = check_int("margin_ticks", margin_ticks, 1)
+    q = noise_threshold_electrons or source.threshold_electrons or DEFAULT_NOISE_THRESHOLD_ELECTRONS
+    ticks = np.asarray(ticks, dtype=np.int64)
+    n_total = source.n_ticks
+    pixels = source.height * source.width
+    shape = (source.height, source.width)
+    prev = np.empty((k_side, pixels), dtype=np.int64)
+    nxt = np.empty((k_side, pixels), dtype=np.int64)
+    short = np.empty(pixels, dtype=bool)
+    start = 0
+    while start < ticks.size:
+        stop = int(np.searchsorted(ticks, ticks[start] + group))
+        lo_tick = max(0, int(ticks[start]) - margin)
+        hi_tick = min(n_total, int(ticks[stop - 1]) + 1 + margin)
+        bits = source.read_ticks(lo_tick, hi_tick).reshape(hi_tick - lo_tick, pixels).view(np.uint8)
+        offsets, spike_ticks = _spike_lists(bits, lo_tick)
+        del bits
+        for k in ticks[start:stop]:
+            _around_from_lists(offsets, spike_ticks, int(k), lo_tick, hi_tick, n_total, prev, nxt, short)
+            if short.any():
+                far = np.flatnonzero(short)
+                far_prev, far_nxt = spike_ticks_around(source, int(k), k_side, k_side, pixels_wanted=far)
+                prev[:, far] = far_prev[:, far]
+                nxt[:, far] = far_nxt[:, far]
+            rate = np.empty(pixels)
+            used = np.empty(pixels, dtype=np.int64)
+            censored = np.empty(pixels, dtype=bool)
+            _span_rate(prev, nxt, n_total, adaptive, float(q), float(tolerance), rate, used, censored)
+            yield int(k), rate.reshape(shape), used.reshape(shape), censored.reshape(shape)
+        start = stop

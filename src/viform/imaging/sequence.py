@@ -133,15 +133,19 @@ def reconstruct_ticks(source: SpikeSource, method: str, ticks, *, window_ticks: 
 
 def _per_instant(source, method, ticks, spikes_per_side, adaptive, sensor_parameters, motion_options):
     from viform.imaging.motion import motion_compensated_image
-    from viform.imaging.multi_interval import DEFAULT_SPIKES_PER_SIDE, multi_interval_image
+    from viform.imaging.multi_interval import DEFAULT_SPIKES_PER_SIDE, multi_interval_frames
 
+    if method == "multi-interval":
+        k_side = spikes_per_side or DEFAULT_SPIKES_PER_SIDE
+        for k, rate, used, censored in multi_interval_frames(source, ticks, k_side, adaptive=adaptive):
+            image = light_from_rate(rate * source.clock_hz, source, sensor_parameters, censored=censored,
+                                    method="multi-interval", spikes_per_side=k_side, adaptive=adaptive)
+            image.info["intervals"] = used
+            yield k, image
+        return
     for k in ticks:
         t = source.start_time_s + (k + 0.5) / source.clock_hz
-        if method == "multi-interval":
-            yield k, multi_interval_image(source, t, spikes_per_side or DEFAULT_SPIKES_PER_SIDE, adaptive=adaptive,
-                                          sensor_parameters=sensor_parameters)
-        else:
-            yield k, motion_compensated_image(source, t, sensor_parameters=sensor_parameters, **motion_options)
+        yield k, motion_compensated_image(source, t, sensor_parameters=sensor_parameters, **motion_options)
 
 
 class NpzFrameWriter:
