@@ -529,6 +529,8 @@ def _summary(out, clips, rows, failed, seconds, workers) -> dict:
         "pixel_ticks_converted": pixel_ticks,
         "seconds": seconds,
         "cpu_seconds": sum(r.get("cpu_seconds", 0.0) for r in converted),
+        # clip-seconds per second: how many clips were being converted at once, on average
+        "clips_in_flight": sum(r["seconds"] for r in converted) / seconds if seconds > 0 else 0.0,
         "clips_per_s": len(converted) / seconds if seconds > 0 else 0.0,
         "pixel_ticks_per_s": pixel_ticks / seconds if seconds > 0 else 0.0,
         "workers": workers,
