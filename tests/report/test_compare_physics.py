@@ -131,3 +131,41 @@ def test_verdict_follows_the_metrics():
     text2 = " ".join(cmp.verdict([a2, b2], demand))
     assert "Sharpest motion: beta" in text2 and "Widest range rendered within a factor of 2: alpha" in text2
     assert "Meets both the scene's range and its speed: alpha" in text2
+
+
+@pytest.mark.parametrize("speed", [1.0, 2.0])
+def test_motion_verdict_holds_when_the_speed_changes(speed):
+    """At either speed the shortest exposure (seed 001's 130 µs) has the sharpest edge and the
+    longest (10 ms) the most blurred: blur is v·T, so the order of T decides (once the 1 ms
+    camera's blur, 2.5 px at speed 1, exceeds the ~1 px of pixel sampling both share)."""
+    from viform.light.dilemma import DilemmaScene
+
+    scene = DilemmaScene(40, 96, speed=speed)
+    instants = [0.0005, 0.0009]  # inside every camera's first exposure window but the 10 ms one's start
+    shots = []
+    for key in ("cmos", "cmos-short", "seed001-3seg"):
+        for shot in cmp.shoot(key, scene, 0.012, instants, seed=2):
+            shot.metrics = cmp.score(shot, scene, instants)
+            shots.append(shot)
+    lines = cmp.verdict(shots, scene.demand())
+    motion = next(line for line in lines if line.startswith("Sharpest motion"))
+    assert motion.startswith(f"Sharpest motion: {cmp.SENSOR_LABELS['seed001-3seg']}")
+    assert f"the most blurred is {cmp.SENSOR_LABELS['cmos']}" in motion
+
+
+def test_fog_hides_targets_from_a_passive_camera_not_from_the_gated_one():
+    """Contrast-to-noise of the signs: in clear air (V = 3 km) the 10 ms CMOS sees them; in fog
+    (V = 150 m) their passive contrast falls as T(R)² under the airlight and the CMOS sees none,
+    while the gated camera, which records only returns from beyond 40 m, still does (seed 004)."""
+    from viform.light.dilemma import NightRoadFogScene
+
+    cnr = {}
+    for visibility in (3000.0, 150.0):
+        scene = NightRoadFogScene(48, 96, visibility_m=visibility)
+        for key in ("cmos", "gated"):
+            shot = cmp.shoot(key, scene, 0.04, [0.02], seed=4)[0]
+            cnr[visibility, key] = cmp.score(shot, scene, [0.02])["target_cnr"]
+    signs = [k for k in cnr[150.0, "gated"] if k.startswith("sign")]
+    assert all(cnr[3000.0, "cmos"][s] > 3 for s in signs)
+    assert all(cnr[150.0, "cmos"][s] < 3 for s in signs)
+    assert all(cnr[150.0, "gated"][s] > 3 for s in signs)
