@@ -574,5 +574,5 @@ def verdict(shots, demand: dict | None) -> list[str]:
                  if r.metrics.get("dr_captured_db", 0) >= demand["dynamic_range_db"] - 6
                  and r.time_resolution_s <= demand["time_resolution_s"]]
         lines.append("Meets both the scene's range and its speed: " + (", ".join(meets) if meets else
-                     "no sensor — the dilemma holds for every architecture compared here at these settings."))
+                     "no sensor compared here, at these settings."))
     return lines
