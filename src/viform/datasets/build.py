@@ -252,6 +252,7 @@ def _convert(task: ClipTask, dat: Path, started: float) -> dict:
     from viform.stream.dat import pack_frames
 
     s, clip, out = task.settings, task.clip, Path(task.out)
+    _sidecar_tools()[1](dat).unlink(missing_ok=True)  # a redone clip is unfinished until its new sidecar
 
     frames, declared_hz = read_clip(clip, s.height, s.width, s.max_lux)
     frame_rate_hz = s.frame_rate_hz or declared_hz
