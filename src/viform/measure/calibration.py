@@ -69,18 +69,38 @@ TILE = 8
 _FOURIER_TERMS = 12
 
 
-def rounding_variance(mean_ticks, jitter_var_ticks2) -> np.ndarray:
+def rounding_variance(mean_ticks, jitter_var_ticks2, mean_var_ticks2=0.0) -> np.ndarray:
     """G = E[frac(S)(1 − frac(S))] for S ~ Normal(mean, var): variance that tick rounding adds.
 
     Fourier series of the periodic parabola, g(x) = 1/6 − Σ_k cos(2πkx)/(π²k²); each term is
     damped by the characteristic function of the jitter, exp(−2π²k²·var). Tends to 1/6 as
     the jitter grows past ~0.5 tick (module notes).
+
+    ``mean_var_ticks2``: when ``mean_ticks`` is itself an estimate, unbiased with this
+    variance, E cos(2πk·estimate) = cos(2πk·mean)·exp(−2π²k²·mean_var); each term is then
+    undamped by that factor (down to no damping at all), so that G averaged over pixels is
+    unbiased. Where every pixel shares nearly the same interval (a uniform field) the
+    rounding phases are coherent and this matters: without it Q_eff read 30–90 % low there.
     """
     mean = np.asarray(mean_ticks, dtype=np.float64)
     var = np.asarray(jitter_var_ticks2, dtype=np.float64)
-    g = np.full(np.broadcast(mean, var).shape, 1.0 / 6.0)
+    excess = np.maximum(var - np.asarray(mean_var_ticks2, dtype=np.float64), 0.0)
+    mean, excess = np.broadcast_arrays(mean, excess)
+    g = np.full(mean.shape, 1.0 / 6.0)
+    # cos(2πkμ)·exp(−2π²k²v) by recurrences: z^k and d^(k²) = d^((k−1)²)·d^(2k−1)
+    z = np.exp(2j * np.pi * (mean - np.floor(mean)))
+    d = np.exp(-2 * np.pi**2 * excess)
+    d2 = d * d
+    zk = np.ones(mean.shape, complex)
+    dk = np.ones(mean.shape)
+    step = d.copy()  # d^(2k−1)
     for k in range(1, _FOURIER_TERMS + 1):
-        g = g - np.cos(2 * np.pi * k * mean) * np.exp(-2 * np.pi**2 * k * k * var) / (np.pi**2 * k * k)
+        zk *= z
+        dk *= step
+        step *= d2
+        g -= zk.real * dk / (np.pi**2 * k * k)
+        if not dk.size or float(dk.max()) < 1e-12:
+            break
     return g
 
 
@@ -198,13 +218,16 @@ def _checkerboard_static(iv: PixelIntervals, tile: int) -> tuple[np.ndarray, dic
     return static, info
 
 
-def _rounding_term(mu, s2, statistic: str):
-    """Rounding part of a statistic's expectation (module notes), from G_n = G(n·μ, n·σ²)."""
-    g1 = rounding_variance(mu, s2)
-    g2 = rounding_variance(2 * mu, 2 * s2)
+def _rounding_term(mu, s2, statistic: str, mu_var=0.0):
+    """Rounding part of a statistic's expectation (module notes), from G_n = G(n·μ, n·σ²).
+
+    ``mu_var``: variance of the per-pixel estimate μ (see :func:`rounding_variance`).
+    """
+    g1 = rounding_variance(mu, s2, mu_var)
+    g2 = rounding_variance(2 * mu, 2 * s2, 4 * mu_var)
     if statistic == "lag1":
         return 2 * g1 - g2 / 2
-    g3 = rounding_variance(3 * mu, 3 * s2)
+    g3 = rounding_variance(3 * mu, 3 * s2, 9 * mu_var)
     return 15 * g1 - 6 * g2 + g3
 
 
@@ -212,11 +235,14 @@ def _rounding_term(mu, s2, statistic: str):
 _SIGMA_COEFFICIENT = {"lag1": 1.0, "second": 6.0}
 
 
-def _fit_inverse_q(mu, stat, pix, n_pix, statistic: str, q0: float = 1e4, iterations: int = 8):
+def _fit_inverse_q(mu, stat, pix, n_pix, statistic: str, n_intervals):
     """Weighted least squares of (stat − rounding)/k = σ² on μ²: returns (1/Q, its standard error).
 
+    The rounding term depends on σ itself (through the jitter that blurs the tick phase),
+    so 1/Q is the root x of fit(x) = x, found by bracketing (a plain fixed-point iteration
+    diverges near half-tick phases, where the rounding term falls faster than σ² grows).
     Pairs are summed per pixel first so the standard error (ratio estimator over pixels)
-    allows for the pairs of one pixel sharing intervals.
+    allows for the pairs of one pixel sharing intervals; it is divided by |1 − fit'(x)|.
     """
     k = _SIGMA_COEFFICIENT[statistic]
     # μ, the weight and the rounding term are per pixel: sum each pixel's pairs first
@@ -226,42 +252,52 @@ def _fit_inverse_q(mu, stat, pix, n_pix, statistic: str, q0: float = 1e4, iterat
     mu_pix[pix] = mu
     has = count > 0
     count, total, mu_pix = count[has], total[has], mu_pix[has]
+    n_iv = np.maximum(np.asarray(n_intervals, dtype=np.float64)[has], 1.0)
     floor_term = _rounding_term(mu_pix, np.ones_like(mu_pix), statistic)  # the rounding of wide jitter
-    inv_q = 1.0 / q0
-    se = math.inf
-    for _ in range(iterations):
-        s2 = mu_pix * mu_pix * max(inv_q, 0.0)
-        corr = _rounding_term(mu_pix, s2, statistic)
+
+    def fit(x):
+        s2 = mu_pix * mu_pix * max(x, 0.0)
+        # μ_p = (last − first)/N: an N-interval span plus the rounding of its two ends
+        mu_var = (n_iv * s2 + 1.0 / 6.0) / (n_iv * n_iv)
+        corr = _rounding_term(mu_pix, s2, statistic, mu_var)
         wgt = 1.0 / (k * s2 + floor_term) ** 2  # var of one pair's statistic ∝ its mean²
         num = wgt * (total - count * corr) / k * mu_pix**2
         den = wgt * count * mu_pix**4
-        new = float(num.sum() / den.sum())
-        resid = num - den * new
-        se = float(np.sqrt(np.sum(resid**2)) / den.sum())
-        if abs(new - inv_q) <= 1e-4 * abs(new) + 1e-12:
-            inv_q = new
-            break
-        inv_q = new
-    return inv_q, se
+        value = float(num.sum() / den.sum())
+        return value, float(np.sqrt(np.sum((num - den * value) ** 2)) / den.sum())
+
+    # Beyond x_hi every pixel's jitter exceeds 3 ticks: the rounding term is flat there.
+    # Scan a log grid from the smallest jitter up and take the first root: where every pixel
+    # has the same tick phase (a uniform field) fit(x) − x can cross zero more than once
+    # (near half-tick phases the rounding term falls about as fast as σ² grows), and the
+    # first crossing is the one that matches the data (checked on simulated uniform fields).
+    x_hi = 9.0 / float(np.min(mu_pix)) ** 2
+    grid = np.geomspace(x_hi * 1e-7, x_hi, 29)
+    h = np.array([fit(x)[0] - x for x in grid])
+    crossing = np.nonzero(np.sign(h[:-1]) != np.sign(h[1:]))[0]
+    if crossing.size:
+        i = int(crossing[0])
+        lo, hi, h_lo = grid[i], grid[i + 1], h[i]
+        while hi - lo > 1e-6 * hi:  # bisection in log x (the bracket spans a factor ≈ 1.6)
+            mid = math.sqrt(lo * hi)
+            h_mid = fit(mid)[0] - mid
+            if np.sign(h_mid) == np.sign(h_lo):
+                lo, h_lo = mid, h_mid
+            else:
+                hi = mid
+        root = math.sqrt(lo * hi)
+    elif h[0] > 0:
+        root = fit(x_hi)[0]
+    else:
+        root = 0.0
+    value, se = fit(root)
+    step = max(abs(root), 1e-9) * 1e-3
+    slope = (fit(root + step)[0] - fit(max(root - step, 0.0))[0]) / (root + step - max(root - step, 0.0))
+    return root, se / max(abs(1.0 - slope), 0.1)
 
 
 #: Largest excess of a bin's lag-1 correlation over a steady pixel's that still counts as static.
 LAG1_TOLERANCE = 0.15
-
-
-def _check_static(table: list[dict], inv_q: float) -> None:
-    """Add each bin's expected lag-1 correlation at Q_eff and whether the bin agrees with it.
-
-    A steady tick-rounded pixel with uniformly spread phases has γ₀ = σ² + 1/6,
-    γ₁ = −1/12 (module notes); light that changes during the recording raises γ₁.
-    """
-    for row in table:
-        mu = row["mean_interval_ticks"]
-        rho = -(1 / 12) / (mu * mu * inv_q + 1 / 6)
-        row["expected_lag1_correlation"] = rho
-        # light that changes slowly raises γ₁; light that changes within an interval can also
-        # push it below any steady pixel's (≥ −1/2)
-        row["static_consistent"] = bool(abs(row["lag1_correlation"] - rho) <= LAG1_TOLERANCE)
 
 
 def _bins(lo: float, hi: float) -> np.ndarray:
@@ -272,14 +308,17 @@ def _bins(lo: float, hi: float) -> np.ndarray:
     return np.array(edges)
 
 
-def interval_table(iv: PixelIntervals, use_pixel: np.ndarray, edges) -> list[dict]:
+def interval_table(iv: PixelIntervals, use_pixel: np.ndarray, edges, inv_q: float | None = None) -> list[dict]:
     """Per mean-interval bin: pixels, pairs, RSD of the intervals (rounding included), lag-1 correlation.
 
     ``rsd`` = √γ₀/μ with γ₀ the pooled within-pixel variance of the intervals (n − 1
     divisor); ``rsd_detrended`` the same after removing each pixel's linear trend of the
     intervals over the recording (n − 2 divisor), so light that drifts slowly does not count
     as noise; ``lag1_correlation`` = γ₁/γ₀ with γ₁ = γ₀ − D₁ (−1/2 for a tick-rounded
-    regular pixel, module notes).
+    regular pixel, module notes). With ``inv_q`` (1/Q_eff) each bin also gets the lag-1
+    correlation a steady pixel would show, γ₁/γ₀ = ((G₂ − 2G₁)/2)/(σ² + G₁) from each
+    pixel's own rounding terms, and ``static_consistent``: whether the two agree within
+    :data:`LAG1_TOLERANCE`.
     """
     npx = iv.height * iv.width
     mu_p = iv.mean_interval
@@ -309,11 +348,24 @@ def interval_table(iv: PixelIntervals, use_pixel: np.ndarray, edges) -> list[dic
         sel = px[pp]
         d1 = float(np.mean((a[sel] - b[sel]) ** 2) / 2) if sel.any() else math.nan
         mean_mu = float(np.mean(mu_p[px]))
-        rows.append({"interval_from_ticks": float(lo), "interval_to_ticks": float(hi),
-                     "mean_interval_ticks": mean_mu, "pixels": int(px.sum()), "pairs": int(sel.sum()),
-                     "rsd": float(math.sqrt(gamma0) / mean_mu),
-                     "rsd_detrended": float(math.sqrt(max(gamma0_detrended, 0.0)) / mean_mu),
-                     "lag1_correlation": float((gamma0 - d1) / gamma0)})
+        row = {"interval_from_ticks": float(lo), "interval_to_ticks": float(hi),
+               "mean_interval_ticks": mean_mu, "pixels": int(px.sum()), "pairs": int(sel.sum()),
+               "rsd": float(math.sqrt(gamma0) / mean_mu),
+               "rsd_detrended": float(math.sqrt(max(gamma0_detrended, 0.0)) / mean_mu),
+               "lag1_correlation": float((gamma0 - d1) / gamma0)}
+        if inv_q is not None:
+            m, n = mu_p[px], n_int[px]
+            s2 = m * m * max(inv_q, 0.0)
+            mv = (n * s2 + 1.0 / 6.0) / (n * n)
+            g1 = rounding_variance(m, s2, mv)
+            g2 = rounding_variance(2 * m, 2 * s2, 4 * mv)
+            w = n - 1
+            rho = float(np.sum(w * (g2 - 2 * g1) / 2) / np.sum(w * (s2 + g1)))
+            row["expected_lag1_correlation"] = rho
+            # light that changes slowly raises γ₁; light that changes within an interval can
+            # also push it below any steady pixel's
+            row["static_consistent"] = bool(abs(row["lag1_correlation"] - rho) <= LAG1_TOLERANCE)
+        rows.append(row)
     return rows
 
 
@@ -431,7 +483,8 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
                     "mean_interval_range_ticks": [MIN_INTERVAL_TICKS, float(mu_hi)]}
     q_eff = None
     edges = _bins(2.0, max(3.0, mu_hi))
-    table = interval_table(iv, static & (n_int >= MIN_INTERVALS_PER_PIXEL - 1), edges)
+    table_pixels = static & (n_int >= MIN_INTERVALS_PER_PIXEL - 1)
+    table = interval_table(iv, table_pixels, edges)
     if mu_hi <= MIN_INTERVAL_TICKS:
         q_info["reason"] = (f"recording too short: {iv.n_ticks} ticks hold fewer than {MIN_INTERVALS_PER_PIXEL} "
                             f"intervals of ≥ {MIN_INTERVAL_TICKS:g} ticks")
@@ -441,13 +494,13 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
     else:
         # drift-robust: second differences of the intervals cancel light that changes linearly
         inv_q, se = _fit_inverse_q(mu_p[p3[sel3]], (y0[sel3] - 2 * y1[sel3] + y2[sel3]) ** 2, p3[sel3], npx,
-                                   "second")
+                                   "second", n_int)
         # check: successive-interval differences, which linear drift inflates
-        inv_q1, se1 = _fit_inverse_q(mu_p[pp[sel]], (a[sel] - b[sel]) ** 2 / 2, pp[sel], npx, "lag1")
+        inv_q1, se1 = _fit_inverse_q(mu_p[pp[sel]], (a[sel] - b[sel]) ** 2 / 2, pp[sel], npx, "lag1", n_int)
         q_info.update(inverse_q=inv_q, inverse_q_standard_error=se, inverse_q_lag1=inv_q1,
                       inverse_q_lag1_standard_error=se1)
         q_info["drift_free"] = bool(abs(inv_q1 - inv_q) <= 2 * math.hypot(se, se1))
-        _check_static(table, max(inv_q, 0.0))
+        table = interval_table(iv, table_pixels, edges, max(inv_q, 0.0))
         pairs_ok = sum(r["pairs"] for r in table if r["static_consistent"])
         pairs_all = sum(r["pairs"] for r in table) or 1
         q_info["static_consistent_pair_fraction"] = pairs_ok / pairs_all
