@@ -66,3 +66,19 @@ def test_adaptive_k_shrinks_where_the_light_steps():
     assert abs(adaptive / rate_per_tick - 1) < 0.1  # old light kept (the instant's interval is pre-step)
     assert fixed / rate_per_tick > 1.3  # fixed K reaches past the step
     assert image_adaptive.info["intervals"].mean() < image_fixed.info["intervals"].mean()
+
+
+@pytest.mark.parametrize("group, margin", [(256, 256), (10, 3)])
+def test_streamed_instants_equal_single_instants_whatever_the_grouping(group, margin):
+    """Spike lists with a small margin force the far search; results equal the per-instant ones."""
+    from viform.imaging.multi_interval import multi_interval_frames
+
+    rng = np.random.default_rng(1)
+    stream = SpikeStream(rng.random((1500, 4, 5)) < rng.uniform(0.0005, 0.5, (4, 5)), 1000.0)
+    ticks = list(range(0, 1500, 47))
+    for adaptive in (False, True):
+        for k, rate, used, censored in multi_interval_frames(stream, ticks, 3, adaptive=adaptive, group_ticks=group,
+                                                             margin_ticks=margin):
+            expected = multi_interval_rate(stream, k, 3, adaptive=adaptive)
+            assert np.array_equal(rate, expected[0]) and np.array_equal(used, expected[1])
+            assert np.array_equal(censored, expected[2])

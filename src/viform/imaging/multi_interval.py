@@ -240,7 +240,7 @@ def _spike_lists(bits, first):
                 counts[j + 1] += 1
     for j in range(p):
         counts[j + 1] += counts[j]
-    ticks = np.empty(counts[p], dtype=np.int64)
+    ticks = np.empty(counts[p], dtype=np.int32)  # streams longer than 2³¹ ticks are refused below
     fill = counts[:-1].copy()
     for i in range(n):
         for j in range(p):
@@ -293,8 +293,8 @@ def _around_from_lists(offsets, ticks, tick, lo_tick, hi_tick, n_total, prev, nx
 
 def multi_interval_frames(source: SpikeSource, ticks, spikes_per_side: int = DEFAULT_SPIKES_PER_SIDE, *,
                           adaptive: bool = True, tolerance: float = 3.0,
-                          noise_threshold_electrons: float | None = None, group_ticks: int = 256,
-                          margin_ticks: int = 256):
+                          noise_threshold_electrons: float | None = None, group_ticks: int | None = None,
+                          margin_ticks: int | None = None):
     """Multi-interval rates at many ticks (sorted), streamed: yields ``(tick, rate, intervals, censored)``.
 
     Ticks are taken in groups of ``group_ticks``; each group reads its ticks plus
@@ -305,8 +305,12 @@ def multi_interval_frames(source: SpikeSource, ticks, spikes_per_side: int = DEF
     """
     k_side = check_int("spikes_per_side", spikes_per_side, 1)
     check_positive("tolerance", tolerance)
-    group = check_int("group_ticks", group_ticks, 1)
-    margin = check_int("margin_ticks", margin_ticks, 1)
+    pixels = source.height * source.width
+    auto = int(np.clip(2 ** 25 // max(1, pixels), 8, 256))
+    group = auto if group_ticks is None else check_int("group_ticks", group_ticks, 1)
+    margin = auto if margin_ticks is None else check_int("margin_ticks", margin_ticks, 1)
+    if source.n_ticks >= 2 ** 31:
+        raise ViformError(f"the stream has {source.n_ticks} ticks: multi-interval streaming handles < 2³¹")
     q = noise_threshold_electrons or source.threshold_electrons or DEFAULT_NOISE_THRESHOLD_ELECTRONS
     ticks = np.asarray(ticks, dtype=np.int64)
     n_total = source.n_ticks
