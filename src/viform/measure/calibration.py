@@ -25,15 +25,23 @@ G_n = 1/6 − Σ_k cos(2πknμ)·exp(−2π²k²nσ²)/(π²k²), evaluated per 
 interval (:func:`rounding_variance`). When the phases frac(μ) are spread over a tick or
 the interval jitter exceeds ~0.5 tick, G₁ = G₂ = 1/6 and D₁ = σ² + 1/4, γ₁ = −1/12, and
 successive intervals of a regular pixel have lag-1 correlation γ₁/γ₀ → −1/2 — what real
-recordings show. Q_eff = μ²/σ² is fitted over all pairs of successive intervals (weighted
-least squares of σ² on μ², iterated because G depends on σ).
+recordings show. Q_eff = μ²/σ² is fitted over all pixels (weighted least squares of σ² on
+μ²; since G depends on σ, 1/Q_eff is the first root of fit(x) = x). The fit uses the second
+differences of the intervals, E(Y_k − 2Y_{k+1} + Y_{k+2})² = 6σ² + 15G₁ − 6G₂ + G₃ (same
+variogram algebra), in which light that changes linearly over three intervals cancels;
+D₁ gives a check. Each G is made unbiased for the noise of the pixel's own mean interval,
+which matters when all pixels share one tick phase (a uniform field without PRNU).
 
 **Static or not.** A stationary pixel has D₂ − D₁ = γ₁ − γ₂ < 0 (≈ −1/12); light that
 changes over the recording (motion, flicker) makes successive intervals positively
 correlated and D₂ − D₁ > 0. The image is cut into tiles, each tile split like a
-checkerboard: a tile's black pixels are judged static by the *white* pixels' D₂ − D₁ and
-vice versa, so the pixels used for Q_eff are not selected by their own fluctuations (that
-would bias Q_eff up). A recording with too few static pairs gives no Q_eff, only a bound.
+checkerboard: a tile's black pixels are used when the *white* pixels' D₂ − D₁ lies below
+minus its standard error, and vice versa, so no pixel is selected by its own fluctuations
+(that would bias Q_eff up). Then every interval bin's lag-1 correlation must agree with a
+steady pixel's at the fitted Q_eff (±0.15); if not, the light changed (slowly: γ₁ too high;
+faster than an interval: below any steady pixel's) and, since changing light only adds
+interval variance, the fit is reported as a lower bound of Q_eff. Too few static pairs:
+no figure.
 
 **Gain spread (PRNU).** In a tile, the pixel rates 1/μ_p around a fitted plane (scene
 gradients removed) spread by the gain spread plus the finite-window noise of μ_p,
@@ -296,7 +304,7 @@ def _fit_inverse_q(mu, stat, pix, n_pix, statistic: str, n_intervals):
     return root, se / max(abs(1.0 - slope), 0.1)
 
 
-#: Largest excess of a bin's lag-1 correlation over a steady pixel's that still counts as static.
+#: Largest difference between a bin's lag-1 correlation and a steady pixel's that still counts as static.
 LAG1_TOLERANCE = 0.15
 
 
