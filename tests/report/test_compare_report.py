@@ -54,7 +54,7 @@ def test_report_is_self_contained(report):
     text = (out / "report.html").read_text()
     assert "<script" not in text and "<link" not in text
     assert not re.search(r"""(src|href)\s*=\s*["']?(https?:)?//""", text)
-    assert text.count("data:image/png;base64,") == 1 + 2 * 2  # summary + images and errors at 2 instants
+    assert text.count("data:image/png;base64,") == 2 + 2 * 2  # scene, summary + images and errors at 2 instants
 
 
 class _Sections(HTMLParser):

@@ -44,6 +44,11 @@ def pwm_on_time_s(t_s: float, frequency_hz: float, duty: float) -> float:
     return whole * duty * period + min(t_s - whole * period, duty * period)
 
 
+def _lux(value: float) -> str:
+    """Illuminance for labels: thousands separated, 3 significant figures below 1 000."""
+    return f"{value:,.0f}" if value >= 1000 else f"{value:.3g}"
+
+
 class DilemmaScene(Scene):
     """The dilemma scene (see the module notes); all illuminances on the sensor plane, lux.
 
@@ -234,6 +239,26 @@ class DilemmaScene(Scene):
             # an edge moving at the top speed crosses one pixel in this time
             "time_resolution_s": 1.0 / self.max_speed_px_per_s() if self.max_speed_px_per_s() > 0 else math.inf,
             "flicker_hz": self.led_frequency_hz,
+        }
+
+    def landmarks(self, t_s: float = 0.0) -> dict:
+        """Where each part of the scene is at ``t_s`` (x, y in pixels), with its light, for figures."""
+        ys, xs = np.nonzero(self.window)
+        ly, lx = np.nonzero(self.lamp)
+        ey, ex = np.nonzero(self.led)
+        v0, v1 = self.vehicle_rows
+        front = self.vehicle_front_px(t_s)
+        return {
+            f"sunlit window {_lux(self.window_lux)}–{_lux(3 * self.window_lux)} lux": (xs.mean(), ys.max() + 1),
+            f"lamp {_lux(self.lamp_lux)} lux": (lx.mean(), ly.max() + 1),
+            f"propeller {self.prop_lux:.3g} lux, tip {self.prop_tip_speed_px_per_s:.0f} px/s":
+                (self.prop_centre[0], self.prop_centre[1] + self.prop_radius_px),
+            f"LED {self.led_frequency_hz:g} Hz PWM": (ex.mean(), ey.max() + 1),
+            f"vehicle {self.vehicle_speed_px_per_s:.0f} px/s": (min(front, self.width - 1) - 0.1 * self.width,
+                                                               (v0 + v1) / 2),
+            f"small dim object {self.object_speed_px_per_s:.0f} px/s":
+                ((self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width, self.object_row_px),
+            f"deep shadow {self.shadow_lux:.3g} lux": (0.02 * self.width, 0.68 * self.height),
         }
 
     def regions(self) -> dict:

@@ -155,6 +155,30 @@ def figure_instant(result, index: int):
     return fig
 
 
+def figure_scene(result):
+    """The truth at the first instant with its parts named (scenes that name them)."""
+    import matplotlib.pyplot as plt
+
+    scene = result["scene"]
+    t = result["instants_s"][0]
+    h, w = scene.shape
+    fig, ax = plt.subplots(figsize=(9.5, 9.5 * h / w * 0.8 + 0.8))
+    fig.subplots_adjust(left=0.01, right=0.86, bottom=0.02, top=0.92)
+    im = ax.imshow(scene.illuminance_lux(t), cmap=LUX_CMAP, norm=_lux_norm(result), interpolation="nearest")
+    for name, (x, y) in scene.landmarks(t).items():
+        right = x > 0.7 * w  # labels near the right edge extend leftwards, so none is cut off
+        ax.annotate(name, (x, y), xytext=(0, 0), textcoords="offset points", fontsize=8, color="white",
+                    ha="right" if right else "left", va="top",
+                    bbox=dict(boxstyle="round,pad=0.2", fc="black", alpha=0.55, lw=0))
+    ax.set_xticks([])
+    ax.set_yticks([])
+    cax = fig.add_axes([0.88, 0.1, 0.025, 0.78])
+    fig.colorbar(im, cax=cax, label="illuminance on the sensor (lux, log scale)")
+    ax.set_title(f"The scene '{scene.name}' at t = {t * 1e3:.2f} ms (the truth every sensor is scored against)",
+                 fontsize=10)
+    return fig
+
+
 def figure_errors(result, index: int):
     """log10(estimate / truth) per sensor at one instant, one diverging scale in decades."""
 
@@ -311,6 +335,9 @@ def write_report(result, out_dir, command: str = "") -> dict:
     instants = result["instants_s"]
     paths = {}
     has_lux = any(not s.skipped and s.lux_units for s in shots)
+    if hasattr(scene, "landmarks"):
+        save_figure(figs / "scene.png", figure_scene(result))
+        paths["scene"] = figs / "scene.png"
     if has_lux:
         save_figure(figs / "dilemma.png", figure_dilemma(result))
         paths["dilemma"] = figs / "dilemma.png"
@@ -357,6 +384,8 @@ def write_report(result, out_dir, command: str = "") -> dict:
                  f"documented settings.{' Command: <code>' + e(command) + '</code>.' if command else ''}"
                  + (f" Shooting and scoring took {result['run_time_s']:.1f} s." if result.get("run_time_s") else "")
                  + "</p>")
+    if "scene" in paths:
+        parts.append(_img(paths["scene"], "the scene with its parts named"))
     parts.append("<section id='verdict'><h2>Who wins on what</h2><ul class='verdict'>")
     parts += [f"<li>{e(line)}</li>" for line in result["verdict"]]
     parts.append("</ul><p class='note'>Derived from the metrics below each time the report is made.</p></section>")
