@@ -331,7 +331,7 @@ class NightRoadFogScene(Scene):
             self.targets[label] = mask
 
         for r in (120.0, 90.0, 60.0):
-            box(f"sign {r:g} m", r, 3.5, 1.5, 0.9, 0.9, 0.6, 50.0)
+            box(f"sign {r:g} m", r, 6.0, 1.5, 0.9, 0.9, 0.6, 50.0)  # on the right shoulder
         box("car 80 m", 80.0, 0.3, 0.3, 1.8, 1.2, 0.3, 0.0)
         self.active = ActiveScene(range_m=range_m, reflectance=reflectance, retro_coefficient_per_sr=retro,
                                   medium=medium, ambient_lux=1e-3, name="night road in fog")
@@ -349,6 +349,7 @@ class NightRoadFogScene(Scene):
             lux += 3000.0 * t150 * np.exp(-d2 / (2 * 0.6 ** 2))
             lux += 40.0 * (1 - t150) * np.exp(-np.sqrt(d2) / max(2.0, 0.05 * w))
         self.targets["oncoming headlights"] = np.zeros((h, w), bool)
+        self._headlights_px = (w / 2 + (-3.5) / 150.0 / ifov, horizon + 0.5 / 150.0 / ifov)
         self._lux = lux * self.brightness
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
@@ -362,6 +363,21 @@ class NightRoadFogScene(Scene):
         return {"min_lux": lo, "max_lux": hi, "dynamic_range_db": 20 * math.log10(hi / lo),
                 "max_speed_px_per_s": 0.0, "time_resolution_s": math.inf, "flicker_hz": None,
                 "visibility_m": self.visibility_m}
+
+    def landmarks(self, t_s: float = 0.0) -> dict:
+        """Where the targets are (x, y in pixels), for figures."""
+        # the targets are a few pixels apart: their labels sit in a column, with an arrow to each
+        marks = {}
+        k = 0
+        for name, mask in self.targets.items():
+            if mask.any():
+                ys, xs = np.nonzero(mask)
+                marks[name] = (xs.mean(), ys.mean(), 0.80 * self.width, (0.10 + 0.12 * k) * self.height)
+                k += 1
+        x, y = self._headlights_px
+        marks["oncoming headlights 150 m"] = (x, y, 0.12 * self.width, 0.25 * self.height)
+        marks[f"fog, visibility {self.visibility_m:g} m"] = (0.02 * self.width, 0.05 * self.height)
+        return marks
 
     def regions(self) -> dict:
         return {"targets": {k: v for k, v in self.targets.items() if v.any()}}

@@ -165,11 +165,16 @@ def figure_scene(result):
     fig, ax = plt.subplots(figsize=(9.5, 9.5 * h / w * 0.8 + 0.8))
     fig.subplots_adjust(left=0.01, right=0.86, bottom=0.02, top=0.92)
     im = ax.imshow(scene.illuminance_lux(t), cmap=LUX_CMAP, norm=_lux_norm(result), interpolation="nearest")
-    for name, (x, y) in scene.landmarks(t).items():
+    box = dict(boxstyle="round,pad=0.2", fc="black", alpha=0.55, lw=0)
+    for name, where in scene.landmarks(t).items():
+        x, y = where[:2]
+        if len(where) == 4:  # label placed apart, with an arrow to its point
+            ax.annotate(name, (x, y), xytext=where[2:], textcoords="data", fontsize=8, color="white", va="center",
+                        bbox=box, arrowprops=dict(arrowstyle="->", color="white", lw=0.8))
+            continue
         right = x > 0.7 * w  # labels near the right edge extend leftwards, so none is cut off
         ax.annotate(name, (x, y), xytext=(0, 0), textcoords="offset points", fontsize=8, color="white",
-                    ha="right" if right else "left", va="top",
-                    bbox=dict(boxstyle="round,pad=0.2", fc="black", alpha=0.55, lw=0))
+                    ha="right" if right else "left", va="top", bbox=box)
     ax.set_xticks([])
     ax.set_yticks([])
     cax = fig.add_axes([0.88, 0.1, 0.025, 0.78])
