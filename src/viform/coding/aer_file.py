@@ -81,9 +81,15 @@ _NCOLS = 8
 _ESC = 255
 _NONE = 254
 _MAX_HEADER = 1 << 20
-#: Most pixels a coded file may have (8192 × 8192): the decoder keeps ~100 bytes of state per pixel, and a
-#: header is cheap to forge.
-MAX_PIXELS = 1 << 26
+#: Most pixels a coded file may have (2²², e.g. 2048 × 2048; the largest spike camera has 1000 × 1000): the
+#: decoder keeps ~150 bytes of state per pixel (≤ 0.6 GB), and a header is cheap to forge.
+MAX_PIXELS = 1 << 22
+#: Pixels per byte of segment data a range-coded file (versions 2 and 3) can hold at most, per segment:
+#: every pixel codes at least one binary decision per segment, and the most confident probability of
+#: the coders costs ≥ 0.0007 bit (version 3's interval coder: 1 − 32/65536; version 2's record coder:
+#: 2043/2048, 0.0035 bit, so even a 5× zstd stage stays inside); checked at open, before anything per
+#: pixel is allocated, so a forged header cannot make the reader allocate for pixels the data cannot hold.
+PIXELS_PER_BYTE = 11_000
 _MAX_COLUMN = 1 << 34
 
 
@@ -899,6 +905,15 @@ class CodedFile(SpikeSource):
             self._fail("header checksum mismatch", len(fixed))
         try:
             h = json.loads(head.decode())
+        except Exception as exc:
+            self._fail(f"header is invalid ({exc})", len(fixed))
+        if not isinstance(h, dict):
+            self._fail("header is invalid (not a JSON object)", len(fixed))
+        for key in ("height", "width", "clock_hz", "threshold_electrons", "start_time_s", "mode", "k",
+                    "segment_ticks"):
+            if key not in h:
+                self._fail(f"header field {key!r} is missing", len(fixed))
+        try:
             for key, typ in (("height", int), ("width", int), ("clock_hz", (int, float)), ("mode", str),
                              ("segment_ticks", int), ("start_time_s", (int, float)), ("k", (int, float))):
                 if not isinstance(h[key], typ):
@@ -954,6 +969,12 @@ class CodedFile(SpikeSource):
             acc = zlib.crc32(struct.pack("<I", crc), acc)
         if acc != crcs:
             self._fail("segment checksum list mismatch", pos)
+        n_pix = self.header["height"] * self.header["width"]
+        data_bytes = sum(length for _, length, _ in index)
+        if self.version >= 2 and n_pix * n_seg > PIXELS_PER_BYTE * data_bytes:
+            self._fail(f"the header's {self.header['height']}×{self.header['width']} pixels cannot be coded in "
+                       f"{data_bytes} bytes of {n_seg} segment(s) (a genuine file holds at most "
+                       f"{PIXELS_PER_BYTE} pixels per byte per segment)", pos)
         self.n_ticks = int(n_ticks)
         self.spikes_stored = int(spikes)
         if spikes > n_ticks * self.header["height"] * self.header["width"]:
@@ -1072,8 +1093,9 @@ def is_coded_file(path) -> bool:
 
 
 def describe_coded_file(path) -> dict:
-    """Summary of a ``.vfc`` file for ``viform info`` (header, size, ratio; no full decode)."""
+    """Summary of a ``.vfc`` file for ``viform info`` (header, size, ratio; every checksum checked, no decode)."""
     cf = CodedFile(path)
+    _check_segment_crcs(cf)
     h = cf.header
     raw = cf.n_ticks * cf.height * cf.width / 8
     return {
@@ -1081,8 +1103,46 @@ def describe_coded_file(path) -> dict:
         "height": cf.height, "width": cf.width, "n_ticks": cf.n_ticks, "clock_hz": cf.clock_hz,
         "duration_s": cf.n_ticks / cf.clock_hz, "start_time_s": cf.start_time_s,
         "threshold_electrons": cf.threshold_electrons, "mode": h["mode"], "k": h["k"],
-        "slack_ticks": h["slack_ticks"], "segment_ticks": h["segment_ticks"], "segments": len(cf._index),
+        "slack_ticks": h.get("slack_ticks", 0), "segment_ticks": h["segment_ticks"], "segments": len(cf._index),
         "spike_count": cf.spikes_stored, "file_bytes": cf.size, "raw_bytes": raw,
         "ratio_vs_raw": raw / cf.size, "bits_per_spike": 8 * cf.size / max(1, cf.spikes_stored),
         "metadata": h.get("metadata", {}),
+        "verified": True,
+        "verification": ("header, end-record and every segment's checksum checked (not decoded: viform verify "
+                         "decodes everything)" if cf.version >= 3 else
+                         "header and every segment's checksum checked (not decoded: viform verify decodes "
+                         f"everything; version {cf.version} has no checksum over the end record's counts)"),
     }
+
+
+def verify_coded_file(path) -> dict:
+    """Check a ``.vfc`` file completely: every checksum, then a full decode with every spike count compared.
+
+    Returns what was checked (for ``viform verify``); damage raises :class:`ViformError` naming the
+    byte offset and what is wrong.
+    """
+    cf = CodedFile(path)
+    spikes = cf.verify()
+    checks = ["header checksum", "end-record checksum" if cf.version >= 3 else "end record (version "
+              f"{cf.version}: its counts have no checksum of their own)",
+              f"{len(cf._index)} segment checksums", f"every segment decoded ({spikes} spikes, "
+              f"{cf.n_ticks} ticks), spike counts match the segment headers and the end record"]
+    return {"format_version": cf.version, "mode": cf.mode, "segments": len(cf._index), "n_ticks": cf.n_ticks,
+            "spike_count": spikes, "checks": checks}
+
+
+def _check_segment_crcs(cf: CodedFile) -> None:
+    """Read every segment and compare its CRC-32 (no decoding; bounded memory)."""
+    with open(cf.path, "rb") as f:
+        for n, (offset, length, crc) in enumerate(cf._index):
+            f.seek(offset)
+            acc = 0
+            left = length
+            while left:
+                chunk = f.read(min(left, 1 << 20))
+                if not chunk:
+                    break
+                acc = zlib.crc32(chunk, acc)
+                left -= len(chunk)
+            if left or acc != crc:
+                cf._fail(f"segment {n} checksum mismatch (damaged data)", offset)

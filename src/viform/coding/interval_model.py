@@ -169,6 +169,10 @@ def _duint(ds, data, probs, base):
 
 _FB = 16  # fractional bits of the fixed-point state
 _ONE = np.int64(1) << _FB
+_NBITS = 6  # flags: intervals since the lock began (saturating), then the last residual's sign
+_NMASK = (1 << _NBITS) - 1
+_SHMAX = 6
+_INSET = _ONE >> 4  # a phase pushed out of its tick is put back this far inside
 
 #: per-pixel state rows (an int64 array (7, P)): μ̂, φ, mean |residual|, flags (n ≤ 7 | last sign << 3),
 #: the last three intervals
@@ -242,8 +246,8 @@ def _update(st, q, iv, p):
     st[6, q] = st[5, q]
     st[5, q] = st[4, q]
     st[4, q] = min(iv, np.int64(1) << 40)
-    n = fl & 7
-    last = fl >> 3
+    n = fl & _NMASK
+    last = fl >> _NBITS
     r = iv - p
     x = ph + mu  # predicted crossing, relative to the previous spike tick
     ar = r if r >= 0 else -r
@@ -258,32 +262,31 @@ def _update(st, q, iv, p):
         st[0, q] = iv << _FB
         st[1, q] = _ONE >> 1
         st[2, q] = mad + (((ar << _FB) - mad) >> 2)
-        st[3, q] = 1 | (3 << 3)
+        st[3, q] = 1 | (3 << _NBITS)
         return
     lo = iv << _FB
     hi = lo + _ONE - 1
     xn = x
     if xn < lo:
-        xn = lo + (_ONE >> 3)
+        xn = lo + _INSET
     elif xn > hi:
-        xn = hi - (_ONE >> 3)
+        xn = hi - _INSET
     err = xn - x
-    if n < 2:
-        sh = 1
-    elif n < 4:
-        sh = 2
-    else:
-        sh = 4
+    # loop gain 1/2, 1/4, ... while the lock is young (the running mean of the phase errors), then
+    # 1/2^_SHMAX; errors of ≥ 2 ticks of one sign twice running mean the light drifts: follow faster
+    sh = 1
+    while sh < _SHMAX and (2 << sh) <= n + 1:
+        sh += 1
     sgn = 0 if r == 0 else (1 if r > 0 else 2)
-    if sgn != 0 and sgn == last:
-        sh = max(sh - 2, 1)  # errors of one sign: the light drifts, follow it
+    if sgn != 0 and sgn == last and ar >= 2:
+        sh = max(sh - 2, 1)
     mu = mu + (err >> sh) if err >= 0 else mu - ((-err) >> sh)
     if mu < _ONE:
         mu = _ONE
     st[0, q] = mu
     st[1, q] = xn - lo
     st[2, q] = mad + (((ar << _FB) - mad) >> 4)
-    st[3, q] = min(n + 1, 7) | (sgn << 3)
+    st[3, q] = min(n + 1, _NMASK) | (sgn << _NBITS)
 
 
 @njit(cache=True, inline="always")
@@ -376,7 +379,7 @@ def _nb_mu(st, q, width, npix):
             n = q + width
             if n >= npix:
                 continue
-        if (st[3, n] & 7) > 0:
+        if (st[3, n] & _NMASK) > 0:
             tot += st[0, n]
             cnt += 1
     if cnt == 0:
@@ -447,7 +450,7 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
                 break
             more = k < c
             fl = st[3, q]
-            if (fl & 7) == 0:
+            if (fl & _NMASK) == 0:
                 _ebit(es, out, probs, _P_COLD + (1 if a >= seg_start else 0), 1 if more else 0)
                 if not more:
                     break
@@ -551,7 +554,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
             if rem < lo:
                 break
             fl = st[3, q]
-            if (fl & 7) == 0:
+            if (fl & _NMASK) == 0:
                 if _dbit(ds, data, probs, _P_COLD + (1 if a >= seg_start else 0)) == 0:
                     break
                 iv = _duint(ds, data, probs, _P_COLDV) + lo
