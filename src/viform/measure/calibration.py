@@ -205,7 +205,7 @@ def _checkerboard_static(iv: PixelIntervals, tile: int) -> tuple[np.ndarray, dic
     n_tx = (w + tile - 1) // tile
     colour = (y + x) % 2
     group = (ty * n_tx + tx) * 2 + colour
-    n_groups = int(group.max()) + 1 if group.size else 0
+    n_groups = 2 * ((h + tile - 1) // tile) * n_tx  # both colours of every tile
     ok = (iv.pixel[2:] == iv.pixel[:-2])
     a, b, c = iv.intervals[:-2][ok], iv.intervals[1:-1][ok], iv.intervals[2:][ok]
     g = group[iv.pixel[2:][ok]]
@@ -497,8 +497,9 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
         q_info["reason"] = (f"recording too short: {iv.n_ticks} ticks hold fewer than {MIN_INTERVALS_PER_PIXEL} "
                             f"intervals of ≥ {MIN_INTERVAL_TICKS:g} ticks")
     elif sel3.sum() < MIN_PAIRS_FOR_Q:
-        q_info["reason"] = (f"too few static interval triples ({int(sel3.sum())} < {MIN_PAIRS_FOR_Q}): the recording "
-                            "is too short, too dark or not static enough")
+        q_info["reason"] = (f"too few steady interval triples ({int(sel3.sum())} < {MIN_PAIRS_FOR_Q}) in pixels whose "
+                            f"mean interval lies in {MIN_INTERVAL_TICKS:g}–{mu_hi:.3g} ticks: the recording is too "
+                            "short, too small, too dark or too bright, or not steady")
     else:
         # drift-robust: second differences of the intervals cancel light that changes linearly
         inv_q, se = _fit_inverse_q(mu_p[p3[sel3]], (y0[sel3] - 2 * y1[sel3] + y2[sel3]) ** 2, p3[sel3], npx,
