@@ -1,24 +1,33 @@
-"""Compression of first-spike coding (seed 000 §5.2) against general-purpose coders.
+"""First-spike coding (seed 000 §5.2) against the best general-purpose compressors, per stream.
 
-For each stream: size of the ``.vfc`` file in strict mode (lossless) and statistical mode,
-as a ratio to the packed raw bits (1 bit per pixel per tick), next to zlib -9, xz -9e and
-zstd -19 run on the same packed bits in this process; encode and decode throughput
-(Mspikes/s and raw MB/s); for the lossy modes the PSNR of interval imaging (Q/τ at an
-instant, seed 000 §3.3.2) of the decoded stream against the uncoded stream, and for the
-simulated scenes the PSNR of both against the true light (the loss in dB).
+For every stream: the packed raw bits (1 bit per pixel per tick), xz -9 and zstd -19 on both byte
+layouts a generic tool could be given — time-major (the camera's ``.dat``: one frame of packed
+bits after another) and pixel-major (each pixel's bits over time packed together) — and each
+``.vfc`` mode: size, ratio to raw and to the best generic result, bits per spike, encode and decode
+speed (Mspikes/s) and peak Python-visible memory (tracemalloc), and for the lossy modes the
+distortion a user sees: PSNR of TFP (spike count in a 64-tick window) and interval (1/ISI) images
+against the same images of the lossless stream, per tolerance k. Simulated streams (static and
+moving scenes, Q from 100 to 10⁴ e⁻, with and without the sensor noise model — gain and dark
+current spread, hot pixels) also get the *entropy floor*: the bits per spike that even a coder
+knowing each pixel's exact light needs, because of shot noise (seed 000 §5.1: the interval is
+Gamma(Q) distributed; rounded to the clock).
 
-Run:  python benchmarks/bench_coding.py [--quick] [--json out.json]
+The time-precision row (seed 000 §5.2: "first-spike coding raises the time precision with almost
+no more data") codes one static scene at 20, 40, 80, 160 and 320 kHz and prints the size of each
+mode relative to 20 kHz; ``--figure PATH`` draws it.
+
+Run:  python benchmarks/bench_coding.py [--quick] [--json out.json] [--figure docs/figures/x.png]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import lzma
+import os
 import sys
 import tempfile
 import time
-import zlib
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -28,148 +37,321 @@ from viform.coding.aer_file import CodedFile, encode_source
 from viform.stream.container import SpikeStream
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "spike"
+K_VALUES = (1.0, 2.0, 4.0)
 
 
-def interval_rate(spikes: np.ndarray, ticks) -> np.ndarray:
-    """1/τ (spikes per tick) of the interval holding each tick, (len(ticks), H, W); NaN where cut by an end."""
-    try:
-        from viform.imaging.interval import interval_ticks
+# ---------------------------------------------------------------------------- generic coders
 
-        tau, censored = interval_ticks(SpikeStream(spikes, 1.0), ticks)
-        rate = 1.0 / tau.astype(float)
-        rate[censored] = np.nan
-        return rate
-    except ImportError:  # the imaging module is not there yet: plain helper
-        t, h, w = spikes.shape
-        flat = spikes.reshape(t, -1)
-        out = np.full((len(ticks), h * w), np.nan)
-        idx = np.arange(t)[:, None]
-        last = np.maximum.accumulate(np.where(flat, idx, -1), axis=0)
-        nxt = np.minimum.accumulate(np.where(flat, idx, t)[::-1], axis=0)[::-1]
-        for m, k in enumerate(ticks):
-            a, b = last[k], nxt[k + 1] if k + 1 < t else np.full(h * w, t)
-            ok = (a >= 0) & (b < t)
-            out[m, ok] = 1.0 / (b[ok] - a[ok])
-        return out.reshape(len(ticks), h, w)
+def layouts(spikes: np.ndarray) -> dict:
+    t = spikes.shape[0]
+    flat = spikes.reshape(t, -1)
+    return {"time-major": np.packbits(flat, axis=1, bitorder="little").tobytes(),
+            "pixel-major": np.packbits(np.ascontiguousarray(flat.T), axis=1).tobytes()}
 
 
-def psnr(x, y, peak) -> float:
-    ok = np.isfinite(x) & np.isfinite(y)
-    mse = np.mean((x[ok] - y[ok]) ** 2)
-    return float("inf") if mse == 0 else 10 * np.log10(peak**2 / mse)
-
-
-def general_coders(packed: bytes) -> dict:
+def generic(spikes: np.ndarray, n_spikes: int) -> dict:
     out = {}
-    for name, fn in (("zlib-9", lambda b: zlib.compress(b, 9)),
-                     ("xz-9e", lambda b: lzma.compress(b, preset=9 | lzma.PRESET_EXTREME)),
-                     ("zstd-19", lambda b: zstandard.ZstdCompressor(level=19).compress(b))):
-        t0 = time.perf_counter()
-        n = len(fn(packed))
-        out[name] = {"bytes": n, "ratio": len(packed) / n, "seconds": time.perf_counter() - t0}
+    for lay, data in layouts(spikes).items():
+        for name, fn in (("xz-9", lambda b: lzma.compress(b, preset=9)),
+                         ("zstd-19", lambda b: zstandard.ZstdCompressor(level=19).compress(b))):
+            t0 = time.perf_counter()
+            n = len(fn(data))
+            dt = time.perf_counter() - t0
+            out[f"{name} {lay}"] = {"bytes": n, "ratio_vs_raw": len(data) / n,
+                                    "encode_mspikes_per_s": n_spikes / dt / 1e6}
     return out
 
 
-def bench_stream(name: str, stream: SpikeStream, truth_rate=None, q=None, tmp=Path(".")) -> dict:
+# ---------------------------------------------------------------------------- images for distortion
+
+def tfp_images(spikes: np.ndarray, probes, window: int = 64) -> np.ndarray:
+    """Spike count in a window around each probe tick / window (spikes per tick)."""
+    t = spikes.shape[0]
+    out = []
+    for k in probes:
+        a, b = max(0, k - window // 2), min(t, k + window // 2)
+        out.append(spikes[a:b].sum(0) / (b - a))
+    return np.array(out)
+
+
+def interval_images(spikes: np.ndarray, probes) -> np.ndarray:
+    """1/τ (spikes per tick) of the interval holding each probe tick; NaN where an end cuts it."""
+    t = spikes.shape[0]
+    flat = spikes.reshape(t, -1)
+    idx = np.arange(t)[:, None]
+    last = np.maximum.accumulate(np.where(flat, idx, -1), axis=0)
+    nxt = np.minimum.accumulate(np.where(flat, idx, t)[::-1], axis=0)[::-1]
+    out = np.full((len(probes), flat.shape[1]), np.nan)
+    for m, k in enumerate(probes):
+        a = last[k]
+        b = nxt[k + 1] if k + 1 < t else np.full(flat.shape[1], t)
+        ok = (a >= 0) & (b < t)
+        out[m, ok] = 1.0 / (b[ok] - a[ok])
+    return out.reshape((len(probes),) + spikes.shape[1:])
+
+
+def psnr_db(x, ref) -> float:
+    ok = np.isfinite(x) & np.isfinite(ref)
+    mse = float(np.mean((x[ok] - ref[ok]) ** 2))
+    peak = float(np.nanmax(ref))
+    return float("inf") if mse == 0 else 10 * np.log10(peak ** 2 / mse)
+
+
+# ---------------------------------------------------------------------------- entropy floor
+
+def entropy_floor_bits_per_spike(mean_interval_ticks: np.ndarray, q: float, n: int = 4000, seed: int = 0) -> float:
+    """A lower bound on the bits per spike of any lossless code of a steady pixel's spike ticks.
+
+    The decoder of a real stream knows less than the exact continuous time of the previous
+    crossing; given it (and the exact light), the next spike tick is ⌊φ + G⌋ with G ~ Gamma(Q)
+    scaled to the mean interval (seed 000 §5.1) and φ the crossing's phase inside its tick.
+    The entropy of that, averaged over φ ~ U[0, 1) and over the pixels, bounds every code from
+    below (conditioning on more cannot raise an entropy).
+    """
+    rng = np.random.default_rng(seed)
+    mus = rng.choice(np.asarray(mean_interval_ticks, float).ravel(), 64)
+    h = []
+    for mu in mus:
+        g = rng.gamma(q, mu / q, n)
+        phi = rng.random(n)
+        v = np.floor(phi + g).astype(np.int64)
+        _, c = np.unique(v, return_counts=True)
+        h.append(-(c / n * np.log2(c / n)).sum() * 1.0)
+    return float(np.mean(h))
+
+
+# ---------------------------------------------------------------------------- one stream
+
+def bench_stream(name: str, stream: SpikeStream, tmp: Path, lossy: bool = True, floor=None) -> dict:
     spikes = stream.spikes
-    t, h, w = spikes.shape
-    packed = np.packbits(spikes.reshape(t, -1), axis=1, bitorder="little").tobytes()
+    t = spikes.shape[0]
     n_spikes = int(spikes.sum())
-    row = {"stream": name, "shape": [t, h, w], "spikes": n_spikes, "raw_bytes": len(packed),
-           "general": general_coders(packed)}
-    probe = np.linspace(t * 0.2, t * 0.8, 5).astype(int)
-    rate_raw = interval_rate(spikes, probe)
-    for mode in ("strict", "statistical", "intensity"):
-        if mode == "statistical" and q is None:
-            continue
-        path = tmp / f"{name}-{mode}.vfc"
+    raw = spikes.size / 8
+    row = {"stream": name, "shape": list(spikes.shape), "spikes": n_spikes, "raw_bytes": raw,
+           "raw_bits_per_spike": 8 * raw / max(1, n_spikes), "generic": generic(spikes, n_spikes)}
+    best = min(row["generic"].items(), key=lambda kv: kv[1]["bytes"])
+    row["best_generic"] = {"name": best[0], **best[1]}
+    if floor is not None:
+        row["entropy_floor_bits_per_spike"] = floor
+    probes = np.linspace(t * 0.2, t * 0.8, 5).astype(int)
+    ref_tfp = tfp_images(spikes, probes)
+    ref_iv = interval_images(spikes, probes)
+    q = stream.threshold_electrons
+    modes = [("strict", "strict", None)]
+    if lossy and q is not None:
+        modes += [(f"statistical k={k:g}", "statistical", k) for k in K_VALUES]
+    if lossy:
+        modes.append(("intensity", "intensity", 0.0))
+    row["modes"] = {}
+    for label, mode, k in modes:
+        path = tmp / "s.vfc"
+        tracemalloc.start()
         t0 = time.perf_counter()
-        info = encode_source(stream, path, mode, k=2.0, threshold_electrons=q, slack_ticks=1)
+        info = encode_source(stream, path, mode, k=k, threshold_electrons=q, slack_ticks=1 if mode != "strict" else 0)
         enc_s = time.perf_counter() - t0
+        enc_peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        tracemalloc.start()
         t0 = time.perf_counter()
         cf = CodedFile(path)
         dec = np.concatenate([b for _, b in cf.iter_blocks(1024)])
         dec_s = time.perf_counter() - t0
-        r = {"bytes": info["bytes"], "ratio_vs_raw": len(packed) / info["bytes"],
-             "ratio_vs_xz": row["general"]["xz-9e"]["bytes"] / info["bytes"],
+        dec_peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        r = {"bytes": info["bytes"], "ratio_vs_raw": raw / info["bytes"],
+             "ratio_vs_best_generic": best[1]["bytes"] / info["bytes"],
              "bits_per_spike": 8 * info["bytes"] / max(1, n_spikes),
-             "encode_mspikes_per_s": n_spikes / enc_s / 1e6, "encode_raw_mb_per_s": len(packed) / enc_s / 1e6,
-             "decode_mspikes_per_s": n_spikes / dec_s / 1e6, "decode_raw_mb_per_s": len(packed) / dec_s / 1e6,
+             "encode_mspikes_per_s": n_spikes / enc_s / 1e6, "decode_mspikes_per_s": n_spikes / dec_s / 1e6,
+             "encode_peak_mb": enc_peak / 1e6, "decode_peak_mb": dec_peak / 1e6,
              "lossless": bool(np.array_equal(dec, spikes))}
         if mode != "strict":
-            rate_dec = interval_rate(dec, probe)
-            peak = np.nanmax(rate_raw)
-            r["psnr_vs_uncoded_db"] = psnr(rate_dec, rate_raw, peak)
-            if truth_rate is not None:
-                tr = np.broadcast_to(truth_rate, rate_raw.shape)
-                r["psnr_uncoded_vs_truth_db"] = psnr(rate_raw, tr, tr.max())
-                r["psnr_decoded_vs_truth_db"] = psnr(rate_dec, tr, tr.max())
-                r["loss_db"] = r["psnr_uncoded_vs_truth_db"] - r["psnr_decoded_vs_truth_db"]
-        row[mode] = r
+            r["psnr_tfp_db"] = psnr_db(tfp_images(dec, probes), ref_tfp)
+            r["psnr_interval_db"] = psnr_db(interval_images(dec, probes), ref_iv)
+        row["modes"][label] = r
+        os.remove(path)
     return row
 
 
-def simulated(kind: str, size=(120, 160), ticks=4000, q=400.0):
-    from viform.light.scenes import StillScene, TranslatingScene
+# ---------------------------------------------------------------------------- simulated streams
+
+def _sensor(q, clock_hz=40e3, noise=False):
     from viform.sensors.spike import SpikeSensor
 
-    sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=20.0)
-    h, w = size
-    # brightness chosen so intervals span about 4–60 ticks (a typical indoor range at 40 kHz)
-    e_tick = np.random.default_rng(0).uniform(q / 60, q / 4, (h, w))
-    e_tick = np.round(e_tick / 10, 0) * 10 + q / 60
-    base_lux = sensor.parameters.optics.lux_from_electrons_per_s(e_tick * sensor.parameters.clock_hz)
-    if kind == "static":
-        scene = StillScene(base_lux)
-        truth = (e_tick + 20.0 / 40e3) / q
-    else:
-        v = 20.0 if kind == "slow" else 2000.0  # px/s
-        scene = TranslatingScene(h, w, velocity_px_per_s=(v, 0.0))
-        truth = None
-    s = sensor.capture(scene, ticks / sensor.parameters.clock_hz, seed=1)
-    return s, truth
+    extra = {}
+    if noise:
+        extra = {"gain_spread_fraction": 0.01, "dark_current_spread_fraction": 0.5, "hot_pixel_fraction": 1e-3}
+    try:
+        return SpikeSensor(threshold_electrons=q, dark_current_e_per_s=20.0, clock_hz=clock_hz, **extra)
+    except TypeError:  # an older sensor model without the noise fields
+        return SpikeSensor(threshold_electrons=q, dark_current_e_per_s=20.0, clock_hz=clock_hz)
+
+
+def static_scene(q, size, ticks, clock_hz=40e3, noise=False, interval_range=(2.0, 20.0), seed=0):
+    """A still scene whose light gives mean intervals uniform in ``interval_range`` ticks at 40 kHz."""
+    from viform.light.scenes import StillScene
+
+    sensor = _sensor(q, clock_hz, noise)
+    rng = np.random.default_rng(seed)
+    mean_iv = rng.uniform(*interval_range, size)  # ticks at 40 kHz
+    e_per_s = q / (mean_iv / 40e3)
+    lux = sensor.parameters.optics.lux_from_electrons_per_s(e_per_s)
+    s = sensor.capture(StillScene(lux), ticks / clock_hz, seed=1)
+    return s, mean_iv * clock_hz / 40e3
+
+
+def moving_scene(q, size, ticks, speed_px_per_s=400.0, noise=False):
+    """A texture translating at ``speed_px_per_s``, bright enough for mean intervals of 2–20 ticks."""
+    from viform.light.scenes import TranslatingScene
+
+    sensor = _sensor(q, 40e3, noise)
+    e_lo, e_hi = q / (20 / 40e3), q / (2 / 40e3)
+    lux_lo = sensor.parameters.optics.lux_from_electrons_per_s(e_lo)
+    lux_hi = sensor.parameters.optics.lux_from_electrons_per_s(e_hi)
+    scene = TranslatingScene(size[0], size[1], velocity_px_per_s=(speed_px_per_s, 0.0), min_lux=lux_lo,
+                             max_lux=lux_hi, period_px=24.0)
+    return sensor.capture(scene, ticks / 40e3, seed=1)
+
+
+def time_precision(quick: bool, tmp: Path) -> list[dict]:
+    """Coded size against the clock rate for one static scene (seed 000 §5.2)."""
+    size = (48, 48) if quick else (64, 64)
+    duration_ticks_20k = 500 if quick else 1000
+    rows = []
+    for q in (100.0, 1e4):
+        for clock in (20e3, 40e3, 80e3, 160e3, 320e3):
+            ticks = int(duration_ticks_20k * clock / 20e3)
+            # light: mean intervals 2–20 ticks at 20 kHz, the same light at every clock
+            s, _ = static_scene(q, size, ticks, clock_hz=clock, interval_range=(4.0, 40.0))
+            row = {"threshold_electrons": q, "clock_hz": clock, "raw_bytes": s.spikes.size / 8,
+                   "spikes": int(s.spikes.sum())}
+            for mode, k in (("strict", None), ("statistical", 2.0), ("intensity", 0.0)):
+                info = encode_source(s, tmp / "p.vfc", mode, k=k, slack_ticks=0 if mode == "strict" else 1)
+                row[mode] = info["bytes"]
+            best = min(len(lzma.compress(b, preset=9)) for b in layouts(s.spikes).values())
+            row["best xz"] = best
+            rows.append(row)
+    return rows
+
+
+def figure(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from viform._io import save_figure
+
+    qs = sorted({r["threshold_electrons"] for r in rows})
+    fig, axes = plt.subplots(1, len(qs), figsize=(5.2 * len(qs), 4.2), sharey=True)
+    axes = np.atleast_1d(axes)
+    for ax, q in zip(axes, qs, strict=True):
+        rs = [r for r in rows if r["threshold_electrons"] == q]
+        clocks = np.array([r["clock_hz"] for r in rs]) / 1e3
+        for key, style in (("raw_bytes", "k--"), ("best xz", "C7-s"), ("strict", "C0-o"),
+                           ("statistical", "C1-o"), ("intensity", "C2-o")):
+            v = np.array([r[key] for r in rs], float)
+            label = {"raw_bytes": "raw bits", "best xz": "xz -9 (best layout)", "strict": "strict (lossless)",
+                     "statistical": "statistical, k = 2", "intensity": "intensity only"}[key]
+            ax.plot(clocks, v / v[0], style, label=label)
+        ax.plot(clocks, np.ones_like(clocks), ":", color="C3", label="seed §5.2: \"almost no more data\"")
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log", base=2)
+        ax.set_xticks(clocks, [f"{c:g}" for c in clocks])
+        ax.set_xlabel("readout clock, kHz")
+        ax.set_title(f"static 64×64 scene, Q = {q:g} e⁻")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("coded size relative to 20 kHz (×)")
+    axes[-1].legend(fontsize=8, loc="upper left")
+    fig.suptitle("Cost of finer time precision: same light, same duration, faster clock")
+    fig.tight_layout()
+    save_figure(path, fig)
+
+
+# ---------------------------------------------------------------------------- printing
+
+def print_rows(rows: list[dict]) -> None:
+    for r in rows:
+        g = r["generic"]
+        print(f"\n{r['stream']}  {r['shape'][0]} ticks × {r['shape'][1]}×{r['shape'][2]}  {r['spikes']:,} spikes  "
+              f"raw {r['raw_bytes'] / 1e6:.3g} MB ({r['raw_bits_per_spike']:.3g} bit/spike)"
+              + (f"  entropy floor {r['entropy_floor_bits_per_spike']:.3g} bit/spike"
+                 if "entropy_floor_bits_per_spike" in r else ""))
+        print("  generic:  " + "  ".join(f"{k} {v['ratio_vs_raw']:.3g}×" for k, v in g.items())
+              + f"  → best {r['best_generic']['name']} ({8 * r['best_generic']['bytes'] / r['spikes']:.3g} bit/spike)")
+        print(f"  {'mode':18s} {'×raw':>7s} {'×best':>6s} {'bit/spike':>9s} {'enc Msp/s':>9s} {'dec Msp/s':>9s} "
+              f"{'enc MB':>7s} {'dec MB':>7s} {'lossless':>8s} {'PSNR TFP':>9s} {'PSNR 1/ISI':>10s}")
+        for label, m in r["modes"].items():
+            ps = (f"{m['psnr_tfp_db']:8.3g}  {m['psnr_interval_db']:9.3g} " if "psnr_tfp_db" in m else f"{'':9s} {'':10s}")
+            print(f"  {label:18s} {m['ratio_vs_raw']:6.3g}× {m['ratio_vs_best_generic']:5.3g}× {m['bits_per_spike']:9.3g} "
+                  f"{m['encode_mspikes_per_s']:9.3g} {m['decode_mspikes_per_s']:9.3g} {m['encode_peak_mb']:7.3g} "
+                  f"{m['decode_peak_mb']:7.3g} {str(m['lossless']):>8s} {ps}")
+
+
+def print_precision(rows: list[dict]) -> None:
+    print("\ntime precision (seed 000 §5.2: finer time precision with almost no more data): size relative to 20 kHz")
+    print(f"  {'Q e⁻':>6s} {'clock kHz':>9s} {'raw':>6s} {'xz best':>7s} {'strict':>7s} {'stat k=2':>8s} {'intensity':>9s}"
+          f"   strict bytes")
+    base = {}
+    for r in rows:
+        q = r["threshold_electrons"]
+        if r["clock_hz"] == 20e3:
+            base[q] = r
+        b = base[q]
+        print(f"  {q:6g} {r['clock_hz'] / 1e3:9g} {r['raw_bytes'] / b['raw_bytes']:5.3g}× "
+              f"{r['best xz'] / b['best xz']:6.3g}× {r['strict'] / b['strict']:6.3g}× "
+              f"{r['statistical'] / b['statistical']:7.3g}× {r['intensity'] / b['intensity']:8.3g}×   {r['strict']}")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller simulated scenes")
-    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--json", type=Path, default=None, help="also write the results as JSON here")
+    ap.add_argument("--figure", type=Path, default=None, help="draw the time-precision figure (PNG) here")
+    ap.add_argument("--only", default=None, help="run only streams whose name contains this")
+    ap.add_argument("--no-precision", action="store_true", help="skip the time-precision row")
     args = ap.parse_args(argv)
     from viform.stream.io import open_spikes
 
+    print(f"load: {os.getloadavg()[0]:.1f} {os.getloadavg()[1]:.1f} {os.getloadavg()[2]:.1f} on {os.cpu_count()} CPUs "
+          "(speeds are shared-machine figures)")
     rows = []
+    size = (48, 48) if args.quick else (96, 96)
+    ticks = 2000 if args.quick else 4000
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        streams = []
         for fname, hw in (("reds_sim_400x250.dat", (250, 400)), ("real_uhsr_250x250.npz", (None, None))):
             if (DATA / fname).exists():
-                s = open_spikes(DATA / fname, *hw).to_memory()
-                rows.append(bench_stream(fname, s, tmp=tmp))
+                streams.append((fname, lambda f=fname, hw=hw: (open_spikes(DATA / f, *hw).to_memory(), None)))
             else:
                 print(f"skip {fname}: not found under {DATA}", file=sys.stderr)
-        ticks = 1500 if args.quick else 4000
-        for kind in ("static", "slow", "fast"):
-            s, truth = simulated(kind, ticks=ticks)
-            rows.append(bench_stream(f"sim-{kind}", s, truth, q=s.threshold_electrons, tmp=tmp))
-    for r in rows:
-        g = r["general"]
-        print(f"\n{r['stream']}  {r['shape']}  {r['spikes']} spikes  raw {r['raw_bytes']} B  "
-              f"zlib {g['zlib-9']['ratio']:.2f}×  xz {g['xz-9e']['ratio']:.2f}×  zstd {g['zstd-19']['ratio']:.2f}×")
-        for mode in ("strict", "statistical", "intensity"):
-            if mode not in r:
+        for q in (100.0, 1000.0, 1e4):
+            streams.append((f"sim static Q={q:g}", lambda q=q: static_scene(q, size, ticks)))
+        streams.append(("sim static Q=1e4 noisy", lambda: static_scene(1e4, size, ticks, noise=True)))
+        for q in (100.0, 1e4):
+            streams.append((f"sim moving 400 px/s Q={q:g}", lambda q=q: (moving_scene(q, size, ticks), None)))
+        for name, make in streams:
+            if args.only and args.only not in name:
                 continue
-            m = r[mode]
-            extra = ""
-            if "psnr_vs_uncoded_db" in m:
-                extra = f"  PSNR vs uncoded {m['psnr_vs_uncoded_db']:.1f} dB"
-            if "loss_db" in m:
-                extra += (f"  vs truth {m['psnr_uncoded_vs_truth_db']:.2f} → {m['psnr_decoded_vs_truth_db']:.2f} dB"
-                          f" (loss {m['loss_db']:.2f} dB)")
-            print(f"  {mode:11s} {m['ratio_vs_raw']:6.2f}× raw  {m['ratio_vs_xz']:5.2f}× xz  "
-                  f"{m['bits_per_spike']:.2f} bit/spike  enc {m['encode_mspikes_per_s']:.1f} Msp/s "
-                  f"({m['encode_raw_mb_per_s']:.1f} MB/s)  dec {m['decode_mspikes_per_s']:.1f} Msp/s "
-                  f"({m['decode_raw_mb_per_s']:.1f} MB/s)  lossless={m['lossless']}{extra}")
+            s, mean_iv = make()
+            floor = None
+            if mean_iv is not None:
+                floor = entropy_floor_bits_per_spike(mean_iv, s.threshold_electrons)
+            rows.append(bench_stream(name, s, tmp, floor=floor))
+            print_rows(rows[-1:])
+            sys.stdout.flush()
+        prec = [] if args.no_precision else time_precision(args.quick, tmp)
+    if prec:
+        print_precision(prec)
+        if args.figure:
+            figure(prec, args.figure)
+            print(f"figure: {args.figure}")
+    print("\nstrict / best generic per stream: " + ", ".join(
+        f"{r['stream']} {r['modes']['strict']['ratio_vs_best_generic']:.3g}×" for r in rows))
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=2))
+        from viform._io import write_json
+
+        write_json(args.json, {"streams": rows, "time_precision": prec})
 
 
 if __name__ == "__main__":

@@ -358,3 +358,138 @@ def test_real_file_strict_beats_xz_twice(tmp_path):
     xz = len(lzma.compress(packed, preset=9 | lzma.PRESET_EXTREME))
     info = encode_source(s, tmp_path / "u.vfc")
     assert xz / info["bytes"] >= 2.0
+
+
+def _regular_file(tmp_path, name="r.vfc", shape=(300, 6, 8), segment_ticks=64) -> bytes:
+    """A strict version-3 file of steady pixels (intervals ⌊μ⌋/⌈μ⌉): its segments are interval-coded."""
+    t, h, w = shape
+    mu = np.linspace(2.2, 13.7, h * w)
+    x = np.random.default_rng(4).random(h * w) * mu
+    a = np.zeros((t, h * w), bool)
+    for k in range(t):  # crossings every mu ticks, read at whole ticks
+        a[np.floor(x).astype(int).clip(0, t - 1)[x < t], np.flatnonzero(x < t)] = True
+        x = np.where(x < k + 1, x + mu, x)
+    s = SpikeStream(a.reshape(shape), 40_000.0, 1e4)
+    encode_source(s, tmp_path / name, segment_ticks=segment_ticks, block_ticks=37)
+    return (tmp_path / name).read_bytes()
+
+
+def test_v3_regular_stream_round_trip_and_interval_coding(tmp_path):
+    """Steady pixels: exact at every segment length, bytes independent of the block size, and the
+    interval coder (payload flag 1) is chosen and smaller than version 2."""
+    from viform.coding import aer_file
+
+    data = _regular_file(tmp_path)
+    cf = CodedFile(tmp_path / "r.vfc")
+    ref = cf.read_ticks(0, cf.n_ticks)
+    for seg in (7, 64, 4096):
+        s = SpikeStream(ref, 40_000.0, 1e4)
+        encode_source(s, tmp_path / "a.vfc", segment_ticks=seg, block_ticks=5)
+        encode_source(s, tmp_path / "b.vfc", segment_ticks=seg, block_ticks=300)
+        assert (tmp_path / "a.vfc").read_bytes() == (tmp_path / "b.vfc").read_bytes()
+        assert np.array_equal(CodedFile(tmp_path / "a.vfc").read_ticks(0, 300), ref)
+    _, payloads = _parts(data)
+    flags = [p[aer_file._PAYLOAD_HEAD.size - 9] for p in payloads]
+    assert aer_file._FLAG_INTERVALS in flags
+    v2 = encode_source(SpikeStream(ref, 40_000.0, 1e4), tmp_path / "v2.vfc", segment_ticks=64, version=2)
+    assert len(data) < 0.8 * v2["bytes"]
+
+
+def test_v3_fuzz_truncations_and_flips(tmp_path):
+    """Version 3 (interval-coded segments): every truncation and 300 byte flips give a one-line
+    ViformError or the exact original, never other spikes."""
+    good = _regular_file(tmp_path, shape=(120, 4, 5), segment_ticks=32)
+    original = _decode_bytes(tmp_path, good, "orig.vfc")
+    rng = np.random.default_rng(99)
+    cases = [good[:c] for c in range(0, len(good), 3)]
+    for _ in range(300):
+        b = bytearray(good)
+        b[int(rng.integers(len(b)))] ^= 1 << int(rng.integers(8))
+        cases.append(bytes(b))
+    for data in cases:
+        try:
+            out = _decode_bytes(tmp_path, data)
+        except ViformError as exc:
+            assert str(exc) and "\n" not in str(exc)
+            continue
+        assert np.array_equal(out, original)
+
+
+def test_v3_forged_interval_payloads(tmp_path):
+    """Random bytes behind a valid interval-coded segment head (CRCs re-signed): clear errors only."""
+    from viform.coding import aer_file
+
+    header, payloads = _parts(_regular_file(tmp_path, shape=(64, 4, 5), segment_ticks=64))
+    rng = np.random.default_rng(5)
+    errors = 0
+    for trial in range(150):
+        spikes = int(rng.integers(0, 200))
+        body = rng.integers(0, 256, int(rng.integers(0, 120))).astype(np.uint8).tobytes()
+        if trial % 2:
+            body = bytearray(payloads[0][aer_file._PAYLOAD_HEAD.size:])
+            body[int(rng.integers(len(body)))] = int(rng.integers(256))
+            spikes = aer_file._PAYLOAD_HEAD.unpack_from(payloads[0])[4]
+        head = aer_file._PAYLOAD_HEAD.pack(0, 64, min(spikes, 20), aer_file._FLAG_INTERVALS, spikes)
+        data = _resign(header, [head + bytes(body)], 64, spikes, version=3)
+        try:
+            _decode_bytes(tmp_path, data)
+        except ViformError as exc:
+            assert "\n" not in str(exc)
+            errors += 1
+    assert errors > 100
+
+
+def test_forged_large_header_refused_before_allocating(tmp_path):
+    """A small file whose re-signed header declares 8192×8192 (or 2048×2048, within the pixel limit)
+    is refused at open, naming the pixels, with almost nothing allocated."""
+    import tracemalloc
+
+    header, payloads = _parts(_regular_file(tmp_path, shape=(64, 4, 5), segment_ticks=64))
+    for hw in (8192, 2048):
+        data = _resign(dict(header, height=hw, width=hw), payloads, 64, 0, version=3)
+        tracemalloc.start()
+        try:
+            with pytest.raises(ViformError, match="header is invalid|pixels"):
+                _decode_bytes(tmp_path, data)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert peak < 4 << 20
+
+
+def test_missing_header_field_is_named(tmp_path):
+    header, payloads = _parts(_good_file(tmp_path))
+    del header["threshold_electrons"]
+    data = _resign(header, payloads, 70, 0, version=3)
+    with pytest.raises(ViformError, match="'threshold_electrons' is missing"):
+        _decode_bytes(tmp_path, data)
+
+
+def test_end_record_counts_are_checksummed(tmp_path):
+    """Version 3: a changed tick or spike count in the end record is caught at open (version 2 could not)."""
+    good = _good_file(tmp_path)
+    for offset in (-32, -16):  # n_ticks (u64 after "EN"), spikes
+        b = bytearray(good)
+        b[len(b) + offset] ^= 0x01
+        with pytest.raises(ViformError, match="end record checksum"):
+            _decode_bytes(tmp_path, bytes(b))
+
+
+def test_info_checks_every_segment_and_verify_decodes(tmp_path):
+    """describe_coded_file (viform info) reads every segment's checksum; verify_coded_file decodes everything."""
+    from viform.coding.aer_file import verify_coded_file
+
+    good = _good_file(tmp_path)
+    (tmp_path / "g.vfc").write_bytes(good)
+    d = describe_coded_file(tmp_path / "g.vfc")
+    assert d["verified"] is True and "checksum" in d["verification"]
+    v = verify_coded_file(tmp_path / "g.vfc")
+    assert v["spike_count"] == d["spike_count"] and v["segments"] == d["segments"] and len(v["checks"]) == 4
+    header, payloads = _parts(good)
+    b = bytearray(good)
+    b[len(good) - 40 - len(payloads[-1]) // 2] ^= 0x10  # inside the last segment's payload
+    (tmp_path / "bad.vfc").write_bytes(bytes(b))
+    with pytest.raises(ViformError, match="checksum"):
+        describe_coded_file(tmp_path / "bad.vfc")
+    with pytest.raises(ViformError, match="checksum"):
+        verify_coded_file(tmp_path / "bad.vfc")
