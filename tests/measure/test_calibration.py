@@ -98,6 +98,18 @@ def test_too_short_recording_says_so():
     assert r["dark_current"]["dark_current_e_per_s"] is None
 
 
+@pytest.mark.parametrize("shape", [(60, 1, 1), (60, 9, 1), (60, 3, 40)])
+@pytest.mark.parametrize("fill", [False, True])
+def test_degenerate_recordings_give_reasons_not_errors(shape, fill):
+    """Dark (no spike) or saturated (a spike every tick) recordings of odd sizes: every figure
+    is None with a reason; a preset can still be written (chip defaults, listed as assumed)."""
+    r = calibrate(SpikeStream(np.full(shape, fill), 40e3))
+    assert r["threshold"]["q_eff_electrons"] is None and r["threshold"]["reason"]
+    assert r["gain_spread"]["gain_spread_fraction"] is None and r["gain_spread"]["reason"]
+    preset = preset_from_calibration(r)
+    assert "threshold_electrons" in preset.calibration["assumed"]
+
+
 def test_hot_and_dead_pixels_found():
     """Hot pixels (dark current 4·10⁷ e⁻/s at Q = 10⁴: 40 spikes in the 10 ms on top of the light)
     and pixels made silent are found; the preset carries the hot-pixel fraction."""
