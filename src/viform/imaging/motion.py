@@ -30,6 +30,8 @@ reconstructions of the spike-camera literature; it uses no training data.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from numba import njit, prange
 
@@ -166,23 +168,31 @@ def motion_compensated_rate(bits: np.ndarray, tick_index: int, *, flow_window_ti
     # Poisson-like counts have var ≈ rate/fw each; smoothing divides white noise by 4π σ²
     var_scale = 1.0 / (fw * 4 * np.pi * smooth_px ** 2)
     reference_smooth = gaussian_filter(reference, smooth_px)
+    def estimate(offset):
+        """Flow to the anchor at ``offset`` and where it aligns (within tolerance, inside the frame)."""
+        image = _window_mean(bits, tick_index + offset, fw)
+        flow_here = _flow(reference, image, flow, flow_downscale)
+        y, x = rows + flow_here[0], cols + flow_here[1]
+        warped_smooth = gaussian_filter(map_coordinates(image, [y, x], order=1, mode="nearest"), smooth_px)
+        sigma = np.sqrt((reference_smooth + warped_smooth + 1.0 / fw) * var_scale)
+        inside = (y >= 0) & (y <= h - 1) & (x >= 0) & (x <= w - 1)
+        return flow_here, (np.abs(warped_smooth - reference_smooth) <= tolerance * sigma) & inside
+
+    # the anchors are independent: estimate them in threads (NumPy/SciPy release the GIL);
+    # the result does not depend on the number of workers
+    from concurrent.futures import ThreadPoolExecutor
+
+    nonzero = [int(o) for o in anchors if o != 0]
+    with ThreadPoolExecutor(max_workers=max(1, min(len(nonzero), os.cpu_count() or 1))) as pool:
+        results = dict(zip(nonzero, pool.map(estimate, nonzero), strict=True))
     for side, direction in ((0, -1), (1, 1)):
         for d in range(step, n + step, step):
-            centre = tick_index + direction * d
-            if not 0 <= centre < n:
+            if direction * d not in results:
                 break
-            a = int(np.searchsorted(anchors, direction * d))
-            image = _window_mean(bits, centre, fw)
-            flows[a] = _flow(reference, image, flow, flow_downscale)
-            warped = map_coordinates(image, [rows + flows[a, 0], cols + flows[a, 1]], order=1, mode="nearest")
-            error = gaussian_filter(warped, smooth_px) - reference_smooth
-            sigma = np.sqrt((reference_smooth + gaussian_filter(warped, smooth_px) + 1.0 / fw) * var_scale)
-            inside = ((rows + flows[a, 0] >= 0) & (rows + flows[a, 0] <= h - 1)
-                      & (cols + flows[a, 1] >= 0) & (cols + flows[a, 1] <= w - 1))
-            alive[side] &= (np.abs(error) <= tolerance * sigma) & inside
+            flow_here, aligned = results[direction * d]
+            flows[int(np.searchsorted(anchors, direction * d))] = flow_here
+            alive[side] &= aligned
             reach[side][alive[side]] = d
-            if not alive[side].any():
-                break
     rate, used = _accumulate_along_flow(bits, tick_index, anchors, flows, reach, half)
     return rate, reach, used
 

@@ -152,8 +152,13 @@ def _span_rate(prev, nxt, n_total, adaptive, noise_q, tolerance, rate, used, cen
                     # uncertainty of μ (from n intervals) add their share of variance
                     mu = (hi - lo) / n
                     var = (1.0 / noise_q + 1.0 / (6.0 * mu * mu)) / 9.0
-                    z = ((new / mu) ** (1.0 / 3.0) - (1.0 - 1.0 / (9.0 * noise_q))) / np.sqrt(var * (1.0 + 1.0 / n))
-                    if abs(z) > tolerance:
+                    centre = 1.0 - 1.0 / (9.0 * noise_q)
+                    reach = tolerance * np.sqrt(var * (1.0 + 1.0 / n))
+                    # |z| ≤ tolerance ⇔ τ/μ between the cubes of centre ∓ reach (no cube root)
+                    low = max(centre - reach, 0.0)
+                    high = centre + reach
+                    ratio = new / mu
+                    if ratio < low * low * low or ratio > high * high * high:
                         if side == 0:
                             grow_b = False
                         else:
