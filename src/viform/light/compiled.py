@@ -198,26 +198,31 @@ def pixel_lux(kind, p, x, y, i, scalars, xtab, ytab, frames, params):
         w = scalars[i, 8]
         f0 = np.float64(frames[k, p])
         return f0 + w * (np.float64(frames[k + 1 if w != 0.0 else k, p]) - f0)
-    u = scalars[i, 0] * x + scalars[i, 1] * y + scalars[i, 2]
+    yf = np.float64(y)
+    u = scalars[i, 0] * np.float64(x) + (scalars[i, 1] * yf + scalars[i, 2])
     pattern = np.int64(params[0])
     period = params[3]
     if pattern == 1:
         value = 1.0 if u >= 0.0 else 0.0
     elif pattern == 2:
-        value = np.float64((np.int64(math.floor(u / (period / 2.0)))) & 1)
+        f = np.floor(u / (period / 2.0))
+        value = f - 2.0 * np.floor(0.5 * f)
     else:
-        v = scalars[i, 3] * x + scalars[i, 4] * y + scalars[i, 5]
-        checker = np.float64((np.int64(math.floor(u / period)) + np.int64(math.floor(v / period))) & 1)
+        v = scalars[i, 3] * np.float64(x) + (scalars[i, 4] * yf + scalars[i, 5])
+        f = np.floor(u / period) + np.floor(v / period)
+        checker = f - 2.0 * np.floor(0.5 * f)
         s1 = xtab[i, 0, x] * ytab[i, 1, y] + xtab[i, 1, x] * ytab[i, 0, y]
         c2 = xtab[i, 3, x] * ytab[i, 3, y] - xtab[i, 2, x] * ytab[i, 2, y]
         value = 0.55 * checker + 0.25 * (0.5 + 0.5 * s1) + 0.20 * (0.5 + 0.5 * c2)
     return (params[1] + (params[2] - params[1]) * value) * m
 
 
-@njit(cache=True, inline="always")
-def row_lux(kind, k, y, width, scalars, xtab, ytab, frames, params, out):
+@njit(cache=True)
+def row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, out):
     """``out[x]`` = :func:`pixel_lux` of row ``y`` for tick row ``k`` — the same arithmetic,
-    written as straight loops per kind so the compiler vectorizes them."""
+    written as straight loops per kind so the compiler vectorizes them (``xs``: the column
+    coordinates as float64, 0 … width − 1, since AVX2 has no packed int64 → float conversion)."""
+    width = xs.size
     m = scalars[k, 6]
     base = y * width
     if kind == KIND_FRAME_MODULATED:
@@ -227,35 +232,40 @@ def row_lux(kind, k, y, width, scalars, xtab, ytab, frames, params, out):
     if kind == KIND_VIDEO_LINEAR:
         f = np.int64(scalars[k, 7])
         w = scalars[k, 8]
+        g = f + 1 if w != 0.0 else f
         for x in range(width):
             f0 = np.float64(frames[f, base + x])
-            out[x] = f0 + w * (np.float64(frames[f + 1 if w != 0.0 else f, base + x]) - f0)
+            out[x] = f0 + w * (np.float64(frames[g, base + x]) - f0)
         return
     pattern = np.int64(params[0])
     period = params[3]
     lo = params[1]
     span = params[2] - params[1]
-    a11, a12, b1 = scalars[k, 0], scalars[k, 1], scalars[k, 2]
-    a21, a22, b2 = scalars[k, 3], scalars[k, 4], scalars[k, 5]
+    yf = np.float64(y)
+    a11, b1 = scalars[k, 0], scalars[k, 1] * yf + scalars[k, 2]
+    a21, b2 = scalars[k, 3], scalars[k, 4] * yf + scalars[k, 5]
     if pattern == 1:
         for x in range(width):
-            u = a11 * x + a12 * y + b1
+            u = a11 * xs[x] + b1
             value = 1.0 if u >= 0.0 else 0.0
             out[x] = (lo + span * value) * m
     elif pattern == 2:
         half = period / 2.0
         for x in range(width):
-            u = a11 * x + a12 * y + b1
-            value = np.float64((np.int64(math.floor(u / half))) & 1)
+            u = a11 * xs[x] + b1
+            f = np.floor(u / half)
+            value = f - 2.0 * np.floor(0.5 * f)  # parity in floating point: vectorizes (AVX2)
             out[x] = (lo + span * value) * m
     else:
         sy1, cy1, sy2, cy2 = ytab[k, 0, y], ytab[k, 1, y], ytab[k, 2, y], ytab[k, 3, y]
+        sx1, cx1, sx2, cx2 = xtab[k, 0], xtab[k, 1], xtab[k, 2], xtab[k, 3]
         for x in range(width):
-            u = a11 * x + a12 * y + b1
-            v = a21 * x + a22 * y + b2
-            checker = np.float64((np.int64(math.floor(u / period)) + np.int64(math.floor(v / period))) & 1)
-            s1 = xtab[k, 0, x] * cy1 + xtab[k, 1, x] * sy1
-            c2 = xtab[k, 3, x] * cy2 - xtab[k, 2, x] * sy2
+            u = a11 * xs[x] + b1
+            v = a21 * xs[x] + b2
+            f = np.floor(u / period) + np.floor(v / period)
+            checker = f - 2.0 * np.floor(0.5 * f)
+            s1 = sx1[x] * cy1 + cx1[x] * sy1
+            c2 = cx2[x] * cy2 - sx2[x] * sy2
             value = 0.55 * checker + 0.25 * (0.5 + 0.5 * s1) + 0.20 * (0.5 + 0.5 * c2)
             out[x] = (lo + span * value) * m
 

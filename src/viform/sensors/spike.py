@@ -321,8 +321,7 @@ class SpikeSensor(Sensor):
         rates += b
         if rates.size and float(rates.max()) >= MAX_RATE_FIXED_POINT:
             raise self._too_bright(float(lux.max()))
-        rates += 0.5  # round half up, as the compiled light does: int64(a·lux + b + 0.5)
-        return np.floor(rates, out=rates).astype(np.int64)
+        return np.rint(rates, out=rates).astype(np.int64)  # half to even, as the compiled light
 
     def _too_bright(self, lux_max: float) -> ViformError:
         p = self.parameters
@@ -402,8 +401,11 @@ class SpikeSensor(Sensor):
         block_ticks = check_int("block_ticks", block_ticks, 1)
         q, shapes, index, tables = self._pixel_tables(height, width)
         a, b = self._pixel_light(height, width)
-        if light is not None and float(a.max()) * light.lux_max + float(b.max()) >= MAX_RATE_FIXED_POINT:
-            raise self._too_bright(light.lux_max)
+        if light is not None:
+            rate_bound = float(a.max()) * light.lux_max + float(b.max())
+            if rate_bound >= MAX_RATE_FIXED_POINT:
+                raise self._too_bright(light.lux_max)
+            fast_round = rate_bound < _FAST_ROUND_LIMIT
         if state is None:
             state = self.initial_state(height, width, seed)
         elif state.next_tick != 0:
@@ -417,6 +419,7 @@ class SpikeSensor(Sensor):
 
             kind, params, frames = light.kernel_kind(), light.parameters(), light.flat_frames()
             scalars, xtab, ytab = tick_buffers(light, min(block_ticks, n_ticks))
+            xs = np.arange(width, dtype=np.float64)
         segments = _Segments(self, scene, light, sample, height, width)
         buffer = None
         bar = None
@@ -438,7 +441,7 @@ class SpikeSensor(Sensor):
                     times = (np.arange(first, last) // sample + 0.5) * (sample / p.clock_hz)
                     n = last - first
                     tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
-                    _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, width,
+                    _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round,
                                      state.charge, state.target, state.counter, q, index, *tables, state.keys,
                                      p.photon_noise, reset_readout, dead_ticks)
                 else:
@@ -793,11 +796,15 @@ def _run_block(out, rates, seg_end, first_tick, charge, target, counter, q, inde
 
 
 _ROWS = 8  # image rows per work item of the per-tick-light kernel
+_ROUNDING_MAGIC = 6755399441055744.0  # 1.5·2^52
+_ROUNDING_MAGIC_BITS = np.int64(0x4338000000000000)  # its bit pattern
+#: Charge rates (fixed point) below which the per-tick kernel rounds by the magic number.
+_FAST_ROUND_LIMIT = float(1 << 51)
 _LIGHT_WINDOW = 16  # ticks per window there: the window's light tables stay in cache
 
 
 @njit(cache=True, parallel=True)
-def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, width, charge, target,
+def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round, charge, target,
                      counter, q, index, bins, keys, noise, reset_readout, dead_ticks):
     """Integrate-and-fire with the light computed per pixel and tick in compiled code.
 
@@ -810,38 +817,57 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, width
     Work items are bands of rows × windows of ticks, so the light tables stay in cache.
     """
     n_ticks, n_pixels = out.shape
+    width = xs.size
     height = n_pixels // width
     n_bands = (height + _ROWS - 1) // _ROWS
     for band in prange(n_bands):
         y0 = band * _ROWS
         y1 = min(y0 + _ROWS, height)
         lux = np.empty(width)
-        rate = np.empty(width, dtype=np.int64)
+        rounded = np.empty(width)
+        rate = rounded.view(np.int64)
+        cw = np.empty(width, dtype=np.int64)
+        tw = np.empty(width, dtype=np.int64)
+        fired_row = np.empty(width, dtype=np.bool_)
         for w0 in range(0, n_ticks, _LIGHT_WINDOW):
             w1 = min(w0 + _LIGHT_WINDOW, n_ticks)
             for y in range(y0, y1):
                 base = y * width
+                # the row's state in local buffers for the window: plain loops over them vectorize
+                cw[:] = charge[base:base + width]
+                tw[:] = target[base:base + width]
                 for k in range(w0, w1):
-                    row_lux(kind, k, y, width, scalars, xtab, ytab, frames, params, lux)
+                    row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, lux)
+                    # charge this tick, rint(a·lux + b) in fixed point
+                    if fast_round:
+                        # below 2^51, adding 1.5·2^52 rounds to an integer (half to even, as
+                        # rint) held in the low mantissa bits: vectorizes where a float → int64
+                        # conversion does not (AVX2)
+                        for x in range(width):
+                            rounded[x] = a[base + x] * lux[x] + b[base + x] + _ROUNDING_MAGIC
+                        for x in range(width):
+                            rate[x] -= _ROUNDING_MAGIC_BITS
+                    else:
+                        for x in range(width):
+                            rate[x] = np.int64(np.rint(a[base + x] * lux[x] + b[base + x]))
                     fired = 0
                     for x in range(width):
-                        p = base + x
-                        e = np.int64(a[p] * lux[x] + b[p] + 0.5)
-                        rate[x] = e
-                        c = charge[p] + e
-                        charge[p] = c
-                        f = c >= target[p]
-                        out[k, p] = f
+                        c = cw[x] + rate[x]
+                        cw[x] = c
+                        f = c >= tw[x]
+                        fired_row[x] = f
                         fired += f
+                    out[k, base:base + width] = fired_row
                     if fired == 0:
                         continue
                     for x in range(width):
-                        p = base + x
-                        if out[k, p]:
-                            c, t = _fire(charge[p], target[p], rate[x], dead_ticks, p, q, index, bins, keys,
+                        if fired_row[x]:
+                            c, t = _fire(cw[x], tw[x], rate[x], dead_ticks, base + x, q, index, bins, keys,
                                          noise, reset_readout, counter)
-                            charge[p] = c
-                            target[p] = t
+                            cw[x] = c
+                            tw[x] = t
+                charge[base:base + width] = cw
+                target[base:base + width] = tw
 
 
 @njit(cache=True)
