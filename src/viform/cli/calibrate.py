@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import click
@@ -12,6 +13,17 @@ from viform.cli.app import cli
 
 def _fmt(value, digits: int = 4) -> str:
     return "—" if value is None else f"{value:.{digits}g}"
+
+
+def _nearest_level(q):
+    """(level, e⁻) of the chip threshold level nearest ``q`` in ratio, or None."""
+    if not q:
+        return None
+    from viform.sensors.spike_presets import threshold_levels_electrons
+
+    levels = threshold_levels_electrons()
+    k = min(range(len(levels)), key=lambda i: abs(math.log(levels[i] / q)))
+    return k, levels[k]
 
 
 def _lines(file, r: dict, out) -> list[str]:
@@ -26,6 +38,7 @@ def _lines(file, r: dict, out) -> list[str]:
     frac = st.get("static_fraction_of_judged")
     lines.append(f"  {'steady tiles':<22}{_fmt(None if frac is None else 100 * frac)} % of {st['tiles_judged']} "
                  "tiles judged (successive intervals anti-correlated)")
+    level = _nearest_level(th.get("q_eff_electrons") or th.get("q_eff_lower_bound_electrons"))
     if th.get("q_eff_electrons"):
         lo, hi = th["q_eff_range_electrons"]
         lines.append(f"  {'effective threshold':<22}{th['q_eff_electrons']:,.0f} e⁻  "
@@ -35,6 +48,8 @@ def _lines(file, r: dict, out) -> list[str]:
                      f"{th['reason']})")
     else:
         lines.append(f"  {'effective threshold':<22}not estimated: {th.get('reason')}")
+    if level is not None:
+        lines.append(f"  {'':<22}nearest chip threshold level: {level[0]} ({level[1]:,.0f} e⁻)")
     g = gs.get("gain_spread_fraction")
     lines.append(f"  {'flat-field spread':<22}" + (f"{100 * g:.3g} % (pixel-to-pixel gain spread; an upper bound "
                                                   "where the scene has fine texture)" if g is not None
