@@ -35,6 +35,10 @@ INT_LIMIT = 2**31
 #: Default caps on the size of a request (environment variables raise them).
 DEFAULT_MAX_PIXELS = 4096 * 4096
 DEFAULT_MAX_PIXEL_TICKS = 1e12
+#: Most ticks one request may produce (tick indices are 32-bit in the event and coded formats).
+MAX_TICKS = 2**31
+#: Sampling rate assumed when a command with ``--duration`` is given no clock (the spike camera's 40 kHz).
+DEFAULT_RATE_HZ = 40_000.0
 
 #: Option names that hold an output path.
 OUTPUT_NAMES = ("out", "out_path", "out_dir", "output", "json_file", "json_path", "preview", "dst")
@@ -180,13 +184,6 @@ def _first(kwargs: dict, *names):
     return None, None
 
 
-def _param_default(command: click.Command, name: str):
-    for p in command.params:
-        if p.name == name:
-            return p
-    return None
-
-
 def check_request(command: click.Command, kwargs: dict) -> None:
     """Refuse requests that would exceed memory, unwritable outputs and non-regular inputs."""
     flags = {p.name: flag_of(p) for p in command.params}
@@ -207,9 +204,12 @@ def check_request(command: click.Command, kwargs: dict) -> None:
                           "VIFORM_MAX_PIXELS if this machine has the memory")
     _, duration = _first(kwargs, "duration_s")
     rate_name, rate = _first(kwargs, "clock_hz", "frame_rate_hz")
-    if rate_name is None and "duration_s" in kwargs:
-        p = _param_default(command, "clock_hz")
-        rate = 40_000.0 if p is None else None
+    if rate_name is None:
+        rate = DEFAULT_RATE_HZ  # the spike camera's clock: the fastest sampling a command takes by default
+    if isinstance(duration, (int, float)) and isinstance(rate, (int, float)) and duration > 0 and rate > 0 \
+            and duration * rate > MAX_TICKS:
+        raise ViformError(f"{flags['duration_s']} {duration:g} s at {rate:g} Hz is {duration * rate:.4g} ticks, more "
+                          f"than the {MAX_TICKS:.4g} a stream may hold; split the recording")
     if pixels is not None and isinstance(duration, (int, float)) and isinstance(rate, (int, float)) \
             and duration > 0 and rate > 0:
         pixel_ticks = pixels * duration * rate
