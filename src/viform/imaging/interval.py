@@ -198,8 +198,9 @@ def interval_frames(source: SpikeSource, block_ticks: int = 1024,
     or ``lookahead_ticks``. Intervals cut by the stream's ends follow the end rule above.
     """
     block_ticks = check_int("block_ticks", block_ticks, 1)
-    look = check_int("lookahead_ticks", lookahead_ticks, 1)
     pixels = source.height * source.width
+    # the result does not depend on the lookahead: cap it so the buffer stays ≈ 32 MiB
+    look = min(check_int("lookahead_ticks", lookahead_ticks, 1), _chunk_limit(pixels))
     n_total = source.n_ticks
     prev = np.full(pixels, -1, dtype=np.int64)
     ahead = np.full(pixels, -1, dtype=np.int64)  # a known first spike at/after an earlier buffer end

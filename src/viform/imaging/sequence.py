@@ -28,6 +28,11 @@ METHODS = ("accumulation", "interval", "multi-interval", "motion")
 DEFAULT_WINDOW_TICKS = 41
 
 
+def _block_ticks(source) -> int:
+    """Ticks per streamed block: 256, fewer on large sensors (a block's counts stay ≈ 32 MiB)."""
+    return int(np.clip(2 ** 23 // max(1, source.height * source.width), 8, 256))
+
+
 def _accumulation_stream(source, ticks, window, align, sensor_parameters):
     """Centred/ended/started windows from one pass of the sliding count (ends handled directly)."""
     n_total = source.n_ticks
@@ -48,7 +53,7 @@ def _accumulation_stream(source, ticks, window, align, sensor_parameters):
     pos = 0
     if by_end:
         last_end = max(by_end)
-        for first, counts in sliding_accumulation(source, window, block_ticks=256):
+        for first, counts in sliding_accumulation(source, window, block_ticks=_block_ticks(source)):
             for e in range(first, min(first + counts.shape[0], last_end + 1)):
                 for k in by_end.get(e, ()):
                     ready[k] = counts[e - first].astype(np.int64)
@@ -78,7 +83,7 @@ def _interval_stream(source, ticks, sensor_parameters):
             yield int(k), _interval_image(source, tau[0], censored[0], sensor_parameters)
         return
     pos = 0
-    for first, tau in interval_frames(source, block_ticks=256):
+    for first, tau in interval_frames(source, block_ticks=_block_ticks(source)):
         while pos < wanted.size and wanted[pos] < first + tau.shape[0]:
             k = int(wanted[pos])
             t = tau[k - first].astype(np.int64)
