@@ -24,8 +24,8 @@ def _code(spikes, width, segment_ticks):
     t, n_pix = spikes.shape
     segs = encode_array(spikes, CodingParameters(segment_ticks=segment_ticks))
     enc_state = FirstSpikeDecoder(n_pix)
-    st_e, pr_e = np.zeros((im.STATE_ROWS, n_pix), np.int64), im.new_probabilities()
-    st_d, pr_d = np.zeros((im.STATE_ROWS, n_pix), np.int64), im.new_probabilities()
+    st_e, pr_e = np.zeros((n_pix, im.STATE_ROWS), np.int64), im.new_probabilities()
+    st_d, pr_d = np.zeros((n_pix, im.STATE_ROWS), np.int64), im.new_probabilities()
     total = 0
     for seg in segs:
         ticks = np.empty(seg.n_spikes + 1, np.int64)

@@ -748,7 +748,7 @@ class CodedWriter:
         self.strict = params.mode == "strict"
         self.encoder = FirstSpikeEncoder(self.height * self.width, params)
         self.state = FirstSpikeDecoder(self.height * self.width)  # mirrors the decoder's state
-        self.ivstate = np.zeros((interval_model.STATE_ROWS, self.height * self.width), np.int64)
+        self.ivstate = np.zeros((self.height * self.width, interval_model.STATE_ROWS), np.int64)
         self.ivprobs = interval_model.new_probabilities()
         self.zc = _Zstd(level)
         self.header = {
@@ -986,7 +986,7 @@ class CodedFile(SpikeSource):
         """Yield ``(decoder, segment)`` in order, each validated (CRC, structure, spike count)."""
         n_pixels = self.height * self.width
         dec = FirstSpikeDecoder(n_pixels)
-        ivstate = np.zeros((interval_model.STATE_ROWS, n_pixels), np.int64) if self.version >= 3 else None
+        ivstate = np.zeros((n_pixels, interval_model.STATE_ROWS), np.int64) if self.version >= 3 else None
         ivprobs = interval_model.new_probabilities() if self.version >= 3 else None
         zc = _Zstd()
         strict = self.mode == "strict"

@@ -174,8 +174,8 @@ _NMASK = (1 << _NBITS) - 1
 _SHMAX = 6
 _INSET = _ONE >> 4  # a phase pushed out of its tick is put back this far inside
 
-#: per-pixel state rows (an int64 array (7, P)): μ̂, φ, mean |residual|, flags (n ≤ 7 | last sign << 3),
-#: the last three intervals
+#: per-pixel state (an int64 array (P, 7)): μ̂, φ, mean |residual|, flags (lock age | last sign), the
+#: last three intervals
 STATE_ROWS = 7
 
 # context sizes
@@ -239,30 +239,30 @@ def _predict(mu, ph, lo):
 @njit(cache=True, inline="always")
 def _update(st, q, iv, p):
     """Advance pixel q's state after an interval iv that was predicted as p."""
-    mu = st[0, q]
-    ph = st[1, q]
-    mad = st[2, q]
-    fl = st[3, q]
-    st[6, q] = st[5, q]
-    st[5, q] = st[4, q]
-    st[4, q] = min(iv, np.int64(1) << 40)
+    mu = st[q, 0]
+    ph = st[q, 1]
+    mad = st[q, 2]
+    fl = st[q, 3]
+    st[q, 6] = st[q, 5]
+    st[q, 5] = st[q, 4]
+    st[q, 4] = min(iv, np.int64(1) << 40)
     n = fl & _NMASK
     last = fl >> _NBITS
     r = iv - p
     x = ph + mu  # predicted crossing, relative to the previous spike tick
     ar = r if r >= 0 else -r
     if n == 0:
-        st[0, q] = iv << _FB
-        st[1, q] = _ONE >> 1
-        st[2, q] = _ONE >> 1
-        st[3, q] = 1
+        st[q, 0] = iv << _FB
+        st[q, 1] = _ONE >> 1
+        st[q, 2] = _ONE >> 1
+        st[q, 3] = 1
         return
     if ar >= 2 and (ar << _FB) > 4 * mad + (_ONE << 1):
         # the light changed: restart at the observed interval
-        st[0, q] = iv << _FB
-        st[1, q] = _ONE >> 1
-        st[2, q] = mad + (((ar << _FB) - mad) >> 2)
-        st[3, q] = 1 | (3 << _NBITS)
+        st[q, 0] = iv << _FB
+        st[q, 1] = _ONE >> 1
+        st[q, 2] = mad + (((ar << _FB) - mad) >> 2)
+        st[q, 3] = 1 | (3 << _NBITS)
         return
     lo = iv << _FB
     hi = lo + _ONE - 1
@@ -283,10 +283,10 @@ def _update(st, q, iv, p):
     mu = mu + (err >> sh) if err >= 0 else mu - ((-err) >> sh)
     if mu < _ONE:
         mu = _ONE
-    st[0, q] = mu
-    st[1, q] = xn - lo
-    st[2, q] = mad + (((ar << _FB) - mad) >> 4)
-    st[3, q] = min(n + 1, _NMASK) | (sgn << _NBITS)
+    st[q, 0] = mu
+    st[q, 1] = xn - lo
+    st[q, 2] = mad + (((ar << _FB) - mad) >> 4)
+    st[q, 3] = min(n + 1, _NMASK) | (sgn << _NBITS)
 
 
 @njit(cache=True, inline="always")
@@ -301,7 +301,7 @@ def _clip(x, lo, hi):
     return min(max(x, lo), hi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _nb_iv(n, tau, starts, counts, ticks, last0, ptr, slot):
     """Interval of neighbour n holding tick tau (−1: not known yet); ptr[slot] follows tau."""
     lo = starts[n]
@@ -320,7 +320,7 @@ def _nb_iv(n, tau, starts, counts, ticks, last0, ptr, slot):
     return ticks[k] - prev
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _trend(q, width, a, tp, starts, counts, ticks, last0, ptr):
     """How the already-coded neighbours' (left, up) intervals changed from tick a to tick tp: 0..4, 5 unknown."""
     col = q % width
@@ -345,9 +345,9 @@ def _trend(q, width, a, tp, starts, counts, ticks, last0, ptr):
 
 @njit(cache=True, inline="always")
 def _zctx(st, q, p, f, sb, tr):
-    h1 = _clip(st[4, q] - p, -2, 2) + 2
-    h2 = _clip(st[5, q] - p, -1, 1) + 1
-    h3 = _clip(st[6, q] - p, -1, 1) + 1
+    h1 = _clip(st[q, 4] - p, -2, 2) + 2
+    h2 = _clip(st[q, 5] - p, -1, 1) + 1
+    h3 = _clip(st[q, 6] - p, -1, 1) + 1
     return (((((f * _NS + sb) * 5 + h1) * 3 + h2) * 3 + h3) * _NT + tr), h1
 
 
@@ -379,8 +379,8 @@ def _nb_mu(st, q, width, npix):
             n = q + width
             if n >= npix:
                 continue
-        if (st[3, n] & _NMASK) > 0:
-            tot += st[0, n]
+        if (st[n, 3] & _NMASK) > 0:
+            tot += st[n, 0]
             cnt += 1
     if cnt == 0:
         return np.int64(0)
@@ -394,7 +394,7 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
     """Code one segment: per pixel (row-major) its spike ticks ``ticks`` (grouped by pixel, ``counts`` each).
 
     ``last0``: each pixel's last spike tick before the segment (−1: never fired); ``st``: the
-    predictor state (STATE_ROWS, P) and ``probs`` the adaptive probabilities, both advanced in
+    predictor state (P, STATE_ROWS) and ``probs`` the adaptive probabilities, both advanced in
     place. Returns the byte count (> out.size: retry bigger from copies of the state).
     """
     npix = counts.size
@@ -434,13 +434,13 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
                     _eunif(es, out, phase - 1, iv)
                 else:
                     _euint(es, out, probs, _P_PH + _rbucket(iv) * _EG, phase - iv - 1)
-                st[3, q] = 0
+                st[q, 3] = 0
                 _update(st, q, iv, iv)
                 a = ticks[r + 1]
                 k = 2
             else:
                 _euint(es, out, probs, _P_PH + fb * _EG, phase - 1)
-                st[3, q] = 0
+                st[q, 3] = 0
                 a = ticks[r]
                 k = 1
         while True:
@@ -449,7 +449,7 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
             if rem < lo:
                 break
             more = k < c
-            fl = st[3, q]
+            fl = st[q, 3]
             if (fl & _NMASK) == 0:
                 _ebit(es, out, probs, _P_COLD + (1 if a >= seg_start else 0), 1 if more else 0)
                 if not more:
@@ -458,8 +458,8 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
                 _euint(es, out, probs, _P_COLDV, iv - lo)
                 _update(st, q, iv, iv)
             else:
-                p, f = _predict(st[0, q], st[1, q], lo)
-                sb = _sbucket(st[2, q])
+                p, f = _predict(st[q, 0], st[q, 1], lo)
+                sb = _sbucket(st[q, 2])
                 _ebit(es, out, probs, _stop_ctx(rem, p, sb), 1 if more else 0)
                 if not more:
                     break
@@ -533,7 +533,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
                     return 3, r
                 ticks[r] = t0
                 ticks[r + 1] = t0 + iv
-                st[3, q] = 0
+                st[q, 3] = 0
                 _update(st, q, iv, iv)
                 a = t0 + iv
                 c = 2
@@ -544,7 +544,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
                 if ds[3] or phase > seg_end - base - 1:
                     return 3, r
                 ticks[r] = base + phase
-                st[3, q] = 0
+                st[q, 3] = 0
                 a = base + phase
                 c = 1
         counts[q] = c
@@ -553,7 +553,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
             lo = max(np.int64(1), seg_start - a)
             if rem < lo:
                 break
-            fl = st[3, q]
+            fl = st[q, 3]
             if (fl & _NMASK) == 0:
                 if _dbit(ds, data, probs, _P_COLD + (1 if a >= seg_start else 0)) == 0:
                     break
@@ -562,8 +562,8 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
                     return 3, r + c
                 _update(st, q, iv, iv)
             else:
-                p, f = _predict(st[0, q], st[1, q], lo)
-                sb = _sbucket(st[2, q])
+                p, f = _predict(st[q, 0], st[q, 1], lo)
+                sb = _sbucket(st[q, 2])
                 if _dbit(ds, data, probs, _stop_ctx(rem, p, sb)) == 0:
                     break
                 # the pixel's own spikes so far are visible to _trend only through its neighbours
