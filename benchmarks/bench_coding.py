@@ -281,16 +281,18 @@ def print_rows(rows: list[dict]) -> None:
         print(f"  {'mode':18s} {'×raw':>7s} {'×best':>6s} {'bit/spike':>9s} {'enc Msp/s':>9s} {'dec Msp/s':>9s} "
               f"{'enc MB':>7s} {'dec MB':>7s} {'lossless':>8s} {'PSNR TFP':>9s} {'PSNR 1/ISI':>10s}")
         for label, m in r["modes"].items():
-            ps = (f"{m['psnr_tfp_db']:8.3g}  {m['psnr_interval_db']:9.3g} " if "psnr_tfp_db" in m else f"{'':9s} {'':10s}")
-            print(f"  {label:18s} {m['ratio_vs_raw']:6.3g}× {m['ratio_vs_best_generic']:5.3g}× {m['bits_per_spike']:9.3g} "
+            ps = (f"{m['psnr_tfp_db']:8.3g}  {m['psnr_interval_db']:9.3g} " if "psnr_tfp_db" in m
+                  else f"{'':9s} {'':10s}")
+            print(f"  {label:18s} {m['ratio_vs_raw']:6.3g}× {m['ratio_vs_best_generic']:5.3g}× "
+                  f"{m['bits_per_spike']:9.3g} "
                   f"{m['encode_mspikes_per_s']:9.3g} {m['decode_mspikes_per_s']:9.3g} {m['encode_peak_mb']:7.3g} "
                   f"{m['decode_peak_mb']:7.3g} {str(m['lossless']):>8s} {ps}")
 
 
 def print_precision(rows: list[dict]) -> None:
     print("\ntime precision (seed 000 §5.2: finer time precision with almost no more data): size relative to 20 kHz")
-    print(f"  {'Q e⁻':>6s} {'clock kHz':>9s} {'raw':>6s} {'xz best':>7s} {'strict':>7s} {'stat k=2':>8s} {'intensity':>9s}"
-          f"   strict bytes")
+    print(f"  {'Q e⁻':>6s} {'clock kHz':>9s} {'raw':>6s} {'xz best':>7s} {'strict':>7s} {'stat k=2':>8s} "
+          f"{'intensity':>9s}   strict bytes")
     base = {}
     for r in rows:
         q = r["threshold_electrons"]
