@@ -32,19 +32,19 @@ def make_clips(root: Path, n_folders: int = 3, gif: bool = True) -> Path:
     return root
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def source_clips(tmp_path_factory) -> Path:
     return make_clips(tmp_path_factory.mktemp("clips") / "src")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def settings():
     from viform.datasets import make_settings
 
     return make_settings(height=H, width=W, frame_rate_hz=FRAME_RATE_HZ, gt_every=2, seed=7)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def client1():
     """One worker, one thread, in this process (starts in well under a second)."""
     distributed = pytest.importorskip("distributed")
@@ -56,7 +56,7 @@ def client1():
     cluster.close()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def client2():
     """Two worker processes, one thread each (what `viform dataset --workers 2` starts)."""
     distributed = pytest.importorskip("distributed")
@@ -68,7 +68,7 @@ def client2():
     cluster.close()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def reference(tmp_path_factory, source_clips, settings, client1) -> Path:
     """The 4-clip dataset converted by one worker."""
     from viform.datasets import build_dataset
@@ -87,11 +87,11 @@ def _dataset_files(root: Path) -> dict[str, bytes]:
     return out
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def dataset_files():
     return _dataset_files
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def clip_maker():
     return make_clips
