@@ -112,6 +112,7 @@ def test_zarr_frames_and_previews(tmp_path, capsys):
     (["capture", "cmos", "dilemma", "--duration", "0.01", "--out", "{t}/a.dat"], "--out"),
     (["capture", "spike", "dilemma", "--duration", "0.01", "--out", "{t}/a.png"], "--out"),
     (["capture", "cmos", "dilemma", "--duration", "-1", "--out", "{t}/a.npz"], "--duration"),
+    (["capture", "highspeed", "dilemma", "--duration", "100", "--out", "{t}/a.npz"], "GB"),  # 11 GB of frames
     (["capture", "cmos", "dilemma", "--duration", "0.01", "--out", "{t}/a.npz", "--preview", "{t}/p.jpg"],
      "--preview"),
 ])

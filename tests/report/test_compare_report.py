@@ -129,6 +129,7 @@ def test_cli_compare_json_and_table(tmp_path, capsys):
     (["compare", "dilemma", "--at", "0.5", "--duration", "0.01"], "instant"),
     (["compare", "dilemma", "--visibility-m", "50"], "--visibility-m"),
     (["compare", "nosuch-scene"], "scene"),
+    (["compare", "dilemma", "--duration", "100"], "GB"),  # 33 GB of spike clip in memory
 ])
 def test_compare_bad_input(tmp_path, capsys, args, needle):
     code = main([*args, "--out", str(tmp_path / "r")])

@@ -147,8 +147,23 @@ def write_preview(path, images) -> None:
         iio.imwrite(tmp, gray, extension=".gif", duration=100, loop=0)
 
 
+#: Most bytes of frames one capture holds in memory (frames are written at the end).
+MAX_FRAME_BYTES = 2e9
+
+
+def check_frame_budget(n_frames: float, height: int, width: int, flag: str = "--duration") -> None:
+    """Refuse, before any work, a frame capture that would not fit in memory (8 bytes a pixel while shot)."""
+    need = n_frames * height * width * 8
+    if need > MAX_FRAME_BYTES:
+        raise ViformError(f"{flag}: {n_frames:.4g} frames of {height}×{width} need {need / 1e9:.3g} GB in memory, "
+                          f"more than the {MAX_FRAME_BYTES / 1e9:g} GB limit; shorten {flag} or lower the resolution")
+
+
 def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int = 0, preview=None) -> dict:
-    """Shoot ``scene`` with ``sensor_name`` and save the output (see the module notes); returns a summary."""
+    """Shoot ``scene`` with ``sensor_name`` and save the output (see the module notes); returns a summary.
+
+    Spike streams are simulated block by block straight into the file (bounded memory).
+    """
     from viform.stream.sidecar import provenance
 
     suffix = Path(out_path).suffix.lower()
@@ -158,9 +173,13 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
 
         if suffix not in FORMATS:
             raise ViformError(f"--out = {str(out_path)!r}: a spike stream is saved as one of {', '.join(FORMATS)}")
+        from viform.stream.io import open_spikes
+
         sensor = _spike_sensor(sensor_name)
-        stream = sensor.capture(scene, duration_s, seed=seed, progress=True)
-        save_spikes(out_path, stream)
+        # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
+        lazy = sensor.stream(scene, duration_s, seed=seed, progress=True, reuse_buffer=suffix in (".dat", ".zarr"))
+        save_spikes(out_path, lazy)
+        stream = open_spikes(out_path)
         summary = {"file": str(out_path), "sensor": sensor_name, "kind": "spikes", "n_ticks": stream.n_ticks,
                    "height": stream.height, "width": stream.width, "clock_hz": stream.clock_hz,
                    "threshold_electrons": stream.threshold_electrons, **stream.summary()}
@@ -173,6 +192,14 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         return summary
     if suffix not in FRAME_FORMATS:
         raise ViformError(f"--out = {str(out_path)!r}: frames are saved as one of {', '.join(FRAME_FORMATS)}")
+    rate = {"highspeed": 1 / 600e-6, "gated": 25.0}.get(sensor_name)
+    if rate is None:
+        from viform.measure.comparison import make_compare_sensor
+        from viform.sensors.presets import make_sensor
+
+        sensor = make_compare_sensor(sensor_name) if sensor_name == "cmos-short" else make_sensor(sensor_name)
+        rate = sensor.frame_rate_hz
+    check_frame_budget(max(1.0, duration_s * rate), scene.height, scene.width)
     meta = {"scene": scene.describe(), "seed": seed, **provenance()}
     extra = {}
     if sensor_name == "highspeed":

@@ -21,6 +21,8 @@ from viform._io import atomic_open, save_figure, write_json
 from viform._validate import ViformError, check_choice, check_int, check_positive
 from viform.measure import comparison as cmp
 
+#: Most bytes of spike clip a comparison holds in memory.
+MAX_SPIKE_BYTES = 2e9
 #: Colour map of light images (perceptually uniform, dark = little light).
 LUX_CMAP = "inferno"
 #: Colour of under-exposed pixels (below the noise floor, or no spike): not a measurement.
@@ -49,6 +51,14 @@ def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed
     """Shoot ``scene`` with each sensor and score it; returns shots, metrics and the verdict."""
     duration_s = check_positive("--duration", duration_s)
     keys = check_sensors(sensors)
+    if "spike" in keys:  # the spike clip is held in memory (1 byte per pixel-tick) for the reconstructions
+        from viform.measure.comparison import spike_preset
+
+        need = scene.height * scene.width * duration_s * spike_preset()[0].parameters.clock_hz
+        if need > MAX_SPIKE_BYTES:
+            raise ViformError(f"--duration {duration_s:g} s of a {scene.height}×{scene.width} spike clip needs "
+                              f"{need / 1e9:.3g} GB in memory, more than the {MAX_SPIKE_BYTES / 1e9:g} GB limit; "
+                              "shorten --duration or lower --height/--width")
     if all(k == "gated" for k in keys) and getattr(scene, "active", None) is None:
         raise ViformError(f"--sensors gated: the gated camera needs a scene with range (night-road-fog); "
                           f"scene {scene.name!r} has none")
