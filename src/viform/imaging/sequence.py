@@ -156,7 +156,7 @@ def _per_instant(source, method, ticks, spikes_per_side, adaptive, sensor_parame
 class NpzFrameWriter:
     """Write ``(F, H, W)`` arrays into a ``.npz`` one frame at a time (bounded memory).
 
-    Frames go to temporary ``.npy`` files (memory-mapped, beside the target) that are packed
+    Frames are appended to temporary ``.npy`` files (beside the target) that are packed
     into the zip, member by member, on :meth:`close`; ``np.load`` reads the result as an
     ordinary ``.npz``. ``path`` should be the temporary path of an atomic write.
     """
@@ -168,20 +168,25 @@ class NpzFrameWriter:
         self.path = Path(path)
         self.n_frames = n_frames
         self._folder = tempfile.TemporaryDirectory(prefix=f".{self.path.name}-", dir=self.path.parent)
-        self._maps = {}
+        self._files = {}
         self._counts = {}
         self._small = {}
         for name, dtype in arrays.items():
-            self._maps[name] = np.lib.format.open_memmap(Path(self._folder.name) / f"{name}.npy", mode="w+",
-                                                         dtype=dtype, shape=(n_frames, *frame_shape))
+            # a plain .npy file: the header (final shape) first, then frames appended as written
+            handle = open(Path(self._folder.name) / f"{name}.npy", "wb")  # noqa: SIM115 (closed in close())
+            np.lib.format.write_array_header_2_0(handle, {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
+                                                          "fortran_order": False,
+                                                          "shape": (n_frames, *frame_shape)})
+            self._files[name] = (handle, np.dtype(dtype), tuple(frame_shape))
             self._counts[name] = 0
 
     def append(self, name: str, frame) -> None:
-        array = self._maps[name]
-        array[self._counts[name]] = frame
+        handle, dtype, shape = self._files[name]
+        frame = np.asarray(frame)
+        if frame.shape != shape:
+            raise ViformError(f"light.npz: a {name} frame has shape {frame.shape}, expected {shape}")
+        handle.write(np.ascontiguousarray(frame, dtype=dtype).tobytes())
         self._counts[name] += 1
-        if self._counts[name] % 64 == 0:
-            array.flush()  # written pages leave memory
 
     def add_array(self, name: str, array) -> None:
         """A small whole array (times, ticks)."""
@@ -191,16 +196,19 @@ class NpzFrameWriter:
         from pathlib import Path
 
         try:
+            for handle, _, _ in self._files.values():
+                handle.close()
             with zipfile.ZipFile(self.path, "w", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as archive:
                 for name, array in self._small.items():
                     with archive.open(f"{name}.npy", "w", force_zip64=True) as member:
                         np.lib.format.write_array(member, array)
-                for name, array in self._maps.items():
+                for name in self._files:
                     if self._counts[name] != self.n_frames:
                         raise ViformError(f"light.npz: {name} got {self._counts[name]} frames, "
                                           f"expected {self.n_frames}")
-                    array.flush()
                     archive.write(Path(self._folder.name) / f"{name}.npy", f"{name}.npy")
         finally:
-            self._maps.clear()
+            for handle, _, _ in self._files.values():
+                handle.close()
+            self._files.clear()
             self._folder.cleanup()
