@@ -177,9 +177,13 @@ class NpzSpikes(SpikeSource):
     def _read_small(self, member: str):
         try:
             with self._zip.open(member) as fp:
-                return np.lib.format.read_array(fp, allow_pickle=False)
+                value = np.lib.format.read_array(fp, allow_pickle=False)
+                fp.read()  # to the end: the zip CRC is checked
+                return value
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:  # damage: never ignored
+            raise ViformError(f"{str(self.path)!r}: member {member!r} is damaged: {_short(exc)}") from None
         except _ERRORS:
-            return None  # an unreadable side member is not the data; verify() reports it
+            return None  # an object (pickled) or exotic array from another tool: not our metadata
 
     def _open_member(self, member: str, info: zipfile.ZipInfo) -> None:
         self._member = member
