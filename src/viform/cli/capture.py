@@ -291,6 +291,7 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     check_positive("--duration", duration_s)
     check_int("--height", height, 1)
     check_int("--width", width, 1)
+    check_int("--seed", seed, 0)
     suffix = Path(out_path).suffix.lower()
     allowed = FORMATS if is_spike(sensor) else FRAME_FORMATS
     if suffix not in allowed:

@@ -22,9 +22,12 @@ def demo(out_dir, duration_s, seed, as_json, json_file):
     Writes OUT/report.html (open it in a browser) and OUT/metrics.json, and prints the
     metrics table and which sensor wins on what.
     """
+    from viform._validate import check_int, check_positive
     from viform.cli.compare import check_outputs, finish
     from viform.report.demo import run_demo
 
+    check_int("--seed", seed, 0)
+    check_positive("--duration", duration_s)
     check_outputs(out_dir, json_file)
     started = time.perf_counter()
     doc = run_demo(out_dir, duration_s=duration_s, seed=seed)

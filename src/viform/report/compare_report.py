@@ -43,7 +43,7 @@ def check_sensors(sensors) -> list[str]:
 
 def default_instants(duration_s: float) -> list[float]:
     """Three instants inside the clip (30 %, 50 %, 70 % of it)."""
-    return [round(f * duration_s, 9) for f in (0.3, 0.5, 0.7)]
+    return [float(f"{f * duration_s:.6g}") for f in (0.3, 0.5, 0.7)]
 
 
 def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed: int = 0,
@@ -492,6 +492,7 @@ def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, he
 
     height = check_int("--height", height, 32)
     width = check_int("--width", width, 48)
+    seed = check_int("--seed", seed, 0)
     check_positive("--duration", duration_s)
     keys = check_sensors(sensors)
     if scene_spec in BUILTIN_SCENES:
