@@ -256,11 +256,13 @@ def _spike_lists(bits, first):
 
 
 @njit(cache=True, parallel=True)
-def _around_from_lists(offsets, ticks, tick, lo_tick, hi_tick, n_total, prev, nxt, short):
+def _around_from_lists(offsets, ticks, tick, lo_tick, hi_tick, n_total, prev, nxt, short, position):
     """The K spikes each side of ``tick`` from the lists (loaded ticks [lo_tick, hi_tick)).
 
-    A pixel whose lists run out before K spikes, where the stream goes on past the loaded
-    ticks, is flagged ``short`` (searched further by the caller).
+    ``position`` (per pixel, kept between calls with increasing ``tick``) is the index of the
+    first listed spike after the previous tick: it only moves forward. A pixel whose lists
+    run out before K spikes, where the stream goes on past the loaded ticks, is flagged
+    ``short`` (searched further by the caller).
     """
     kb = prev.shape[0]
     ka = nxt.shape[0]
@@ -268,15 +270,10 @@ def _around_from_lists(offsets, ticks, tick, lo_tick, hi_tick, n_total, prev, nx
     for j in prange(p):
         a = offsets[j]
         b = offsets[j + 1]
-        # first index with ticks > tick
-        lo = a
-        hi = b
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if ticks[mid] <= tick:
-                lo = mid + 1
-            else:
-                hi = mid
+        lo = max(position[j], a)
+        while lo < b and ticks[lo] <= tick:  # first index with ticks > tick
+            lo += 1
+        position[j] = lo
         short[j] = False
         for m in range(kb):
             i = lo - 1 - m
@@ -304,7 +301,7 @@ def multi_interval_frames(source: SpikeSource, ticks, spikes_per_side: int = DEF
 
     Ticks are taken in groups of ``group_ticks``; each group reads its ticks plus
     ``margin_ticks`` on each side once, turns them into per-pixel spike lists, and finds
-    each instant's K spikes a side by binary search. Pixels whose K spikes lie beyond the
+    each instant's K spikes a side by a per-pixel pointer that only moves forward. Pixels whose K spikes lie beyond the
     margin are searched further (:func:`spike_ticks_around`), so the result equals
     :func:`multi_interval_rate` at every tick, in memory bounded by the group and margin.
     """
@@ -318,6 +315,8 @@ def multi_interval_frames(source: SpikeSource, ticks, spikes_per_side: int = DEF
         raise ViformError(f"the stream has {source.n_ticks} ticks: multi-interval streaming handles < 2³¹")
     q = noise_threshold_electrons or source.threshold_electrons or DEFAULT_NOISE_THRESHOLD_ELECTRONS
     ticks = np.asarray(ticks, dtype=np.int64)
+    if ticks.size > 1 and np.any(np.diff(ticks) < 0):
+        raise ViformError("ticks must be in increasing order for streamed multi-interval imaging")
     n_total = source.n_ticks
     pixels = source.height * source.width
     shape = (source.height, source.width)
@@ -332,8 +331,9 @@ def multi_interval_frames(source: SpikeSource, ticks, spikes_per_side: int = DEF
         bits = source.read_ticks(lo_tick, hi_tick).reshape(hi_tick - lo_tick, pixels).view(np.uint8)
         offsets, spike_ticks = _spike_lists(bits, lo_tick)
         del bits
+        position = offsets[:-1].copy()
         for k in ticks[start:stop]:
-            _around_from_lists(offsets, spike_ticks, int(k), lo_tick, hi_tick, n_total, prev, nxt, short)
+            _around_from_lists(offsets, spike_ticks, int(k), lo_tick, hi_tick, n_total, prev, nxt, short, position)
             if short.any():
                 far = np.flatnonzero(short)
                 far_prev, far_nxt = spike_ticks_around(source, int(k), k_side, k_side, pixels_wanted=far)
