@@ -29,9 +29,11 @@ def test_accumulation_stream_equals_single_instants(stream, align):
 def test_interval_and_multi_interval_streams_equal_single_instants(stream):
     every = list(range(0, 400, 3))  # dense: the streamed path
     got = dict(reconstruct_ticks(stream, "interval", every))
-    tau, _ = interval_ticks(stream, every)
+    tau, censored = interval_ticks(stream, every)
+    assert censored.any()  # near the ends: the streamed path must flag them too
     for i, k in enumerate(every):
         assert np.allclose(got[k].spikes_per_s, 40_000.0 / tau[i])
+        assert np.array_equal(got[k].censored, censored[i])
     got = dict(reconstruct_ticks(stream, "multi-interval", [10, 200], spikes_per_side=2, adaptive=False))
     expected = multi_interval_image(stream, 200.5 / 40_000, 2)
     assert np.allclose(got[200].spikes_per_s, expected.spikes_per_s)

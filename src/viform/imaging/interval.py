@@ -157,7 +157,7 @@ def _next_after_block(bits, n_block, ahead, buffer_end, out_next):
 
 
 @njit(cache=True, parallel=True)
-def _interval_block(bits, first, n_block, next_after, prev, out):
+def _interval_block(bits, first, n_block, next_after, prev, out, censored, n_total):
     """τ for ticks [first, first + n_block); ``bits`` holds (at least) those ticks.
 
     ``next_after`` is each pixel's first spike at or after the block's end (T if none);
@@ -183,12 +183,16 @@ def _interval_block(bits, first, n_block, next_after, prev, out):
             for j in range(j0, j1):
                 if bits[i, j]:
                     prev[j] = k
+                censored[i, j] = prev[j] < 0 or out[i, j] >= n_total
                 out[i, j] = out[i, j] - prev[j]
 
 
 def interval_frames(source: SpikeSource, block_ticks: int = 1024,
-                    lookahead_ticks: int = DEFAULT_LOOKAHEAD_TICKS):
+                    lookahead_ticks: int = DEFAULT_LOOKAHEAD_TICKS, with_censored: bool = False):
     """τ (ticks) at every tick, streamed: yields ``(first_tick, tau)`` with tau (T, H, W) int32.
+
+    With ``with_censored`` yields ``(first_tick, tau, censored)``: censored (T, H, W) bool
+    marks intervals cut by an end of the stream.
 
     Exact at any interval length: the last spike before each block is carried, the ticks
     up to ``lookahead_ticks`` after it are read with it (and kept for the next block), and a
@@ -222,9 +226,14 @@ def interval_frames(source: SpikeSource, block_ticks: int = 1024,
             next_after[far] = found[far]
             ahead[far] = found[far]
         out = np.empty((last - first, pixels), dtype=np.int64)
-        _interval_block(buffer, first, last - first, next_after, prev, out)
+        censored = np.empty((last - first, pixels), dtype=np.bool_)
+        _interval_block(buffer, first, last - first, next_after, prev, out, censored, n_total)
         buffer = buffer[last - first:]
-        yield first, out.astype(np.int32).reshape(last - first, source.height, source.width)
+        shape = (last - first, source.height, source.width)
+        if with_censored:
+            yield first, out.astype(np.int32).reshape(shape), censored.reshape(shape)
+        else:
+            yield first, out.astype(np.int32).reshape(shape)
 
 
 # ------------------------------------------------------------------ display mappings

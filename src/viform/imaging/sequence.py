@@ -83,11 +83,11 @@ def _interval_stream(source, ticks, sensor_parameters):
             yield int(k), _interval_image(source, tau[0], censored[0], sensor_parameters)
         return
     pos = 0
-    for first, tau in interval_frames(source, block_ticks=_block_ticks(source)):
+    for first, tau, censored in interval_frames(source, block_ticks=_block_ticks(source), with_censored=True):
         while pos < wanted.size and wanted[pos] < first + tau.shape[0]:
             k = int(wanted[pos])
             t = tau[k - first].astype(np.int64)
-            yield k, _interval_image(source, t, None, sensor_parameters)
+            yield k, _interval_image(source, t, censored[k - first].copy(), sensor_parameters)
             pos += 1
         if pos == wanted.size:
             break
