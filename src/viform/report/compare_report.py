@@ -385,7 +385,10 @@ def write_report(result, out_dir, command: str = "") -> dict:
     parts.append(f"<h1>One scene, every sensor: '{e(scene.name)}'</h1>")
     demand_text = ""
     if d:
-        demand_text = (f" The scene spans {d['min_lux']:.3g}–{d['max_lux']:.3g} lux "
+        def lux(v):
+            return f"{v:,.0f}" if v >= 1000 else f"{v:.3g}"
+
+        demand_text = (f" The scene spans {lux(d['min_lux'])}–{lux(d['max_lux'])} lux "
                        f"({d['dynamic_range_db']:.0f} dB)")
         if math.isfinite(d["time_resolution_s"]):
             demand_text += (f", its fastest edge moves {d['max_speed_px_per_s']:.0f} px/s (one pixel every "
