@@ -1,4 +1,4 @@
-"""The spike-camera / SpikeCV ``.dat`` layout: headerless packed bits, memory-mapped.
+"""The spike-camera / SpikeCV ``.dat`` layout: headerless packed bits, read block by block.
 
 Layout (see ``shared/data/spike/SOURCES.md``): a sequence of frames, each holding H·W bits
 in H·W/8 bytes; pixel k = r·W + c is bit (k mod 8) of byte k // 8, least significant bit
@@ -55,7 +55,7 @@ def _frame_bytes(height: int, stored_width: int) -> int:
 
 
 class DatFile(SpikeSource):
-    """A memory-mapped ``.dat`` spike file, read through the :class:`SpikeSource` interface.
+    """A ``.dat`` spike file, read block by block through the :class:`SpikeSource` interface.
 
     Parameters
     ----------
@@ -138,7 +138,7 @@ class DatFile(SpikeSource):
         self.metadata = source_metadata(side) if side is not None else {}
         self.metadata.update({"source": str(path), "format": "dat", "flip": self.flip,
                               "stored_width": self.stored_width})
-        self._bytes = np.memmap(path, dtype=np.uint8, mode="r", shape=(whole, self.frame_bytes))
+        self._size = size
         if verify or (verify is None and not allow_partial and size <= VERIFY_ON_OPEN_BYTES):
             self.verify()
 
@@ -177,7 +177,14 @@ class DatFile(SpikeSource):
 
     def read_ticks(self, start: int, stop: int) -> np.ndarray:
         start, stop = max(0, start), min(stop, self.n_ticks)
-        raw = np.asarray(self._bytes[start:stop])
+        # positioned reads rather than a memory map: the resident memory stays one block whatever
+        # the file size (mapped pages of a long file count against the process)
+        want = (stop - start) * self.frame_bytes if stop > start else 0
+        with open(self.path, "rb") as f:
+            data = os.pread(f.fileno(), want, start * self.frame_bytes) if want else b""
+        if len(data) != want:
+            raise ViformError(f"{str(self.path)!r} was cut while being read (ticks {start}–{stop - 1})")
+        raw = np.frombuffer(data, np.uint8).reshape(-1, self.frame_bytes)
         bits = np.unpackbits(raw, axis=1, bitorder="little").view(bool)
         frames = bits.reshape(-1, self.height, self.stored_width)[:, :, : self.width]
         if self.flip:
@@ -186,7 +193,7 @@ class DatFile(SpikeSource):
 
 
 def read_dat(path, height: int | None = None, width: int | None = None, **kwargs) -> DatFile:
-    """Open a ``.dat`` spike file (memory-mapped); see :class:`DatFile` for the options."""
+    """Open a ``.dat`` spike file; see :class:`DatFile` for the options."""
     return DatFile(path, height, width, **kwargs)
 
 
