@@ -120,7 +120,10 @@ class NpzSpikes(SpikeSource):
                 raise ViformError(f"{str(path)!r}: member {HEADER_KEY!r} is not valid JSON: {_short(exc)}") from None
             if not isinstance(header, dict):
                 raise ViformError(f"{str(path)!r}: member {HEADER_KEY!r} must hold a JSON object")
-            validate_header(header, path, required=("height", "width", "clock_hz"))
+            validate_header(header, path, required=("height", "width", "clock_hz", "start_time_s"))
+            if "threshold_electrons" not in header:
+                raise ViformError(f"{str(path)!r}: required field 'threshold_electrons' is missing from "
+                                  f"member {HEADER_KEY!r}")
         declared_axes = header.get("axes")
         if declared_axes is not None:
             declared_axes = _check_axes(declared_axes)

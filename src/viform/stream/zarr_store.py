@@ -87,7 +87,11 @@ class ZarrSpikeStore(SpikeSource):
         if version not in (1, FORMAT_VERSION):
             raise ViformError(f"{str(path)!r}: field 'version' = {version!r} is not supported "
                               f"(this viform reads versions 1 and {FORMAT_VERSION})")
-        validate_header(header, path, required=("height", "width", "clock_hz"))
+        # version 2 stores are written whole by viform: every field must be there (null where unknown)
+        validate_header(header, path, required=("height", "width", "clock_hz") if version == 1 else
+                        ("height", "width", "clock_hz", "start_time_s", "rows", "bit_order"))
+        if version >= 2 and "threshold_electrons" not in header:
+            raise ViformError(f"{str(path)!r}: required field 'threshold_electrons' is missing from the header")
         self.header = header
         self.height, self.width = int(header["height"]), int(header["width"])
         packed_width = (self.width + 7) // 8
@@ -118,6 +122,14 @@ class ZarrSpikeStore(SpikeSource):
         for key in ("n_ticks", "chunk_ticks", "chunks", "header_blake2b"):
             if key not in header:
                 raise ViformError(f"{str(path)!r}: required field {key!r} is missing from the header")
+        for key in ("n_ticks", "chunk_ticks"):
+            v = header[key]
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ViformError(f"{str(path)!r}: field {key!r} = {v!r} must be a whole number ≥ 0")
+        chunks = header["chunks"]
+        if not isinstance(chunks, list) or not all(isinstance(c, int) and not isinstance(c, bool)
+                                                   and 0 <= c < 2**32 for c in chunks):
+            raise ViformError(f"{str(path)!r}: field 'chunks' must be a list of CRC-32 values")
         if _header_digest(header) != header["header_blake2b"]:
             raise ViformError(f"{str(path)!r}: the header is damaged or was edited (its BLAKE2b checksum differs)")
         if int(header["n_ticks"]) != self.n_ticks:
