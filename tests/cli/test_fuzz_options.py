@@ -17,7 +17,6 @@ import argparse
 import io
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -101,17 +100,6 @@ def _with(args, flag, value):
     return args
 
 
-def run_subprocess(args, timeout_s, cwd):
-    started = time.perf_counter()
-    try:
-        proc = subprocess.run([sys.executable, "-m", "viform.cli", *args], capture_output=True, text=True,
-                              timeout=timeout_s, cwd=cwd, env={**os.environ, "VIFORM_DEBUG": ""})
-        rc, err = proc.returncode, proc.stderr
-    except subprocess.TimeoutExpired:
-        rc, err = "hang", ""
-    return rc, err, time.perf_counter() - started
-
-
 def classify(rc, err):
     lines = [line for line in err.splitlines() if line.strip() and "%|" not in line and "/s]" not in line]
     if rc == "hang":
@@ -148,37 +136,43 @@ def test_boundary_values_fail_cleanly_or_run(tmp_path, monkeypatch, command):
 
 
 # ---------------------------------------------------------------- campaign (outside the suite)
-def campaign(timeout_s: float, values=RUN_VALUES + ["1e-12", "65536", "100000"]) -> dict:
-    """Every numeric option of every command, from each command's default invocation."""
+def campaign(timeout_s: float, values=None) -> dict:
+    """Every numeric option of every command, from each command's default invocation, in-process
+    with a time limit per run (work caps of :data:`FUZZ_ENV`)."""
+    import shutil
+
+    from test_fuzz_files import run_command
+
+    os.environ.update(FUZZ_ENV)
+    values = values or PARSE_VALUES + ["0", "-1", "-1e12", "2147483648", "1e-300"]
     counts, examples = {}, {}
     with tempfile.TemporaryDirectory(prefix="viform-optfuzz-") as work:
         work = Path(work)
         bases = base_invocations(work)
-        for command, flag, _ in numeric_options():
+        for command, flag, _ in list(numeric_options()):
             base = bases.get(command, [command, "--out", str(work / "out" / command)])
             for value in values:
                 (work / "out").mkdir(exist_ok=True)
                 args = _with(base, flag, value)
-                rc, err, elapsed = run_subprocess(args, timeout_s, work)
-                kind = classify(rc, err)
+                result = run_command(args, timeout_s)
+                kind = classify(result["rc"], result["err"])
                 left = [str(p) for p in work.rglob("*") if ".viform-" in p.name]
                 if left:
                     counts["temp-left"] = counts.get("temp-left", 0) + 1
                 counts[kind] = counts.get(kind, 0) + 1
                 if kind not in ("ok", "refused"):
-                    examples.setdefault(kind, []).append([" ".join(args[:1] + [flag, value]), rc,
-                                                          err.strip()[-300:], round(elapsed, 1)])
-                print(f"{kind:9s} {elapsed:6.1f}s {command} {flag} {value}", file=sys.stderr, flush=True)
-                import shutil
-
+                    examples.setdefault(kind, []).append([command, flag, value, str(result["rc"]),
+                                                          result["err"].strip()[-300:]])
+                print(f"{kind:9s} {result['s']:6.1f}s {command} {flag} {value}", file=sys.stderr, flush=True)
                 shutil.rmtree(work / "out", ignore_errors=True)
     return {"counts": counts, "examples": examples}
 
 
 if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).parent))
     parser = argparse.ArgumentParser()
     parser.add_argument("--campaign", action="store_true")
-    parser.add_argument("--timeout", type=float, default=60.0)
+    parser.add_argument("--timeout", type=float, default=120.0)
     a = parser.parse_args()
     started = time.perf_counter()
     result = campaign(a.timeout)
