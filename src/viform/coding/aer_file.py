@@ -633,19 +633,20 @@ def _encode_payload_v3(seg: Segment, anchor0, ref0, width: int, ivstate: np.ndar
     flag, body = _FLAG_INTERVALS, out[:n]
     # the run-length record model (version 2's, without its zstd stage) wins on some streams (fast
     # scene changes, few spikes per pixel): keep whichever is smaller; the predictor state above is
-    # advanced either way (the reader replays it from the decoded spikes)
+    # advanced either way (the reader replays it from the decoded spikes). Below 0.8 bit per spike
+    # (steady pixels) it did not win on any benchmark stream (a width change costs it ≥ 1 bit): not tried.
     n_rec = seg.m.size
     size = 16 * (n_rec + npix) + 4096
     rec_s = np.empty(n_rec + 1, np.int64)
-    while True:
+    while 8 * n >= 0.8 * n_spikes:
         out2 = np.empty(size, np.uint8)
         n2 = context_model.encode_segment(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
                                           seg.start_tick, seg.start_tick + seg.n_ticks, width, True, out2, rec_s)
         if n2 <= size:
+            if n2 < n:
+                flag, body = _FLAG_RECORDS, out2[:n2]
             break
         size = 2 * n2
-    if n2 < n:
-        flag, body = _FLAG_RECORDS, out2[:n2]
     if body.size > _v3_data_limit(n_spikes, npix):  # never write what the reader would refuse
         raise ViformError(f"segment at tick {seg.start_tick} codes to {body.size} bytes, more than the format "
                           "allows")
