@@ -163,6 +163,8 @@ def name_flags(message: str, command: click.Command) -> str:
     Only option names are replaced, only as whole words not inside quotes (file fields such
     as ``'clock_hz'`` stay), and names without an underscore only when followed by `` = ``.
     """
+    names = {p.name for p in command.params if p.name}
+    names_with_units = {n for n in names if any(m.startswith(n + "_") for m in names)}
     for param in sorted(command.params, key=lambda p: -len(p.name or "")):
         if not isinstance(param, click.Option) or not param.name:
             continue
@@ -174,7 +176,14 @@ def name_flags(message: str, command: click.Command) -> str:
         else:
             pattern = rf"(?<![\w'\"./-]){re.escape(param.name)}(?= = )"
         message = re.sub(pattern, flag, message)
+        # the library's name with its unit (--slack → slack_ticks, --threshold → threshold_electrons)
+        if param.name not in names_with_units:
+            message = re.sub(rf"(?<![\w'\"./-]){re.escape(param.name)}_(?:{_UNIT_SUFFIXES})(?![\w'\"-])", flag,
+                             message)
     return message
+
+
+_UNIT_SUFFIXES = "ticks|electrons|s|hz|m|lux|v|e_per_s|fraction|db|bps|ms|us|mhz|px_per_s|cd"
 
 
 def _first(kwargs: dict, *names):
