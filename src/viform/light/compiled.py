@@ -10,7 +10,7 @@ the simulator then works from it:
   hold. The event-driven kernel jumps from crossing to crossing inside each constant
   stretch.
 * ``"video-linear"`` — frames interpolated linearly in time: the kernel computes each
-  tick's light per pixel, (1 − w)·F_k + w·F_{k+1}, from float32 frames.
+  tick's light per pixel, (1 − w)·F_k + w·F_{k+1}, from the float64 frames.
 * ``"pattern"`` — a synthetic pattern P(u, v) (texture, edge, bars) seen through a
   time-dependent affine map (translation or rotation), times a modulation m(t) (none, a
   step, sine or square flicker). Each tick needs the map's six coefficients and, for the
@@ -20,7 +20,7 @@ the simulator then works from it:
 Per-tick quantities are computed by compiled scalar code from the absolute tick time, so a
 tick's light is the same number whatever block it falls in (the simulator's same-seed,
 same-bits property). The light agrees with the scene's NumPy ``illuminance_lux`` to rounding
-(≈ 1e-15 relative; float32 frames: 6e-8), except exactly on a pattern's discontinuities.
+(≈ 1e-15 relative), except exactly on a pattern's discontinuities.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class CompiledLight:
     kind : {"frames", "frames-modulated", "video-linear", "pattern"}
     frames : ndarray, (F, H, W)
         Lux frames: "frames" (float64), "frames-modulated" (one frame times m(t)),
-        "video-linear" (float32).
+        "video-linear"; the kernels read them as float64.
     frame_index : callable
         "frames": times (s, array) → index of the frame in effect (int array), elementwise
         (so a tick's frame does not depend on the block it is computed in).
@@ -98,9 +98,10 @@ class CompiledLight:
         return KIND_PATTERN
 
     def flat_frames(self) -> np.ndarray:
+        """Frames as (F, H·W) float64 (one compiled specialization of the kernel for every kind)."""
         if self.frames is None:
-            return np.zeros((1, 1), np.float32)
-        return self.frames.reshape(self.frames.shape[0], -1)
+            return np.zeros((1, 1))
+        return np.ascontiguousarray(self.frames.reshape(self.frames.shape[0], -1), dtype=np.float64)
 
     def parameters(self) -> np.ndarray:
         """The float parameters the compiled per-tick code reads (see :func:`tick_scalars`)."""

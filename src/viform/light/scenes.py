@@ -196,7 +196,6 @@ class VideoScene(Scene):
         self.interpolation = check_choice("interpolation", interpolation, ("hold", "linear"))
         super().__init__(frames.shape[1], frames.shape[2], duration_s=frames.shape[0] / self.frame_rate_hz)
         self._frames = frames
-        self._frames32 = None
 
     @classmethod
     def from_file(cls, path, frame_rate_hz: float | None = None, max_lux: float = 1000.0,
@@ -260,9 +259,7 @@ class VideoScene(Scene):
         if self.interpolation == "hold" or self._frames.shape[0] == 1:
             return CompiledLight("frames", self.height, self.width, frames=self._frames,
                                  frame_index=self._frame_index)
-        if self._frames32 is None:
-            self._frames32 = self._frames.astype(np.float32)  # the kernel reads two frames a tick
-        return CompiledLight("video-linear", self.height, self.width, frames=self._frames32,
+        return CompiledLight("video-linear", self.height, self.width, frames=self._frames,
                              frame_rate_hz=self.frame_rate_hz)
 
 

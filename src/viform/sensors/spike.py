@@ -688,10 +688,11 @@ def _fixed_charge(electrons):
     return np.int64(x) if x < 4611686018427387904.0 else np.int64(4611686018427387904)
 
 
-@njit(cache=True, inline="always")
-def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter):
-    """(charge, target) of pixel p after its charge ``c`` reached its target ``t`` in a tick of
-    charge ``e`` (fixed point); the spike itself is the caller's.
+@njit(cache=True)
+def _fire_general(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter):
+    """(charge, target) of pixel p after its charge ``c`` reached its target ``t`` in a tick
+    of charge ``e`` (fixed point); the spike itself is the caller's (:func:`_fire` inlines
+    the common case of this).
 
     Self-reset: the charge past the crossing is kept; further crossings inside the same tick
     are lost to the one-bit readout. Dead time: no charge is collected for ``dead_ticks``
@@ -733,6 +734,22 @@ def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, co
         return _equilibrium_state(p, q, index, bins, keys, counter)
     # many crossings lost in this tick: jump to its end state exactly
     return _saturated_state(over / 4294967296.0, p, q, keys, counter)
+
+
+@njit(cache=True, inline="always")
+def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter):
+    """(charge, target) of pixel p after its charge ``c`` reached its target ``t`` (see
+    :func:`_fire_general`). The common case — self-reset with photon noise, no dead time,
+    fewer than 48·Q e⁻ past the crossing — is inlined into the kernels; every other case is a
+    call (kept out of line so the kernels compile fast)."""
+    if noise and not reset_readout and dead_ticks == 0.0:
+        if c - t < min(_fixed_charge(_JUMP_INTERVALS * q[p]), _fixed_charge(8.0 * q[p] * q[p])):
+            # further crossings inside the same tick are lost to the one-bit readout
+            while c >= t:
+                c -= t
+                t = _next_target(p, q, index, bins, keys, noise, counter)
+            return c, t
+    return _fire_general(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter)
 
 
 @njit(cache=True, parallel=True)
