@@ -137,8 +137,9 @@ def _compiled_scenes():
 @pytest.mark.parametrize("name", ["translating", "moving-edge", "rotating", "hdr", "step", "flicker", "video-hold",
                                   "video-linear", "bars-rotating", "step-pattern", "square-flicker-pattern"])
 def test_compiled_light_is_the_scene_light(name):
-    """What the kernel evaluates equals the NumPy scene to rounding (float32 video frames:
-    2^-24 relative); patterns may differ only exactly on a discontinuity (no pixel here)."""
+    """What the kernel evaluates equals the NumPy scene to rounding (a few ulps of the
+    angle-addition gratings; 2e-7 leaves room); patterns may differ only exactly on a
+    discontinuity (no pixel here)."""
     from viform.light.compiled import evaluate
 
     scene = _compiled_scenes()[name]
