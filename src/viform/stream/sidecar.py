@@ -31,6 +31,11 @@ SIDECAR_VERSION = 1
 MAX_DIMENSION = 1 << 16
 #: Largest readout clock a header may declare, Hz.
 MAX_CLOCK_HZ = 1e12
+#: Largest threshold Q a header may declare, e⁻ (far above any pixel's full well; beyond it
+#: Q × rate overflows the light estimates).
+MAX_THRESHOLD_ELECTRONS = 1e12
+#: Largest |start time| a header may declare, s.
+MAX_START_TIME_S = 1e12
 #: Largest tick count a header may declare.
 MAX_TICKS = 1 << 40
 #: Largest sidecar read, bytes (a sidecar is a few kB; a bigger one is not ours).
@@ -169,7 +174,7 @@ def validate_header(header: dict, where, *, required=("height", "width", "clock_
 
     ``where`` (the file) and the field name appear in every message. Fields: ``height``,
     ``width`` (whole numbers in [1, 65536]), ``clock_hz`` (finite, in (0, 1e12]),
-    ``threshold_electrons`` (null or finite > 0), ``start_time_s`` (finite), ``n_ticks`` (whole,
+    ``threshold_electrons`` (null or in (0, 1e12]), ``start_time_s`` (|t| ≤ 1e12 s), ``n_ticks`` (whole,
     in [0, 2^40]), ``rows`` (``bottom-up`` or ``upright``), ``bit_order`` (``little``),
     ``dark_current_e_per_s`` (null or finite ≥ 0), ``optics`` (null or an object of finite
     positive numbers).
@@ -192,13 +197,15 @@ def validate_header(header: dict, where, *, required=("height", "width", "clock_
                               f"it must be a finite number in (0, {MAX_CLOCK_HZ:g}]")
     if header.get("threshold_electrons") is not None:
         v = _number(header, "threshold_electrons", where)
-        if not (math.isfinite(v) and v > 0):
+        if not (math.isfinite(v) and 0 < v <= MAX_THRESHOLD_ELECTRONS):
             raise ViformError(f"{str(where)!r}: field 'threshold_electrons' = {header['threshold_electrons']!r} "
-                              "is not allowed: it must be a finite number > 0 (or null)")
+                              f"is not allowed: it must be a finite number in (0, {MAX_THRESHOLD_ELECTRONS:g}] "
+                              "(or null)")
     if header.get("start_time_s") is not None:
         v = _number(header, "start_time_s", where)
-        if not math.isfinite(v):
-            raise ViformError(f"{str(where)!r}: field 'start_time_s' = {header['start_time_s']!r} must be finite")
+        if not (math.isfinite(v) and abs(v) <= MAX_START_TIME_S):
+            raise ViformError(f"{str(where)!r}: field 'start_time_s' = {header['start_time_s']!r} must be finite, "
+                              f"at most {MAX_START_TIME_S:g} s in magnitude")
     if header.get("n_ticks") is not None:
         v = _number(header, "n_ticks", where)
         if not (v.is_integer() and 0 <= v <= MAX_TICKS):
