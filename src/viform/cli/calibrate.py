@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from pathlib import Path
 
 import click
@@ -15,15 +16,22 @@ def _fmt(value, digits: int = 4) -> str:
     return "—" if value is None else f"{value:.{digits}g}"
 
 
-def _nearest_level(q):
-    """(level, e⁻) of the chip threshold level nearest ``q`` in ratio, or None."""
+def _level_line(q, bound: bool = False) -> str | None:
+    """The chip threshold level that matches ``q``: the nearest in ratio, or "below/above" the range."""
     if not q:
         return None
     from viform.sensors.spike_presets import threshold_levels_electrons
 
     levels = threshold_levels_electrons()
+    lo, hi = min(levels), max(levels)
+    if q < lo / 1.5 and bound:
+        return f"(the chip's lowest threshold level is {lo:,.0f} e⁻, level {levels.index(lo)})"
+    if q < lo / 1.5:
+        return f"below the chip's lowest threshold level ({lo:,.0f} e⁻ at level {levels.index(lo)})"
+    if q > hi * 1.5:
+        return f"above the chip's highest threshold level ({hi:,.0f} e⁻ at level {levels.index(hi)})"
     k = min(range(len(levels)), key=lambda i: abs(math.log(levels[i] / q)))
-    return k, levels[k]
+    return f"nearest chip threshold level: {k} ({levels[k]:,.0f} e⁻)"
 
 
 def _lines(file, r: dict, out) -> list[str]:
@@ -38,18 +46,19 @@ def _lines(file, r: dict, out) -> list[str]:
     frac = st.get("static_fraction_of_judged")
     lines.append(f"  {'steady tiles':<22}{_fmt(None if frac is None else 100 * frac)} % of {st['tiles_judged']} "
                  "tiles judged (successive intervals anti-correlated)")
-    level = _nearest_level(th.get("q_eff_electrons") or th.get("q_eff_lower_bound_electrons"))
+    level = _level_line(th.get("q_eff_electrons") or th.get("q_eff_lower_bound_electrons"),
+                        bound=not th.get("q_eff_electrons"))
     if th.get("q_eff_electrons"):
         lo, hi = th["q_eff_range_electrons"]
         lines.append(f"  {'effective threshold':<22}{th['q_eff_electrons']:,.0f} e⁻  "
                      f"(95 % range {lo:,.0f} – {hi:,.0f})")
     elif th.get("q_eff_lower_bound_electrons"):
-        lines.append(f"  {'effective threshold':<22}≥ {th['q_eff_lower_bound_electrons']:,.0f} e⁻  (lower bound: "
-                     f"{th['reason']})")
+        lines.append(f"  {'effective threshold':<22}≥ {th['q_eff_lower_bound_electrons']:,.0f} e⁻  (a lower bound)")
+        lines += [f"  {'':<22}{part}" for part in textwrap.wrap(th["reason"], 72)]
     else:
         lines.append(f"  {'effective threshold':<22}not estimated: {th.get('reason')}")
     if level is not None:
-        lines.append(f"  {'':<22}nearest chip threshold level: {level[0]} ({level[1]:,.0f} e⁻)")
+        lines.append(f"  {'':<22}{level}")
     g = gs.get("gain_spread_fraction")
     lines.append(f"  {'flat-field spread':<22}" + (f"{100 * g:.3g} % (pixel-to-pixel gain spread; an upper bound "
                                                   "where the scene has fine texture)" if g is not None

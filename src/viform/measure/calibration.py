@@ -52,8 +52,11 @@ is an upper bound wherever texture remains.
 
 **Dark current, hot and dead pixels.** Dark current shows only as spikes of pixels
 without light, at I_d/Q per second: in a recording much shorter than Q/I_d (seconds to
-minutes for Q ~ 10⁴ e⁻) it is not measurable, and only a bound is given. Hot pixels: rates
-far above their neighbourhood; dead pixels: silent where the neighbourhood fires often.
+minutes for Q ~ 10⁴ e⁻) it is not measurable, and only a bound is given. Hot pixels: counts
+far above their neighbourhood's median (by 5σ of the photon noise, σ² = m/Q + 1) in BOTH
+halves of the recording, by the same excess, so that moving light, which lifts a pixel
+only while a bright feature passes it, gives none; dead pixels: silent where the
+neighbourhood fires often.
 """
 
 from __future__ import annotations
@@ -136,6 +139,8 @@ class PixelIntervals:
     last_tick: np.ndarray
     intervals: np.ndarray
     pixel: np.ndarray
+    #: Per-pixel spike counts in the first half of the ticks read (``n_ticks // 2``).
+    n_spikes_first_half: np.ndarray | None = None
 
     @property
     def mean_interval(self) -> np.ndarray:
@@ -188,8 +193,9 @@ def pixel_intervals(source: SpikeSource, *, max_ticks: int | None = None, block_
     last_tick[p] = t
     same = p[1:] == p[:-1]
     intervals = np.diff(t)[same].astype(np.float64)
+    first_half = np.bincount(p[t < end // 2], minlength=npx)
     return PixelIntervals(h, w, end, float(source.clock_hz), n_spikes, first_tick, last_tick, intervals,
-                          p[1:][same])
+                          p[1:][same], first_half)
 
 
 def _checkerboard_static(iv: PixelIntervals, tile: int) -> tuple[np.ndarray, dict]:
@@ -432,17 +438,40 @@ def _gain_spread(iv: PixelIntervals, sigma2_per_mu2: float, tile: int, min_spike
     return (math.sqrt(var) if var > 0 else 0.0), info
 
 
+def _hot_in(counts: np.ndarray, local: np.ndarray,
+            q_electrons: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(hot, excess, σ) of one stretch of the recording: far above the local median m.
+
+    A pixel that is not hot counts about m spikes; its photo-electrons are Poisson, so its
+    count varies by σ = √(m/Q + 1) (the 1: where the first and last spikes fall). Without
+    a Q, Q = 1 (plain Poisson counts, conservative). Hot: excess c − m ≥ 5σ, ≥ 5 spikes,
+    and ≥ 8 robust standard deviations of the excess over the image (PRNU, scene texture).
+    """
+    excess = counts - local
+    scale = 1.4826 * float(np.median(np.abs(excess - np.median(excess))))
+    sigma = np.sqrt(np.maximum(local, 0.0) / max(q_electrons or 1.0, 1.0) + 1.0)
+    hot = excess >= np.maximum(5.0 * sigma, max(5.0, 8.0 * scale))
+    return hot, excess, sigma
+
+
 def _hot_dead(iv: PixelIntervals, q_electrons: float | None):
     from scipy import ndimage
 
     h, w = iv.height, iv.width
     counts = iv.n_spikes.reshape(h, w).astype(np.float64)
     local = ndimage.median_filter(counts, size=5, mode="nearest")
-    # hot: more spikes than the neighbourhood by ≥ 10 (Poisson-safe even at Q = 1) and by
-    # ≥ 8 robust standard deviations of that excess over the image (PRNU, texture)
     excess = counts - local
-    scale = 1.4826 * float(np.median(np.abs(excess - np.median(excess))))
-    hot = excess >= max(10.0, 8.0 * scale)
+    # hot: a dark current is steady, so the pixel must stand out in BOTH halves of the
+    # recording, by the same excess within the noise; moving light makes a pixel outshine
+    # its neighbours only while a bright feature passes it.
+    first = (iv.n_spikes_first_half if iv.n_spikes_first_half is not None else iv.n_spikes // 2)
+    first = first.reshape(h, w).astype(np.float64)
+    second = counts - first
+    hot1, e1, s1 = _hot_in(first, ndimage.median_filter(first, size=5, mode="nearest"), q_electrons)
+    hot2, e2, s2 = _hot_in(second, ndimage.median_filter(second, size=5, mode="nearest"), q_electrons)
+    # same excess in both halves: within 5 σ of the difference, and 20 % (slack for the light)
+    steady = np.abs(e1 - e2) <= 5.0 * np.hypot(s1, s2) + 0.2 * np.maximum(e1, e2)
+    hot = hot1 & hot2 & steady
     # dead: silent where the neighbourhood gives ≥ 10 spikes (P(0) < e^-10 for a live pixel)
     dead = (counts == 0) & (local >= 10)
     duration_s = iv.n_ticks / iv.clock_hz
@@ -550,7 +579,8 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
     if q_eff:
         bound = max(darkest_rate_per_s, 1.0 / duration_s) * q_eff
         dark["dark_current_upper_bound_e_per_s"] = bound
-    dark["reason"] = (f"the recording ({duration_s * 1e3:.3g} ms) is far shorter than Q/I_d (the dark interval); "
+    dark["reason"] = (f"the recording ({duration_s * 1e3:.3g} ms) is far shorter than the time a pixel takes to "
+                      "fire in the dark (threshold / dark current); "
                       "its darkest pixels still see light, so only an upper bound follows")
     result["dark_current"] = dark
     result["defects"] = hd
