@@ -23,12 +23,14 @@ def demo(out_dir, duration_s, seed, as_json, json_file):
     metrics table and which sensor wins on what.
     """
     from viform._validate import check_int, check_positive
-    from viform.cli.compare import check_outputs, finish
+    from viform.cli.compare import announce_preparation, check_outputs, command_start, finish
+
+    started = command_start()
     from viform.report.demo import run_demo
 
     check_int("--seed", seed, 0)
     check_positive("--duration", duration_s)
     check_outputs(out_dir, json_file)
-    started = time.perf_counter()
-    doc = run_demo(out_dir, duration_s=duration_s, seed=seed)
+    announce_preparation()
+    doc = run_demo(out_dir, duration_s=duration_s, seed=seed, started_s=started)
     finish(doc, out_dir, time.perf_counter() - started, as_json, json_file)

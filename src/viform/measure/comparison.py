@@ -40,7 +40,7 @@ from viform._validate import ViformError, check_choice
 
 #: Sensors of the comparison, in report order, with a one-line description for users.
 SENSOR_DESCRIPTIONS = {
-    "spike": "spike camera (self-reset pixels, 40 kHz readout)",
+    "spike": "spike camera (self-reset pixels, 40 kHz readout; the SpikeOne chip preset)",
     "cmos-short": "conventional CMOS, 1 ms exposure at 30 fps",
     "cmos": "conventional CMOS, 10 ms exposure at 30 fps",
     "seed001-2seg": "segmented exposure, two segments, 130 µs at 60 fps",
@@ -96,6 +96,47 @@ def spike_preset():
 
         return make_sensor("spike"), "spike defaults"
     return load_spike_preset("spikeone").sensor(height=None, width=None), "spikeone"
+
+
+#: How presets are named for users.
+PRESET_DISPLAY_NAMES = {"spikeone": "SpikeOne", "spiketwo": "SpikeTwo", "spiketwo-40k": "SpikeTwo 40 kHz"}
+
+
+def _grouped(v: float) -> str:
+    """16250 → "16 250" (groups of three, as the report's text writes numbers)."""
+    return f"{v:,.0f}".replace(",", " ")
+
+
+def spike_label(sensor, preset: str) -> str:
+    """Row/panel label of the spike camera: its preset, threshold Q and clock."""
+    p = sensor.parameters
+    name = PRESET_DISPLAY_NAMES.get(preset, preset)
+    return f"spike ({name}, Q = {_grouped(p.threshold_electrons)} e⁻, {p.clock_hz / 1e3:g} kHz)"
+
+
+def spike_exposure_note(sensor, preset: str, duration_s: float) -> dict:
+    """Why a real-chip threshold leaves dim regions under-exposed in a short clip.
+
+    A pixel collects η·E electrons per second (η electrons per lux-second, E lux) and fires
+    every Q/(η·E) s (seed 000 §3.3); it fires at least once in a clip of T seconds only where
+    E ≥ Q/(η·T), and at every tick (its ceiling) where E ≥ Q·f/η.
+    """
+    p = sensor.parameters
+    eta = p.optics.electrons_per_lux_second
+    q = p.threshold_electrons
+    once = q / (eta * duration_s)
+    ceiling = q * p.clock_hz / eta
+    name = PRESET_DISPLAY_NAMES.get(preset, preset)
+    text = (f"The spike camera is the {name} chip preset: threshold Q = {_grouped(q)} e⁻, clock "
+            f"{p.clock_hz / 1e3:g} kHz, {_grouped(eta)} e⁻ per lux-second per pixel. A pixel fires every "
+            f"Q/(electrons per second) = {q / eta:.3g} s at 1 lux, so in this {duration_s * 1e3:.3g} ms clip it "
+            f"fires even once only where the light exceeds {once:.3g} lux; dimmer regions have no spike (or "
+            f"one interval cut by the clip) and are drawn grey as under-exposed. This is the real chip's "
+            f"threshold, not a scoring artefact: a longer clip or a lower threshold level (smaller Q) lowers "
+            f"that floor, and lowers its ceiling (a spike every tick, above {ceiling:.4g} lux) by the same factor.")
+    return {"preset": preset, "threshold_electrons": q, "clock_hz": p.clock_hz,
+            "electrons_per_lux_second": eta, "one_spike_per_clip_lux": once, "ceiling_lux": ceiling,
+            "text": text}
 
 
 def make_compare_sensor(key: str, scene=None):
@@ -188,13 +229,26 @@ def _inverse_table(sensor, kind):
     return kept[: top + 1], lux[: top + 1]
 
 
-def frame_estimates(sensor, stack, instants_s, kind: str = "linear") -> list:
-    """Light estimates of a frame camera's :class:`~viform.sensors.base.FrameStack` at ``instants_s``."""
+def complete_frames(stack, duration_s: float) -> int:
+    """Number of leading frames whose exposure ends inside the clip ``[0, duration_s]``.
+
+    A frame still exposing when the clip ends would integrate light the clip does not hold.
+    """
+    ends = np.asarray(stack.start_times_s) + np.asarray(stack.exposure_s)
+    return int(np.count_nonzero(ends <= duration_s * (1 + 1e-9) + 1e-12))
+
+
+def frame_estimates(sensor, stack, instants_s, kind: str = "linear", duration_s: float | None = None) -> list:
+    """Light estimates of a frame camera's :class:`~viform.sensors.base.FrameStack` at ``instants_s``.
+
+    With ``duration_s``, only frames whose exposure ends inside the clip are shown.
+    """
     p = sensor.parameters
     out = []
     table = None if kind == "linear" else _inverse_table(sensor, kind)
+    n = len(stack.start_times_s) if duration_s is None else max(1, complete_frames(stack, duration_s))
     for t in instants_s:
-        i = frame_at(stack.start_times_s, stack.exposure_s, t)
+        i = frame_at(stack.start_times_s[:n], stack.exposure_s[:n], t)
         dn = stack.frames_dn[i]
         exposure = float(stack.exposure_s[i])
         signal, lux = _linear_lux(p, dn, exposure)
@@ -335,9 +389,11 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
         rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
         shots = []
         methods = [m for m in SPIKE_METHODS if m != "best" or best_spike_method_name() is not None]
+        head = spike_label(sensor, preset)
+        note = spike_exposure_note(sensor, preset, duration_s)
         for method in methods:
-            label = {"accumulation": f"spike · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
-                     "interval": "spike · interval", "best": f"spike · {best_spike_method_name()}"}[method]
+            label = {"accumulation": f"{head} · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
+                     "interval": f"{head} · interval", "best": f"{head} · {best_spike_method_name()}"}[method]
             ests = spike_estimates(stream, instants_s, method)
             if method == "accumulation":
                 tres = ACCUMULATION_WINDOW_S
@@ -357,7 +413,8 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
                 tres = float(np.median(taus))
                 lat = tres + 1 / par.clock_hz
             shots.append(Shot(f"spike-{method}", label, f"{desc}, {preset}", ests,
-                              {**sensor.describe(), "preset": preset, "reconstruction": method},
+                              {**sensor.describe(), "preset": preset, "reconstruction": method,
+                               "exposure_note": note},
                               time_resolution_s=tres, latency_s=lat, data_rate_mb_per_s=rate,
                               frame_rate_hz=par.clock_hz, raw=stream))
         return shots
@@ -385,9 +442,14 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
         stack = sensor.capture(scene, duration_s, seed=seed)
     except ViformError as exc:
         return [Shot(key, SENSOR_LABELS[key], desc, skipped=str(exc))]
+    if complete_frames(stack, duration_s) == 0:  # its first frame integrates light beyond the clip's end
+        frame_s = float(stack.exposure_s[0])
+        return [Shot(key, SENSOR_LABELS[key], desc,
+                     skipped=f"its frame ({frame_s * 1e3:.3g} ms of exposure) is longer than the clip "
+                             f"({duration_s * 1e3:.3g} ms); give --duration {frame_s:.4g} or more")]
     kind = {"seed001-2seg": "segmented", "seed001-3seg": "segmented", "seed003-overflow": "overflow"}.get(key,
                                                                                                          "linear")
-    ests = frame_estimates(sensor, stack, instants_s, kind)
+    ests = frame_estimates(sensor, stack, instants_s, kind, duration_s)
     p = sensor.parameters
     return [Shot(key, SENSOR_LABELS[key], desc, ests, sensor.describe(), time_resolution_s=sensor.exposure_s,
                  latency_s=1.0 / sensor.frame_rate_hz,
@@ -528,9 +590,10 @@ def verdict(shots, demand: dict | None) -> list[str]:
 
     s, v, worst = best("edge_width_px", higher=False)
     if s is not None:
-        lines.append(f"Sharpest motion: {s.label}, with a {v:.3g} px edge (integration {s.time_resolution_s:.3g} s)"
+        lines.append(f"Sharpest motion: {s.label}, with a {v:.3g} px edge "
+                     f"(integration {s.time_resolution_s * 1e3:.3g} ms)"
                      + (f"; the most blurred is {worst[1].label} at {worst[0]:.3g} px, because its integration time "
-                        f"is {worst[1].time_resolution_s:.3g} s" if worst else "") + ".")
+                        f"is {worst[1].time_resolution_s * 1e3:.3g} ms" if worst else "") + ".")
     s, v, worst = best("dr_captured_db")
     if s is not None:
         need = f" of the {demand['dynamic_range_db']:.0f} dB the scene holds" if demand else ""
@@ -559,7 +622,8 @@ def verdict(shots, demand: dict | None) -> list[str]:
         lines.append(f"Least data: {s.label}, {v:.3g} MB/s" + tail(worst, "; most: {label}, {value:.3g} MB/s") + ".")
     s, v, worst = best("latency_s", higher=False)
     if s is not None:
-        lines.append(f"Shortest latency: {s.label}, {v:.3g} s" + tail(worst, "; longest: {label}, {value:.3g} s") + ".")
+        lines.append(f"Shortest latency: {s.label}, {v * 1e3:.3g} ms"
+                     + (f"; longest: {worst[1].label}, {worst[0] * 1e3:.3g} ms" if worst else "") + ".")
     cnr = [(s, s.metrics["target_cnr"]) for s in shots if not s.skipped and s.metrics.get("target_cnr")]
     if cnr:
         seen = {s.label: [k for k, v in c.items() if v >= 3] for s, c in cnr}

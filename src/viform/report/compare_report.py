@@ -203,17 +203,24 @@ def figure_errors(result, index: int):
     d = result["demand"] or {"min_lux": 1e-4, "max_lux": 1e6}
     lo, hi = d["min_lux"] / 2, d["max_lux"] * 2
     truth = cmp.log_lux(scene.illuminance_lux(t), lo, hi)
+    import matplotlib.pyplot as plt
+
     fig, axes, cax = _image_grid(len(shots), scene.shape)
     im = None
+    # under-exposed pixels hold a bound, not a measurement: grey, as in the image panels
+    cmap = plt.get_cmap("RdBu_r").with_extremes(bad=UNDER_COLOUR)
     for ax, s in zip(axes.flat, shots, strict=False):
-        err = cmp.log_lux(s.estimates[index].lux, lo, hi) - truth
-        im = ax.imshow(err, cmap="RdBu_r", vmin=-ERROR_SPAN_DECADES, vmax=ERROR_SPAN_DECADES,
+        est = s.estimates[index]
+        err = np.where(est.underexposed, np.nan, cmp.log_lux(est.lux, lo, hi) - truth)
+        im = ax.imshow(np.ma.masked_invalid(err), cmap=cmap, vmin=-ERROR_SPAN_DECADES, vmax=ERROR_SPAN_DECADES,
                        interpolation="nearest")
         ax.set_title(f"{s.label}\nsaturated {s.estimates[index].saturated.mean():.0%}, "
                      f"under-exposed {s.estimates[index].underexposed.mean():.0%}", fontsize=8)
-    fig.colorbar(im, cax=cax,
-                 label="error: log10(estimate / truth), decades (red = too bright, blue = too dark)")
-    fig.suptitle(f"Error against the truth at t = {t * 1e3:.2f} ms (one scale for every sensor)", fontsize=10)
+    bar = fig.colorbar(im, cax=cax, extend="both")
+    bar.set_label("error, decades: log10(estimate / truth)\nclipped at ±2; red = too bright, blue = too dark",
+                  fontsize=7)
+    fig.suptitle(f"Error against the truth at t = {t * 1e3:.2f} ms (one scale for every sensor; "
+                 "grey = under-exposed, no measurement)", fontsize=10)
     return fig
 
 
@@ -305,7 +312,10 @@ def _fmt(v) -> str:
             return "n/a"
         if v == 0:
             return "0"
-        return f"{v:.4g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.3e}"
+        text = f"{v:.4g}"
+        if "e" in text:  # no exponent next to plain decimals: fixed point, 4 significant figures
+            text = f"{v:.{max(0, 3 - math.floor(math.log10(abs(v))))}f}"
+        return text
     if isinstance(v, dict):
         return ", ".join(f"{k}: {_fmt(x)}" for k, x in v.items())
     if isinstance(v, (list, tuple)):
@@ -340,7 +350,7 @@ img{max-width:100%;height:auto;border:1px solid #ddd;margin:.4em 0}.note{color:#
 """
 
 
-def write_report(result, out_dir, command: str = "") -> dict:
+def write_report(result, out_dir, command: str = "", started_s: float | None = None) -> dict:
     """Write report.html, metrics.json and figures/*.png in ``out_dir``; return the metrics document."""
     out = Path(out_dir)
     figs = out / "figures"
@@ -367,6 +377,10 @@ def write_report(result, out_dir, command: str = "") -> dict:
         save_figure(figs / "gated.png", gated)
         paths["gated"] = figs / "gated.png"
 
+    spike_note = next((s.parameters["exposure_note"] for s in shots
+                       if not s.skipped and "exposure_note" in s.parameters), None)
+    if started_s is not None:  # one wall time, from the command's start (compilation included) to here
+        result["run_time_s"] = time.perf_counter() - started_s
     doc = {
         "scene": scene.describe(), "duration_s": result["duration_s"], "instants_s": instants,
         "demand": result["demand"], "command": command,
@@ -374,9 +388,11 @@ def write_report(result, out_dir, command: str = "") -> dict:
         "sensors": {s.key: {"label": s.label, "description": s.description, "skipped": s.skipped,
                             "metrics": s.metrics, "parameters": s.parameters} for s in shots},
         "verdict": result["verdict"], "run_time_s": result.get("run_time_s"),
+        "run_time_note": RUN_TIME_NOTE, "spike_exposure": spike_note,
         "sensor_times_s": result["timings_s"],
     }
-    write_json(out / "metrics.json", json.loads(json.dumps(doc, default=_json_default)))
+    doc = finite_json(doc)
+    write_json(out / "metrics.json", doc)
 
     e = html.escape
     parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>viform compare: {e(scene.name)}"
@@ -400,8 +416,10 @@ def write_report(result, out_dir, command: str = "") -> dict:
                  f"images compared at {', '.join(f'{t * 1e3:.2f} ms' for t in instants)}.{e(demand_text)} "
                  f"Every sensor sees the same light (illuminance on the sensor plane) and is used at its "
                  f"documented settings.{' Command: <code>' + e(command) + '</code>.' if command else ''}"
-                 + (f" Shooting and scoring took {result['run_time_s']:.1f} s." if result.get("run_time_s") else "")
+                 + (f" Wall time {result['run_time_s']:.1f} s ({RUN_TIME_NOTE})." if result.get("run_time_s") else "")
                  + "</p>")
+    if spike_note:
+        parts.append(f"<p class='note' id='spike-exposure'>{e(spike_note['text'])}</p>")
     if "scene" in paths:
         parts.append(_img(paths["scene"], "the scene with its parts named"))
     parts.append("<section id='verdict'><h2>Who wins on what</h2><ul class='verdict'>")
@@ -409,13 +427,13 @@ def write_report(result, out_dir, command: str = "") -> dict:
     parts.append("</ul><p class='note'>Derived from the metrics below each time the report is made.</p></section>")
 
     parts.append("<section id='metrics'><h2>Metrics against the truth</h2><table><tr><th>sensor</th>")
-    parts += [f"<th>{e(name)}<br><span class='note'>{e(unit)}</span></th>" for name, unit in cmp.METRICS.values()]
+    parts += [f"<th>{e(cmp.METRICS[k][0])}<br><span class='note'>{e(_unit(k))}</span></th>" for k in cmp.METRICS]
     parts.append("</tr>")
     for s in shots:
         if s.skipped:
             continue
         parts.append(f"<tr data-sensor='{e(s.key)}'><td>{e(s.label)}</td>")
-        parts += [f"<td data-metric='{k}'>{_fmt(s.metrics.get(k))}</td>" for k in cmp.METRICS]
+        parts += [f"<td data-metric='{k}'>{_fmt(_shown(k, s.metrics.get(k)))}</td>" for k in cmp.METRICS]
         parts.append("</tr>")
     parts.append("</table><p class='note'>PSNR and SSIM on log10-lux over the scene's range; saturated = at "
                  "the pixel's ceiling; under-exposed = below its noise floor (SNR &lt; 1) or no spike; edge width = "
@@ -448,8 +466,8 @@ def write_report(result, out_dir, command: str = "") -> dict:
             parts.append(f"<p><b>Not in this comparison:</b> {e(s.skipped)}</p></div>")
             continue
         parts.append("<table>" + "".join(
-            f"<tr><td>{e(cmp.METRICS[k][0])}</td><td data-metric='{k}'>{_fmt(s.metrics.get(k))} "
-            f"{e(cmp.METRICS[k][1])}</td></tr>" for k in cmp.METRICS))
+            f"<tr><td>{e(cmp.METRICS[k][0])}</td><td data-metric='{k}'>{_fmt(_shown(k, s.metrics.get(k)))} "
+            f"{e(_unit(k))}</td></tr>" for k in cmp.METRICS))
         if "target_cnr" in s.metrics:
             parts.append("".join(f"<tr><td>contrast-to-noise, {e(n)}</td><td>{_fmt(v)}</td></tr>"
                                  for n, v in s.metrics["target_cnr"].items()))
@@ -460,6 +478,41 @@ def write_report(result, out_dir, command: str = "") -> dict:
     with atomic_open(out / "report.html", "w") as f:
         f.write("".join(parts))
     return doc
+
+
+#: Metrics shown to people in other units than metrics.json keeps (factor, unit).
+DISPLAY_UNITS = {"saturated_fraction": (100.0, "%"), "underexposed_fraction": (100.0, "%"),
+                 "latency_s": (1e3, "ms"), "time_resolution_s": (1e3, "ms")}
+#: What the reported wall time covers.
+RUN_TIME_NOTE = ("from the command's start to the report written: simulation, scoring and figures, and on a "
+                 "first run the compiling of the simulation kernels")
+
+
+def _unit(key: str) -> str:
+    return DISPLAY_UNITS[key][1] if key in DISPLAY_UNITS else cmp.METRICS[key][1]
+
+
+def _shown(key: str, v):
+    """A metric in the unit people read (percent, ms); metrics.json keeps SI units and fractions."""
+    if key in DISPLAY_UNITS and isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool):
+        return float(v) * DISPLAY_UNITS[key][0]
+    return v
+
+
+def finite_json(obj):
+    """``obj`` as plain JSON types with NaN/±inf as null (bare NaN is not valid JSON, RFC 8259)."""
+    def clean(v):
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, dict):
+            return {str(k): clean(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [clean(x) for x in v]
+        return v
+
+    out = clean(json.loads(json.dumps(obj, default=_json_default)))
+    json.dumps(out, allow_nan=False)  # proves it: raises if anything non-finite is left
+    return out
 
 
 def _json_default(v):
@@ -474,23 +527,28 @@ def _json_default(v):
 
 def metrics_table(doc: dict) -> str:
     """A small console table: one row per sensor, key metrics with units, 3–4 significant figures."""
-    cols = [("psnr_log_db", "PSNR dB"), ("ssim_log", "SSIM"), ("saturated_fraction", "sat"),
-            ("underexposed_fraction", "under"), ("edge_width_px", "edge px"), ("flicker_error", "flicker"),
-            ("dr_captured_db", "DR dB"), ("data_rate_mb_per_s", "MB/s"), ("latency_s", "latency s")]
+    cols = [("psnr_log_db", "PSNR dB"), ("ssim_log", "SSIM"), ("saturated_fraction", "sat %"),
+            ("underexposed_fraction", "under %"), ("edge_width_px", "edge px"), ("flicker_error", "flicker"),
+            ("dr_captured_db", "DR dB"), ("data_rate_mb_per_s", "MB/s"), ("latency_s", "latency ms")]
     width = max([len(v["label"]) for v in doc["sensors"].values()] + [6])
     lines = [f"{'sensor':<{width}}  " + "  ".join(f"{h:>9}" for _, h in cols)]
     for v in doc["sensors"].values():
         if v["skipped"]:
             lines.append(f"{v['label']:<{width}}  not applicable: {v['skipped']}")
             continue
-        lines.append(f"{v['label']:<{width}}  " + "  ".join(f"{_fmt(v['metrics'].get(k)):>9}" for k, _ in cols))
+        # None: not defined for this sensor or scene (metrics.json holds null there)
+        lines.append(f"{v['label']:<{width}}  " + "  ".join(
+            f"{'n/a' if v['metrics'].get(k) is None else _fmt(_shown(k, v['metrics'][k])):>9}" for k, _ in cols))
     return "\n".join(lines)
 
 
 def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, height: int = 64,
             width: int = 128, seed: int = 0, instants_s=None, progress: bool = True, command: str = "",
-            scene_options: dict | None = None) -> dict:
-    """Load the scene, run the comparison, write the report; return the metrics document."""
+            scene_options: dict | None = None, started_s: float | None = None) -> dict:
+    """Load the scene, run the comparison, write the report; return the metrics document.
+
+    ``started_s``: ``time.perf_counter()`` at the command's start; the reported wall time runs from it.
+    """
     from viform.light.scenes import BUILTIN_SCENES, builtin_scene, load_scene
 
     height = check_int("--height", height, 32)
@@ -502,7 +560,6 @@ def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, he
         scene = builtin_scene(scene_spec, height, width, **(scene_options or {}))
     else:
         scene = load_scene(scene_spec, height, width, resize=True)
-    started = time.perf_counter()
+    started = time.perf_counter() if started_s is None else started_s
     result = run_comparison(scene, duration_s, keys, instants_s, seed, progress)
-    result["run_time_s"] = time.perf_counter() - started
-    return write_report(result, out_dir, command)
+    return write_report(result, out_dir, command, started_s=started)

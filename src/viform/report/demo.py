@@ -12,9 +12,10 @@ from __future__ import annotations
 DEMO_HEIGHT, DEMO_WIDTH = 64, 128
 
 
-def run_demo(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = True) -> dict:
+def run_demo(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = True,
+             started_s: float | None = None) -> dict:
     """Run the comparison on the dilemma scene; write the report; return the metrics document."""
     from viform.report.compare_report import compare
 
     return compare("dilemma", out_dir, None, duration_s, DEMO_HEIGHT, DEMO_WIDTH, seed, progress=progress,
-                   command="viform demo")
+                   command="viform demo", started_s=started_s)
