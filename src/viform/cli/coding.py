@@ -1,8 +1,8 @@
 """CLI commands: encode, decode, dr (registered on viform.cli.app.cli).
 
-``viform encode IN OUT [--mode]`` codes a viform (.dat/.npz/.zarr) into a first-spike coded
-``.vfc`` file (seed 000 §5.2); ``viform decode IN OUT`` regenerates the stream;
-``viform dr`` prints the seed's dynamic-range figures (§4.2–§4.5).
+``viform encode IN OUT [--mode]`` codes a spike stream (.dat/.npz/.zarr) into a first-spike
+coded ``.vfc`` file (seed 000 §5.2); ``viform decode IN OUT`` regenerates the stream;
+``viform dr`` prints the dynamic-range figures of spike photography (seed 000 §4.2–§4.5).
 """
 
 from __future__ import annotations
@@ -17,53 +17,122 @@ from viform._validate import ViformError
 from viform.cli.app import cli
 
 
+def check_json_file(json_file) -> None:
+    """Refuse, before any work, a ``--json-file`` whose folder does not exist (no folders are made)."""
+    if json_file is None:
+        return
+    from viform._io import check_output_folder
+
+    parent = Path(json_file).resolve().parent
+    if not parent.is_dir():
+        raise ViformError(f"--json-file = {str(json_file)!r} is not allowed: the folder {parent} does not exist "
+                          "(create it first)")
+    check_output_folder("--json-file", parent)
+
+
+def _emit(summary: dict, as_json: bool, json_file, line: str) -> None:
+    """The command's result: JSON on stdout (``--json``) or the human line, and ``--json-file``."""
+    if json_file is not None:
+        from viform._io import write_json
+
+        write_json(json_file, summary)
+    click.echo(json.dumps(summary, indent=2, ensure_ascii=False) if as_json else line)
+
+
+def _announce_compile(direction: str) -> None:
+    from viform.coding._compile_cache import COMPILING_NOTICE, kernels_cached
+
+    if not kernels_cached(direction):
+        click.echo(COMPILING_NOTICE, err=True)
+
+
+_JSON_OPTIONS = (
+    click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of the text."),
+    click.option("--json-file", type=click.Path(dir_okay=False), default=None,
+                 help="Also write the JSON summary to this file (its folder must exist)."),
+)
+
+
+def _json_options(f):
+    for option in reversed(_JSON_OPTIONS):
+        f = option(f)
+    return f
+
+
 @cli.command("encode")
 @click.argument("src", type=click.Path())
 @click.argument("dst", type=click.Path())
 @click.option("--mode", type=click.Choice(["strict", "statistical", "intensity"]), default="strict",
-              show_default=True, help="strict: lossless; statistical: |Δτ| ≤ k·τ/√Q are repeats; "
-                                      "intensity: transitional first spikes dropped")
-@click.option("--k", "k", type=float, default=None, help="tolerance factor k (default 2)")
-@click.option("--threshold", type=float, default=None, help="threshold Q, e⁻ (if the file does not say)")
-@click.option("--slack", type=int, default=0, show_default=True, help="extra tolerance, ticks (lossy modes)")
-@click.option("--height", type=int, default=None, help=".dat height")
-@click.option("--width", type=int, default=None, help=".dat width")
-@click.option("--segment-ticks", type=int, default=None, help="segment length of the coded file")
-@click.option("--json", "as_json", is_flag=True, help="print the summary as JSON")
-def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks, as_json):
-    """Code the viform SRC into the first-spike coded file DST (.vfc)."""
+              show_default=True,
+              help="strict: lossless. statistical: an interval within k·τ/√Q of the previous one (τ the "
+                   "interval, Q the threshold) is coded as a repeat. intensity: like statistical, and the "
+                   "transitional first spikes after a light change are dropped.")
+@click.option("--k", "k", type=float, default=None,
+              help="Tolerance factor k of the lossy modes: intervals within k·τ/√Q count as a repeat "
+                   "(k standard deviations of the photon noise).  [default: 2]")
+@click.option("--threshold", type=float, default=None,
+              help="Threshold Q, electrons, when the file does not record it (lossy modes).")
+@click.option("--slack", type=int, default=0, show_default=True,
+              help="Extra tolerance of the lossy modes, ticks.")
+@click.option("--height", type=int, default=None, help="Height, pixels, of a .dat file without a sidecar.")
+@click.option("--width", type=int, default=None, help="Width, pixels, of a .dat file without a sidecar.")
+@click.option("--segment-ticks", type=int, default=None,
+              help="Ticks per independently decodable segment of the coded file (≥ 1).  [default: 4096]")
+@_json_options
+def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks, as_json, json_file):
+    """Code the spike stream SRC into the first-spike coded file DST (.vfc)."""
+    from viform._validate import check_int
     from viform.coding.aer_file import EXTENSION, encode_source
     from viform.stream.io import open_spikes
 
     if Path(dst).suffix.lower() != EXTENSION:
         raise ViformError(f"output {dst!r} must end in {EXTENSION}")
+    if segment_ticks is not None:
+        check_int("--segment-ticks", segment_ticks, 1)
+    check_json_file(json_file)
     source = open_spikes(src, height, width)
+    _announce_compile("encode")
     t0 = time.perf_counter()
     summary = encode_source(source, dst, mode, k=k, threshold_electrons=threshold, slack_ticks=slack,
                             segment_ticks=segment_ticks, progress=True)
     summary["seconds"] = time.perf_counter() - t0
-    if as_json:
-        click.echo(json.dumps(summary, indent=2))
-    else:
-        click.echo(f"{dst}: {summary['bytes']} bytes, {summary['ratio_vs_raw']:.2f}× smaller than the raw bits "
-                   f"({mode} mode, {summary['spikes']} spikes, {summary['seconds']:.2f} s)")
+    _emit(summary, as_json, json_file,
+          f"{dst}: {summary['bytes']:,} bytes, {summary['ratio_vs_raw']:.3g}× smaller than the raw bits "
+          f"({mode} mode, {summary['spikes']:,} spikes, {summary['seconds']:.3g} s)")
 
 
 @cli.command("decode")
 @click.argument("src", type=click.Path())
 @click.argument("dst", type=click.Path())
-def decode_cmd(src, dst):
+@_json_options
+def decode_cmd(src, dst, as_json, json_file):
     """Regenerate the spike stream of the coded file SRC into DST (.dat/.npz/.zarr)."""
     from viform.coding.aer_file import CodedFile
     from viform.stream.io import save_spikes
 
+    check_json_file(json_file)
     coded = CodedFile(src)
+    _announce_compile("decode")
+    t0 = time.perf_counter()
     save_spikes(dst, coded)
-    click.echo(f"{dst}: {coded.n_ticks} ticks × {coded.height}×{coded.width} ({coded.mode} coding)")
+    summary = {"path": str(dst), "source": str(src), "mode": coded.mode, "n_ticks": int(coded.n_ticks),
+               "height": int(coded.height), "width": int(coded.width), "clock_hz": float(coded.clock_hz),
+               "seconds": time.perf_counter() - t0}
+    _emit(summary, as_json, json_file,
+          f"{dst}: {coded.n_ticks:,} ticks × {coded.height}×{coded.width} pixels ({coded.mode} coding)")
+
+
+#: Plain-language labels of the worked examples, in the order of ``seed_examples()``.
+_EXAMPLE_LABELS = (
+    "shortest interval 10 ns, longest interval 1 s",
+    "shortest interval 10 ns, longest interval 10 s",
+    "sub-threshold readout: shortest 10 ns, 100 levels every 10 ms",
+    "shortest interval at 100 000 lux (Q 100 e-, 100 µm², QE 0.7)",
+)
 
 
 @cli.command("dr")
-@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the table.")
+@_json_options
 @click.option("--threshold-electrons", type=float, default=None,
               help="Your sensor's threshold Q, electrons (with --dark-current-e-per-s gives the longest interval).")
 @click.option("--clock-hz", type=float, default=None,
@@ -73,11 +142,13 @@ def decode_cmd(src, dst):
               help="Shortest interval the readout resolves, s (default: 1/--clock-hz).")
 @click.option("--longest", type=float, default=None,
               help="Longest interval still set by light, s (default: Q / dark current).")
-@click.option("--sensitivity", type=float, default=None, help="Sub-threshold read period, s.")
-@click.option("--levels", type=int, default=None, help="Number of sub-threshold levels.")
+@click.option("--sensitivity", type=float, default=None,
+              help="Sub-threshold readout: how often the partial charge is read, s (with --levels).")
+@click.option("--levels", type=int, default=None,
+              help="Sub-threshold readout: number of charge levels it resolves, ≥ 1 (with --sensitivity).")
 @click.option("--measure", is_flag=True, help="Also measure the DR of a simulated spike sensor.")
-def dr_cmd(as_json, threshold_electrons, clock_hz, dark_current_e_per_s, shortest, longest, sensitivity, levels,
-           measure):
+def dr_cmd(as_json, json_file, threshold_electrons, clock_hz, dark_current_e_per_s, shortest, longest, sensitivity,
+           levels, measure):
     """Dynamic range of spike continuous photography: the worked examples, and your sensor's.
 
     The DR is the ratio of the longest interval still set by light (Q over the dark current)
@@ -87,6 +158,7 @@ def dr_cmd(as_json, threshold_electrons, clock_hz, dark_current_e_per_s, shortes
     from viform._validate import ViformError, check_positive
     from viform.measure import dynamic_range as dr
 
+    check_json_file(json_file)
     if clock_hz is not None:
         check_positive("--clock-hz", clock_hz)
         shortest = 1.0 / clock_hz if shortest is None else shortest
@@ -117,15 +189,20 @@ def dr_cmd(as_json, threshold_electrons, clock_hz, dark_current_e_per_s, shortes
         raise ViformError("--sensitivity/--levels need the shortest interval: give --shortest or --clock-hz")
     if measure:
         out["measured"] = dr.measure_spike_dynamic_range()
+    if json_file is not None:
+        from viform._io import write_json
+
+        write_json(json_file, out)
     if as_json:
         click.echo(json.dumps(out, indent=2, ensure_ascii=False))
         return
-    click.echo(f"{'worked example':<58}{'computed':>12}{'paper':>10}")
-    for ex in out["seed_examples"]:
+    click.echo(f"{'worked example':<62}{'computed':>12}{'published':>12}")
+    for i, ex in enumerate(out["seed_examples"]):
+        label = _EXAMPLE_LABELS[i] if i < len(_EXAMPLE_LABELS) else ex["example"]
         if "seed_db" in ex:
-            click.echo(f"{ex['example'][:57]:<58}{ex['computed_db']:>9.1f} dB{ex['seed_db']:>7g} dB")
+            click.echo(f"{label[:61]:<62}{ex['computed_db']:>9.1f} dB{ex['seed_db']:>9g} dB")
         else:
-            click.echo(f"{ex['example'][:57]:<58}{ex['computed_ns']:>9.2f} ns{ex['seed_ns']:>7g} ns")
+            click.echo(f"{label[:61]:<62}{ex['computed_ns']:>9.2f} ns{ex['seed_ns']:>9g} ns")
     if "dr_db" in out:
         click.echo(f"your sensor: shortest interval {shortest:.4g} s, longest {longest:.4g} s → "
                    f"dynamic range {out['dr_db']:.1f} dB")

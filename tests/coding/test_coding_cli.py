@@ -1,0 +1,105 @@
+"""``viform encode`` / ``decode`` / ``dr`` command lines: JSON convention, bad input, notices."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from viform.cli import main
+from viform.stream.container import SpikeStream
+from viform.stream.io import open_spikes, save_spikes
+
+
+@pytest.fixture()
+def stream_file(tmp_path):
+    rng = np.random.default_rng(3)
+    spikes = rng.random((40, 6, 8)) < 0.2
+    return save_spikes(tmp_path / "s.npz", SpikeStream(spikes, 40_000.0, 100.0)), spikes
+
+
+def test_encode_decode_json_and_json_file(tmp_path, stream_file, capsys):
+    src, spikes = stream_file
+    vfc, out = tmp_path / "s.vfc", tmp_path / "back.npz"
+    assert main(["encode", str(src), str(vfc), "--json", "--json-file", str(tmp_path / "e.json")]) == 0
+    text = capsys.readouterr().out
+    summary = json.loads(text)
+    assert json.loads((tmp_path / "e.json").read_text()) == summary
+    assert summary["spikes"] == int(spikes.sum())
+    assert main(["decode", str(vfc), str(out), "--json", "--json-file", str(tmp_path / "d.json")]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert json.loads((tmp_path / "d.json").read_text()) == summary
+    assert (summary["n_ticks"], summary["height"], summary["width"]) == spikes.shape
+    back = open_spikes(out)
+    assert np.array_equal(back.read_ticks(0, back.n_ticks), spikes)
+    # the human line: thousands separators, no JSON
+    assert main(["decode", str(vfc), str(out)]) == 0
+    assert capsys.readouterr().out.startswith(f"{out}: 40 ticks × 6×8 pixels")
+
+
+@pytest.mark.parametrize("value", ["0", "-5"])
+def test_segment_ticks_must_be_positive(tmp_path, stream_file, capsys, value):
+    src, _ = stream_file
+    vfc = tmp_path / "s.vfc"
+    assert main(["encode", str(src), str(vfc), "--segment-ticks", value]) == 2
+    err = capsys.readouterr().err
+    assert "--segment-ticks" in err and value in err and err.count("\n") == 1
+    assert not vfc.exists()
+
+
+@pytest.mark.parametrize("command", ["encode", "decode", "dr"])
+def test_json_file_into_a_missing_folder_is_refused(tmp_path, stream_file, capsys, command):
+    src, _ = stream_file
+    vfc = tmp_path / "s.vfc"
+    assert main(["encode", str(src), str(vfc)]) == 0
+    capsys.readouterr()
+    args = {"encode": ["encode", str(src), str(tmp_path / "t.vfc")],
+            "decode": ["decode", str(vfc), str(tmp_path / "t.npz")], "dr": ["dr"]}[command]
+    missing = tmp_path / "no" / "such"
+    assert main(args + ["--json-file", str(missing / "x.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--json-file" in err and err.count("\n") == 1
+    assert not (tmp_path / "no").exists()
+    assert not (tmp_path / "t.vfc").exists() and not (tmp_path / "t.npz").exists()
+
+
+def test_dr_console_speaks_plainly_and_json_keys_stay(tmp_path, capsys):
+    assert main(["dr"]) == 0
+    text = capsys.readouterr().out
+    assert "§" not in text and "τ" not in text and "shortest interval" in text and "longest interval" in text
+    assert main(["dr", "--json", "--json-file", str(tmp_path / "dr.json")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert json.loads((tmp_path / "dr.json").read_text()) == out
+    assert [sorted(ex) for ex in out["seed_examples"]][0] == ["computed_db", "example", "seed_db"]
+
+
+def test_help_says_spike_stream(capsys):
+    try:
+        code = main(["encode", "--help"])
+    except SystemExit as exit_:
+        code = exit_.code
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "spike stream SRC" in text and "viform SRC" not in text
+
+
+@pytest.mark.parametrize("cached", [False, True])
+def test_cold_cache_is_announced(tmp_path, stream_file, capsys, monkeypatch, cached):
+    from viform.coding import _compile_cache
+
+    monkeypatch.setattr(_compile_cache, "kernels_cached", lambda direction="encode": cached)
+    src, _ = stream_file
+    assert main(["encode", str(src), str(tmp_path / "s.vfc")]) == 0
+    err = capsys.readouterr().err
+    assert (_compile_cache.COMPILING_NOTICE in err) is (not cached)
+
+
+def test_empty_numba_cache_reads_as_cold(tmp_path):
+    """With numba's cache pointed at an empty folder the kernels have no cached code (the check
+    only loads the cache index: nothing is compiled)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    code = "from viform.coding._compile_cache import kernels_cached as k; print(k('encode'), k('decode'))"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "False"]
