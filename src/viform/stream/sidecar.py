@@ -211,6 +211,15 @@ def validate_header(header: dict, where, *, required=("height", "width", "clock_
         if not (v.is_integer() and 0 <= v <= MAX_TICKS):
             raise ViformError(f"{str(where)!r}: field 'n_ticks' = {header['n_ticks']!r} is not allowed: "
                               f"it must be a whole number in [0, {MAX_TICKS}]")
+    for key, high in (("data_bytes", 1 << 62), ("stored_width", MAX_DIMENSION + 64)):
+        if header.get(key) is not None:
+            v = header[key]
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= high:
+                raise ViformError(f"{str(where)!r}: field {key!r} = {v!r} is not allowed: "
+                                  f"it must be a whole number in [0, {high}]")
+    for key in ("blake2b", "sidecar_blake2b", "header_blake2b"):
+        if header.get(key) is not None and not isinstance(header[key], str):
+            raise ViformError(f"{str(where)!r}: field {key!r} must be a hexadecimal string")
     if header.get("rows") is not None and header["rows"] not in ROW_ORDERS:
         raise ViformError(f"{str(where)!r}: field 'rows' = {header['rows']!r} is not supported: "
                           f"use one of {', '.join(ROW_ORDERS)}")
