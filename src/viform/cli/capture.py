@@ -304,14 +304,20 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
         check_output_folder("--preview", Path(preview).resolve().parent)
     if json_file:
         check_output_folder("--json-file", Path(json_file).resolve().parent)
+    from viform.cli.compare import announce_preparation
+    from viform.report.compare_report import finite_json
+
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz)
+    if is_spike(sensor):
+        announce_preparation()
     summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview)
     if preview:
         summary["preview"] = str(preview)
+    summary = finite_json(summary)  # null, not a bare NaN: valid JSON
     if json_file:
         write_json(json_file, summary)
     if as_json:
-        click.echo(json.dumps(summary, indent=2, default=str))
+        click.echo(json.dumps(summary, indent=2, allow_nan=False))
         return
     if summary["kind"] == "spikes":
         click.echo(f"wrote {out_path}: spike stream, {summary['n_ticks']} ticks × {summary['height']}×"

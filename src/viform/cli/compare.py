@@ -70,14 +70,19 @@ def command_start() -> float:
 def kernels_cached() -> bool:
     """Whether numba's on-disk cache holds the spike simulation kernels for the current source.
 
-    Cheap check: an index file (``*.nbi``) of ``viform/sensors/spike.py`` no older than the source.
+    Cheap check: an index file (``*.nbi``) of ``viform/sensors/spike.py`` no older than the source,
+    in ``__pycache__`` next to it or under ``NUMBA_CACHE_DIR`` when that is set.
     """
+    import os
+
     import viform.sensors as sensors
 
     src = Path(sensors.__file__).with_name("spike.py")
+    where = os.environ.get("NUMBA_CACHE_DIR")
+    found = Path(where).rglob("spike.*.nbi") if where else (src.parent / "__pycache__").glob("spike.*.nbi")
     try:
         made = src.stat().st_mtime
-        return any(p.stat().st_mtime >= made for p in (src.parent / "__pycache__").glob("spike.*.nbi"))
+        return any(p.stat().st_mtime >= made for p in found)
     except OSError:
         return False
 
