@@ -122,10 +122,14 @@ def _apply(options):
               help="Output file: .dat (spike-camera layout), .zarr (chunked, with metadata) or .npz.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Photon-noise seed.")
 @click.option("--height", type=int, default=None,
-              help="Resolution of built-in scenes (and of files with --resize).  [default: the preset's, or 250]")
-@click.option("--width", type=int, default=None, help="[default: the preset's, or 400]")
+              help="Resolution of built-in scenes [default: the preset's, or 250]; for an image or video, "
+                   "resize to this height (keeping the aspect ratio unless --width is also given).")
+@click.option("--width", type=int, default=None,
+              help="Resolution of built-in scenes [default: the preset's, or 400]; for an image or video, "
+                   "resize to this width.")
 @click.option("--max-lux", type=float, default=4.0, show_default=True,
-              help="Illuminance on the sensor of full-scale image/video pixels, lux.")
+              help="Illuminance on the sensor of full-scale pixels of 8/16-bit images and videos, lux "
+                   "(float images are lux already).")
 @click.option("--frame-rate-hz", type=float, default=None, help="Frame rate of a video or image folder.")
 @click.option("--interpolation", type=click.Choice(["hold", "linear"]), default="linear", show_default=True,
               help="Light between video frames.")
@@ -142,7 +146,7 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     Memory stays bounded (blocks of about 50 MB) whatever the resolution and duration.
     """
     from viform._io import check_output_folder, write_json
-    from viform.light.scenes import load_scene
+    from viform.light.scenes import VideoScene, load_scene
     from viform.stream.io import FORMATS, save_spikes
 
     if Path(out_path).suffix.lower() not in FORMATS:
@@ -150,11 +154,21 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     check_output_folder("--out", Path(out_path).resolve().parent)
     if json_file:
         check_output_folder("--json-file", Path(json_file).resolve().parent)
+    if not max_lux > 0:
+        raise ViformError(f"--max-lux = {max_lux!r} is not allowed: it must be > 0 lux")
+    for flag, value in (("--height", height), ("--width", width)):
+        if value is not None and value < 1:
+            raise ViformError(f"{flag} = {value!r} is not allowed: it must be at least 1 pixel")
     sensor, preset = _sensor_from_options(**sensor_kw)
+    fit = (height, width)  # files: resized only when the user asked
     height = height if height is not None else (preset.height if preset is not None else 250)
     width = width if width is not None else (preset.width if preset is not None else 400)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
-                       interpolation=interpolation)
+                       interpolation=interpolation, fit=fit)
+    scene_s = light.duration_s if isinstance(light, VideoScene) else None
+    if scene_s is not None and duration_s > scene_s * (1 + 1e-9) and not as_json:
+        click.echo(f"viform: warning: the video lasts {scene_s:.4g} s; its last frame is held for the other "
+                   f"{duration_s - scene_s:.4g} s of --duration {duration_s:g}", err=True)
     # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
     reuse = Path(out_path).suffix.lower() in (".dat", ".zarr")
     stream = sensor.stream(light, duration_s, seed=seed, light_sample_ticks=light_sample_ticks, progress=True,

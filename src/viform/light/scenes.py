@@ -104,9 +104,8 @@ def image_to_lux(image, max_lux: float | None) -> np.ndarray:
     """Map stored pixel values to lux, explicitly.
 
     Integer images (uint8, uint16, …) map linearly: 0 → 0 lux, the dtype's full scale →
-    ``max_lux``. Float images are lux already when ``max_lux`` is None; with ``max_lux``
-    given they are taken as [0, 1] relative values. Colour images are reduced to luminance
-    with the Rec. 709 weights.
+    ``max_lux``. Float images (TIFF, EXR, NumPy) are lux already: ``max_lux`` does not
+    apply to them. Colour images are reduced to luminance with the Rec. 709 weights.
     """
     arr = np.asarray(image)
     if arr.ndim == 3 and arr.shape[-1] in (3, 4):
@@ -126,10 +125,7 @@ def image_to_lux(image, max_lux: float | None) -> np.ndarray:
             raise ViformError("max_lux is required for integer images: give the lux of full scale")
         full = 1 if arr.dtype == bool else np.iinfo(arr.dtype).max
         return check_lux(arr.astype(np.float64) / full * check_positive("max_lux", max_lux), "image")
-    arr = arr.astype(np.float64)
-    if max_lux is not None:
-        arr = arr * check_positive("max_lux", max_lux)
-    return check_lux(arr, "image")
+    return check_lux(arr.astype(np.float64), "image")
 
 
 def _resize(image: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:
@@ -232,9 +228,12 @@ class VideoScene(Scene):
             raise ViformError(f"video {str(path)!r} could not be read: {one_line(exc)}") from None
         if not frames:
             raise ViformError(f"video {str(path)!r} holds no frames")
+        if declared is not None and not (isinstance(declared, (int, float)) and 0 < declared < 1e7):
+            declared = None  # some files declare 0 or garbage: treat as not declared
         rate = frame_rate_hz if frame_rate_hz is not None else declared
         if rate is None:
-            raise ViformError(f"frame_rate_hz is required: {str(path)!r} declares no frame rate")
+            raise ViformError(f"{str(path)!r} declares no usable frame rate: give it with --frame-rate-hz "
+                              "(frame_rate_hz in Python)")
         return cls(np.stack(frames), rate, interpolation)
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
@@ -545,13 +544,35 @@ BUILTIN_SCENES.update({name: _dilemma_scene(name) for name in ("dilemma", "night
 _VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".gif", ".webm")
 
 
+def fit_shape(native: tuple[int, int], height: int | None, width: int | None,
+              names: tuple[str, str] = ("--height", "--width")) -> tuple[int, int]:
+    """The size to resize an image of shape ``native`` to, keeping its aspect ratio.
+
+    Give ``height``, ``width`` or both; with both, they must keep the image's aspect ratio
+    (within one pixel), else the request is refused rather than stretching the picture.
+    """
+    h0, w0 = native
+    if height is None and width is None:
+        return native
+    if height is not None and width is not None:
+        if abs(height * w0 - width * h0) > max(h0, w0):
+            raise ViformError(f"{names[0]} {height} {names[1]} {width} would stretch the {h0}×{w0} image "
+                              f"(height × width); give only {names[0]} or only {names[1]} to keep its aspect ratio")
+        return int(height), int(width)
+    if height is not None:
+        return int(height), max(1, int(round(w0 * height / h0)))
+    return max(1, int(round(h0 * width / w0))), int(width)
+
+
 def load_scene(spec: str, height: int = 250, width: int = 400, max_lux: float = 4.0,
                frame_rate_hz: float | None = None, interpolation: str = "linear",
-               resize: bool = False) -> Scene:
+               resize: bool = False, fit: tuple[int | None, int | None] | None = None) -> Scene:
     """A scene from a built-in name, an image file, a video file or a folder of images.
 
-    Image and video pixel values map linearly to [0, ``max_lux``] lux. Built-in scenes are
-    made at ``height`` × ``width``; files keep their own size unless ``resize``.
+    Integer image and video pixel values map linearly to [0, ``max_lux``] lux; float images
+    are lux already. Built-in scenes are made at ``height`` × ``width``; files keep their own
+    size unless ``resize`` (to exactly ``height`` × ``width``) or ``fit`` = (height or None,
+    width or None), which resizes keeping the aspect ratio (see :func:`fit_shape`).
     """
     if spec in BUILTIN_SCENES:
         return builtin_scene(spec, height, width)
@@ -561,6 +582,17 @@ def load_scene(spec: str, height: int = 250, width: int = 400, max_lux: float = 
                           "nor an existing file or folder")
     shape = (height, width) if resize else None
     if path.is_dir() or path.suffix.lower() in _VIDEO_SUFFIXES:
-        return VideoScene.from_file(path, frame_rate_hz=frame_rate_hz, max_lux=max_lux,
-                                    interpolation=interpolation, shape=shape)
-    return StillScene.from_file(path, max_lux=max_lux, shape=shape)
+        scene = VideoScene.from_file(path, frame_rate_hz=frame_rate_hz, max_lux=max_lux,
+                                     interpolation=interpolation, shape=shape)
+        if fit is not None and shape is None and fit != (None, None):
+            target = fit_shape(scene.shape, *fit)
+            if target != scene.shape:
+                scene = VideoScene(np.stack([_resize(f, target) for f in scene._frames]), scene.frame_rate_hz,
+                                   scene.interpolation)
+        return scene
+    scene = StillScene.from_file(path, max_lux=max_lux, shape=shape)
+    if fit is not None and shape is None and fit != (None, None):
+        target = fit_shape(scene.shape, *fit)
+        if target != scene.shape:
+            scene = StillScene(_resize(scene.illuminance_lux(0.0), target))
+    return scene
