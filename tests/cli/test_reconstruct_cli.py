@@ -76,3 +76,30 @@ def test_bad_input_is_one_line_naming_the_flag(clip, tmp_path, capsys, args, fla
                        capsys)
     assert code == 2 and flag in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o" / "light.npz").exists()
+
+
+def test_json_file_folder_must_exist(clip, tmp_path, capsys):
+    """--json-file into a folder that does not exist is refused (no folders made for a typo)."""
+    code, _, err = run(["reconstruct", str(clip), "--method", "accumulation", "--at", "0.001", "--out",
+                        str(tmp_path / "o.png"), "--json-file", str(tmp_path / "no" / "s.json")], capsys)
+    assert code == 2 and "--json-file" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "no").exists() and not (tmp_path / "o.png").exists()
+
+
+def test_display_255_tau_and_its_old_name(clip, tmp_path, capsys):
+    """--display 255-tau (grey 255 − τ) draws what the old, still accepted, name 'seed' drew."""
+    import imageio.v3 as iio
+
+    images = []
+    for name in ("255-tau", "seed"):
+        png = tmp_path / f"{name}.png"
+        code, _, err = run(["reconstruct", str(clip), "--method", "interval", "--at", "0.002", "--display", name,
+                            "--out", str(png)], capsys)
+        assert code == 0, err
+        images.append(iio.imread(png))
+    assert np.array_equal(images[0], images[1]) and images[0].std() > 0
+    code, _, err = run(["reconstruct", str(clip), "--method", "accumulation", "--at", "0.002", "--display",
+                        "255-tau", "--out", str(tmp_path / "x.png")], capsys)
+    assert code == 2 and "--display" in err
+    code, text, _ = run(["reconstruct", "--help"], capsys)
+    assert "255-tau" in text and "seed" not in text and "TFP" not in text

@@ -65,3 +65,11 @@ def test_frame_folders_need_a_frame_rate(source_clips, tmp_path, capsys):
     args = [a for a in _args(source_clips, tmp_path / "ds") if a not in ("--frame-rate-hz", "1000")]
     assert main(args) == 2
     assert "--frame-rate-hz" in capsys.readouterr().err
+
+
+def test_json_file_folder_must_exist(source_clips, tmp_path, capsys):
+    out = tmp_path / "ds"
+    rc = main(_args(source_clips, out, "--json-file", str(tmp_path / "no" / "s.json")))
+    err = capsys.readouterr().err
+    assert rc == 2 and "--json-file" in err and err.count("\n") == 1, err
+    assert not out.exists() and not (tmp_path / "no").exists()

@@ -168,6 +168,9 @@ def test_cli_writes_a_preset_that_loads(tmp_path, capsys):
     code = main(["calibrate", str(path), "--out", str(tmp_path / "p.txt")])
     _, err = capsys.readouterr()
     assert code == 2 and "--out" in err and err.count("\n") == 1
+    code = main(["calibrate", str(path), "--json-file", str(tmp_path / "no" / "r.json")])
+    _, err = capsys.readouterr()
+    assert code == 2 and "--json-file" in err and err.count("\n") == 1 and not (tmp_path / "no").exists()
 
 
 @pytest.mark.skipif(not REAL.exists(), reason="shared real recording ../shared/data/spike not present")

@@ -16,13 +16,20 @@ from viform.cli.app import cli
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
 
+class _DisplayChoice(click.Choice):
+    """The --display choices; ``seed`` is still accepted (hidden) for ``255-tau``, its old name."""
+
+    def convert(self, value, param, ctx):
+        return super().convert("255-tau" if value == "seed" else value, param, ctx)
+
+
 def _png(method, display, scale, image, rate_per_tick, peak):
     """8-bit picture of one image: one fixed mapping for every frame of a run (no flicker)."""
     from viform.imaging import interval_8bit, inverse_tau_display_8bit, tau_display_8bit
 
-    if method == "interval" and display in ("seed", "inverse"):
+    if method == "interval" and display in ("255-tau", "inverse"):
         tau = image.info["tau_ticks"]
-        return tau_display_8bit(tau) if display == "seed" else inverse_tau_display_8bit(tau)
+        return tau_display_8bit(tau) if display == "255-tau" else inverse_tau_display_8bit(tau)
     if method == "interval" and display == "8bit":
         return interval_8bit(image.info["tau_ticks"], scale)
     full = scale if display == "8bit" else peak
@@ -40,7 +47,8 @@ def _png(method, display, scale, image, rate_per_tick, peak):
 @click.option("--every", "every", type=int, default=None,
               help="Whole stream: one image every N ticks (instead of --at).")
 @click.option("--window", "window_s", type=float, default=None,
-              help="Accumulation window, seconds (default: 41 ticks, the common TFP window).")
+              help="Accumulation window, seconds (default: 41 ticks, the window of the usual 8-bit "
+                   "spike-count pictures).")
 @click.option("--align", type=click.Choice(["centre", "center", "end", "start"]), default="centre", show_default=True,
               help="Accumulation window placement: centred on the instant (the convention of published "
                    "spike-camera figures), ending at it (causal, live use) or starting at it.")
@@ -57,12 +65,15 @@ def _png(method, display, scale, image, rate_per_tick, peak):
 @click.option("--width", type=int, default=None, help="Width of a .dat file.")
 @click.option("--clock-hz", type=float, default=None, help="Clock of a .dat/.npz file (default 40 kHz).")
 @click.option("--no-flip", is_flag=True, help=".dat rows stored upright (some simulators).")
-@click.option("--display", type=click.Choice(["linear", "seed", "inverse", "8bit"]), default="linear",
+@click.option("--display", type=_DisplayChoice(["linear", "255-tau", "inverse", "8bit"]), default="linear",
               show_default=True,
               help="PNG/video mapping: linear light (the first image's 99.9th percentile is white, for every "
-                   "image), interval's 255−τ (seed) or 1/τ (inverse), or the common TFP/TFI 8-bit (--scale).")
+                   "image); with --method interval, 255-tau (grey level 255 − τ, τ the interval in ticks: "
+                   "short intervals = bright) or inverse (1/τ); or 8bit, the usual 8-bit spike-camera "
+                   "picture: spike count over the window (or 1/τ) scaled so --scale spikes a tick is white.")
 @click.option("--scale", type=float, default=1.0, show_default=True,
-              help="Full-scale firing rate per tick for --display 8bit (0.6 for REDS simulations).")
+              help="Full-scale firing rate per tick for --display 8bit (0.6 for the spike streams simulated "
+                   "from the REDS video data set).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
 @click.option("--json-file", "json_file", type=click.Path(dir_okay=False), default=None,
               help="Also write the JSON summary to this file.")
@@ -71,11 +82,12 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
     """Images of the spike stream in FILE at chosen instants (--at) or over the whole stream (--every).
 
     Accumulation windows are centred on each instant by default (--align), as in published
-    spike-camera figures: the 8-bit TFP image of REDS clips is
-    --method accumulation --display 8bit --scale 0.6 (41 ticks). Whole-stream output
+    spike-camera figures: the usual 8-bit spike-count picture of streams simulated from
+    the REDS video data set is --method accumulation --display 8bit --scale 0.6 (41 ticks). Whole-stream output
     (--every N) is written frame by frame in bounded memory, with a progress bar.
     """
     from viform._io import atomic_path, check_output_folder, save_image, write_json
+    from viform.cli.coding import check_json_file
     from viform.imaging.sequence import NpzFrameWriter, reconstruct_ticks
 
     # ---- validate everything before any work
@@ -93,7 +105,7 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         raise ViformError(f"--video = {video!r} is not allowed: give a path ending in {' or '.join(VIDEO_SUFFIXES)}")
     if not fps > 0:
         raise ViformError(f"--fps = {fps!r} is not allowed: it must be > 0")
-    if display == "seed" and method != "interval" or display == "inverse" and method != "interval":
+    if display in ("255-tau", "inverse") and method != "interval":
         raise ViformError(f"--display {display} is not allowed with --method {method}: it maps intervals "
                           "(use --method interval, or --display linear / 8bit)")
     if not scale > 0:
@@ -106,8 +118,7 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         check_output_folder("--out", (out.parent if out.suffix.lower() == ".png" else out).resolve())
     if video is not None:
         check_output_folder("--video", Path(video).resolve().parent)
-    if json_file is not None:
-        check_output_folder("--json-file", Path(json_file).resolve().parent)
+    check_json_file(json_file)  # its folder must exist: a typo must not create folders
     source = _open(file, height, width, clock_hz, flip=not no_flip)
     if at is not None:
         times = _parse_times(at)
