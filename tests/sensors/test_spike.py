@@ -131,9 +131,12 @@ def test_threshold_spread_is_fixed_pattern():
 
 
 def test_chip_threshold_levels():
+    from viform.sensors.spike_presets import threshold_level_electrons
+
     assert len(CHIP_THRESHOLD_LEVELS_ELECTRONS) == 16
-    assert 100 in CHIP_THRESHOLD_LEVELS_ELECTRONS
     assert np.all(np.diff(CHIP_THRESHOLD_LEVELS_ELECTRONS) > 0)
+    # one table: the presets' level k is the sensor module's level k
+    assert [threshold_level_electrons(k) for k in range(16)] == list(CHIP_THRESHOLD_LEVELS_ELECTRONS)
 
 
 def test_lazy_stream_equals_capture():

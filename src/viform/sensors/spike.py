@@ -67,9 +67,11 @@ from viform.sensors.base import Sensor
 from viform.stream.container import SpikeSource, SpikeStream
 
 #: The chip's 16 selectable threshold levels, e⁻. Seed 000 §6 says the threshold "supports
-#: 16 levels of adjustment" without listing them; viform assumes √2 steps from 25 e⁻
-#: (so Q = 100, the seed's worked example, is level 4). Any other positive value is allowed.
-CHIP_THRESHOLD_LEVELS_ELECTRONS = tuple(int(round(25 * math.sqrt(2) ** k)) for k in range(16))
+#: 16 levels of adjustment" without listing them; viform assumes a linear threshold DAC,
+#: (k + 1)·1,250 e⁻, which puts the effective Q calibrated on a real recording (≥ 16,188 e⁻,
+#: docs/calibration.md) at level 12. The same table as
+#: :func:`viform.sensors.spike_presets.threshold_level_electrons`. Any other positive Q is allowed.
+CHIP_THRESHOLD_LEVELS_ELECTRONS = tuple(1250.0 * (k + 1) for k in range(16))
 
 #: Readout clocks of the chips (seed 000 §6): 40 kHz, and the 20 kHz mode.
 CLOCK_40KHZ = 40_000.0

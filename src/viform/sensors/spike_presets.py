@@ -72,8 +72,10 @@ def threshold_level_electrons(level: int) -> float:
     Seed 000 §6: the threshold "supports 16 levels of adjustment"; the linear DAC law is
     viform's assumption (module notes).
     """
+    from viform.sensors.spike import CHIP_THRESHOLD_LEVELS_ELECTRONS
+
     level = check_int("threshold level", level, 0, N_THRESHOLD_LEVELS - 1)
-    return (level + 1) * THRESHOLD_LEVEL_STEP_ELECTRONS
+    return CHIP_THRESHOLD_LEVELS_ELECTRONS[level]
 
 
 def threshold_levels_electrons() -> tuple[float, ...]:
