@@ -8,6 +8,10 @@ import click
 def cli():
     """viform: simulate and process next-generation image sensors.
 
-    Data flows scene → sensor → output → processing → measurement. Run
-    ``viform demo`` for the built-in default scene shot by the spike camera.
+    Data flows scene → sensor → output → processing → measurement. Start with
+    'viform demo': one scene with fast motion, flicker and six decades of light,
+    shot by every sensor (spike camera, CMOS, segmented exposure, overflow pixel,
+    high-speed camera), compared in viform-demo/report.html.
+
+    Every command takes --help, --json (JSON on stdout) and --json-file PATH.
     """
