@@ -11,7 +11,11 @@ def test_gated_cli_writes_json_and_figures(tmp_path, capsys):
     js = tmp_path / "r.json"
     assert main(["gated", "--pulses", "20", "--out", str(out), "--json-file", str(js)]) == 0
     text = capsys.readouterr().out
-    assert "paper: 15–20" in text and "paper: 70–90" in text
+    assert "published: 15–20" in text and "published: 70–90" in text
+    # the contrast-to-noise ratio is not called "visibility" (that is --visibility-m, in metres),
+    # and the console cites no paper
+    assert "visibility 50 m" not in text and "glint CNR" in text
+    assert "paper" not in text and "seed" not in text
     assert "threshold X" in text and "{" not in text          # a table, not JSON
     data = json.loads(js.read_text())
     acc = {t["range_m"]: t["visible"] for t in data["modes"]["accumulate"]["targets"]}

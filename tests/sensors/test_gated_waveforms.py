@@ -71,3 +71,23 @@ def test_gate_beyond_pulse_period_is_refused():
         drive_waveforms("icx618", 20_000.0, 2)
     with pytest.raises(ViformError, match="part"):
         drive_waveforms("icx999", 150.0, 2)
+
+
+def test_waveform_figure_describes_the_run_not_the_shortened_drawing(tmp_path, monkeypatch):
+    """The top panel draws the first 4 pulses only; its title must still give the run's X and
+    frame time (the console's), and say how much is drawn."""
+    import viform._io as vio
+    from viform.sensors import gated_waveforms as gw
+
+    titles = []
+
+    def grab(path, fig, **kw):
+        titles.extend(ax.get_title() for ax in fig.axes)
+
+    monkeypatch.setattr(vio, "save_figure", grab)
+    full = gw.drive_waveforms("icx618", 150.0, 20)
+    short = gw.drive_waveforms("icx618", 150.0, 4, lines=3)
+    gw.plot_waveforms(tmp_path / "w.png", short, full)
+    top = titles[0]
+    assert "X = 20 pulses" in top and f"frame {full.info['frame_s'] * 1e3:.4g} ms" in top
+    assert "first 4 of 20 pulses" in top

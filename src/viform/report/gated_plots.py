@@ -119,9 +119,11 @@ def plot_modes(path, images: dict, full_well_electrons: float, title: str = "") 
 
 
 def plot_cnr(path, rows: list[dict], threshold: float, title: str = "") -> None:
-    """Grouped bars: CNR per target (x) for each mode (colour); symmetric-log axis so a CNR of
-    0 is drawn as 0; saturated targets hatched. ``rows`` have 'target', 'mode', 'cnr' and
-    optionally 'saturated'."""
+    """Grouped bars: glint contrast-to-noise ratio per target (x) for each mode (colour);
+    symmetric-log axis so a CNR of 0 is drawn as 0. A saturated target (glint and its
+    surround both clipped, so its CNR is 0 or meaningless) is drawn as a full-height hollow
+    hatched bar labelled "saturated", and a CNR of 0 is written "0", so no mode's bar is
+    invisible. ``rows`` have 'target', 'mode', 'cnr' and optionally 'saturated'."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -129,31 +131,43 @@ def plot_cnr(path, rows: list[dict], threshold: float, title: str = "") -> None:
 
     targets = list(dict.fromkeys(r["target"] for r in rows))
     modes = list(dict.fromkeys(r["mode"] for r in rows))
-    fig, ax = plt.subplots(figsize=(7, 3.8))
+    fig, ax = plt.subplots(figsize=(9.5, 4.0))
     w = 0.8 / len(modes)
+    top = 3.0 * max([threshold, *[float(r["cnr"]) for r in rows if np.isfinite(r["cnr"])]])
+    any_sat = False
     for j, m in enumerate(modes):
         for i, t in enumerate(targets):
             r = next((r for r in rows if r["target"] == t and r["mode"] == m), None)
             if r is None:
                 continue
+            x = i + (j - (len(modes) - 1) / 2) * w
             v = max(float(r["cnr"]), 0.0)
-            ax.bar(i + (j - (len(modes) - 1) / 2) * w, v, w * 0.95, color=f"C{j}",
-                   hatch="//" if r.get("saturated") else None, edgecolor="k", lw=0.4,
-                   label=m if i == 0 else None)
-    ax.axhline(threshold, color="k", ls="--", lw=1, label=f"visible: ≥ {threshold:g}")
+            if r.get("saturated"):
+                any_sat = True
+                ax.bar(x, top, w * 0.95, facecolor="none", edgecolor=f"C{j}", hatch="//", lw=1.0)
+                ax.text(x, 0.3, f"saturated (CNR {v:.2g})", rotation=90, ha="center", va="bottom", fontsize=7,
+                        color=f"C{j}", bbox=dict(facecolor="white", edgecolor="none", pad=1.0))
+            else:
+                ax.bar(x, v, w * 0.95, color=f"C{j}", edgecolor="k", lw=0.4)
+                if v < 0.05:
+                    ax.text(x, 0.02, "0", ha="center", va="bottom", fontsize=7, color=f"C{j}")
+        ax.bar(np.nan, 0, color=f"C{j}", label=m)  # legend entry per mode
+    if any_sat:
+        ax.bar(np.nan, 0, facecolor="none", edgecolor="k", hatch="//", label="saturated (drawn full height)")
+    ax.axhline(threshold, color="k", ls="--", lw=1, label=f"stands out: CNR ≥ {threshold:g}")
     ax.set_yscale("symlog", linthresh=1.0)
-    ax.set_ylim(0, None)
+    ax.set_ylim(0, top)
     ax.set_xticks(range(len(targets)), targets)
     ax.set_xlabel("reflector range")
-    ax.set_ylabel("glint visibility (0–1 linear, log above)")
-    ax.legend(fontsize=8, loc="upper left")
+    ax.set_ylabel("glint contrast-to-noise ratio\n(linear 0–1, log above)")
+    ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
     save_figure(path, fig)
 
 
 def plot_gate_sweep(path, sweep: dict) -> None:
-    """Visibility of each reflector against the gate's near range (the seed's field
+    """Glint CNR of each reflector against the gate's near range (the seed's field
     procedure: raise the range until the glint vanishes), true ranges marked."""
     import matplotlib
 
@@ -168,11 +182,11 @@ def plot_gate_sweep(path, sweep: dict) -> None:
         v = sweep["vanish_gate_m"][lab]
         if v is not None:
             ax.plot([v], [sweep["threshold"]], "v", color=f"C{j}", ms=7)
-    ax.axhline(sweep["threshold"], color="k", ls="--", lw=1, label=f"visible: ≥ {sweep['threshold']:g}")
+    ax.axhline(sweep["threshold"], color="k", ls="--", lw=1, label=f"stands out: CNR ≥ {sweep['threshold']:g}")
     ax.set_yscale("symlog", linthresh=1.0)
     ax.set_ylim(0, None)
     ax.set_xlabel("gate near range R (m)  — dotted: true range; ▼: glint vanishes")
-    ax.set_ylabel("glint visibility (peak − ring) / noise")
+    ax.set_ylabel("glint CNR: (peak − surround) / noise")
     ax.set_title(f"Gate sweep, X = {sweep['pulses']} pulses: a glint vanishes 20–30 m (≈ cτ/2) "
                  "beyond its range", fontsize=10)
     ax.legend(fontsize=8)

@@ -104,16 +104,16 @@ class CCDDrive:
 #: The parts of seed 004's experiments.
 DRIVES: dict[str, CCDDrive] = {
     "icx618": CCDDrive("ICX618ALA", False, ("V2", "V3"), rows=494, cols=659,
-                       note="progressive; the paper's Figs. 2-3"),
+                       note="progressive; the drive of the published timing diagram"),
     "icx445": CCDDrive("ICX445ALA", False, ("V2", "V3"), ("VHLD", "VST"), rows=600, cols=1280,
                        line_time_s=1.0 / 25.0 / 1.3 / 600,
                        note="progressive; needs VHLD and VST as well; 1280x600 centre window "
                             "for >= 25 Hz"),
     "icx279": CCDDrive("ICX279AL-E", True, ("V1", "V3"), rows=291, cols=752, line_time_s=64e-6,
                        note="interlaced (PAL field 291 lines); readout on V1 and V3 assumed "
-                            "(not given in the paper)"),
+                            "(not published)"),
     "icx659": CCDDrive("ICX659ALA", True, ("V1", "V3"), rows=247, cols=752, line_time_s=63.5e-6,
-                       note="interlaced; +15 V readout on V1 and V3 (the paper)"),
+                       note="interlaced; +15 V readout on V1 and V3 (as published)"),
 }
 
 
@@ -363,9 +363,12 @@ def plot_waveforms(path, trace: DriveTrace, cycle: DriveTrace | None = None) -> 
     a.set_yticks([])
     a.set_xticks([])
     info = trace.info
-    a.set_title(f"{info['part']}: four-stage gated drive, X = {info['pulses']} pulses, gate {info['gate_range_m']:g} m "
-                f"(not to scale; {info['lines']} line shifts shown, frame {info['frame_s'] * 1e3:.3g} ms)",
-                fontsize=10)
+    # The top panel may draw a shortened frame (``trace``) of the run (``cycle``): the title
+    # gives the run's pulse count and frame time, and how much of it is drawn.
+    run = cycle.info if cycle is not None else info
+    a.set_title(f"{info['part']}: four-stage gated drive, X = {run['pulses']} pulses, gate {info['gate_range_m']:g} m, "
+                f"frame {run['frame_s'] * 1e3:.4g} ms\n(not to scale; first {info['pulses']} of {run['pulses']} "
+                f"pulses and {info['lines']} of {run['lines']} line shifts shown)", fontsize=10)
     a.text(0.0, -(len(names) - 1) * spacing - 0.75,
            "levels: SUB 0 / +20 V; V-phases −5.5 / 0 V, readout +15 V; LASER 0 / "
            f"{trace.levels['LASER'].max():g} W; RETURN = echo from the gate range", fontsize=8)
