@@ -59,7 +59,7 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
             "rpd_voltage_v": RpdBarrier().voltage_for_fraction(np.asarray(hdr.clamp_levels_electrons[:-1]) / fw)
             .tolist(),
         }
-        seed_vals["snr_dip_db"] = "none claimed"
+        seed_vals["snr_dip_db"] = "no loss"
         if not two:
             fam = three_segment_family(np.linspace(0.0005, 0.08, 800))
             model["family_f3_range"] = [fam[0]["fractions"][2], fam[-1]["fractions"][2]]
@@ -92,6 +92,7 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
             "seed": {
                 "4t_saturation_a": 8e-12,
                 "DE_start_a": 270e-12,
+                "D_a": 270e-12,
                 "max_usable_a": 10e-9,
                 "dr_gain_db": 62.0,
                 "row_share_time_s": 0.51e-3,
@@ -122,34 +123,54 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
 
 #: Labels of the comparison curves, by preset name.
 COMPARISON_LABELS = {
-    "seed001-normal": "normal (seed 001, 130 µs)",
-    "seed001-3seg": "segmented, 3 segments (seed 001)",
-    "seed003-4t": "plain 4T APS (seed 003, 33 ms)",
-    "seed003-overflow": "conditional overflow (seed 003)",
+    "seed001-normal": "normal CMOS, 130 µs",
+    "seed001-3seg": "segmented exposure, 3 segments, 130 µs",
+    "seed003-4t": "plain 4T APS, 33 ms",
+    "seed003-overflow": "conditional overflow, 33 ms",
 }
 
 
 def _fmt(v) -> str:
-    """A number (or list of numbers) to 4 significant figures."""
+    """A number (or list of numbers) to 4 significant figures; a list as "a, b"."""
     if isinstance(v, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+        return ", ".join(_fmt(x) for x in v)
     if isinstance(v, (float, np.floating)):
         return f"{float(v):.4g}"
     return str(v)
 
 
-#: Units of the seed-comparison fields (printed in the table).
-_UNITS = {"snr_dip_db": "dB", "rpd_voltage_v": "V (assumed mapping)", "family_f3_range": "of T",
-          "family_knee2_intensity_range": "× unit lux",
-          "normal_saturation": "× unit lux", "hdr_saturation": "× unit lux", "extension_db": "dB",
-          "knee_intensity": "× unit lux", "knee_dn": "DN", "4t_saturation_a": "A", "B_a": "A", "C_a": "A",
-          "D_a": "A", "E_a": "A", "max_usable_a": "A", "dr_gain_db": "dB", "dr_gain_equations_db": "dB",
-          "row_share_time_s": "s", "max_rows": "rows", "reset_ktc_e": "e- rms per reset",
-          "readout_reset_noise_e": "e- rms (signal before reset)", "share_ktc_e": "e- rms per sharing",
-          "dr_a_4t_db": "dB (4T)", "dr_b_lofic_db": "dB (lateral overflow)", "dr_c_overflow_db": "dB (this pixel)"}
+#: Readable row names and units of the paper-comparison fields (keys stay in the JSON).
+_ROWS = {
+    "normal_saturation": ("normal mode saturates at", "intensity units"),
+    "hdr_saturation": ("segmented mode saturates at", "intensity units"),
+    "extension_db": ("range extension", "dB"),
+    "knee_intensity": ("knee(s) at", "intensity units"),
+    "knee_dn": ("knee output(s)", "DN"),
+    "snr_dip_db": ("SNR dip at each knee", "dB"),
+    "rpd_voltage_v": ("barrier voltage(s), assumed mapping", "V"),
+    "family_f3_range": ("third-segment fraction, fits from", "of the frame"),
+    "family_knee2_intensity_range": ("second knee of the fits, from", "intensity units"),
+    "4t_saturation_a": ("plain 4T saturates at", "A"),
+    "B_a": ("first overflow starts (B)", "A"),
+    "C_a": ("second segment saturates (C)", "A"),
+    "D_a": ("third segment starts (D)", "A"),
+    "E_a": ("third segment saturates (E)", "A"),
+    "DE_start_a": ("third segment starts (D)", "A"),
+    "max_usable_a": ("largest usable photocurrent", "A"),
+    "dr_gain_db": ("DR gain over the 4T, simulated", "dB"),
+    "dr_gain_equations_db": ("DR gain over the 4T, equations", "dB"),
+    "row_share_time_s": ("charge-sharing time per row", "s"),
+    "max_rows": ("rows that fit in the frame", "rows"),
+    "reset_ktc_e": ("reset (kTC) noise per reset", "e- rms"),
+    "readout_reset_noise_e": ("noise of the signal before reset", "e- rms"),
+    "share_ktc_e": ("kTC noise per charge sharing", "e- rms"),
+    "dr_a_4t_db": ("DR, plain 4T", "dB"),
+    "dr_b_lofic_db": ("DR, lateral overflow capacitor", "dB"),
+    "dr_c_overflow_db": ("DR, conditional overflow", "dB"),
+}
 
 
-def _comparison_curves(size: int, seed: int) -> dict:
+def _comparison_curves(size: int, seed: int, skip_spike: bool = False) -> dict:
     """Normal, segmented, overflow (and spike) responses on a common illuminance axis."""
     from viform.report.response_plots import frame_response_curve, spike_response_curve
     from viform.sensors import presets
@@ -159,8 +180,8 @@ def _comparison_curves(size: int, seed: int) -> dict:
     for key, label in COMPARISON_LABELS.items():
         kw = {"height": size, "width": size} if key == "seed003-overflow" else {}
         curves[label] = frame_response_curve(presets.make_sensor(key, **kw), lux, size=size, seed=seed)
-    if presets.spike_available():
-        curves["spike camera (seed 000, Q = 100 e⁻)"] = spike_response_curve(
+    if presets.spike_available() and not skip_spike:
+        curves["spike camera, Q = 100 e⁻ (spikes per tick)"] = spike_response_curve(
             presets.make_sensor("spike"), np.geomspace(0.01, 1e4, 60), seed=seed
         )
     return curves
@@ -234,20 +255,25 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
 
         dev = presets.make_sensor(sensor, height=None, width=None)  # any test size
         # 2·τ̂ of dark on 16×16 pixels: ~500 dark spikes, τ̂ to ±5 % (0.4 dB).
+        dark_s = 2 * dev.parameters.longest_signal_interval_s
+        ticks = dark_s * dev.parameters.clock_hz
+        click.echo(f"{sensor}: simulating {dark_s:.3g} s of darkness ({ticks:.3g} ticks on "
+                   f"{min(size, 16)}×{min(size, 16)} pixels) to find the longest interval, then an "
+                   "illuminance sweep; long dark intervals take minutes", err=True)
         r = characterize_spike_sensor(
             dev,
             height=min(size, 16),
             width=min(size, 16),
             seed=seed,
-            dark_duration_s=2 * dev.parameters.longest_signal_interval_s,
+            dark_duration_s=dark_s,
         )
         result["spike"] = r
         c = r["snr_curve"]
         figures["snr.png"] = plots.snr_figure({"spike (interval SNR)": {"lux": c["lux"], "snr": c["snr"]}})
         lines = [
-            f"interval DR  {r['dynamic_range_db']:.2f} dB (expected "
-            f"{r['expected']['dynamic_range_db']:.2f} dB: τ̂ = Q/I_d = "
-            f"{r['longest_interval_s']:.3g} s, τ̌ = {r['shortest_interval_s']:.3g} s)"
+            f"interval DR  {r['dynamic_range_db']:.4g} dB (expected "
+            f"{r['expected']['dynamic_range_db']:.4g} dB: longest interval = threshold / dark current = "
+            f"{r['longest_interval_s']:.3g} s, shortest = one tick = {r['shortest_interval_s'] * 1e6:.3g} µs)"
         ]
     else:
         kw = {"height": min(size, 64), "width": min(size, 64)} if sensor == "seed003-overflow" else {}
@@ -288,15 +314,17 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
         if seed_fig:
             result["seed_comparison"] = seed_fig
             unit_lux = seed_fig.get("intensity_unit_lux")
-            lines.append(f"paper comparison ({seed_fig['source'].replace('seed', 'paper')}"
-                         + (f"; intensity unit = {unit_lux:.4g} lux" if unit_lux else "") + "):")
-            lines.append(f"  {'quantity':<22} {'model':>26}  {'paper':>14}  unit")
+            lines.append("the model next to the published figures"
+                         + (f" (1 intensity unit = {unit_lux:.4g} lux)" if unit_lux else "") + ":")
+            lines.append(f"  {'quantity':<37} {'model':>22}  {'published':>10}  unit")
             for k, v in seed_fig["model"].items():
                 ref = seed_fig["seed"].get(k)
-                lines.append(f"  {k:<22} {_fmt(v):>26}  {_fmt(ref) if ref is not None else '-':>14}  "
-                             f"{_UNITS.get(k, '')}")
+                name, unit = _ROWS.get(k, (k.replace("_", " "), ""))
+                val = " to ".join(_fmt(x) for x in v) if k.endswith("_range") else _fmt(v)
+                lines.append(f"  {name:<37} {val:>22}  {_fmt(ref) if ref is not None else '-':>10}  {unit}")
     if out_dir is not None:
-        curves = _comparison_curves(16, seed)
+        # The "spike" preset is the reference spike curve itself: draw it once.
+        curves = _comparison_curves(16, seed, skip_spike=sensor == "spike")
         label = COMPARISON_LABELS.get(sensor)
         if label is None:  # this sensor is not among the comparison curves: add it, bold
             label = f"{sensor} (this sensor)"

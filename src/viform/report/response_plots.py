@@ -2,7 +2,7 @@
 
 * :func:`response_figure` — normalized output vs illuminance of several sensors on one
   figure, linear and log axes side by side (normal, segmented, overflow, spike …);
-* :func:`snr_figure` — SNR (dB) vs illuminance;
+* :func:`snr_figure` — SNR (dB) vs illuminance (ends before saturation);
 * :func:`ptc_figure` — the photon-transfer curve of an EMVA 1288 sweep (temporal
   variance vs mean, both dark-corrected) with the fitted system gain K.
 
@@ -43,47 +43,66 @@ def spike_response_curve(sensor, lux_values, *, pixels: int = 32, seed: int = 0)
 
 def meaningful(c: dict, sat_fraction: float = 0.995) -> np.ndarray:
     """Points of a curve where the quantity means something: SNR ≥ 1 (above the noise floor)
-    and not past saturation (the output has reached ``sat_fraction`` of its plateau; the first
-    saturated point is kept so the curve ends at the knee into the plateau)."""
+    and before saturation (the output has reached ``sat_fraction`` of its plateau). The first
+    saturated point is dropped too: clipping collapses its variance, so its SNR would jump
+    up (39 → 61 dB on cmos) at the very end of the curve."""
     snr = np.asarray(c.get("snr", np.ones(len(c["lux"]))), dtype=np.float64)
     out = np.asarray(c["output"], dtype=np.float64)
     ok = np.isfinite(snr) & (snr >= 1.0)
-    sat = np.nonzero(out >= sat_fraction * np.nanmax(out))[0]
-    if sat.size:
-        ok[sat[0] + 1:] = False
+    if saturates(c, sat_fraction):
+        ok[np.nonzero(out >= sat_fraction * np.nanmax(out))[0][0]:] = False
     return ok
+
+
+def saturates(c: dict, sat_fraction: float = 0.995) -> bool:
+    """Whether the curve reaches its plateau within its range (the output stops rising)."""
+    out = np.asarray(c["output"], dtype=np.float64)
+    first = np.nonzero(out >= sat_fraction * np.nanmax(out))[0][0]
+    return bool(first < out.size - 1)
+
+
+#: Line styles and markers that keep overlapping curves apart (each legend entry visible).
+_STYLES = (("-", None), ("--", "o"), (":", "s"), ("-.", "^"), ((0, (5, 1, 1, 1)), "v"), ((0, (1, 1)), "D"))
 
 
 def response_figure(curves: dict, title: str = "Response curves", highlight: str | None = None):
     """Output vs illuminance for each named curve: linear axes (left), log axes (right).
 
-    Each curve starts where its SNR reaches 1 (below, the output is noise); the plateau past
-    saturation is drawn flat on the linear axes only. ``highlight`` names the curve drawn
-    bold (the sensor being characterized)."""
+    Each curve starts where its SNR reaches 1 (below, the output is noise). Curves that
+    coincide stay visible: each has its own dash pattern and hollow markers, drawn over the
+    bold ``highlight`` (the sensor being characterized), which sits underneath. The linear
+    panel spans a little past the highlighted sensor's saturation (else the slowest one's),
+    so its response is a curve rather than a line on the y axis; both panels have a legend."""
     plt = _plt()
-    fig, (ax_lin, ax_log) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for name, c in curves.items():
+    fig, (ax_lin, ax_log) = plt.subplots(1, 2, figsize=(12, 4.6))
+    for j, (name, c) in enumerate(curves.items()):
         lux, out = np.asarray(c["lux"]), np.asarray(c["output"])
         snr = np.asarray(c.get("snr", np.ones(len(lux))), dtype=np.float64)
         ok = np.isfinite(snr) & (snr >= 1.0)
-        lw, z = (2.6, 3) if name == highlight else (1.2, 2)
-        ax_lin.plot(lux[ok], out[ok], label=name, lw=lw, zorder=z)
-        ax_log.loglog(lux[ok], out[ok], label=name, lw=lw, zorder=z)
-    # Linear panel: up to a little past the last sensor's saturation, so the knees show.
-    onsets = [float(np.asarray(c["lux"])[np.argmax(np.asarray(c["output"]) >= 0.999)]) for c in curves.values()]
-    ax_lin.set_xlim(0, 1.3 * max(onsets))
-    ax_lin.set(xlabel="illuminance on the sensor (lux)", ylabel="output / max output", title="linear axes")
+        ls, mk = _STYLES[j % len(_STYLES)]
+        if name == highlight:
+            kw = dict(lw=4.0, ls="-", marker=None, zorder=2, alpha=0.45, color="k")
+        else:
+            kw = dict(lw=1.3, ls=ls, marker=mk, markevery=0.08, ms=5, mfc="none", zorder=3 + j, color=f"C{j}")
+        ax_lin.plot(lux[ok], out[ok], label=name, **kw)
+        ax_log.loglog(lux[ok], out[ok], label=name, **kw)
+    onsets = {name: float(np.asarray(c["lux"])[np.argmax(np.asarray(c["output"]) >= 0.999)])
+              for name, c in curves.items()}
+    ax_lin.set_xlim(0, 1.5 * onsets.get(highlight, max(onsets.values())))
+    ax_lin.set_ylim(0, 1.05)
+    ax_lin.set(xlabel="illuminance on the sensor (lux)", ylabel="output / max output",
+               title="linear axes, up to the bold sensor's saturation")
     ax_log.set(xlabel="illuminance on the sensor (lux)", ylabel="output / max output",
                title="log axes (from SNR = 1)")
     for ax in (ax_lin, ax_log):
         ax.grid(True, which="both", alpha=0.3)
-    ax_log.legend(fontsize=8)
+        ax.legend(fontsize=7)
     fig.suptitle(title)
     fig.tight_layout()
     return fig
 
 
-def snr_figure(curves: dict, title: str = "SNR vs irradiance"):
+def snr_figure(curves: dict, title: str = "SNR vs illuminance"):
     """SNR in dB vs illuminance (input-referred for frame sensors, interval SNR for spikes).
 
     Curves stop where SNR means nothing: below SNR = 1 (0 dB) and past saturation (see
@@ -96,13 +115,12 @@ def snr_figure(curves: dict, title: str = "SNR vs irradiance"):
         lux = np.asarray(c["lux"])
         ok = meaningful(c) if "output" in c else (np.isfinite(snr) & (snr >= 1.0))
         ax.semilogx(lux[ok], 20 * np.log10(snr[ok]), label=name, color=f"C{j}")
-        if "output" in c and ok.any():
+        if "output" in c and ok.any() and saturates(c):
             last = np.nonzero(ok)[0][-1]
-            if np.asarray(c["output"])[last] >= 0.995 * np.nanmax(c["output"]):
-                ax.plot(lux[last], 20 * np.log10(snr[last]), "x", color=f"C{j}", ms=8)
-                crossed = True
+            ax.plot(lux[last], 20 * np.log10(snr[last]), "x", color=f"C{j}", ms=8)
+            crossed = True
     if crossed:
-        ax.plot([], [], "kx", label="saturation (curve ends)")
+        ax.plot([], [], "kx", label="last point before saturation")
     ax.axhline(0.0, color="k", lw=0.8, ls=":")
     ax.set_ylim(bottom=0.0)
     ax.set(xlabel="illuminance on the sensor (lux)", ylabel="SNR (dB)", title=title)

@@ -116,27 +116,27 @@ def _spike(**kw):
 
 PRESETS: dict[str, tuple[str, Callable]] = {
     "cmos": (
-        "conventional global-shutter CMOS, 10 ms exposure at 30 fps (seed 000 §2, timed mode)",
+        "conventional global-shutter CMOS, 10 ms exposure at 30 fps",
         lambda **kw: FrameSensor(
             FramePixelParameters(), exposure_s=10e-3, frame_rate_hz=30.0, **kw
         ),
     ),
     "seed001-normal": (
-        "seed 001 5T pixel, normal mode, 130 µs exposure",
+        "5T global-shutter pixel, normal mode, 130 µs exposure",
         lambda **kw: FrameSensor(
             seed001_pixel_parameters(), exposure_s=SEED001_EXPOSURE_S, frame_rate_hz=60.0, **kw
         ),
     ),
     "seed001-2seg": (
-        "seed 001 fig. 8: two-segment exposure (T1:T2 = 5:1, barrier 5/12 FW)",
+        "segmented exposure, two segments (T1:T2 = 5:1, barrier 5/12 of the full well)",
         lambda **kw: _seed001_segmented(SEED001_2SEG_FRACTIONS, SEED001_2SEG_BARRIERS_FW, **kw),
     ),
     "seed001-3seg": (
-        "seed 001 fig. 9: three-segment exposure (0.74:0.25:0.01, barriers 0.344/0.874 FW)",
+        "segmented exposure, three segments (0.74:0.25:0.01, barriers 0.344/0.874 of the full well)",
         lambda **kw: _seed001_segmented(SEED001_3SEG_FRACTIONS, SEED001_3SEG_BARRIERS_FW, **kw),
     ),
     "seed003-4t": (
-        "seed 003 reference plain 4T APS, 33.33 ms integration at 30 fps",
+        "plain 4T APS, 33.33 ms integration at 30 fps",
         lambda **kw: FrameSensor(
             seed003_pixel_parameters(),
             exposure_s=sum((32.8e-3, 0.5e-3, 0.03e-3)),
@@ -145,15 +145,15 @@ PRESETS: dict[str, tuple[str, Callable]] = {
         ),
     ),
     "seed003-overflow": (
-        "seed 003 conditional-overflow pixel, CF = 500 fF, t = 32.8/0.5/0.03 ms at 30 fps",
+        "conditional-overflow pixel, C_F = 500 fF, integration 32.8/0.5/0.03 ms at 30 fps",
         lambda **kw: OverflowSensor(seed003_pixel_parameters(), **kw),
     ),
     "seed003-overflow-ktc": (
-        "seed 003 conditional-overflow pixel with the readout's reset (kTC) noise (120 e- per reset)",
+        "conditional-overflow pixel with the readout's reset (kTC) noise (120 e- per reset)",
         lambda **kw: OverflowSensor(seed003_pixel_parameters(), ktc_noise=True, **kw),
     ),
     "seed003-lofic": (
-        "seed 003 fig. 5(b): lateral-overflow capacitor pixel, C_S = 500 fF read with the photodiode "
+        "lateral-overflow capacitor pixel, C_S = 500 fF read with the photodiode "
         "at low gain, 33.33 ms at 30 fps",
         lambda **kw: FrameSensor(
             lofic_pixel_parameters(),
@@ -207,4 +207,4 @@ def describe_preset(name: str) -> str:
         from viform.sensors.spike_presets import describe_spike_preset
 
         return describe_spike_preset(name)
-    return "seed 000 spike camera (Q = 100 e⁻, 40 kHz)" if name == "spike" else PRESETS[name][0]
+    return "spike camera (Q = 100 e⁻, 40 kHz)" if name == "spike" else PRESETS[name][0]
