@@ -77,6 +77,25 @@ def test_cli_writes_video_plot_report(tmp_path):
     assert not list(out.glob(".*"))  # no temporary files left
 
 
+def test_cli_console_counts_add_up_and_plan_matches_figures(tmp_path, capsys):
+    """The console's frame counts add up (captured = transmitted + still in the ring + lost), and
+    the run describes its 3:1 sampling with the same words as ``highspeed-figures``."""
+    import re
+
+    rc = main(["highspeed", "translating", "--frames", "10", "--render", "32x18", "--steps", "none",
+               "--out", str(tmp_path / "hs")])
+    assert rc == 0
+    text = capsys.readouterr().out
+    m = re.search(r"captured (\d+) = transmitted (\d+) \+ still in the DDR ring (\d+) .*\+ lost (\d+)", text)
+    assert m, text
+    cap, sent, ring, lost = map(int, m.groups())
+    assert (cap, sent) == (10, 2) and cap == sent + ring + lost
+    sampling = re.search(r"sampling: (.*) -> ", text).group(1)
+    assert "link alone: 4:1" in sampling and "overruns after" in sampling
+    assert main(["highspeed-figures"]) == 0
+    assert sampling in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("args, name", [
     (["--roi", "1400x720"], "roi"),
     (["--interface", "gige", "--max-decimation", "8"], "interface"),
@@ -132,7 +151,7 @@ def test_highspeed_figures_table_and_json(tmp_path, capsys):
     out = tmp_path / "f"
     assert main(["highspeed-figures", "--json-file", str(tmp_path / "f.json")]) == 0
     text = capsys.readouterr().out
-    assert "paper" in text and "fps" in text and "{" not in text
+    assert "published" in text and "paper" not in text and "fps" in text and "{" not in text
     data = json.loads((tmp_path / "f.json").read_text())
     assert data["reduced_2500fps_full_frame"]["fps_1280x864"] == pytest.approx(2500, rel=1e-3)
     assert main(["highspeed-figures", "--json"]) == 0

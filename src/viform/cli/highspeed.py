@@ -42,18 +42,21 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
               help="Largest N the frame-sampling counter allows; a link that needs more is refused.")
 @click.option("--ae/--no-ae", default=True, show_default=True, help="Auto-exposure.")
 @click.option("--meter", type=click.Choice(["mean", "weighted", "percentile"]), default="mean",
-              show_default=True, help="AE feedback: the seed's mean gray, centre-weighted, or 99th percentile.")
+              show_default=True, help="Auto-exposure feedback: mean gray of the frame, centre-weighted mean, "
+                                      "or 99th percentile.")
 @click.option("--target", "target_gray", type=float, default=128.0, show_default=True,
-              help="AE target gray R_i (0-255); dead band ±--band.")
-@click.option("--band", "band_gray", type=float, default=15.0, show_default=True)
+              help="Auto-exposure target gray (0-255); dead band ±--band.")
+@click.option("--band", "band_gray", type=float, default=15.0, show_default=True,
+              help="Auto-exposure dead band: no change while the gray is within target ± band (0-255 levels).")
 @click.option("--ae-saturated-cut", type=float, default=None,
-              help="Optional saturation-aware AE step k (0<k<1, e.g. 0.125): N×k while most pixels "
-                   "are at 255. Default: the seed's eq. (6) alone.")
+              help="Optional saturation-aware auto-exposure step k (0<k<1, e.g. 0.125): exposure ×k while "
+                   "most pixels are at 255. Default: the plain rule, exposure scaled by target / mean gray.")
 @click.option("--equalize/--no-equalize", default=True, show_default=True, help="Histogram equalization.")
 @click.option("--eq-source", type=click.Choice(["same", "previous"]), default="same", show_default=True,
               help="Equalize each frame with its own histogram (gathered while it is buffered) "
                    "or with the previous transmitted frame's (flashes after a light step).")
-@click.option("--eq-method", type=click.Choice(["shift", "float"]), default="shift", show_default=True)
+@click.option("--eq-method", type=click.Choice(["shift", "float"]), default="shift", show_default=True,
+              help="Equalization arithmetic: integer bit shifts (as in the camera's FPGA) or floating point.")
 @click.option("--frames", "n_frames", type=int, default=200, show_default=True, help="Sensor frames to capture.")
 @click.option("--exposure-us", type=float, default=100.0, show_default=True,
               help="Initial exposure (fixed with --no-ae), µs.")
@@ -64,9 +67,11 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
 @click.option("--steps", default="0.03:10,0.07:0.1", show_default=True,
               help="Illuminance steps TIME_S:FACTOR,... applied to the scene ('none' for none).")
 @click.option("--scene-fps", type=float, default=None, help="Frame rate of a video SCENE (if it declares none).")
-@click.option("--video", "video_format", type=click.Choice(["gif", "mp4"]), default="gif", show_default=True)
-@click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="highspeed_out", show_default=True)
+@click.option("--video", "video_format", type=click.Choice(["gif", "mp4"]), default="gif", show_default=True,
+              help="Format of the video of the transmitted frames.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed of the simulated noise.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="highspeed_out", show_default=True,
+              help="Folder for the video, exposure.png and report.json.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON instead of the summary.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None,
               help="Also write the report JSON to this file (OUT/report.json is always written).")
@@ -148,11 +153,16 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     lk = report["link"]
     click.echo(f"sensor: {window.width}x{window.height} {mode} @ {timing.pixel_clock_hz / 1e6:g} MHz -> "
                f"{report['sensor_frame_rate_hz']:.1f} fps ({report['timing']['cycles_per_frame']} cycles/frame)")
-    click.echo(f"link: {interface} max {lk['link_max_frame_rate_hz']:.1f} fps, decimation {lk['decimation']}:1 "
-               f"-> {lk['transmitted_frame_rate_hz']:.1f} fps; DDR ring {lk['buffer_capacity_frames']} frames "
-               f"({lk['buffer_record_s']:.3f} s); first overrun after {lk['time_to_first_overrun_s']:.4g} s")
-    click.echo(f"frames: captured {report['frames_captured']}, buffered {report['frames_buffered_at_end']}, "
-               f"transmitted {report['frames_transmitted']}, dropped {report['frames_dropped']}")
+    click.echo(f"link: {interface} max {lk['link_max_frame_rate_hz']:.1f} fps; DDR ring "
+               f"{lk['buffer_capacity_frames']} frames ({lk['buffer_record_s']:.3f} s)")
+    click.echo("sampling: " + decimation_plan_text(lk["decimation"], lk["decimation_strict"],
+                                                    lk["time_to_first_overrun_s"], lk["sustain_target_s"])
+               + f" -> {lk['transmitted_frame_rate_hz']:.1f} fps sent")
+    cap, sent, lost = report["frames_captured"], report["frames_transmitted"], report["frames_dropped"]
+    waiting = max(0, -(-cap // lk["decimation"]) - sent - report["selected_but_overwritten"])
+    click.echo(f"frames: captured {cap} = transmitted {sent} + still in the DDR ring {cap - sent - lost} "
+               f"({waiting} of them picked for the link, not yet sent; the rest skipped by the "
+               f"{lk['decimation']}:1 sampling) + lost {lost} (overwritten before sending)")
     for s in report["ae_settling"]:
         if s["settle_frames"] is None:
             click.echo(f"AE: step at {s['step_time_s']:g} s did not settle within the recording "
@@ -163,8 +173,19 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     click.echo(f"wrote {Path(out_dir) / report['files']['video']}, exposure.png, report.json")
 
 
+def decimation_plan_text(decimation: int, strict: int, overrun_s: float, sustain_s: float) -> str:
+    """One wording of the N:1 frame-sampling plan for ``highspeed`` and ``highspeed-figures``:
+    the link alone keeps up at ``strict``:1; below that the DDR ring absorbs the excess until
+    it first overruns (the default choice keeps that beyond ``sustain_s``)."""
+    if decimation >= strict:
+        return f"{decimation}:1 (the link keeps up: never overruns)"
+    kept = "≥" if overrun_s >= sustain_s else "<"
+    return (f"{decimation}:1 with the DDR ring taking the excess (link alone: {strict}:1), "
+            f"overruns after {overrun_s:.4g} s ({kept} {sustain_s / 3600:g} h)")
+
+
 def format_figures(fig: dict) -> str:
-    """The paper's figures next to the model's, as a small table with units."""
+    """The published figures next to the model's, as a small table with units."""
     red, nor = fig["reduced_1280x720_100MHz"], fig["normal_full_1280x864_133MHz"]
     r166, r25 = fig["reduced_166MHz"], fig["reduced_2500fps_full_frame"]
     links = fig["links_fps_1280x720x8"]
@@ -180,8 +201,8 @@ def format_figures(fig: dict) -> str:
         ("CameraLink, 1280x720x8 bit", f"{links['cameralink']:.0f} fps", "555 fps"),
         ("DDR4 ring", f"{ddr['capacity_frames']} frames ({ddr['record_s_at_sensor_rate']:.2f} s)",
          "2 330 frames"),
-        ("frame sampling", f"{dec['strict']}:1 strict; 3:1 overruns the ring after "
-         f"{dec['time_to_first_overrun_s_at_3to1']:.2f} s", "3:1"),
+        ("frame sampling", decimation_plan_text(3, dec["strict"], dec["time_to_first_overrun_s_at_3to1"],
+                                                dec.get("sustain_target_s", 3600.0)), "3:1"),
         ("equalization shifts", f">>{eq['shifts'][0]} + >>{eq['shifts'][1]}", ">>12 + >>15"),
         ("equalization worst error", f"{eq['max_abs_error_uncompensated']:.1f} → "
          f"{eq['max_abs_error_compensated']:.2f} levels", "'close to 0'"),
@@ -192,7 +213,7 @@ def format_figures(fig: dict) -> str:
                      "not settled" if n is None else f"{n} frames ({s['settle_s'] * 1e3:.2f} ms)", "-"))
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
-    head = f"{'quantity':<{w0}}  {'model':<{w1}}  paper"
+    head = f"{'quantity':<{w0}}  {'model':<{w1}}  published"
     return "\n".join([head, "-" * len(head)] + [f"{a:<{w0}}  {b:<{w1}}  {c}" for a, b, c in rows])
 
 
@@ -203,7 +224,7 @@ def format_figures(fig: dict) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print the numbers as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON here.")
 def highspeed_figures(out_dir, as_json, json_file):
-    """Print the paper's figures next to the model's (timing, link, buffer, equalization)."""
+    """Print the published LUX13HS camera figures next to the model's (timing, link, buffer, equalization)."""
     from viform._io import write_json
     from viform.isp.highspeed_pipeline import before_after, plot_before_after, seed_figures
 
