@@ -15,6 +15,7 @@ sensor description and provenance, to a JSON sidecar beside it (``clip.dat.json`
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from pathlib import Path
 
@@ -23,7 +24,7 @@ import numpy as np
 from viform._io import atomic_open
 from viform._validate import ViformError, check_int, check_positive
 from viform.stream.container import SpikeSource, block_ticks_for
-from viform.stream.sidecar import read_sidecar, sidecar_path, source_metadata, stream_header, write_sidecar
+from viform.stream.sidecar import read_sidecar, sidecar_body, sidecar_path, source_metadata, stream_header
 
 #: Readout clock assumed for ``.dat`` files when none is given, Hz (seed 000 §6: 40 kHz).
 DEFAULT_DAT_CLOCK_HZ = 40_000.0
@@ -212,25 +213,44 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     """Write ``source`` as a ``.dat`` file, block by block and atomically, with its JSON sidecar.
 
     The sidecar (:func:`viform.stream.sidecar.stream_header` fields plus the data size and
-    BLAKE2b checksum) is written after the data; a reader notices a crash in between as a size
-    or checksum mismatch, never as silently different bits.
+    BLAKE2b checksum) is prepared before the data is renamed in and renamed right after it; a
+    SIGKILL between the two renames leaves the new data beside the old sidecar, which a reader
+    reports as a checksum mismatch (never as silently different bits).
     """
+    from viform._io import TMP_MARK, clean_stale
+
     path = Path(path)
     _frame_bytes(source.height, source.width)
     block_ticks = block_ticks_for(source.height, source.width, block_ticks)
     digest = hashlib.blake2b(digest_size=16)
     size = 0
-    with atomic_open(path, "wb") as f:
-        for _, block in source.iter_blocks(block_ticks):
-            raw = pack_frames(block, flip)
-            digest.update(raw)
-            size += len(raw)
-            f.write(raw)
-        f.flush()
-        os.fsync(f.fileno())
-    if sidecar:
-        write_sidecar(path, stream_header(source, rows="bottom-up" if flip else "upright",
-                                          extra={"data_bytes": size, "blake2b": digest.hexdigest()}))
-    else:  # an old sidecar would describe other bits
-        sidecar_path(path).unlink(missing_ok=True)
+    side = sidecar_path(path)
+    # the new sidecar is ready before the data is renamed in, so the two renames follow each
+    # other at once (a kill between them is the only moment data and sidecar disagree)
+    pending = side.with_name(f".{side.name}{TMP_MARK}{os.getpid()}-pending.json")
+    clean_stale(side)
+    renamed = False
+    try:
+        with atomic_open(path, "wb") as f:
+            for _, block in source.iter_blocks(block_ticks):
+                raw = pack_frames(block, flip)
+                digest.update(raw)
+                size += len(raw)
+                f.write(raw)
+            f.flush()
+            os.fsync(f.fileno())
+            if sidecar:
+                body = sidecar_body(stream_header(source, rows="bottom-up" if flip else "upright",
+                                                  extra={"data_bytes": size, "blake2b": digest.hexdigest()}))
+                pending.write_text(json.dumps(body, indent=2) + "\n")
+        renamed = True
+        if sidecar:
+            os.replace(pending, side)
+        else:  # an old sidecar would describe other bits
+            side.unlink(missing_ok=True)
+    except BaseException:
+        if renamed and pending.exists():  # interrupted between the renames: finish the pair
+            os.replace(pending, side)
+        pending.unlink(missing_ok=True)
+        raise
     return path

@@ -104,19 +104,24 @@ def write_sidecar(data_path, metadata: dict) -> Path:
     """
     from viform._io import write_json
 
-    if not isinstance(metadata, dict):
-        raise ViformError(f"sidecar metadata must be a dict, got {type(metadata).__name__}")
+    path = sidecar_path(data_path)
+    write_json(path, sidecar_body(metadata))
+    return path
+
+
+def sidecar_body(metadata: dict) -> dict:
+    """The JSON object :func:`write_sidecar` writes: markers, provenance, ``metadata``, checksum."""
     from viform._io import _jsonable
 
+    if not isinstance(metadata, dict):
+        raise ViformError(f"sidecar metadata must be a dict, got {type(metadata).__name__}")
     body = {"format": SIDECAR_FORMAT, "version": SIDECAR_VERSION}
     body.update({k: v for k, v in provenance().items() if k not in metadata})
     body.update(metadata)
     body.pop(DIGEST_KEY, None)
     body = json.loads(json.dumps(body, default=_jsonable))
     body[DIGEST_KEY] = _digest(body)
-    path = sidecar_path(data_path)
-    write_json(path, body)
-    return path
+    return body
 
 
 #: Field holding the BLAKE2b of the rest of the sidecar (damage or edits are noticed on read).
