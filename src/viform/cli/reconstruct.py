@@ -138,6 +138,7 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
     writer = video_writer = None
     npz_context = None
     peak = None
+    lux_per_rate = None  # lux per spike a tick of the first image (light ∝ firing rate)
     summary_rows = []
     try:
         if folder is not None:
@@ -171,6 +172,8 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
             rate = image.spikes_per_s / source.clock_hz
             if peak is None:
                 peak = float(np.percentile(rate, 99.9)) or float(rate.max()) or 1.0
+                if image.lux is not None and float(np.mean(rate)) > 0:
+                    lux_per_rate = float(np.mean(image.lux)) / float(np.mean(rate))
             png = _png(method, display, scale, image, rate, peak)
             if folder is not None:
                 writer.append("spikes_per_s", image.spikes_per_s)
@@ -211,7 +214,11 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
                "window_ticks": window_ticks if method == "accumulation" else None,
                "frames": len(ticks), "times_s": times, "ticks": ticks,
                "mean_firing_rate_per_tick": [r[2] for r in summary_rows],
-               "mean_lux": [r[3] for r in summary_rows], "files": files}
+               "mean_lux": [r[3] for r in summary_rows], "files": files, "display": display}
+    if display in ("linear", "8bit") and not (method == "interval" and display == "8bit"):
+        white = peak if display == "linear" else scale
+        summary["white_firing_rate_per_tick"] = white
+        summary["white_lux"] = None if lux_per_rate is None or white is None else white * lux_per_rate
     if json_file is not None:
         write_json(json_file, summary)
     if as_json:
@@ -226,4 +233,10 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
             continue
         k, t, r, lux = row
         click.echo(f"{k:>8d} {t:>11.6f} {r:>13.4g} {'—' if lux is None else format(lux, '.4g'):>11}")
+    if summary.get("white_firing_rate_per_tick") is not None:
+        lux_text = "" if summary["white_lux"] is None else f" ≈ {summary['white_lux']:.3g} lux"
+        click.echo(f"grey scale: black = no spikes, white = {summary['white_firing_rate_per_tick']:.3g} spikes a "
+                   f"tick{lux_text}")
+    elif display == "255-tau":
+        click.echo("grey scale: 255 − the interval in ticks (short interval = bright)")
     click.echo(f"wrote {len(files)} file(s)" + (f" to {folder}" if folder is not None else f": {', '.join(files)}"))
