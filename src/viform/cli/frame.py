@@ -216,7 +216,7 @@ def _jsonable(obj):
     "json_path",
     type=click.Path(dir_okay=False),
     default=None,
-    help="Also write the results (EMVA 1288 / paper comparison) as JSON to this file.",
+    help="Also write the results (EMVA 1288, comparison with the published figures) as JSON to this file.",
 )
 @click.option(
     "--size",
@@ -288,13 +288,15 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
                 f"{'quantity':<22} {'measured':>12}  {'from parameters':>15}",
                 f"{'system gain K':<22} {r['system_gain_dn_per_e']:>7.4g} DN/e-  "
                 f"{e['system_gain_dn_per_e']:>9.4g} DN/e-",
-                f"{'quantum efficiency':<22} {r['quantum_efficiency']:>12.3g}",
-                f"{'dark noise':<22} {r['temporal_dark_noise_electrons']:>9.3g} e-",
-                f"{'saturation capacity':<22} {r['saturation_capacity_electrons']:>9.4g} e-",
+                f"{'quantum efficiency':<22} {r['quantum_efficiency']:>12.3g}  {e['quantum_efficiency']:>15.3g}",
+                f"{'dark noise':<22} {r['temporal_dark_noise_electrons']:>9.3g} e-  "
+                f"{e['temporal_dark_noise_electrons']:>12.3g} e-",
+                f"{'saturation capacity':<22} {r['saturation_capacity_electrons']:>9.4g} e-  "
+                f"{e['saturation_capacity_electrons']:>12.4g} e-",
                 f"{'sensitivity threshold':<22} {r['absolute_sensitivity_threshold_photons']:>5.3g} photons",
                 f"{'dynamic range':<22} {r['dynamic_range_db']:>9.4g} dB  {e['dynamic_range_db']:>12.4g} dB",
-                f"{'DSNU':<22} {r['dsnu_electrons']:>9.3g} e-",
-                f"{'PRNU':<22} {r['prnu_percent']:>10.3g} %",
+                f"{'DSNU':<22} {r['dsnu_electrons']:>9.3g} e-  {e['dsnu_electrons']:>12.3g} e-",
+                f"{'PRNU':<22} {r['prnu_percent']:>10.3g} %  {e['prnu_percent']:>13.3g} %",
                 f"{'linearity error':<22} {r['linearity_error_percent']:>10.3g} %",
             ]
             lines += [f"warning: {w}" for w in r["warnings"]]

@@ -234,8 +234,8 @@ def analyze_linear(series: FlatFieldSeries) -> dict:
         out["warnings"].append(
             f"temporal dark noise {np.sqrt(max(float(np.median(series.sigma2_y_dark)), 0.0)):.2g} DN is below "
             "the 0.49 DN EMVA 1288 asks for (1 DN is "
-            f"{1 / k:.4g} e-): K is fitted with a free offset, and the sensitivity threshold uses the "
-            "standard's 0.49 DN floor, so the measured DR is below the one from the parameters")
+            f"{1 / k:.4g} e-): K is fitted with a free offset, and the dark noise and sensitivity threshold "
+            "use the standard's 0.49 DN floor, so they read higher and the DR lower than from the parameters")
     return out
 
 
