@@ -230,7 +230,8 @@ def classify(cmd: str, result: dict, fp_original, fp_damaged, what: str = "") ->
         return "hang"
     if not isinstance(rc, int):
         return "crash"
-    lines = [line for line in err.splitlines() if line.strip() and "%|" not in line and "tick/s" not in line]
+    lines = [line for line in err.splitlines() if line.strip() and "%|" not in line and "tick/s" not in line
+             and not line.startswith("compiling ")]  # the first-run compile notice is not an error line
     if rc == 2:
         return "refused" if len(lines) == 1 and "Traceback" not in err and "internal error" not in err \
             else "multiline"
