@@ -308,7 +308,8 @@ class _PatternScene(Scene):
         return self.min_lux + (self.max_lux - self.min_lux) * value
 
     def _motion(self) -> tuple:
-        raise NotImplementedError
+        """The pattern's motion for the compiled kernel; each moving subclass (translating, rotating) defines it."""
+        raise NotImplementedError(f"{type(self).__name__} does not describe its motion to the compiled kernel")
 
     def _pattern_light(self, modulation=("none",)):
         """The compiled form of this pattern scene (None when a subclass changed the light)."""
