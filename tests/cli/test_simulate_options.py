@@ -69,3 +69,15 @@ def test_preset_file_with_a_bad_key_is_named(tmp_path, capsys):
                         "--out", str(tmp_path / "x.dat")], capsys)
     assert code == 2
     assert "threshold_electronz" in err
+
+
+@pytest.mark.parametrize("scene", ["moving-edge", "translating"])
+def test_metadata_records_the_scene_name_given(tmp_path, capsys, scene):
+    """moving-edge is a translating edge, but the file says what the user asked for."""
+    out = tmp_path / "s.dat"
+    code, _, err = run(["simulate", scene, "--duration", "0.0005", "--height", "4", "--width", "8", "--out",
+                        str(out)], capsys)
+    assert code == 0, err
+    assert open_spikes(out).metadata["scene"]["name"] == scene
+    code, text, _ = run(["info", str(out), "--json"], capsys)
+    assert code == 0 and json.loads(text)["scene"] == scene

@@ -518,7 +518,9 @@ class FlickerScene(Scene):
 def builtin_scene(name: str, height: int = 250, width: int = 400, **kw) -> Scene:
     """A built-in synthetic scene by name (see :data:`BUILTIN_SCENES`)."""
     check_choice("scene", name, tuple(BUILTIN_SCENES))
-    return BUILTIN_SCENES[name](height=height, width=width, **kw)
+    scene = BUILTIN_SCENES[name](height=height, width=width, **kw)
+    scene.name = name  # metadata records the name the user gave ("moving-edge", not its class's "translating")
+    return scene
 
 
 BUILTIN_SCENES = {
