@@ -192,6 +192,34 @@ def check_output_folder(option: str, folder) -> None:
         raise ViformError(f"{option}: the folder {existing} is not writable")
 
 
+#: What every command's ``--json-file`` does with folders (the CLI shows it in each command's help).
+JSON_FILE_HELP = ("Also write the JSON that --json prints to this file. Missing folders are created, as for "
+                  "--out; an existing file is replaced.")
+
+
+def check_json_file(path, option: str = "--json-file") -> None:
+    """Refuse, before any work, a JSON output ``path`` that cannot be written; None passes.
+
+    The one rule for every command's ``--json-file`` (applied centrally by the CLI): like
+    ``--out``, missing folders are created when the file is written (by :func:`write_json`);
+    refused are an existing folder or a FIFO/device at ``path``, a path under a regular file,
+    and a folder that is not writable. ``option`` (the flag the user typed) leads the message.
+    """
+    from viform._validate import ViformError
+
+    if path is None:
+        return
+    path = Path(path)
+    if path.is_dir():
+        raise ViformError(f"{option} = {str(path)!r} is an existing folder; give a file name for the JSON")
+    if path.exists() and not path.is_file():
+        raise ViformError(f"{option} = {str(path)!r} is not a regular file (a FIFO or device cannot hold the JSON)")
+    try:
+        _check_target(path, directory=False)
+    except ViformError as exc:
+        raise ViformError(f"{option} = {exc}") from None
+
+
 def write_json(path, data) -> None:
     """Write ``data`` as indented JSON, atomically."""
     with atomic_open(path, "w") as f:

@@ -67,9 +67,12 @@ def test_frame_folders_need_a_frame_rate(source_clips, tmp_path, capsys):
     assert "--frame-rate-hz" in capsys.readouterr().err
 
 
-def test_json_file_folder_must_exist(source_clips, tmp_path, capsys):
+def test_unwritable_json_file_refused_before_work(source_clips, tmp_path, capsys):
+    """--json-file under a regular file cannot be written: refused before any clip is made
+    (a missing folder would be created, as for --out)."""
     out = tmp_path / "ds"
+    (tmp_path / "no").write_text("a file")
     rc = main(_args(source_clips, out, "--json-file", str(tmp_path / "no" / "s.json")))
     err = capsys.readouterr().err
     assert rc == 2 and "--json-file" in err and err.count("\n") == 1, err
-    assert not out.exists() and not (tmp_path / "no").exists()
+    assert not out.exists()

@@ -168,9 +168,10 @@ def test_cli_writes_a_preset_that_loads(tmp_path, capsys):
     code = main(["calibrate", str(path), "--out", str(tmp_path / "p.txt")])
     _, err = capsys.readouterr()
     assert code == 2 and "--out" in err and err.count("\n") == 1
+    (tmp_path / "no").write_text("a file")  # a missing folder would be created, as for --out
     code = main(["calibrate", str(path), "--json-file", str(tmp_path / "no" / "r.json")])
     _, err = capsys.readouterr()
-    assert code == 2 and "--json-file" in err and err.count("\n") == 1 and not (tmp_path / "no").exists()
+    assert code == 2 and "--json-file" in err and err.count("\n") == 1 and (tmp_path / "no").is_file()
 
 
 @pytest.mark.skipif(not REAL.exists(), reason="shared real recording ../shared/data/spike not present")

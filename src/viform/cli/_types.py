@@ -12,7 +12,8 @@ walks every command and
 - refuses, before any work, requests too big for memory (``--height × --width`` above
   :func:`max_pixels`, ``VIFORM_MAX_PIXELS`` to raise it; pixel-ticks of ``--duration`` ×
   ``--clock-hz`` × pixels above :func:`max_pixel_ticks`, ``VIFORM_MAX_PIXEL_TICKS``), output
-  paths that cannot be written (an existing folder where a file goes, an unwritable folder),
+  paths that cannot be written (an existing folder where a file goes, an unwritable folder;
+  ``--json-file`` of every command by :func:`viform._io.check_json_file`, whose help it sets),
   and inputs that are not regular files or folders (a FIFO would block the reader).
 """
 
@@ -26,6 +27,7 @@ from pathlib import Path
 
 import click
 
+from viform._io import JSON_FILE_HELP, check_json_file
 from viform._validate import ViformError
 
 #: Largest magnitude of a float option unless the option declares ``viform_limit``.
@@ -232,7 +234,9 @@ def check_request(command: click.Command, kwargs: dict) -> None:
         if value is None or not isinstance(param.type, click.Path) or isinstance(value, (tuple, list)):
             continue
         path = Path(value)
-        if param.name in OUTPUT_NAMES:
+        if flags[param.name] == "--json-file":
+            check_json_file(path, "--json-file")  # one rule for every command (viform._io)
+        elif param.name in OUTPUT_NAMES:
             _check_output(flags[param.name], path)
         elif path.exists() and not (path.is_file() or path.is_dir()):
             raise ViformError(f"{flags[param.name]}: {str(path)!r} is not a regular file or folder "
@@ -288,4 +292,8 @@ def install(group: click.Group) -> None:
     for command in walk(group):
         for param in command.params:
             param.type = _bounded(param.type, param)
+            if isinstance(param, click.Option) and flag_of(param) == "--json-file":
+                # one behaviour, checked by one function and described the same way everywhere
+                param.type = click.Path()
+                param.help = JSON_FILE_HELP
         _wrap(command)

@@ -107,10 +107,9 @@ def calibrate(recording, out_path, name, max_ticks, height, width, clock_hz, no_
     the rounding to readout ticks), the flat-field gain spread, hot and dead pixels, and
     says for each figure when the recording is too short or not steady enough to give it.
     """
-    from viform._io import check_output_folder, write_json
+    from viform._io import check_json_file, check_output_folder, write_json
     from viform._validate import ViformError, check_int
     from viform.cli._common import open_source
-    from viform.cli.coding import check_json_file
     from viform.measure.calibration import calibrate as run
     from viform.measure.calibration import preset_from_calibration
     from viform.sensors.spike_presets import save_spike_preset
@@ -119,7 +118,7 @@ def calibrate(recording, out_path, name, max_ticks, height, width, clock_hz, no_
         if Path(out_path).suffix.lower() != ".json":
             raise ViformError(f"--out = {out_path!r} is not allowed: give a .json file for the preset")
         check_output_folder("--out", Path(out_path).resolve().parent)
-    check_json_file(json_file)  # its folder must exist: a typo must not create folders
+    check_json_file(json_file)
     if max_ticks is not None:
         check_int("--max-ticks", max_ticks, 20)
     source = open_source(recording, height, width, clock_hz, flip=not no_flip)

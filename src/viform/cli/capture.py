@@ -281,7 +281,7 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     SCENE: a built-in scene (dilemma, night-road-fog, translating, rotating, hdr, ...), an
     image, a video or a folder of images.
     """
-    from viform._io import check_output_folder, write_json
+    from viform._io import check_json_file, check_output_folder, write_json
     from viform.light.scenes import load_scene
     from viform.stream.io import FORMATS
 
@@ -302,8 +302,7 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     check_output_folder("--out", Path(out_path).resolve().parent)
     if preview:
         check_output_folder("--preview", Path(preview).resolve().parent)
-    if json_file:
-        check_output_folder("--json-file", Path(json_file).resolve().parent)
+    check_json_file(json_file)
     from viform.cli.compare import announce_preparation
     from viform.report.compare_report import finite_json
 

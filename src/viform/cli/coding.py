@@ -13,21 +13,10 @@ from pathlib import Path
 
 import click
 
+# one rule for every command's --json-file (missing folders are created, as for --out)
+from viform._io import check_json_file
 from viform._validate import ViformError
 from viform.cli.app import cli
-
-
-def check_json_file(json_file) -> None:
-    """Refuse, before any work, a ``--json-file`` whose folder does not exist (no folders are made)."""
-    if json_file is None:
-        return
-    from viform._io import check_output_folder
-
-    parent = Path(json_file).resolve().parent
-    if not parent.is_dir():
-        raise ViformError(f"--json-file = {str(json_file)!r} is not allowed: the folder {parent} does not exist "
-                          "(create it first)")
-    check_output_folder("--json-file", parent)
 
 
 def _emit(summary: dict, as_json: bool, json_file, line: str) -> None:
@@ -49,7 +38,7 @@ def _announce_compile(direction: str) -> None:
 _JSON_OPTIONS = (
     click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of the text."),
     click.option("--json-file", type=click.Path(dir_okay=False), default=None,
-                 help="Also write the JSON summary to this file (its folder must exist)."),
+                 help="Also write the JSON that --json prints to this file."),
 )
 
 

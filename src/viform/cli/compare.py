@@ -37,15 +37,12 @@ def parse_instants(text: str | None) -> list[float] | None:
 
 
 def check_outputs(out_dir, json_file) -> None:
-    from viform._io import check_output_folder
+    from viform._io import check_json_file, check_output_folder
 
     if Path(out_dir).exists() and not Path(out_dir).is_dir():
         raise ViformError(f"--out: {out_dir} is a file; give a folder")
     check_output_folder("--out", out_dir)
-    if json_file:
-        if Path(json_file).is_dir():
-            raise ViformError(f"--json-file: {json_file} is a folder; give a file name")
-        check_output_folder("--json-file", Path(json_file).resolve().parent)
+    check_json_file(json_file)
 
 
 def command_start() -> float:

@@ -54,11 +54,10 @@ def dataset(src, out_dir, preset, height, width, workers, scheduler, worker_memo
     worker processes or on a dask cluster; finished clips are checked and skipped when the
     command is run again. Exit status 1 when a clip failed (the others are still written).
     """
-    from viform._io import write_json
-    from viform.cli.coding import check_json_file
+    from viform._io import check_json_file, write_json
     from viform.datasets.build import build_dataset, make_settings
 
-    check_json_file(json_file)  # its folder must exist: a typo must not create folders
+    check_json_file(json_file)
     settings = make_settings(preset, height=height, width=width, seed=seed, gt_every=gt_every,
                              frame_rate_hz=frame_rate_hz, max_lux=max_lux, interpolation=interpolation,
                              light_sample_ticks=light_sample_ticks)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from viform._io import check_output_folder
+from viform._io import check_json_file, check_output_folder
 from viform._validate import ViformError, check_int, check_non_negative, check_positive
 from viform.cli.app import cli
 
@@ -21,10 +21,7 @@ def _check_outputs(json_path, out) -> None:
     """Refuse unusable --json-file/--out before any work, so a bad path leaves no figures behind."""
     if out is not None:
         check_output_folder("--out", Path(out))
-    if json_path is not None:
-        if Path(json_path).is_dir():
-            raise ViformError(f"--json-file: {json_path} is a folder; give a file name")
-        check_output_folder("--json-file", Path(json_path).resolve().parent)
+    check_json_file(json_path)
 
 
 def _emit(result: dict, print_table, as_json: bool, json_path) -> None:

@@ -27,6 +27,24 @@ _file_options = [
 ]
 
 
+_json_options = [
+    click.option("--json", "as_json", is_flag=True, help="Print the result as JSON instead of the table."),
+    click.option("--json-file", type=click.Path(dir_okay=False), default=None,
+                 help="Also write the JSON that --json prints to this file."),
+]
+
+
+def _emit_json(result: dict, as_json: bool, json_file) -> bool:
+    """``--json-file`` gets the same JSON as ``--json``; True when the table is not wanted."""
+    if json_file is not None:
+        from viform._io import write_json
+
+        write_json(json_file, json.loads(json.dumps(result, default=str)))
+    if as_json:
+        click.echo(json.dumps(result, indent=2, default=str))
+    return as_json
+
+
 def _apply(options):
     def decorator(f):
         for option in reversed(options):
@@ -109,9 +127,9 @@ def _table(summary: dict) -> None:
 
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
-@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@_apply(_json_options)
 @_apply(_file_options)
-def info(file, as_json, height, width, clock_hz, allow_partial, key, axes):
+def info(file, as_json, json_file, height, width, clock_hz, allow_partial, key, axes):
     """Resolution, duration, ticks, spike count, firing and data rates of a spike stream (or a coded file).
 
     Reading the stream checks it: zarr chunk checksums, the .npz zip checksums, a .dat
@@ -130,8 +148,7 @@ def info(file, as_json, height, width, clock_hz, allow_partial, key, axes):
         summary = dict(summary)
         summary.setdefault("verified", False)
         summary.setdefault("verification", "segment checksums not checked here: run viform verify")
-    if as_json:
-        click.echo(json.dumps(summary, indent=2, default=str))
+    if _emit_json(summary, as_json, json_file):
         return
     _table(summary)
 
@@ -155,9 +172,9 @@ def _verification(source) -> dict:
 
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
-@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+@_apply(_json_options)
 @_apply(_file_options)
-def verify(file, as_json, height, width, clock_hz, allow_partial, key, axes):
+def verify(file, as_json, json_file, height, width, clock_hz, allow_partial, key, axes):
     """Check that FILE (.dat with its sidecar, .npz, .zarr or .vfc) is whole and consistent.
 
     Reads everything: a .dat against the size and checksum in its sidecar, every member of a
@@ -171,8 +188,7 @@ def verify(file, as_json, height, width, clock_hz, allow_partial, key, axes):
     if result is None:
         result = verify_spikes(file, height=height, width=width, clock_hz=clock_hz, allow_partial=allow_partial,
                                key=key, axes=axes)
-    if as_json:
-        click.echo(json.dumps(result, indent=2, default=str))
+    if _emit_json(result, as_json, json_file):
         return
     if not result["verified"]:
         click.echo(f"{file}: readable, but not verified: {'; '.join(result['checks'])}")

@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from viform._io import check_output_folder
+from viform._io import check_json_file, check_output_folder
 from viform.cli.app import cli
 
 
@@ -243,10 +243,7 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
     # Check the outputs first, so a bad path fails at once and leaves no figures behind.
     if out_dir is not None:
         check_output_folder("--out", Path(out_dir))
-    if json_path is not None:
-        if Path(json_path).is_dir():
-            raise ViformError(f"--json-file: {json_path} is a folder; give a file name")
-        check_output_folder("--json-file", Path(json_path).resolve().parent)
+    check_json_file(json_path)
     presets.describe_preset(sensor)  # clear error for an unknown name
     result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
     figures = {}

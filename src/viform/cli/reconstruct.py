@@ -86,8 +86,7 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
     the REDS video data set is --method accumulation --display 8bit --scale 0.6 (41 ticks). Whole-stream output
     (--every N) is written frame by frame in bounded memory, with a progress bar.
     """
-    from viform._io import atomic_path, check_output_folder, save_image, write_json
-    from viform.cli.coding import check_json_file
+    from viform._io import atomic_path, check_json_file, check_output_folder, save_image, write_json
     from viform.imaging.sequence import NpzFrameWriter, reconstruct_ticks
 
     # ---- validate everything before any work
@@ -118,7 +117,7 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         check_output_folder("--out", (out.parent if out.suffix.lower() == ".png" else out).resolve())
     if video is not None:
         check_output_folder("--video", Path(video).resolve().parent)
-    check_json_file(json_file)  # its folder must exist: a typo must not create folders
+    check_json_file(json_file)
     source = _open(file, height, width, clock_hz, flip=not no_flip)
     if at is not None:
         times = _parse_times(at)

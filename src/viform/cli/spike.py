@@ -145,15 +145,14 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
     Memory stays bounded (blocks of about 50 MB) whatever the resolution and duration.
     """
-    from viform._io import check_output_folder, write_json
+    from viform._io import check_json_file, check_output_folder, write_json
     from viform.light.scenes import VideoScene, load_scene
     from viform.stream.io import FORMATS, save_spikes
 
     if Path(out_path).suffix.lower() not in FORMATS:
         raise ViformError(f"--out = {out_path!r}: the suffix must be one of {', '.join(FORMATS)}")
     check_output_folder("--out", Path(out_path).resolve().parent)
-    if json_file:
-        check_output_folder("--json-file", Path(json_file).resolve().parent)
+    check_json_file(json_file)
     if not max_lux > 0:
         raise ViformError(f"--max-lux = {max_lux!r} is not allowed: it must be > 0 lux")
     for flag, value in (("--height", height), ("--width", width)):
