@@ -12,6 +12,7 @@ import base64
 import html
 import json
 import math
+import textwrap
 import time
 from pathlib import Path
 
@@ -107,9 +108,20 @@ def _panel_grid(n):
     return math.ceil(n / cols), cols
 
 
-def _image_grid(n_panels: int, shape):
+#: Characters per line of a panel title (fontsize 8 in a 3.3-inch panel): longer sensor labels
+#: are wrapped so no title runs into its neighbour or off the figure's edge.
+TITLE_CHARS = 46
+
+
+def _panel_title(*lines: str) -> str:
+    """A panel title whose lines are wrapped to the panel's width."""
+    return "\n".join(textwrap.fill(line, TITLE_CHARS) for line in lines)
+
+
+def _image_grid(n_panels: int, shape, title_lines: int = 2):
     """A grid of image panels with room for titles, a suptitle and one colour bar on the right.
 
+    ``title_lines`` is the most lines any panel title has (see :func:`_panel_title`).
     Laid out by hand (no constrained layout: it costs seconds per figure on a busy machine).
     """
     import matplotlib.pyplot as plt
@@ -117,11 +129,13 @@ def _image_grid(n_panels: int, shape):
     rows, cols = _panel_grid(n_panels)
     h, w = shape
     panel_w = 3.3
-    panel_h = panel_w * h / w + 0.45  # image + two title lines
-    fig_w, fig_h = panel_w * cols + 1.6, panel_h * rows + 0.6
+    title_h = 0.14 * title_lines + 0.17  # fontsize-8 lines and the pad above the image
+    panel_h = panel_w * h / w + title_h
+    # one row of wide panels is short: keep room for the colour bar's label along its length
+    fig_w, fig_h = panel_w * cols + 1.6, max(panel_h * rows + 0.6, 3.4)
     fig, axes = plt.subplots(rows, cols, figsize=(fig_w, fig_h), squeeze=False,
                              gridspec_kw=dict(left=0.01, right=1 - 1.5 / fig_w, bottom=0.02, top=1 - 0.8 / fig_h,
-                                              wspace=0.06, hspace=0.45 / (panel_h - 0.45) + 0.05))
+                                              wspace=0.06, hspace=title_h / (panel_h - title_h) + 0.05))
     cax = fig.add_axes([1 - 1.15 / fig_w, 0.08, 0.16 / fig_w, 0.78])
     for ax in axes.flat:
         ax.set_xticks([])
@@ -129,6 +143,12 @@ def _image_grid(n_panels: int, shape):
     for ax in list(axes.flat)[n_panels:]:
         ax.axis("off")
     return fig, axes, cax
+
+
+def _suptitle(fig, text: str) -> None:
+    """A figure title wrapped to the figure's width (a grid of two or three panels is narrow)."""
+    chars = int(fig.get_figwidth() * 72 / 5.6)  # fontsize 10: about 5.6 pt a character
+    fig.suptitle(textwrap.fill(text, chars), fontsize=10)
 
 
 def _when(est, t):
@@ -146,7 +166,6 @@ def figure_instant(result, index: int):
     scene = result["scene"]
     shots = [s for s in result["shots"] if not s.skipped and s.lux_units]
     norm = _lux_norm(result)
-    fig, axes, cax = _image_grid(len(shots) + 1, scene.shape)
     floor = norm.vmin
     im = None
     cmap = plt.get_cmap(LUX_CMAP).with_extremes(bad=UNDER_COLOUR)
@@ -155,13 +174,14 @@ def figure_instant(result, index: int):
         est = s.estimates[index]
         panels.append((s.label, np.where(est.underexposed, np.nan, np.maximum(np.nan_to_num(est.lux), floor)),
                        _when(est, t)))
-    for ax, (title, lux, when) in zip(axes.flat, panels, strict=False):
+    titles = [_panel_title(title, when) for title, _, when in panels]
+    fig, axes, cax = _image_grid(len(panels), scene.shape, max((t.count("\n") + 1 for t in titles), default=2))
+    for ax, title, (_, lux, _) in zip(axes.flat, titles, panels, strict=False):
         im = ax.imshow(np.ma.masked_invalid(np.maximum(lux, floor)), cmap=cmap, norm=norm, interpolation="nearest")
-        ax.set_title(f"{title}\n{when}", fontsize=8)
-    fig.colorbar(im, cax=cax, label="illuminance on the sensor (lux, log scale)")
-    fig.suptitle(f"Scene '{scene.name}' at t = {t * 1e3:.2f} ms: truth and each sensor's image (same colour "
-                 "map; black = at or below the scene's darkest level; grey = under-exposed, no measurement)",
-                 fontsize=10)
+        ax.set_title(title, fontsize=8)
+    fig.colorbar(im, cax=cax, label="illuminance on the sensor\n(lux, log scale)")
+    _suptitle(fig, f"Scene '{scene.name}' at t = {t * 1e3:.2f} ms: truth and each sensor's image (same colour "
+              "map; black = at or below the scene's darkest level; grey = under-exposed, no measurement)")
     return fig
 
 
@@ -176,6 +196,8 @@ def figure_scene(result):
     fig.subplots_adjust(left=0.01, right=0.86, bottom=0.02, top=0.92)
     im = ax.imshow(scene.illuminance_lux(t), cmap=LUX_CMAP, norm=_lux_norm(result), interpolation="nearest")
     box = dict(boxstyle="round,pad=0.2", fc="black", alpha=0.55, lw=0)
+    renderer = fig.canvas.get_renderer()
+    placed = []  # label boxes drawn so far (moving parts can bring two labels together)
     for name, where in scene.landmarks(t).items():
         x, y = where[:2]
         if len(where) == 4:  # label placed apart, with an arrow to its point
@@ -183,8 +205,9 @@ def figure_scene(result):
                         bbox=box, arrowprops=dict(arrowstyle="->", color="white", lw=0.8))
             continue
         right = x > 0.7 * w  # labels near the right edge extend leftwards, so none is cut off
-        ax.annotate(name, (x, y), xytext=(0, 0), textcoords="offset points", fontsize=8, color="white",
-                    ha="right" if right else "left", va="top", bbox=box)
+        note = ax.annotate(name, (x, y), xytext=(0, 0), textcoords="offset points", fontsize=8, color="white",
+                           ha="right" if right else "left", va="top", bbox=box)
+        _clear_of(note, placed, renderer)
     ax.set_xticks([])
     ax.set_yticks([])
     cax = fig.add_axes([0.88, 0.1, 0.025, 0.78])
@@ -192,6 +215,17 @@ def figure_scene(result):
     ax.set_title(f"The scene '{scene.name}' at t = {t * 1e3:.2f} ms (the truth every sensor is scored against)",
                  fontsize=10)
     return fig
+
+
+def _clear_of(note, placed: list, renderer, step_pt: float = 11.0, tries: int = 8) -> None:
+    """Move a label down, a line at a time, until its box overlaps no label in ``placed``; add it."""
+    for _ in range(tries):
+        b = note.get_window_extent(renderer)
+        if not any(b.x0 < p.x1 and p.x0 < b.x1 and b.y0 < p.y1 and p.y0 < b.y1 for p in placed):
+            break
+        x, y = note.get_position()  # offset from the point, in points
+        note.set_position((x, y - step_pt))
+    placed.append(note.get_window_extent(renderer))
 
 
 def figure_errors(result, index: int):
@@ -205,22 +239,23 @@ def figure_errors(result, index: int):
     truth = cmp.log_lux(scene.illuminance_lux(t), lo, hi)
     import matplotlib.pyplot as plt
 
-    fig, axes, cax = _image_grid(len(shots), scene.shape)
+    titles = [_panel_title(s.label, f"saturated {s.estimates[index].saturated.mean():.0%}, "
+                                     f"under-exposed {s.estimates[index].underexposed.mean():.0%}") for s in shots]
+    fig, axes, cax = _image_grid(len(shots), scene.shape, max((t.count("\n") + 1 for t in titles), default=2))
     im = None
     # under-exposed pixels hold a bound, not a measurement: grey, as in the image panels
     cmap = plt.get_cmap("RdBu_r").with_extremes(bad=UNDER_COLOUR)
-    for ax, s in zip(axes.flat, shots, strict=False):
+    for ax, s, title in zip(axes.flat, shots, titles, strict=False):
         est = s.estimates[index]
         err = np.where(est.underexposed, np.nan, cmp.log_lux(est.lux, lo, hi) - truth)
         im = ax.imshow(np.ma.masked_invalid(err), cmap=cmap, vmin=-ERROR_SPAN_DECADES, vmax=ERROR_SPAN_DECADES,
                        interpolation="nearest")
-        ax.set_title(f"{s.label}\nsaturated {s.estimates[index].saturated.mean():.0%}, "
-                     f"under-exposed {s.estimates[index].underexposed.mean():.0%}", fontsize=8)
+        ax.set_title(title, fontsize=8)
     bar = fig.colorbar(im, cax=cax, extend="both")
-    bar.set_label("error, decades: log10(estimate / truth)\nclipped at ±2; red = too bright, blue = too dark",
+    bar.set_label("error: log10(estimate / truth), decades\nclipped at ±2\nred = too bright, blue = too dark",
                   fontsize=7)
-    fig.suptitle(f"Error against the truth at t = {t * 1e3:.2f} ms (one scale for every sensor; "
-                 "grey = under-exposed, no measurement)", fontsize=10)
+    _suptitle(fig, f"Error against the truth at t = {t * 1e3:.2f} ms (one scale for every sensor; "
+              "grey = under-exposed, no measurement)")
     return fig
 
 
@@ -229,8 +264,8 @@ def figure_dilemma(result):
     import matplotlib.pyplot as plt
 
     shots = [s for s in result["shots"] if not s.skipped and s.lux_units]
-    fig, ax = plt.subplots(figsize=(10.5, 5.6))
-    fig.subplots_adjust(left=0.08, right=0.64, bottom=0.11, top=0.92)
+    fig, ax = plt.subplots(figsize=(11.5, 5.6))
+    fig.subplots_adjust(left=0.07, right=0.6, bottom=0.11, top=0.92)
     markers = "osD^v<>phXP"
     colours = plt.get_cmap("tab10").colors
     placed: list[tuple[float, float]] = []
@@ -242,9 +277,11 @@ def figure_dilemma(result):
         ax.scatter([x], [y], s=70, marker=markers[i % len(markers)], color=colours[i % len(colours)],
                    label=f"{i + 1}  {s.label}", zorder=3, edgecolor="black", linewidth=0.5)
         # the point's number beside it (the legend names it); nudged when another sits close by
-        near = sum(1 for (px, py) in placed if abs(math.log10(px / x)) < 0.2 and abs(py - y) < 5)
-        ax.annotate(str(i + 1), (x, y), xytext=(6, 3 - 10 * near), textcoords="offset points", fontsize=8,
-                    fontweight="bold", color=colours[i % len(colours)])
+        # above it when it is the higher of the two, below when lower, so no marker hides a number
+        near = [py for (px, py) in placed if abs(math.log10(px / x)) < 0.2 and abs(py - y) < 5]
+        dy = 3 + (10 * len(near) if near and y >= max(near) else -10 * len(near))
+        ax.annotate(str(i + 1), (x, y), xytext=(7, dy), textcoords="offset points", fontsize=8,
+                    fontweight="bold", color=colours[i % len(colours)], zorder=5)
         placed.append((x, y))
     d = result["demand"]
     if d and math.isfinite(d["time_resolution_s"]):
@@ -266,8 +303,25 @@ def figure_dilemma(result):
     ax.set_ylabel("scene dynamic range captured (dB)")
     ax.set_title("The dilemma: time resolution against dynamic range (top left is better)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    _legend_at_right(fig, ax)
     return fig
+
+
+def _legend_at_right(fig, ax, chars: int = 44) -> None:
+    """The axes' legend on the figure's right, labels wrapped; the axes shrink so it fits.
+
+    Sensor labels are long (preset, Q, clock, method): the legend is measured after drawing
+    and the axes end where it begins, so no label is cut off at the figure's edge.
+    """
+    handles, labels = ax.get_legend_handles_labels()
+    if not handles:
+        return
+    wrapped = [textwrap.fill(lb, chars, subsequent_indent="      ") for lb in labels]
+    leg = fig.legend(handles, wrapped, fontsize=8, loc="center right", bbox_to_anchor=(0.995, 0.5))
+    box = leg.get_window_extent(fig.canvas.get_renderer())
+    if box.height > 0.98 * fig.bbox.height:  # many sensors: a taller figure, same legend
+        fig.set_figheight(box.height / fig.dpi / 0.95)
+    fig.subplots_adjust(right=0.985 - box.width / fig.bbox.width - 0.02)
 
 
 def figure_gated(result):
@@ -279,17 +333,19 @@ def figure_gated(result):
     if not shots:
         return None
     scene = result["scene"]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
-    fig.subplots_adjust(left=0.01, right=0.93, bottom=0.04, top=0.84, wspace=0.25)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+    fig.subplots_adjust(left=0.01, right=0.9, bottom=0.04, top=0.84, wspace=0.5)
     truth = scene.illuminance_lux(result["instants_s"][0])
     im0 = axes[0].imshow(truth, cmap=LUX_CMAP, norm=_lux_norm(result), interpolation="nearest")
     axes[0].set_title("passive light on the sensor (truth, lux)", fontsize=9)
-    fig.colorbar(im0, ax=axes[0], label="illuminance (lux)")
+    # each colour bar hugs its own image (different quantities: lux, photoelectrons)
+    fig.colorbar(im0, cax=axes[0].inset_axes([1.03, 0, 0.035, 1]), label="illuminance (lux, log scale)")
     e = np.maximum(shots[0].estimates[0].lux, 0.1)
     im1 = axes[1].imshow(e, cmap="viridis", norm=LogNorm(vmin=max(0.1, float(np.percentile(e, 1))),
                                                          vmax=max(1.0, float(e.max()))), interpolation="nearest")
     axes[1].set_title(f"{shots[0].label}: one frame", fontsize=9)
-    fig.colorbar(im1, ax=axes[1], label="laser-return photoelectrons per pixel (e⁻, log)")
+    fig.colorbar(im1, cax=axes[1].inset_axes([1.03, 0, 0.035, 1]), extend="min",
+                 label="laser-return photoelectrons\nper pixel (e⁻, log; < 0.1 at the bottom)")
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
