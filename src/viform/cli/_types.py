@@ -6,12 +6,15 @@ walks every command and
 - replaces float and int types by :class:`BoundedFloat` / :class:`BoundedInt`: finite, and
   |x| ≤ 1e12 for floats, |n| ≤ 2^31 for whole numbers (values past those overflow, hang or
   exhaust memory downstream); the error names the flag the user typed (``--duration``);
-  an option may declare its own limit with ``param.viform_limit``;
+  an option may declare its own limit with ``param.viform_limit``, and :data:`OPTION_BOUNDS`
+  gives some options a physical range with the reason (``lightcomm --clock-hz``, ``--bits``,
+  ``display --eye-ms``);
 - wraps each command so that a :class:`~viform._validate.ViformError` naming a Python
   parameter (``duration_s``) names the flag instead (``--duration``);
 - refuses, before any work, requests too big for memory (``--height × --width`` above
   :func:`max_pixels`, ``VIFORM_MAX_PIXELS`` to raise it; pixel-ticks of ``--duration`` ×
-  ``--clock-hz`` × pixels above :func:`max_pixel_ticks`, ``VIFORM_MAX_PIXEL_TICKS``), output
+  ``--clock-hz`` × pixels above :func:`max_pixel_ticks`, ``VIFORM_MAX_PIXEL_TICKS``; light-link
+  ticks of bits × ``--clock-hz`` / ``--bitrate`` above :data:`MAX_LINK_TICKS`), output
   paths that cannot be written (an existing folder where a file goes, an unwritable folder;
   ``--json-file`` of every command by :func:`viform._io.check_json_file`, whose help it sets),
   and inputs that are not regular files or folders (a FIFO would block the reader).
@@ -42,6 +45,25 @@ MAX_TICKS = 2**31
 #: Sampling rate assumed when a command with ``--duration`` is given no clock (the spike camera's 40 kHz).
 DEFAULT_RATE_HZ = 40_000.0
 
+#: Bounds of single options that the magnitude limit above does not give, by (command, option
+#: name): (low, high, unit, why). Values outside them describe no real device and would run for
+#: minutes or hours before doing anything useful; the error says what is allowed and why.
+OPTION_BOUNDS = {
+    ("lightcomm", "clock_hz"): (1.0, 1e8, "Hz", "a spike pixel is read at most every 10 ns, and every tick of the "
+                                               "link is simulated"),
+    ("lightcomm", "n_bits"): (1, 1_000_000, "bits", "0 errors in 10⁶ bits already bounds the bit-error rate below "
+                                                    "3e-6 at 95 %, and every bit is simulated tick by tick"),
+    ("display", "eye_ms"): (0.025, 200.0, "ms", "at least one 25 µs tick of the 40 kHz camera; the eye integrates "
+                                                "for 10–100 ms, and 200 ms already simulates 0.32 s of the camera"),
+}
+#: Ticks one run of the light link may simulate: it holds them all (about 1 kB each over its
+#: 8×8 pixels, ~8 µs each on one core), so 10⁶ ticks is about 1 GB and 10 s.
+MAX_LINK_TICKS = 1e6
+#: Ticks all the runs of one ``lightcomm`` may simulate (the BER sweeps repeat the link 23 times).
+MAX_LINK_TICKS_TOTAL = 4e6
+#: Runs and payload bits of the distance and ambient-light sweeps (``lightcomm --sweeps`` / ``--out``).
+SWEEP_RUNS, SWEEP_BITS = 23, 300
+
 #: Option names that hold an output path.
 OUTPUT_NAMES = ("out", "out_path", "out_dir", "output", "json_file", "json_path", "preview", "dst")
 #: Suffixes that name files (an existing folder of that name cannot be replaced by a file).
@@ -71,14 +93,24 @@ def max_pixel_ticks() -> float:
     return _env_number("VIFORM_MAX_PIXEL_TICKS", DEFAULT_MAX_PIXEL_TICKS)
 
 
+def _check_bounds(kind: click.ParamType, number, value, param, ctx) -> None:
+    """Refuse ``number`` outside the option's :data:`OPTION_BOUNDS` entry, saying why."""
+    if kind.bounds is None:
+        return
+    low, high, unit, why = kind.bounds
+    if not low <= number <= high:
+        kind.fail(f"{value!r} is not allowed: it must be in [{low:g}, {high:g}] {unit} ({why})", param, ctx)
+
+
 class BoundedFloat(click.ParamType):
-    """A finite float with |x| ≤ ``limit``, then the original type's own checks (ranges)."""
+    """A finite float with |x| ≤ ``limit`` (and within ``bounds``), then the original type's own checks."""
 
     name = "float"
 
-    def __init__(self, inner: click.ParamType | None = None, limit: float = FLOAT_LIMIT):
+    def __init__(self, inner: click.ParamType | None = None, limit: float = FLOAT_LIMIT, bounds=None):
         self.inner = inner if inner is not None else click.FLOAT
         self.limit = float(limit)
+        self.bounds = bounds
 
     def convert(self, value, param, ctx):
         if isinstance(value, bool):
@@ -91,6 +123,7 @@ class BoundedFloat(click.ParamType):
             self.fail(f"{value!r} is not allowed: give a finite number", param, ctx)
         if abs(number) > self.limit:
             self.fail(f"{value!r} is not allowed: its magnitude must be at most {self.limit:g}", param, ctx)
+        _check_bounds(self, number, value, param, ctx)
         return self.inner.convert(number if isinstance(value, str) else value, param, ctx)
 
     def get_metavar(self, param, ctx=None):
@@ -101,13 +134,14 @@ class BoundedFloat(click.ParamType):
 
 
 class BoundedInt(click.ParamType):
-    """A whole number with |n| ≤ ``limit``, then the original type's own checks (ranges)."""
+    """A whole number with |n| ≤ ``limit`` (and within ``bounds``), then the original type's own checks."""
 
     name = "integer"
 
-    def __init__(self, inner: click.ParamType | None = None, limit: int = INT_LIMIT):
+    def __init__(self, inner: click.ParamType | None = None, limit: int = INT_LIMIT, bounds=None):
         self.inner = inner if inner is not None else click.INT
         self.limit = int(limit)
+        self.bounds = bounds
 
     def convert(self, value, param, ctx):
         if isinstance(value, bool):
@@ -129,6 +163,7 @@ class BoundedInt(click.ParamType):
             number = int(f)
         if abs(number) > self.limit:
             self.fail(f"{value!r} is not allowed: its magnitude must be at most {self.limit}", param, ctx)
+        _check_bounds(self, number, value, param, ctx)
         return self.inner.convert(number, param, ctx)
 
     def get_metavar(self, param, ctx=None):
@@ -138,14 +173,14 @@ class BoundedInt(click.ParamType):
         return "INT"
 
 
-def _bounded(kind: click.ParamType, param) -> click.ParamType:
+def _bounded(kind: click.ParamType, param, bounds=None) -> click.ParamType:
     if isinstance(kind, (BoundedFloat, BoundedInt)):
         return kind
     limit = getattr(param, "viform_limit", None)
     if isinstance(kind, click.types.FloatParamType):
-        return BoundedFloat(kind, FLOAT_LIMIT if limit is None else limit)
+        return BoundedFloat(kind, FLOAT_LIMIT if limit is None else limit, bounds)
     if isinstance(kind, click.types.IntParamType):
-        return BoundedInt(kind, INT_LIMIT if limit is None else int(limit))
+        return BoundedInt(kind, INT_LIMIT if limit is None else int(limit), bounds)
     if isinstance(kind, click.Tuple):
         kind.types = [_bounded(t, param) for t in kind.types]
     return kind
@@ -229,6 +264,8 @@ def check_request(command: click.Command, kwargs: dict) -> None:
                               f"{pixel_ticks:.4g} pixel-ticks ({pixel_ticks / 8e9:.4g} GB of raw spike bits), more "
                               f"than the limit of {max_pixel_ticks():.4g}; raise it with the environment variable "
                               "VIFORM_MAX_PIXEL_TICKS")
+    if isinstance(kwargs.get("bitrate_bps"), (int, float)):
+        _check_link_work(kwargs, flags)
     for param in command.params:
         value = kwargs.get(param.name)
         if value is None or not isinstance(param.type, click.Path) or isinstance(value, (tuple, list)):
@@ -241,6 +278,34 @@ def check_request(command: click.Command, kwargs: dict) -> None:
         elif path.exists() and not (path.is_file() or path.is_dir()):
             raise ViformError(f"{flags[param.name]}: {str(path)!r} is not a regular file or folder "
                               "(a FIFO, socket or device cannot be read as data)")
+
+
+def _check_link_work(kwargs: dict, flags: dict) -> None:
+    """Refuse a light-link request whose simulation would hold or run too many ticks.
+
+    One bit lasts clock / bit rate ticks whatever the modulation; every tick is simulated.
+    """
+    bitrate, clock = kwargs["bitrate_bps"], kwargs.get("clock_hz") or DEFAULT_RATE_HZ
+    if not (bitrate > 0 and clock > 0):
+        return  # the command's own checks name the flag
+    message = kwargs.get("message")
+    bits = 8 * len(message.encode("utf-8", "replace")) if message else (kwargs.get("n_bits") or 0)
+    what = f"{len(message)} characters of --message ({bits} bits)" if message else f"{flags['n_bits']} {bits}"
+    per_bit = clock / bitrate
+    ticks = bits * per_bit
+    sweeps = bool(kwargs.get("sweeps") or kwargs.get("out"))
+    total = ticks + (SWEEP_RUNS * SWEEP_BITS * per_bit if sweeps else 0.0)
+    if ticks > MAX_LINK_TICKS:
+        raise ViformError(f"{flags['bitrate_bps']} {bitrate:g} bit/s with {what} at {flags['clock_hz']} {clock:g} Hz "
+                          f"is {ticks:.3g} ticks of the link to simulate (about 1 kB of memory each), more than "
+                          f"the {MAX_LINK_TICKS:,.0f} a run may hold: use at least {bits * clock / MAX_LINK_TICKS:.3g} "
+                          f"bit/s, fewer bits or a slower {flags['clock_hz']}")
+    if total > MAX_LINK_TICKS_TOTAL:
+        raise ViformError(f"{flags['bitrate_bps']} {bitrate:g} bit/s at {flags['clock_hz']} {clock:g} Hz: the BER "
+                          f"sweeps (--sweeps, or --out) send {SWEEP_BITS} bits {SWEEP_RUNS} more times, "
+                          f"{total:.3g} ticks in all, more than {MAX_LINK_TICKS_TOTAL:,.0f} (about 30 s): use at least "
+                          f"{(bits + SWEEP_RUNS * SWEEP_BITS) * clock / MAX_LINK_TICKS_TOTAL:.3g} bit/s or leave the "
+                          "sweeps out")
 
 
 def _check_output(flag: str, path: Path) -> None:
@@ -291,7 +356,7 @@ def install(group: click.Group) -> None:
     """Bound every numeric option of every command under ``group`` and wrap its callback."""
     for command in walk(group):
         for param in command.params:
-            param.type = _bounded(param.type, param)
+            param.type = _bounded(param.type, param, OPTION_BOUNDS.get((command.name, param.name)))
             if isinstance(param, click.Option) and flag_of(param) == "--json-file":
                 # one behaviour, checked by one function and described the same way everywhere
                 param.type = click.Path()
