@@ -13,8 +13,11 @@ def _drawn_texts(fig):
     out = []
     every_axes = [*fig.axes, *(c for a in fig.axes for c in a.child_axes)]  # inset colour bars too
     for ax in every_axes:
+        if not ax.get_visible():
+            continue
         span = ax.get_window_extent(renderer)
         ticks = [(t, "x") for t in ax.xaxis.get_ticklabels()] + [(t, "y") for t in ax.yaxis.get_ticklabels()]
+        ticks = ticks if ax.axison else []  # axis("off"): its ticks are not drawn
         for t, axis in ticks:
             if not (t.get_visible() and t.get_text().strip()):
                 continue
@@ -23,7 +26,8 @@ def _drawn_texts(fig):
             lo, hi = (span.x0, span.x1) if axis == "x" else (span.y0, span.y1)
             if lo - 1 <= centre <= hi + 1:  # ticks outside the view are never drawn
                 out.append((t.get_text(), box))
-        for t in [ax.title, ax._left_title, ax._right_title, ax.xaxis.label, ax.yaxis.label, *ax.texts]:
+        labels = [ax.xaxis.label, ax.yaxis.label] if ax.axison else []
+        for t in [ax.title, ax._left_title, ax._right_title, *labels, *ax.texts]:
             if t.get_visible() and t.get_text().strip():
                 out.append((t.get_text(), t.get_window_extent(renderer)))
     legends = [a.get_legend() for a in fig.axes if a.get_legend()] + list(fig.legends)
@@ -42,6 +46,7 @@ def layout_problems(fig, tolerance_px: float = 1.0) -> list[str]:
     problems = [f"{s!r} cut off at the edge ({b.x0:.0f}, {b.y0:.0f})–({b.x1:.0f}, {b.y1:.0f}) of {w:.0f}×{h:.0f}"
                 for s, b in texts
                 if b.x0 < -tolerance_px or b.y0 < -tolerance_px or b.x1 > w + tolerance_px or b.y1 > h + tolerance_px]
+    problems += _texts_on_markers(fig, tolerance_px)
     for i, (s1, b1) in enumerate(texts):
         for s2, b2 in texts[i + 1:]:
             dx = min(b1.x1, b2.x1) - max(b1.x0, b2.x0)
@@ -49,6 +54,27 @@ def layout_problems(fig, tolerance_px: float = 1.0) -> list[str]:
             if dx > tolerance_px and dy > tolerance_px:
                 problems.append(f"{s1!r} overlaps {s2!r} by {dx:.0f}×{dy:.0f} px")
     return problems
+
+
+def _texts_on_markers(fig, tolerance_px: float) -> list[str]:
+    """Texts written in an axes over one of its line's markers (a number on its neighbour's circle)."""
+    import numpy as np
+
+    renderer = fig.canvas.get_renderer()
+    out = []
+    for ax in fig.axes:
+        boxes = [(t.get_text(), t.get_window_extent(renderer)) for t in ax.texts if t.get_text().strip()]
+        for line in ax.lines:
+            if line.get_marker() in (None, "None", "", " ") or not boxes:
+                continue
+            half = line.get_markersize() * fig.dpi / 72 / 2
+            xy = ax.transData.transform(np.column_stack([line.get_xdata(), line.get_ydata()]))
+            for s, b in boxes:
+                hit = ((xy[:, 0] + half > b.x0 + tolerance_px) & (xy[:, 0] - half < b.x1 - tolerance_px)
+                       & (xy[:, 1] + half > b.y0 + tolerance_px) & (xy[:, 1] - half < b.y1 - tolerance_px))
+                if hit.any():
+                    out.append(f"{s!r} drawn on a marker of {line.get_label()!r}")
+    return out
 
 
 @pytest.fixture

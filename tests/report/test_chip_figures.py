@@ -88,3 +88,22 @@ def test_waving_hand_scene_is_valid_light():
     s = WavingHandScene(32, 40)
     img = s.illuminance_lux(0.01)
     assert img.shape == (32, 40) and img.min() >= 0 and img.max() <= s.skin_lux + 1e-9
+
+
+def test_figures_have_no_text_cut_off_or_overlapping(small_run, check_layout):
+    """Fig. 5's pixel numbers sat on the neighbouring circles along the hand's arc (pixels a
+    few apart) and the row numbers left of the axes: every number is now clear of every circle
+    and of the other numbers, and every text inside the figure. Figs. 1, 3 and 4 likewise."""
+    from viform.imaging.interval import interval_ticks
+    from viform.report.chip_figures import fig1_figure, fig3_figure, fig4_figure, fig5_figure, pick_pixels
+
+    stream, scene, p = small_run
+    check_layout(fig1_figure()[0])
+    counts = accumulation_counts(stream, (1, 2, 5, 50, 200))
+    check_layout(fig3_figure(counts, stream.clock_hz, p.name))
+    tau, _ = interval_ticks(stream, [199])
+    check_layout(fig4_figure(counts[200], tau[0], "minmax", 200, stream.clock_hz))
+    fig, seqs = fig5_figure(stream, [24, 74, 124, 174], pick_pixels(scene), "minmax", 200)
+    assert len(seqs) == 10
+    assert [t.get_text() for t in fig.axes[-1].get_yticklabels()] == [str(j) for j in range(1, 11)]
+    check_layout(fig)

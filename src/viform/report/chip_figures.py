@@ -66,6 +66,13 @@ def first_spikes(spike_times, rel_tol: float = 0.1) -> np.ndarray:
 
 
 def plot_fig1(path, levels=(1 / 6, 1 / 3, 1 / 12), durations=(26.0, 21.0, 33.0)) -> dict:
+    """Write :func:`fig1_figure` to ``path``; return its numbers."""
+    fig, numbers = fig1_figure(levels, durations)
+    save_figure(path, fig)
+    return numbers
+
+
+def fig1_figure(levels=(1 / 6, 1 / 3, 1 / 12), durations=(26.0, 21.0, 33.0)):
     """Fig. 1: photocurrent, spike train, pulses as width τ × height Q/τ, first spikes.
 
     The default signal reproduces the seed's example: 4 equal pulses, one shorter pulse at
@@ -103,8 +110,7 @@ def plot_fig1(path, levels=(1 / 6, 1 / 3, 1 / 12), durations=(26.0, 21.0, 33.0))
     c.set_xlabel("time (ticks)")
     c.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
-    save_figure(path, fig)
-    return {"spike_ticks": t.tolist(), "widths_ticks": widths.tolist(), "first_spikes": (fs + 1).tolist()}
+    return fig, {"spike_ticks": t.tolist(), "widths_ticks": widths.tolist(), "first_spikes": (fs + 1).tolist()}
 
 
 # ----------------------------------------------------------------------------- Figs. 3–5
@@ -142,6 +148,11 @@ def accumulation_counts(stream, lengths=FIG3_TICKS) -> dict:
 
 
 def plot_fig3(path, counts: dict, clock_hz: float, sensor_name: str = "SpikeTwo") -> None:
+    """Write :func:`fig3_figure` to ``path``."""
+    save_figure(path, fig3_figure(counts, clock_hz, sensor_name))
+
+
+def fig3_figure(counts: dict, clock_hz: float, sensor_name: str = "SpikeTwo"):
     """Fig. 3: accumulation images; brightness = spikes per tick (count / n) on ONE scale, so a
     1-tick image is binary (white dots = spikes) and long windows blur the hand."""
     import matplotlib
@@ -164,7 +175,7 @@ def plot_fig3(path, counts: dict, clock_hz: float, sensor_name: str = "SpikeTwo"
                  label=f"spikes per tick (count / n; one scale; white ≥ {vmax:.2f})")
     fig.suptitle(f"Accumulation images of the first n ticks: a hand waving, {sensor_name} at {clock_hz / 1e3:g} kHz",
                  fontsize=11)
-    save_figure(path, fig)
+    return fig
 
 
 def interval_display(tau_ticks, stretch: str = "minmax") -> np.ndarray:
@@ -181,6 +192,11 @@ def interval_display(tau_ticks, stretch: str = "minmax") -> np.ndarray:
 
 
 def plot_fig4(path, counts800, tau800, stretch: str, n_ticks: int, clock_hz: float) -> None:
+    """Write :func:`fig4_figure` to ``path``."""
+    save_figure(path, fig4_figure(counts800, tau800, stretch, n_ticks, clock_hz))
+
+
+def fig4_figure(counts800, tau800, stretch: str, n_ticks: int, clock_hz: float):
     """Fig. 4: (a) accumulation of all ticks (blurred hand), (b) interval image at the last tick."""
     import matplotlib
 
@@ -201,7 +217,7 @@ def plot_fig4(path, counts800, tau800, stretch: str, n_ticks: int, clock_hz: flo
     for ax in (a, b):
         ax.set_xticks([])
         ax.set_yticks([])
-    save_figure(path, fig)
+    return fig
 
 
 def pick_pixels(scene, n: int = 10) -> list[tuple[int, int]]:
@@ -218,6 +234,13 @@ def pick_pixels(scene, n: int = 10) -> list[tuple[int, int]]:
 
 
 def plot_fig5(path, stream, instants, pixels, stretch: str = "minmax", n_ticks: int | None = None) -> dict:
+    """Write :func:`fig5_figure` to ``path``; return each pixel's pulse widths (ticks)."""
+    fig, seqs = fig5_figure(stream, instants, pixels, stretch, n_ticks)
+    save_figure(path, fig)
+    return seqs
+
+
+def fig5_figure(stream, instants, pixels, stretch: str = "minmax", n_ticks: int | None = None):
     """Fig. 5: interval images at four instants with ten marked pixels, and each pixel's
     pulse-width sequence over the record (pulses drawn with width τ and height Q/τ)."""
     import matplotlib
@@ -232,15 +255,16 @@ def plot_fig5(path, stream, instants, pixels, stretch: str = "minmax", n_ticks: 
     bits = stream.read_ticks(0, n_ticks)
     fig = plt.figure(figsize=(13, 8.2), layout="constrained")
     gs = fig.add_gridspec(2, 4, height_ratios=[1, 1.05])
+    image_axes = []
     for i, k in enumerate(instants):
         ax = fig.add_subplot(gs[0, i])
         ax.imshow(interval_display(tau[i], stretch), cmap="gray", vmin=0, vmax=255, interpolation="nearest")
         for j, (r, c) in enumerate(pixels):
-            ax.plot(c, r, "o", mfc="none", mec=f"C{j}", ms=7, mew=1.5)
-            ax.text(c + 4, r, str(j + 1), color=f"C{j}", fontsize=8, weight="bold")
+            ax.plot(c, r, "o", mfc="none", mec=f"C{j}", ms=MARKER_PT, mew=1.5)
         ax.set_title(f"tick {k + 1} ({(k + 1) / stream.clock_hz * 1e3:.1f} ms): 255 − τ", fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
+        image_axes.append(ax)
     ax = fig.add_subplot(gs[1, :])
     seqs = {}
     trains = [np.nonzero(bits[:, r, c])[0].astype(float) + 1 for r, c in pixels]
@@ -253,18 +277,69 @@ def plot_fig5(path, stream, instants, pixels, stretch: str = "minmax", n_ticks: 
         for t1, wdt in zip(t[1:], widths, strict=True):
             ax.add_patch(plt.Rectangle((t1 - wdt, base), wdt, 0.85 * (1.0 / wdt) / hmax, color=f"C{j}",
                                        alpha=0.6, ec="k", lw=0.3))
-        ax.text(-0.003 * n_ticks, base + 0.3, f"{j + 1}", ha="right", color=f"C{j}", fontsize=9, weight="bold")
     for k in instants:
         ax.axvline(k + 1, color="0.3", ls=":")
     ax.set_xlim(-0.015 * n_ticks, n_ticks + 2)
     ax.set_ylim(-0.2, len(pixels))
-    ax.set_yticks([])
+    # the pixel numbers as tick labels: the layout keeps them inside the figure
+    ax.set_yticks([len(pixels) - 1 - j + 0.3 for j in range(len(pixels))],
+                  [str(j + 1) for j in range(len(pixels))], fontsize=9, fontweight="bold")
+    for j, lab in enumerate(ax.get_yticklabels()):
+        lab.set_color(f"C{j}")
+    ax.tick_params(axis="y", length=0)
+    ax.set_ylabel("pixel")
     ax.set_xlabel(f"tick ({1e6 / stream.clock_hz:g} µs at {stream.clock_hz / 1e3:g} kHz); "
                   "dotted: the four instants above")
     ax.set_title("pulse-width sequences of the ten pixels: each pulse is width τ × height ∝ 1/τ "
                  "(area = Q, one height scale); bright pixels fire short, tall pulses", fontsize=10)
-    save_figure(path, fig)
-    return seqs
+    fig.canvas.draw()  # fixes the layout, so the numbers can be placed in screen units
+    for ax in image_axes:
+        _number_markers(ax, pixels)
+    return fig, seqs
+
+
+#: Size of the circles marking fig. 5's pixels, points.
+MARKER_PT = 7.0
+
+
+def _number_markers(ax, pixels, fontsize: int = 8) -> None:
+    """Number each circled pixel beside its circle, on no circle and no other number.
+
+    Pixels along the hand's arc are a few pixels apart: numbers at a fixed offset fell on the
+    neighbouring circles. Each number takes the first free spot of eight directions at growing
+    distances (with a thin leader line once it is away from its circle), inside the image.
+    """
+    from matplotlib.transforms import Bbox
+
+    renderer = ax.figure.canvas.get_renderer()
+    px_per_pt = ax.figure.dpi / 72
+    half = (MARKER_PT / 2 + 1.0) * px_per_pt  # circle radius plus its edge, pixels
+    centres = [ax.transData.transform((c, r)) for r, c in pixels]
+    taken = [Bbox.from_extents(x - half, y - half, x + half, y + half) for x, y in centres]
+    frame = ax.get_window_extent(renderer)
+    directions = ((1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1))
+    for j, (r, c) in enumerate(pixels):
+        note = None
+        for dist in (6.0, 11.0, 17.0, 24.0):
+            for dx, dy in directions:
+                ha = "left" if dx > 0 else "right" if dx < 0 else "center"
+                va = "bottom" if dy > 0 else "top" if dy < 0 else "center"
+                arrow = dict(arrowstyle="-", lw=0.6, color=f"C{j}", shrinkA=0, shrinkB=half / px_per_pt)
+                note = ax.annotate(str(j + 1), (c, r), xytext=(dx * dist, dy * dist), textcoords="offset points",
+                                   ha=ha, va=va, color=f"C{j}", fontsize=fontsize, weight="bold",
+                                   arrowprops=arrow if dist > 6.0 else None)
+                b = note.get_window_extent(renderer)
+                inside = frame.x0 <= b.x0 and b.x1 <= frame.x1 and frame.y0 <= b.y0 and b.y1 <= frame.y1
+                if inside and not any(b.overlaps(o) for o in taken):
+                    break
+                note.remove()
+                note = None
+            if note is not None:
+                break
+        if note is None:  # no free spot (a crowded tiny image): beside the circle, as before
+            note = ax.annotate(str(j + 1), (c, r), xytext=(6, 0), textcoords="offset points", va="center",
+                               color=f"C{j}", fontsize=fontsize, weight="bold")
+        taken.append(note.get_window_extent(renderer))
 
 
 def chip_figures(out_dir, size: int = 192, ticks: int = 800, stretch: str = "minmax", seed: int = 0,
