@@ -331,8 +331,15 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
                 curves[label] = plots.spike_response_curve(dev, np.geomspace(0.01, 1e4, 40), seed=seed)
             else:
                 curves[label] = own
+        knees = None
+        if hasattr(dev, "segment_boundaries_a"):  # the overflow pixel's knees B–E (seed 003 fig. 6)
+            names = {"B": "B first overflow", "C": "C saturates in t1", "D": "D saturates in t2",
+                     "E": "E end of range"}
+            knees = {names[k]: float(dev.lux_from_photocurrent(v))
+                     for k, v in dev.segment_boundaries_a().items() if k in names}
         figures["response.png"] = plots.response_figure(
-            curves, f"Response of {sensor} (bold) against the other frame and spike sensors", highlight=label
+            curves, f"Response of {sensor} (bold) against the other frame and spike sensors", highlight=label,
+            knees_lux=knees,
         )
         if sensor in ("seed001-2seg", "seed001-3seg"):
             from viform.sensors.segmented import SegmentedExposureSensor, three_segment_family

@@ -65,16 +65,27 @@ def saturates(c: dict, sat_fraction: float = 0.995) -> bool:
 _STYLES = (("-", None), ("--", "o"), (":", "s"), ("-.", "^"), ((0, (5, 1, 1, 1)), "v"), ((0, (1, 1)), "D"))
 
 
-def response_figure(curves: dict, title: str = "Response curves", highlight: str | None = None):
+def response_figure(curves: dict, title: str = "Response curves", highlight: str | None = None,
+                    knees_lux: dict | None = None):
     """Output vs illuminance for each named curve: linear axes (left), log axes (right).
 
     Each curve starts where its SNR reaches 1 (below, the output is noise). Curves that
     coincide stay visible: each has its own dash pattern and hollow markers, drawn over the
     bold ``highlight`` (the sensor being characterized), which sits underneath. The linear
     panel spans a little past the highlighted sensor's saturation (else the slowest one's),
-    so its response is a curve rather than a line on the y axis; both panels have a legend."""
+    so its response is a curve rather than a line on the y axis; both panels have a legend.
+
+    ``knees_lux`` (name → illuminance, lux), for a compressive pixel such as seed 003's
+    conditional overflow: a third panel draws the bold sensor's output on a linear axis
+    against log illuminance with its knees marked. On log–log axes a segment of small slope
+    riding on a large output (seed 003 fig. 6, B→D: slope ≈ 1/300 of A→B) looks flat,
+    although the output still rises and its SNR stays above 30 dB."""
     plt = _plt()
-    fig, (ax_lin, ax_log) = plt.subplots(1, 2, figsize=(12, 4.6))
+    if knees_lux and highlight in curves:
+        fig, (ax_lin, ax_log, ax_knee) = plt.subplots(1, 3, figsize=(17, 4.8))
+    else:
+        fig, (ax_lin, ax_log) = plt.subplots(1, 2, figsize=(12, 4.6))
+        ax_knee = None
     for j, (name, c) in enumerate(curves.items()):
         lux, out = np.asarray(c["lux"]), np.asarray(c["output"])
         snr = np.asarray(c.get("snr", np.ones(len(lux))), dtype=np.float64)
@@ -97,9 +108,45 @@ def response_figure(curves: dict, title: str = "Response curves", highlight: str
     for ax in (ax_lin, ax_log):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
+    if ax_knee is not None:
+        _knee_panel(ax_knee, curves[highlight], knees_lux)
     fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+def _knee_panel(ax, c: dict, knees_lux: dict) -> None:
+    """The bold sensor's output (linear) against log illuminance, its knees marked, and the
+    slope of each segment relative to the first (what the log–log panel hides)."""
+    lux, out = np.asarray(c["lux"], dtype=np.float64), np.asarray(c["output"], dtype=np.float64)
+    ok = meaningful(c)
+    last = np.nonzero(out >= 0.999 * np.nanmax(out))[0][0]  # the plateau's first point
+    ok[last] = True
+    ax.semilogx(lux[ok], out[ok], "k-", lw=2.5, alpha=0.6)
+    names = sorted(knees_lux, key=knees_lux.get)
+    edges = [float(lux[ok][0]), *(float(knees_lux[n]) for n in names)]
+    slopes = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        ya, yb = np.interp([a, b], lux, out)
+        slopes.append((yb - ya) / (b - a) if b > a else np.nan)
+    for n in names:
+        x = knees_lux[n]
+        ax.axvline(x, color="C3", ls=":", lw=1)
+        ax.text(x, 1.13, n.split()[0], color="C3", fontsize=9, ha="center", va="center", weight="bold",
+                bbox=dict(fc="white", ec="none", pad=1))
+    for a, b, sl in zip(edges[:-1], edges[1:], slopes, strict=True):
+        if np.isfinite(sl) and slopes[0] > 0 and b > 4 * a:  # room for the note
+            rel = sl / slopes[0]
+            text = "×1" if abs(rel - 1) < 1e-9 else f"×1/{1 / rel:.0f}" if rel < 1 else f"×{rel:.2g}"
+            # one row of notes between the knee lines, above the curve (it ends at 1 on the right)
+            ax.text(float(np.sqrt(a * b)), 0.8, f"slope\n{text}", ha="center", va="center", fontsize=7.5,
+                    color="0.25")
+    ax.set_ylim(0, 1.2)
+    key = "; ".join(n for n in names)
+    ax.set(xlabel="illuminance on the sensor (lux, log scale)", ylabel="output / max output (linear)")
+    ax.set_title(f"bold sensor: linear output on log illuminance\nslope = output per lux relative to the start: "
+                 f"compressed, not saturated\n{key}", fontsize=8.5)
+    ax.grid(True, which="both", alpha=0.3)
 
 
 def snr_figure(curves: dict, title: str = "SNR vs illuminance"):
