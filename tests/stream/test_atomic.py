@@ -119,3 +119,73 @@ def test_output_checked_before_work(tmp_path):
     live.write_text("mine")
     clean_stale(tmp_path / "x.dat")
     assert live.exists()  # a live writer's temporary is left alone
+
+
+# A .dat and its sidecar are two files, renamed in one after the other: this writer is killed
+# (SIGKILL, no cleanup) exactly at one of those renames.
+KILL_AT_RENAME = """
+import os, signal, sys
+import numpy as np
+from viform.stream.container import SpikeStream
+from viform.stream.dat import write_dat
+path, moment, with_sidecar = sys.argv[1], sys.argv[2], sys.argv[3] == "1"
+real = os.replace
+def replace(src, dst):
+    if os.fspath(dst) == {"data": path, "sidecar": path + ".json"}[moment]:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return real(src, dst)
+os.replace = replace
+write_dat(path, SpikeStream(np.random.default_rng(1).random((96, 8, 16)) < 0.3, 40000.0), sidecar=with_sidecar)
+"""
+
+
+def _kill_at(path, moment, with_sidecar=True):
+    proc = subprocess.run([sys.executable, "-c", KILL_AT_RENAME, str(path), moment, "1" if with_sidecar else "0"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+
+
+@pytest.mark.parametrize("moment, survivor", [("data", 0), ("sidecar", 1)])
+def test_dat_killed_at_either_rename_reads_a_whole_pair(tmp_path, moment, survivor):
+    """Killed before the data rename: the old pair; between the renames: the new data, whose
+    sidecar waits beside the old one and is picked because its checksum matches. The next
+    write removes what the dead writer left."""
+    path = tmp_path / "s.dat"
+    a, b = streams()
+    save_spikes(path, SpikeStream(a, 40_000.0))
+    _kill_at(path, moment)
+    source = open_spikes(path)
+    assert source.verify()["verified"]
+    assert np.array_equal(source.read_ticks(0, 96), (a, b)[survivor])
+    assert open_spikes(path).sidecar["blake2b"] == source.sidecar["blake2b"]  # settled on disk, not per read
+    save_spikes(path, SpikeStream(a, 40_000.0))
+    assert _leftovers(tmp_path) == []
+    assert np.array_equal(open_spikes(path).read_ticks(0, 96), a)
+
+
+def test_dat_without_sidecar_killed_before_the_data_keeps_the_old_pair(tmp_path):
+    """sidecar=False sets the old sidecar aside first; a kill before the data rename gets it back."""
+    path = tmp_path / "s.dat"
+    a, _ = streams()
+    save_spikes(path, SpikeStream(a, 40_000.0))
+    _kill_at(path, "data", with_sidecar=False)
+    source = open_spikes(path)
+    assert source.verify()["verified"] and np.array_equal(source.read_ticks(0, 96), a)
+
+
+def test_dat_sigkill_at_random_points_reads_old_or_new(tmp_path):
+    path = tmp_path / "s.dat"
+    a, b = streams()
+    save_spikes(path, SpikeStream(a, 40_000.0), block_ticks=4)
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        proc = _start(WRITER, path)
+        time.sleep(rng.uniform(0.0, 0.3))
+        proc.kill()
+        proc.wait(10)
+        source = open_spikes(path)
+        assert source.verify()["verified"]
+        bits = source.read_ticks(0, 96)
+        assert np.array_equal(bits, a) or np.array_equal(bits, b)
+    save_spikes(path, SpikeStream(b, 40_000.0))
+    assert _leftovers(tmp_path) == []

@@ -97,3 +97,53 @@ def test_other_tools_flat_sidecar_gives_lux(tmp_path):
     source = open_spikes(path)
     assert source.clock_hz == 20_000.0 and source.metadata["source_clip"] == "clip7"
     assert accumulation_image(source, 0.0001, 0.0001).lux is not None
+
+
+def _two_pairs(tmp_path):
+    """s.dat with its sidecar (stream a), and the sidecar stream b would have, as bytes."""
+    a, b = (SpikeStream(np.random.default_rng(s).random((16, 4, 8)) < 0.3, 40_000.0) for s in (0, 1))
+    other = write_dat(tmp_path / "other.dat", b)
+    path = write_dat(tmp_path / "s.dat", a)
+    return path, other, sidecar_path(other).read_bytes()
+
+
+def test_pending_sidecar_matching_the_data_is_renamed_in(tmp_path):
+    """A writer killed between its renames: new data, old sidecar, new one pending beside it."""
+    from viform.stream.sidecar import pending_sidecar_path
+
+    path, other, new_side = _two_pairs(tmp_path)
+    path.write_bytes(other.read_bytes())  # the new data is in
+    pending_sidecar_path(path).write_bytes(new_side)
+    assert open_spikes(path).verify()["verified"]
+    assert sidecar_path(path).read_bytes() == new_side and not pending_sidecar_path(path).exists()
+
+
+def test_pending_sidecar_of_data_that_never_arrived(tmp_path):
+    """Killed before its data rename: the old pair holds; the pending sidecar goes once stale."""
+    import os
+
+    from viform.stream.sidecar import PENDING_STALE_S, pending_sidecar_path
+
+    path, _, new_side = _two_pairs(tmp_path)
+    old_side = sidecar_path(path).read_bytes()
+    pending = pending_sidecar_path(path)
+    pending.write_bytes(new_side)
+    assert open_spikes(path).verify()["verified"]
+    assert pending.exists()  # young: it may be a live writer's, about to rename its data in
+    old = pending.stat().st_mtime - 2 * PENDING_STALE_S
+    os.utime(pending, (old, old))
+    assert open_spikes(path).verify()["verified"]
+    assert not pending.exists() and sidecar_path(path).read_bytes() == old_side
+
+
+def test_neither_sidecar_matches_damaged_data(tmp_path):
+    from viform.stream.sidecar import pending_sidecar_path
+
+    path, _, new_side = _two_pairs(tmp_path)
+    pending_sidecar_path(path).write_bytes(new_side)
+    data = bytearray(path.read_bytes())
+    data[3] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(ViformError, match="damaged"):
+        open_spikes(path)
+    assert pending_sidecar_path(path).exists()  # both kept for whoever looks into it

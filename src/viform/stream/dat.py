@@ -213,11 +213,15 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     """Write ``source`` as a ``.dat`` file, block by block and atomically, with its JSON sidecar.
 
     The sidecar (:func:`viform.stream.sidecar.stream_header` fields plus the data size and
-    BLAKE2b checksum) is prepared before the data is renamed in and renamed right after it; a
-    SIGKILL between the two renames leaves the new data beside the old sidecar, which a reader
-    reports as a checksum mismatch (never as silently different bits).
+    BLAKE2b checksum) is written beside the sidecar in place, as a pending sidecar
+    (:func:`~viform.stream.sidecar.pending_sidecar_path`), before the data is renamed in, and
+    renamed onto the sidecar right after. Whenever the writer is killed, one of the two
+    sidecars matches the data under ``path``, and the next reader or writer keeps that one
+    (:func:`~viform.stream.sidecar.settle_sidecar`). With ``sidecar=False`` the old sidecar is
+    set aside the same way, so that it still describes the old data until the new data is in.
     """
-    from viform._io import TMP_MARK, clean_stale
+    from viform._io import clean_stale
+    from viform.stream.sidecar import pending_sidecar_path, settle_sidecar
 
     path = Path(path)
     _frame_bytes(source.height, source.width)
@@ -225,10 +229,10 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     digest = hashlib.blake2b(digest_size=16)
     size = 0
     side = sidecar_path(path)
-    # the new sidecar is ready before the data is renamed in, so the two renames follow each
-    # other at once (a kill between them is the only moment data and sidecar disagree)
-    pending = side.with_name(f".{side.name}{TMP_MARK}{os.getpid()}-pending.json")
-    clean_stale(side)
+    settle_sidecar(path)  # a pair left by a killed writer is made whole before anything is replaced
+    clean_stale(side)  # temporaries of sidecars written by write_json (write_sidecar)
+    pending = pending_sidecar_path(path)
+    pending.unlink(missing_ok=True)  # a killed writer's whose data never arrived
     renamed = False
     try:
         with atomic_open(path, "wb") as f:
@@ -242,15 +246,31 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
             if sidecar:
                 body = sidecar_body(stream_header(source, rows="bottom-up" if flip else "upright",
                                                   extra={"data_bytes": size, "blake2b": digest.hexdigest()}))
-                pending.write_text(json.dumps(body, indent=2) + "\n")
+                with open(pending, "w", encoding="utf-8") as p:
+                    p.write(json.dumps(body, indent=2) + "\n")
+                    p.flush()
+                    os.fsync(p.fileno())
+            elif os.path.lexists(side):  # an old sidecar would describe other bits once the data is in
+                os.replace(side, pending)
         renamed = True
-        if sidecar:
-            os.replace(pending, side)
-        else:  # an old sidecar would describe other bits
-            side.unlink(missing_ok=True)
+        _finish_pair(pending, side, sidecar)
     except BaseException:
-        if renamed and pending.exists():  # interrupted between the renames: finish the pair
+        if renamed:  # interrupted between the renames: finish the pair
+            _finish_pair(pending, side, sidecar)
+        elif not sidecar and os.path.lexists(pending):  # the old data stays: so does its sidecar
             os.replace(pending, side)
-        pending.unlink(missing_ok=True)
+        else:
+            pending.unlink(missing_ok=True)
         raise
     return path
+
+
+def _finish_pair(pending: Path, side: Path, sidecar: bool) -> None:
+    """Second rename of :func:`write_dat`: the pending sidecar goes in (or the old one goes away)."""
+    if not sidecar:
+        pending.unlink(missing_ok=True)
+        return
+    try:
+        os.replace(pending, side)
+    except FileNotFoundError:
+        pass  # a reader found the new data first and renamed it in (settle_sidecar)

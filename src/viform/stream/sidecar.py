@@ -18,8 +18,10 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
+import os
 import shlex
 import sys
+import time
 from pathlib import Path
 
 from viform._validate import ViformError
@@ -136,13 +138,105 @@ def _digest(body: dict) -> str:
     return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
 
 
+#: Where :func:`viform.stream.dat.write_dat` puts the new sidecar while the new data is renamed
+#: in: ``clip.dat`` → ``.clip.dat.json.viform-pending.json``. It is renamed onto the sidecar
+#: right after the data; a writer killed between the two renames leaves it there, and the next
+#: reader (or writer) picks whichever of the two sidecars matches the data (:func:`settle_sidecar`).
+PENDING_SUFFIX = ".viform-pending.json"
+#: A pending sidecar older than this whose data never arrived is a dead writer's: a reader may
+#: remove it (a live writer renames its data in within moments of writing it), seconds.
+PENDING_STALE_S = 60.0
+#: Bytes hashed at a time when a sidecar has to be matched against its data.
+HASH_BLOCK_BYTES = 16 << 20
+
+
+def pending_sidecar_path(data_path) -> Path:
+    """The new sidecar of ``data_path`` waiting for its data (see :data:`PENDING_SUFFIX`)."""
+    side = sidecar_path(data_path)
+    return side.with_name(f".{side.name}{PENDING_SUFFIX}")
+
+
+def data_blake2b(data_path) -> str:
+    """BLAKE2b (16 bytes, hex) of the whole file, read in bounded blocks."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=16)
+    with open(data_path, "rb") as f:
+        for chunk in iter(lambda: f.read(HASH_BLOCK_BYTES), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _intact(path) -> dict | None:
+    """The sidecar at ``path`` when it is a readable object whose own checksum holds, else None."""
+    try:
+        if path.stat().st_size > MAX_SIDECAR_BYTES:
+            return None
+        body = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return None
+    if not isinstance(body, dict) or body.get(DIGEST_KEY) != _digest(body):
+        return None
+    return body
+
+
+def settle_sidecar(data_path) -> dict | None:
+    """After a writer was killed between renaming a ``.dat`` and its sidecar, pair them again.
+
+    Does nothing (one ``stat``) unless a pending sidecar (:func:`pending_sidecar_path`) is
+    there. Then the data is hashed once and the sidecar whose size and BLAKE2b match it is
+    kept: a matching pending one is renamed onto the sidecar (or, when the folder is read-only,
+    returned for the caller to use); a pending one that matches nothing while the sidecar in
+    place matches is removed once older than :data:`PENDING_STALE_S`. When neither matches,
+    both stay (the reader then reports the damage).
+    """
+    pending = pending_sidecar_path(data_path)
+    if not os.path.lexists(pending):
+        return None
+    data_path = Path(data_path)
+    candidate = _intact(pending)
+    try:
+        size = data_path.stat().st_size
+    except OSError:
+        return None  # no data (yet): the writer that left it will replace it
+    digest = None
+
+    def matches(body) -> bool:
+        nonlocal digest
+        if body is None or body.get("data_bytes") != size or not body.get("blake2b"):
+            return False
+        digest = data_blake2b(data_path) if digest is None else digest
+        return body["blake2b"] == digest
+
+    if matches(_intact(sidecar_path(data_path))):
+        try:
+            if candidate is None or time.time() - pending.stat().st_mtime > PENDING_STALE_S:
+                pending.unlink()  # a killed writer's: its data never arrived
+        except OSError:
+            pass
+        return None
+    if not matches(candidate):
+        return None
+    try:
+        os.replace(pending, sidecar_path(data_path))
+    except FileNotFoundError:
+        return None  # its writer (or another reader) has just renamed it
+    except OSError:
+        return candidate  # a read-only folder: use it without renaming
+    return None
+
+
 def read_sidecar(data_path) -> dict | None:
     """The validated sidecar of ``data_path``, or None when there is none.
 
-    Raises :class:`ViformError` (naming the sidecar and the field) when it exists but is not
-    valid JSON, not an object, or holds an out-of-range field.
+    A writer killed between renaming the data and its sidecar is healed first
+    (:func:`settle_sidecar`). Raises :class:`ViformError` (naming the sidecar and the field)
+    when the sidecar exists but is not valid JSON, not an object, or holds an out-of-range field.
     """
     path = sidecar_path(data_path)
+    chosen = settle_sidecar(data_path)
+    if chosen is not None:
+        return validate_header(chosen, path, required=())
     if not path.is_file():
         return None
     try:
