@@ -6,6 +6,7 @@ Cluster start-up costs seconds, so one 2-process cluster serves every test of th
 from __future__ import annotations
 
 import logging
+import shutil
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -44,28 +45,29 @@ def settings():
     return make_settings(height=H, width=W, frame_rate_hz=FRAME_RATE_HZ, gt_every=2, seed=7)
 
 
+def _local_client(n_workers: int, processes: bool):
+    """A dask LocalCluster of ``n_workers`` single-thread workers and its client, closed after use."""
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=processes,
+                                       dashboard_address=":0", silence_logs=logging.ERROR)
+    client = distributed.Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()
+
+
 @pytest.fixture(scope="package")
 def client1():
     """One worker, one thread, in this process (starts in well under a second)."""
-    distributed = pytest.importorskip("distributed")
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                       dashboard_address=":0", silence_logs=logging.ERROR)
-    client = distributed.Client(cluster)
-    yield client
-    client.close()
-    cluster.close()
+    yield from _local_client(1, processes=False)
 
 
 @pytest.fixture(scope="package")
 def client2():
     """Two worker processes, one thread each (what `viform dataset --workers 2` starts)."""
-    distributed = pytest.importorskip("distributed")
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                       dashboard_address=":0", silence_logs=logging.ERROR)
-    client = distributed.Client(cluster)
-    yield client
-    client.close()
-    cluster.close()
+    yield from _local_client(2, processes=True)
 
 
 @pytest.fixture(scope="package")
@@ -95,3 +97,27 @@ def dataset_files():
 @pytest.fixture(scope="package")
 def clip_maker():
     return make_clips
+
+
+@pytest.fixture()
+def source_with_broken_clip(source_clips, tmp_path) -> Path:
+    """A copy of the source clips plus a folder 'broken' whose one frame is not a PNG."""
+    src = tmp_path / "src"
+    shutil.copytree(source_clips, src)
+    (src / "broken").mkdir()
+    (src / "broken" / "000.png").write_bytes(b"not a png")
+    return src
+
+
+@pytest.fixture()
+def spike_zoo_layout(tmp_path) -> Path:
+    """The Spike-Zoo 'base' layout: spike/<name>.dat, gt/<name>.png, config.yaml (links to the shared files)."""
+    if not (SHARED / "reds_sim_400x250.dat").is_file():
+        pytest.skip("shared spike data (../shared/data/spike) is absent")
+    (tmp_path / "spike").mkdir()
+    (tmp_path / "gt").mkdir()
+    for name in ("reds_sim", "reds_sim2"):
+        (tmp_path / "spike" / f"{name}.dat").symlink_to((SHARED / f"{name}_400x250.dat").resolve())
+        (tmp_path / "gt" / f"{name}.png").symlink_to((SHARED / f"{name}_400x250_gt.png").resolve())
+    (tmp_path / "config.yaml").write_text("filename: base\nspike_h: 250\nspike_w: 400\n")
+    return tmp_path

@@ -121,11 +121,9 @@ def test_block_size_does_not_change_the_bits(reference, source_clips, settings, 
     assert dataset_files(out) == dataset_files(reference)
 
 
-def test_a_failing_clip_is_reported_and_the_others_are_written(source_clips, settings, client1, tmp_path):
-    src = tmp_path / "src"
-    shutil.copytree(source_clips, src)
-    (src / "broken").mkdir()
-    (src / "broken" / "000.png").write_bytes(b"not a png")
+def test_a_failing_clip_is_reported_and_the_others_are_written(source_with_broken_clip, settings, client1,
+                                                               tmp_path):
+    src = source_with_broken_clip
     summary = build_dataset(src, tmp_path / "ds", settings, client=client1, block_ticks=64, progress=False)
     assert [f["clip"] for f in summary["failed"]] == ["broken"]
     assert "broken" in summary["failed"][0]["error"]

@@ -31,11 +31,8 @@ def test_cli_on_a_running_scheduler_resumes_the_reference(reference, source_clip
     assert dataset_files(out) == dataset_files(reference)
 
 
-def test_cli_table_and_exit_status_1_when_a_clip_fails(source_clips, client1, tmp_path, capsys):
-    src = tmp_path / "src"
-    shutil.copytree(source_clips, src)
-    (src / "broken").mkdir()
-    (src / "broken" / "000.png").write_bytes(b"not a png")
+def test_cli_table_and_exit_status_1_when_a_clip_fails(source_with_broken_clip, client1, tmp_path, capsys):
+    src = source_with_broken_clip
     rc = main(_args(src, tmp_path / "ds", "--scheduler", client1.scheduler.address))
     captured = capsys.readouterr()
     assert rc == 1

@@ -15,18 +15,6 @@ pytestmark = pytest.mark.skipif(not (SHARED / "reds_sim_400x250.dat").is_file(),
                                 reason="shared spike data (../shared/data/spike) is absent")
 
 
-@pytest.fixture()
-def spike_zoo_layout(tmp_path) -> Path:
-    """The Spike-Zoo 'base' layout: spike/<name>.dat, gt/<name>.png, config.yaml (links to the shared files)."""
-    (tmp_path / "spike").mkdir()
-    (tmp_path / "gt").mkdir()
-    for name in ("reds_sim", "reds_sim2"):
-        (tmp_path / "spike" / f"{name}.dat").symlink_to((SHARED / f"{name}_400x250.dat").resolve())
-        (tmp_path / "gt" / f"{name}.png").symlink_to((SHARED / f"{name}_400x250_gt.png").resolve())
-    (tmp_path / "config.yaml").write_text("filename: base\nspike_h: 250\nspike_w: 400\n")
-    return tmp_path
-
-
 def test_spike_zoo_layout_sample_reconstructs_its_ground_truth(spike_zoo_layout):
     """41 ticks around the middle tick / 0.6 give 31.6 dB PSNR against the gt (SOURCES.md's figure).
 

@@ -2,11 +2,7 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
-
-SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
 
 
 def test_import_viform_torch_does_not_need_torch():
@@ -15,18 +11,11 @@ def test_import_viform_torch_does_not_need_torch():
     assert "SpikeDataset" in viform.torch.__all__
 
 
-@pytest.mark.skipif(not (SHARED / "reds_sim_400x250.dat").is_file(), reason="shared spike data is absent")
-def test_dataloader_batches(tmp_path):
+def test_dataloader_batches(spike_zoo_layout):
     torch = pytest.importorskip("torch")
     from viform.torch import SpikeDataset
 
-    (tmp_path / "spike").mkdir()
-    (tmp_path / "gt").mkdir()
-    for name in ("reds_sim", "reds_sim2"):
-        (tmp_path / "spike" / f"{name}.dat").symlink_to((SHARED / f"{name}_400x250.dat").resolve())
-        (tmp_path / "gt" / f"{name}.png").symlink_to((SHARED / f"{name}_400x250_gt.png").resolve())
-    (tmp_path / "config.yaml").write_text("spike_h: 250\nspike_w: 400\n")
-    dataset = SpikeDataset(tmp_path, window_ticks=21)
+    dataset = SpikeDataset(spike_zoo_layout, window_ticks=21)
     assert len(dataset) == 2
     loader = torch.utils.data.DataLoader(dataset, batch_size=2, shuffle=False, num_workers=0)
     batch = next(iter(loader))
