@@ -179,7 +179,8 @@ def figure_instant(result, index: int):
     for ax, title, (_, lux, _) in zip(axes.flat, titles, panels, strict=False):
         im = ax.imshow(np.ma.masked_invalid(np.maximum(lux, floor)), cmap=cmap, norm=norm, interpolation="nearest")
         ax.set_title(title, fontsize=8)
-    fig.colorbar(im, cax=cax, label="illuminance on the sensor\n(lux, log scale)")
+    # sensors can read beyond the scene's range: the ends of the bar say that such pixels are clipped
+    fig.colorbar(im, cax=cax, extend="both", label="illuminance on the sensor\n(lux, log scale)")
     _suptitle(fig, f"Scene '{scene.name}' at t = {t * 1e3:.2f} ms: truth and each sensor's image (same colour "
               "map; black = at or below the scene's darkest level; grey = under-exposed, no measurement)")
     return fig
