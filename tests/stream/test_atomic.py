@@ -189,3 +189,44 @@ def test_dat_sigkill_at_random_points_reads_old_or_new(tmp_path):
         assert np.array_equal(bits, a) or np.array_equal(bits, b)
     save_spikes(path, SpikeStream(b, 40_000.0))
     assert _leftovers(tmp_path) == []
+
+
+def campaign(kills: int, seed: int) -> dict:
+    """Kill a writer that rewrites a .dat in a loop ``kills`` times at random moments; count what
+    a reader then finds: the old or new stream whole, a refused pair, or wrong bits."""
+    import tempfile
+    from pathlib import Path
+
+    a, b = streams()
+    rng = np.random.default_rng(seed)
+    counts = {"whole": 0, "refused": 0, "wrong": 0}
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "s.dat"
+        save_spikes(path, SpikeStream(a, 40_000.0))
+        for _ in range(kills):
+            proc = _start(WRITER, path)
+            time.sleep(rng.uniform(0.0, 0.3))
+            proc.kill()
+            proc.wait(10)
+            try:
+                source = open_spikes(path)
+                source.verify()
+                bits = source.read_ticks(0, 96)
+            except ViformError:
+                counts["refused"] += 1
+                save_spikes(path, SpikeStream(a, 40_000.0))  # start again from a whole pair
+                continue
+            counts["whole" if np.array_equal(bits, a) or np.array_equal(bits, b) else "wrong"] += 1
+    return counts
+
+
+if __name__ == "__main__":  # python tests/stream/test_atomic.py --kills 30 --seed 1
+    import argparse
+
+    parser = argparse.ArgumentParser(description="SIGKILL campaign on .dat writes")
+    parser.add_argument("--kills", type=int, default=30)
+    parser.add_argument("--seed", type=int, default=1)
+    opts = parser.parse_args()
+    result = campaign(opts.kills, opts.seed)
+    print(f"{opts.kills} kills: {result['whole']} whole pairs, {result['refused']} refused, "
+          f"{result['wrong']} with wrong bits")
