@@ -356,7 +356,10 @@ def install(group: click.Group) -> None:
     """Bound every numeric option of every command under ``group`` and wrap its callback."""
     for command in walk(group):
         for param in command.params:
-            param.type = _bounded(param.type, param, OPTION_BOUNDS.get((command.name, param.name)))
+            bounds = OPTION_BOUNDS.get((command.name, param.name))
+            param.type = _bounded(param.type, param, bounds)
+            if bounds is not None and isinstance(param, click.Option) and "allowed:" not in (param.help or ""):
+                param.help = f"{param.help or ''}  [allowed: {bounds[0]:g}–{bounds[1]:g} {bounds[2]}]".strip()
             if isinstance(param, click.Option) and flag_of(param) == "--json-file":
                 # one behaviour, checked by one function and described the same way everywhere
                 param.type = click.Path()
