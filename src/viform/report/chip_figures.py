@@ -292,7 +292,7 @@ def fig5_figure(stream, instants, pixels, stretch: str = "minmax", n_ticks: int 
                   "dotted: the four instants above")
     ax.set_title("pulse-width sequences of the ten pixels: each pulse is width τ × height ∝ 1/τ "
                  "(area = Q, one height scale); bright pixels fire short, tall pulses", fontsize=10)
-    fig.canvas.draw()  # fixes the layout, so the numbers can be placed in screen units
+    fig.get_layout_engine().execute(fig)  # fixes the axes, so the numbers can be placed in screen units
     for ax in image_axes:
         _number_markers(ax, pixels)
     return fig, seqs
