@@ -181,7 +181,7 @@ STATE_ROWS = 7
 # context sizes
 _NS = 7  # noise buckets
 _NR = 8  # stop-decision buckets (remaining − predicted)
-_NT = 6  # neighbour trend: −2..2, unknown
+_NT = 12  # neighbour context (version 3: trend −2..2, unknown; version 4: 12 values)
 _NZ = 8 * _NS * 5 * 3 * 3 * _NT  # residual = 0 / sign contexts
 
 _P_NEW = 0  # 2: pixel that never fired: fires in this segment? (left neighbour fired)
@@ -321,11 +321,34 @@ def _nb_iv(n, tau, starts, counts, ticks, last0, ptr, slot):
 
 
 @njit(cache=True, inline="always")
-def _trend(q, width, a, tp, starts, counts, ticks, last0, ptr):
-    """How the already-coded neighbours' (left, up) intervals changed from tick a to tick tp: 0..4, 5 unknown."""
+def _trend(model, q, width, a, tp, starts, counts, ticks, last0, ptr):
+    """What the already-coded neighbours (left, up) say about the next interval (a context, 0.._NT-1).
+
+    Version 3: how their intervals changed from tick a to the predicted tick tp (0..4, 5 unknown).
+    Version 4: their intervals at tp minus this pixel's predicted interval, summed over both
+    (−4..4 → 0..8), or one neighbour only: 9 (same) / 10 (differs), 11 unknown — a neighbour
+    under nearly the same light fires at nearly the same rate (an edge reaches both alike).
+    """
     col = q % width
     tot = np.int64(0)
     have = 0
+    if model >= 4:
+        p = tp - a
+        if col > 0:
+            now = _nb_iv(q - 1, tp, starts, counts, ticks, last0, ptr, 1)
+            if now > 0:
+                tot += now - p
+                have += 1
+        if q >= width:
+            now = _nb_iv(q - width, tp, starts, counts, ticks, last0, ptr, 3)
+            if now > 0:
+                tot += now - p
+                have += 1
+        if have == 0:
+            return 11
+        if have == 1:
+            return 9 + (0 if tot == 0 else 1)
+        return _clip(tot, -4, 4) + 4
     if col > 0:
         then = _nb_iv(q - 1, a, starts, counts, ticks, last0, ptr, 0)
         now = _nb_iv(q - 1, tp, starts, counts, ticks, last0, ptr, 1)
@@ -389,8 +412,8 @@ def _nb_mu(st, q, width, npix):
 
 # ---------------------------------------------------------------------------- encoder
 
-@njit(cache=True)
-def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, out):
+@njit(cache=True, nogil=True)
+def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, out, model=3):
     """Code one segment: per pixel (row-major) its spike ticks ``ticks`` (grouped by pixel, ``counts`` each).
 
     ``last0``: each pixel's last spike tick before the segment (−1: never fired); ``st``: the
@@ -465,7 +488,7 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
                     break
                 iv = ticks[r + k] - a
                 d = iv - p
-                tr = _trend(q, width, a, a + p, starts, counts, ticks, last0, ptr)
+                tr = _trend(model, q, width, a, a + p, starts, counts, ticks, last0, ptr)
                 zc, h1 = _zctx(st, q, p, f, sb, tr)
                 _ebit(es, out, probs, _P_Z + zc, 1 if d == 0 else 0)
                 if d != 0:
@@ -484,8 +507,8 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
 
 # ---------------------------------------------------------------------------- decoder
 
-@njit(cache=True)
-def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_spikes, counts, ticks):
+@njit(cache=True, nogil=True)
+def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_spikes, counts, ticks, model=3):
     """Inverse of :func:`encode_segment`. Returns (error code, spikes decoded); arrays filled in place.
 
     ``ticks`` must hold the spikes: when it is full the code is 2 (the caller may grow it and
@@ -567,7 +590,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
                 if _dbit(ds, data, probs, _stop_ctx(rem, p, sb)) == 0:
                     break
                 # the pixel's own spikes so far are visible to _trend only through its neighbours
-                tr = _trend(q, width, a, a + p, starts, counts, ticks, last0, ptr)
+                tr = _trend(model, q, width, a, a + p, starts, counts, ticks, last0, ptr)
                 zc, h1 = _zctx(st, q, p, f, sb, tr)
                 if _dbit(ds, data, probs, _P_Z + zc):
                     d = np.int64(0)
@@ -660,3 +683,72 @@ def records_from_ticks(tick_counts, ticks, anchor0, ref0, counts, rec_m, rec_g, 
         tail_m[p] = m
         tail_g[p] = m * ref
     return r
+
+
+# ---------------------------------------------------------------------------- dense ↔ ticks (version 4 bands)
+
+@njit(cache=True, nogil=True)
+def band_ticks(dense, row0, row1, seg_start, counts, ticks):
+    """Spike ticks of rows ``row0:row1`` of a segment's bool array ``dense`` (T, H, W).
+
+    Fills ``counts`` (one per pixel of the band, row-major) and ``ticks`` (absolute ticks,
+    grouped by pixel, in time order; ``seg_start`` is the tick of ``dense[0]``). Returns the
+    spike count. ``ticks`` must hold them (size ≥ the band's spike count).
+    """
+    n_ticks = dense.shape[0]
+    width = dense.shape[2]
+    npix = (row1 - row0) * width
+    for q in range(npix):
+        counts[q] = 0
+    for k in range(n_ticks):
+        for r in range(row0, row1):
+            base = (r - row0) * width
+            for c in range(width):
+                if dense[k, r, c]:
+                    counts[base + c] += 1
+    pos = np.empty(npix, np.int64)
+    total = np.int64(0)
+    for q in range(npix):
+        pos[q] = total
+        total += counts[q]
+    for k in range(n_ticks):
+        for r in range(row0, row1):
+            base = (r - row0) * width
+            for c in range(width):
+                if dense[k, r, c]:
+                    ticks[pos[base + c]] = seg_start + k
+                    pos[base + c] += 1
+    return total
+
+
+@njit(cache=True, nogil=True)
+def band_spike_count(dense, row0, row1):
+    """Number of spikes in rows ``row0:row1`` of ``dense`` (T, H, W)."""
+    n = np.int64(0)
+    for k in range(dense.shape[0]):
+        for r in range(row0, row1):
+            for c in range(dense.shape[2]):
+                if dense[k, r, c]:
+                    n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def ticks_to_dense(counts, ticks, seg_start, out):
+    """Fill ``out`` (T, P) bool — zeroed here — with the spikes of a segment given per pixel (grouped ticks)."""
+    out[:] = False
+    r = 0
+    for q in range(counts.size):
+        for _ in range(counts[q]):
+            out[ticks[r] - seg_start, q] = True
+            r += 1
+
+
+@njit(cache=True, nogil=True)
+def advance_last_ticks(counts, ticks, last):
+    """Set ``last`` (per pixel) to each pixel's last spike tick of the segment, where it fired."""
+    r = 0
+    for q in range(counts.size):
+        r += counts[q]
+        if counts[q] > 0:
+            last[q] = ticks[r - 1]
