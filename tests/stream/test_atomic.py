@@ -163,14 +163,15 @@ def test_dat_killed_at_either_rename_reads_a_whole_pair(tmp_path, moment, surviv
     assert np.array_equal(open_spikes(path).read_ticks(0, 96), a)
 
 
-def test_dat_without_sidecar_killed_before_the_data_keeps_the_old_pair(tmp_path):
-    """sidecar=False sets the old sidecar aside first; a kill before the data rename gets it back."""
+def test_dat_without_sidecar_never_leaves_a_wrong_one(tmp_path):
+    """sidecar=False removes the old sidecar just before the data goes in: a kill there leaves
+    the old data without a sidecar (read with its size given), never with another's."""
     path = tmp_path / "s.dat"
     a, _ = streams()
     save_spikes(path, SpikeStream(a, 40_000.0))
     _kill_at(path, "data", with_sidecar=False)
-    source = open_spikes(path)
-    assert source.verify()["verified"] and np.array_equal(source.read_ticks(0, 96), a)
+    assert not (tmp_path / "s.dat.json").exists()
+    assert np.array_equal(open_spikes(path, 8, 16).read_ticks(0, 96), a)
 
 
 def test_dat_sigkill_at_random_points_reads_old_or_new(tmp_path):

@@ -147,3 +147,17 @@ def test_neither_sidecar_matches_damaged_data(tmp_path):
     with pytest.raises(ViformError, match="damaged"):
         open_spikes(path)
     assert pending_sidecar_path(path).exists()  # both kept for whoever looks into it
+
+
+def test_writer_whose_pending_sidecar_vanished_writes_it_again(tmp_path):
+    """The second rename finds no pending sidecar (a reader renamed it in, or it was removed):
+    the sidecar in place ends up the writer's either way."""
+    from viform.stream.dat import _finish_pair
+    from viform.stream.sidecar import DIGEST_KEY, pending_sidecar_path
+
+    path, other, new_side = _two_pairs(tmp_path)
+    body = json.loads(new_side)
+    path.write_bytes(other.read_bytes())  # the new data is in, its sidecar gone missing
+    _finish_pair(pending_sidecar_path(path), sidecar_path(path), body)
+    assert read_sidecar(path)[DIGEST_KEY] == body[DIGEST_KEY]
+    assert open_spikes(path).verify()["verified"]

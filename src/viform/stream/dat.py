@@ -217,8 +217,9 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     (:func:`~viform.stream.sidecar.pending_sidecar_path`), before the data is renamed in, and
     renamed onto the sidecar right after. Whenever the writer is killed, one of the two
     sidecars matches the data under ``path``, and the next reader or writer keeps that one
-    (:func:`~viform.stream.sidecar.settle_sidecar`). With ``sidecar=False`` the old sidecar is
-    set aside the same way, so that it still describes the old data until the new data is in.
+    (:func:`~viform.stream.sidecar.settle_sidecar`). With ``sidecar=False`` an old sidecar is
+    removed just before the data is renamed in (it would describe other bits): a kill between
+    the two leaves the old data without a sidecar, never with a wrong one.
     """
     from viform._io import clean_stale
     from viform.stream.sidecar import pending_sidecar_path, settle_sidecar
@@ -234,6 +235,7 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     pending = pending_sidecar_path(path)
     pending.unlink(missing_ok=True)  # a killed writer's whose data never arrived
     renamed = False
+    body = old_side = None
     try:
         with atomic_open(path, "wb") as f:
             for _, block in source.iter_blocks(block_ticks):
@@ -250,27 +252,31 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
                     p.write(json.dumps(body, indent=2) + "\n")
                     p.flush()
                     os.fsync(p.fileno())
-            elif os.path.lexists(side):  # an old sidecar would describe other bits once the data is in
-                os.replace(side, pending)
+            elif side.is_file():  # an old sidecar would describe other bits once the data is in
+                old_side = side.read_bytes()
+                side.unlink()
         renamed = True
-        _finish_pair(pending, side, sidecar)
+        if body is not None:
+            _finish_pair(pending, side, body)
     except BaseException:
-        if renamed:  # interrupted between the renames: finish the pair
-            _finish_pair(pending, side, sidecar)
-        elif not sidecar and os.path.lexists(pending):  # the old data stays: so does its sidecar
-            os.replace(pending, side)
+        if renamed and body is not None:  # interrupted between the renames: finish the pair
+            _finish_pair(pending, side, body)
         else:
             pending.unlink(missing_ok=True)
+            if not renamed and old_side is not None:  # the old data stays: so does its sidecar
+                with atomic_open(side, "wb") as f:
+                    f.write(old_side)
         raise
     return path
 
 
-def _finish_pair(pending: Path, side: Path, sidecar: bool) -> None:
-    """Second rename of :func:`write_dat`: the pending sidecar goes in (or the old one goes away)."""
-    if not sidecar:
-        pending.unlink(missing_ok=True)
-        return
+def _finish_pair(pending: Path, side: Path, body: dict) -> None:
+    """Second rename of :func:`write_dat`: the pending sidecar (holding ``body``) goes in."""
+    from viform._io import write_json
+    from viform.stream.sidecar import DIGEST_KEY, _intact
+
     try:
         os.replace(pending, side)
-    except FileNotFoundError:
-        pass  # a reader found the new data first and renamed it in (settle_sidecar)
+    except FileNotFoundError:  # a reader found the new data first and renamed it in (settle_sidecar)
+        if (_intact(side) or {}).get(DIGEST_KEY) != body[DIGEST_KEY]:
+            write_json(side, body)  # whatever removed it, the data needs its sidecar

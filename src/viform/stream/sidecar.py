@@ -186,9 +186,9 @@ def settle_sidecar(data_path) -> dict | None:
     Does nothing (one ``stat``) unless a pending sidecar (:func:`pending_sidecar_path`) is
     there. Then the data is hashed once and the sidecar whose size and BLAKE2b match it is
     kept: a matching pending one is renamed onto the sidecar (or, when the folder is read-only,
-    returned for the caller to use); a pending one that matches nothing while the sidecar in
-    place matches is removed once older than :data:`PENDING_STALE_S`. When neither matches,
-    both stay (the reader then reports the damage).
+    returned for the caller to use); a pending one while the sidecar in place matches is
+    removed once older than :data:`PENDING_STALE_S` (a younger one may be a live writer's).
+    When neither matches, both stay (the reader then reports the damage).
     """
     pending = pending_sidecar_path(data_path)
     if not os.path.lexists(pending):
@@ -209,8 +209,8 @@ def settle_sidecar(data_path) -> dict | None:
         return body["blake2b"] == digest
 
     if matches(_intact(sidecar_path(data_path))):
-        try:
-            if candidate is None or time.time() - pending.stat().st_mtime > PENDING_STALE_S:
+        try:  # a young one may be a live writer's, still being written or about to rename its data in
+            if time.time() - pending.stat().st_mtime > PENDING_STALE_S:
                 pending.unlink()  # a killed writer's: its data never arrived
         except OSError:
             pass
