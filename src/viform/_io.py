@@ -193,8 +193,8 @@ def check_output_folder(option: str, folder) -> None:
 
 
 #: What every command's ``--json-file`` does with folders (the CLI shows it in each command's help).
-JSON_FILE_HELP = ("Also write the JSON that --json prints to this file. Missing folders are created, as for "
-                  "--out; an existing file is replaced.")
+JSON_FILE_HELP = ("Also write the JSON that --json prints to this file. Missing folders are created (as for an "
+                  "output folder); an existing file is replaced.")
 
 
 def check_json_file(path, option: str = "--json-file") -> None:
