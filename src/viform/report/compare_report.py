@@ -311,8 +311,8 @@ def figure_dilemma(result):
 def _legend_at_right(fig, ax, chars: int = 44) -> None:
     """The axes' legend on the figure's right, labels wrapped; the axes shrink so it fits.
 
-    Sensor labels are long (preset, Q, clock, method): the legend is measured after drawing
-    and the axes end where it begins, so no label is cut off at the figure's edge.
+    Sensor labels are long (preset, Q, clock, method): the legend's drawn size is measured and
+    the axes end where it begins, so no label is cut off at the figure's edge.
     """
     handles, labels = ax.get_legend_handles_labels()
     if not handles:
@@ -342,11 +342,12 @@ def figure_gated(result):
     # each colour bar hugs its own image (different quantities: lux, photoelectrons)
     fig.colorbar(im0, cax=axes[0].inset_axes([1.03, 0, 0.035, 1]), label="illuminance (lux, log scale)")
     e = np.maximum(shots[0].estimates[0].lux, 0.1)
-    im1 = axes[1].imshow(e, cmap="viridis", norm=LogNorm(vmin=max(0.1, float(np.percentile(e, 1))),
-                                                         vmax=max(1.0, float(e.max()))), interpolation="nearest")
+    floor = max(0.1, float(np.percentile(e, 1)))
+    im1 = axes[1].imshow(e, cmap="viridis", norm=LogNorm(vmin=floor, vmax=max(1.0, float(e.max()))),
+                         interpolation="nearest")
     axes[1].set_title(f"{shots[0].label}: one frame", fontsize=9)
     fig.colorbar(im1, cax=axes[1].inset_axes([1.03, 0, 0.035, 1]), extend="min",
-                 label="laser-return photoelectrons\nper pixel (e⁻, log; < 0.1 at the bottom)")
+                 label=f"laser-return photoelectrons\nper pixel (e⁻, log; ≤ {floor:.2g} at the bottom)")
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
