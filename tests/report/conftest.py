@@ -29,7 +29,7 @@ def _drawn_texts(fig):
         labels = [ax.xaxis.label, ax.yaxis.label] if ax.axison else []
         for t in [ax.title, ax._left_title, ax._right_title, *labels, *ax.texts]:
             if t.get_visible() and t.get_text().strip():
-                out.append((t.get_text(), t.get_window_extent(renderer)))
+                out.append((t.get_text(), Text.get_window_extent(t, renderer)))  # text, not its arrow
     legends = [a.get_legend() for a in fig.axes if a.get_legend()] + list(fig.legends)
     for leg in legends:
         out += [(t.get_text(), t.get_window_extent(renderer)) for t in leg.get_texts() if t.get_text().strip()]
@@ -59,11 +59,13 @@ def layout_problems(fig, tolerance_px: float = 1.0) -> list[str]:
 def _texts_on_markers(fig, tolerance_px: float) -> list[str]:
     """Texts written in an axes over one of its line's markers (a number on its neighbour's circle)."""
     import numpy as np
+    from matplotlib.text import Text
 
     renderer = fig.canvas.get_renderer()
     out = []
     for ax in fig.axes:
-        boxes = [(t.get_text(), t.get_window_extent(renderer)) for t in ax.texts if t.get_text().strip()]
+        # the text's own box: an annotation's arrow is meant to reach its marker
+        boxes = [(t.get_text(), Text.get_window_extent(t, renderer)) for t in ax.texts if t.get_text().strip()]
         for line in ax.lines:
             if line.get_marker() in (None, "None", "", " ") or not boxes:
                 continue

@@ -309,6 +309,7 @@ def _number_markers(ax, pixels, fontsize: int = 8) -> None:
     neighbouring circles. Each number takes the first free spot of eight directions at growing
     distances (with a thin leader line once it is away from its circle), inside the image.
     """
+    from matplotlib.text import Text
     from matplotlib.transforms import Bbox
 
     renderer = ax.figure.canvas.get_renderer()
@@ -328,7 +329,8 @@ def _number_markers(ax, pixels, fontsize: int = 8) -> None:
                 note = ax.annotate(str(j + 1), (c, r), xytext=(dx * dist, dy * dist), textcoords="offset points",
                                    ha=ha, va=va, color=f"C{j}", fontsize=fontsize, weight="bold",
                                    arrowprops=arrow if dist > 6.0 else None)
-                b = note.get_window_extent(renderer)
+                note.update_positions(renderer)
+                b = Text.get_window_extent(note, renderer)  # the number, not its leader line
                 inside = frame.x0 <= b.x0 and b.x1 <= frame.x1 and frame.y0 <= b.y0 and b.y1 <= frame.y1
                 if inside and not any(b.overlaps(o) for o in taken):
                     break
@@ -339,7 +341,8 @@ def _number_markers(ax, pixels, fontsize: int = 8) -> None:
         if note is None:  # no free spot (a crowded tiny image): beside the circle, as before
             note = ax.annotate(str(j + 1), (c, r), xytext=(6, 0), textcoords="offset points", va="center",
                                color=f"C{j}", fontsize=fontsize, weight="bold")
-        taken.append(note.get_window_extent(renderer))
+        note.update_positions(renderer)
+        taken.append(Text.get_window_extent(note, renderer))
 
 
 def chip_figures(out_dir, size: int = 192, ticks: int = 800, stretch: str = "minmax", seed: int = 0,
