@@ -50,18 +50,20 @@ def test_segment_ticks_must_be_positive(tmp_path, stream_file, capsys, value):
 
 
 @pytest.mark.parametrize("command", ["encode", "decode", "dr"])
-def test_json_file_into_a_missing_folder_is_refused(tmp_path, stream_file, capsys, command):
+def test_json_file_under_a_file_is_refused(tmp_path, stream_file, capsys, command):
+    """A --json-file that cannot be made (under a regular file) is refused before any work, by name."""
     src, _ = stream_file
     vfc = tmp_path / "s.vfc"
     assert main(["encode", str(src), str(vfc)]) == 0
     capsys.readouterr()
     args = {"encode": ["encode", str(src), str(tmp_path / "t.vfc")],
             "decode": ["decode", str(vfc), str(tmp_path / "t.npz")], "dr": ["dr"]}[command]
-    missing = tmp_path / "no" / "such"
-    assert main(args + ["--json-file", str(missing / "x.json")]) == 2
+    blocker = tmp_path / "no"
+    blocker.write_text("x")
+    assert main(args + ["--json-file", str(blocker / "such" / "x.json")]) == 2
     err = capsys.readouterr().err
     assert "--json-file" in err and err.count("\n") == 1
-    assert not (tmp_path / "no").exists()
+    assert blocker.is_file()
     assert not (tmp_path / "t.vfc").exists() and not (tmp_path / "t.npz").exists()
 
 
