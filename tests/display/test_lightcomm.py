@@ -197,6 +197,18 @@ def test_max_error_free_rate_between_photon_and_clock_bounds():
     assert mx["max_error_free_bps"] >= lc.theoretical_rate_limits(link, "ook", spikes_needed=8.0)["photon_limited_bps"]
 
 
+def test_max_error_free_search_stops_at_its_tick_budget():
+    """A link with errors at every rate: the search stops once its tries cost the budget of sensor ticks
+    (slower rates cost more ticks per bit) and says how far down it went."""
+    link = lc.LightLink(distance_m=1e5, ambient_lux=0.1)  # far too far: errors at every rate
+    n_bits = 100
+    mx = lc.max_error_free_rate(link, "ook", n_bits=n_bits, seed=0, max_ticks=2e5)
+    assert mx["max_error_free_bps"] is None and mx["tried"]
+    spent = sum(2 * n_bits * CLOCK / t["bitrate_bps"] for t in mx["tried"])
+    assert spent <= 2e5 or len(mx["tried"]) == 1
+    assert mx["searched_down_to_bps"] == mx["tried"][-1]["bitrate_bps"] > CLOCK / 4096
+
+
 # ------------------------------------------------------------------ bad input
 
 def test_bitrate_above_clock_is_refused():

@@ -122,8 +122,12 @@ def print_lightcomm(r: dict) -> None:
                f"absolute clock limit {th['absolute_clock_limit_bps']:.4g} bit/s")
     if "max_error_free" in r:
         mx = r["max_error_free"]
-        click.echo(f"maximum error-free rate: {_fmt(mx['max_error_free_bps'], ' bit/s')} "
-                   f"(0 errors in {mx['n_bits_checked']} bits, BER < {_fmt(mx['ber_upper_95'])} at 95%)")
+        if mx["max_error_free_bps"] is None:
+            click.echo("maximum error-free rate: none found down to "
+                       f"{_fmt(mx.get('searched_down_to_bps'), ' bit/s')} (every rate tried had bit errors)")
+        else:
+            click.echo(f"maximum error-free rate: {_fmt(mx['max_error_free_bps'], ' bit/s')} "
+                       f"(0 errors in {mx['n_bits_checked']} bits, BER < {_fmt(mx['ber_upper_95'])} at 95%)")
     if "sweeps" in r:
         for name, rows in r["sweeps"].items():
             label = {"bitrate_bps": "bit rate (bit/s)", "distance_m": "distance (m)",

@@ -641,13 +641,16 @@ def theoretical_rate_limits(link: LightLink, modulation: str = "ook", spikes_nee
 
 
 def max_error_free_rate(link: LightLink, modulation: str = "ook", n_bits: int = 400, seed: int = 0,
-                        steps_per_octave: int = 4, min_bps: float | None = None) -> dict:
+                        steps_per_octave: int = 4, min_bps: float | None = None,
+                        max_ticks: float = 4e6) -> dict:
     """Highest bit rate (on a geometric grid below the clock limit) with zero errors in ``n_bits``,
     confirmed with a second seed.
 
     The grid is the clock limit (one slot per tick) divided by powers of 2^(1/``steps_per_octave``),
     from the highest rate at which an on slot still gets more than half a spike (faster is
-    photon-starved, BER ≳ ¼) down to ``min_bps`` (default: the clock limit / 2^12).
+    photon-starved, BER ≳ ¼) down to ``min_bps`` (default: the clock limit / 2^12). The search
+    stops once the rates tried have cost ``max_ticks`` sensor ticks in all (a slower rate costs
+    more ticks per bit); ``searched_down_to_bps`` then says how far it went.
     """
     mod = get_modulation(modulation)
     factor = 2 ** (1 / check_int("steps_per_octave", steps_per_octave, 1))
@@ -658,7 +661,12 @@ def max_error_free_rate(link: LightLink, modulation: str = "ook", n_bits: int = 
     while rate > starved and rate / factor >= lo * (1 - 1e-9):
         rate /= factor
     tried = []
+    spent = 0.0
     while rate >= lo * (1 - 1e-9):
+        cost = 2 * n_bits * link.sensor.clock_hz / rate  # ticks of this try and its confirmation, at most
+        if tried and spent + cost > max_ticks:
+            break
+        spent += cost
         r = ber(link, rate, modulation, n_bits, seed)
         tried.append({"bitrate_bps": rate, "bit_errors": r["bit_errors"], "ber": r["ber"]})
         if r["bit_errors"] == 0:
@@ -666,9 +674,11 @@ def max_error_free_rate(link: LightLink, modulation: str = "ook", n_bits: int = 
             tried[-1]["confirm_bit_errors"] = r2["bit_errors"]
             if r2["bit_errors"] == 0:
                 return {"max_error_free_bps": rate, "n_bits_checked": 2 * n_bits,
-                        "ber_upper_95": ber_upper_bound(0, 2 * n_bits), "tried": tried}
+                        "ber_upper_95": ber_upper_bound(0, 2 * n_bits), "tried": tried,
+                        "searched_down_to_bps": rate}
         rate /= factor
-    return {"max_error_free_bps": None, "n_bits_checked": 0, "ber_upper_95": None, "tried": tried}
+    return {"max_error_free_bps": None, "n_bits_checked": 0, "ber_upper_95": None, "tried": tried,
+            "searched_down_to_bps": tried[-1]["bitrate_bps"] if tried else None}
 
 
 def sweep(link: LightLink, parameter: str, values, bitrate_bps: float, modulation: str = "ook",
