@@ -503,12 +503,12 @@ def test_info_checks_every_segment_and_verify_decodes(tmp_path):
 
 # ---------------------------------------------------------------------------- version 4: bands coded in parallel
 
-def _banded_stream(shape=(160, 50, 9)) -> SpikeStream:
-    """Steady pixels below a left-moving edge: two bands of 25 rows (the default for 50 rows)."""
+def _banded_stream(shape=(160, 96, 5)) -> SpikeStream:
+    """Steady pixels below a left-moving edge: two bands of 48 rows (the default for 96 rows)."""
     s = _regular_stream(shape)
     a = s.spikes.copy()
     for k in range(shape[0]):
-        a[k, :, : max(0, shape[2] - k // 20)] &= (k % 3 == 0)  # a region that changes rate as the edge passes
+        a[k, : max(0, shape[1] - k // 2)] &= (k % 3 == 0)  # a region that changes rate as the edge passes
     return SpikeStream(a, 40_000.0, 1e4)
 
 
@@ -524,7 +524,8 @@ def test_v4_bytes_do_not_depend_on_threads_or_blocks(tmp_path, monkeypatch):
         out.append((tmp_path / f"t{threads}-{block}.vfc").read_bytes())
     assert out[0] == out[1] == out[2]
     cf = CodedFile(tmp_path / "t1-7.vfc")
-    assert cf.version == 4 and cf.header["band_rows"] == aer_file.default_band_rows(50) == 25
+    assert cf.version == 4 and cf.header["band_rows"] == aer_file.default_band_rows(96) == 48
+    assert [aer_file.default_band_rows(h) for h in (1, 95, 250, 1000)] == [1, 95, 63, 125]
     for threads in ("1", "2"):
         monkeypatch.setenv("VIFORM_THREADS", threads)
         assert np.array_equal(CodedFile(tmp_path / "t1-7.vfc").read_ticks(0, 160), s.spikes)
@@ -534,7 +535,7 @@ def test_v4_bytes_do_not_depend_on_threads_or_blocks(tmp_path, monkeypatch):
 
 def test_v4_first_spikes_match_v3(tmp_path):
     """Version 4 stores spike ticks; the (i, j, t, τ) quadruples derived from them equal version 3's."""
-    s = _banded_stream((120, 30, 7))
+    s = _banded_stream((120, 96, 3))
     encode_source(s, tmp_path / "a.vfc", segment_ticks=40, version=3)
     encode_source(s, tmp_path / "b.vfc", segment_ticks=40)
     assert np.array_equal(CodedFile(tmp_path / "a.vfc").quadruples(), CodedFile(tmp_path / "b.vfc").quadruples())
@@ -594,7 +595,7 @@ def test_coding_threads_setting_is_validated(monkeypatch):
 
 def test_v4_fuzz_truncations_and_flips(tmp_path):
     """Every truncation and 300 byte flips of a banded file: a one-line ViformError or the exact original."""
-    encode_source(_banded_stream((100, 50, 4)), tmp_path / "g.vfc", segment_ticks=32, block_ticks=37)
+    encode_source(_banded_stream((100, 96, 2)), tmp_path / "g.vfc", segment_ticks=32, block_ticks=37)
     good = (tmp_path / "g.vfc").read_bytes()
     original = _decode_bytes(tmp_path, good, "orig.vfc")
     rng = np.random.default_rng(98)
@@ -618,7 +619,7 @@ def test_v4_forged_band_tables_and_header(tmp_path):
 
     from viform.coding import aer_file
 
-    encode_source(_banded_stream((64, 50, 4)), tmp_path / "g.vfc", segment_ticks=64)
+    encode_source(_banded_stream((64, 96, 2)), tmp_path / "g.vfc", segment_ticks=64)
     header, payloads = _parts((tmp_path / "g.vfc").read_bytes())
     head = aer_file._PAYLOAD_HEAD.size
     p = payloads[0]
@@ -649,7 +650,7 @@ def test_v4_forged_band_tables_and_header(tmp_path):
             assert "\n" not in str(exc)
             errors += 1
     assert errors >= 60
-    for bad in (0, 51, "2", True, None):
+    for bad in (0, 97, "2", True, None):
         data = _resign(dict(header, band_rows=bad), payloads, 64, spikes, version=4)
         with pytest.raises(ViformError, match="band_rows"):
             _decode_bytes(tmp_path, data)

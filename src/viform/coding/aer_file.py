@@ -766,8 +766,12 @@ def _map(fn, n: int) -> list:
 
 
 def default_band_rows(height: int) -> int:
-    """Rows per independently coded band: 1 to 8 bands of ≥ 24 rows (each band costs ≈ 1 % of size)."""
-    n_bands = max(1, min(8, height // 24))
+    """Rows per independently coded band: one band below 96 rows, else an even number (≤ 8) of ≥ 48 rows.
+
+    Each band learns its probabilities on its own (smaller bands cost more: 32-row bands ≈ 1 % of
+    the size, 16-row ≈ 2 %); an even count keeps two threads equally busy.
+    """
+    n_bands = 1 if height < 96 else min(8, 2 * (height // 96))
     return -(-height // n_bands)
 
 
