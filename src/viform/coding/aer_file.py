@@ -814,10 +814,8 @@ def _encode_payload_v4(dense: np.ndarray, start: int, last, ivstate: np.ndarray,
     def one(b):
         r0, r1 = bands[b]
         p0, p1 = r0 * width, r1 * width
-        n = int(interval_model.band_spike_count(dense, r0, r1))
-        counts = np.empty(p1 - p0, np.int64)
-        ticks = np.empty(n + 1, np.int64)
-        interval_model.band_ticks(dense, r0, r1, start, counts, ticks)
+        counts, ticks = interval_model.band_ticks(dense, r0, r1, start)
+        n = ticks.size
         st, probs = ivstate[p0:p1], ivprobs[b]
         st0, probs0 = st.copy(), probs.copy()
         size = 2 * n + (p1 - p0) // 4 + 4096
@@ -830,7 +828,7 @@ def _encode_payload_v4(dense: np.ndarray, start: int, last, ivstate: np.ndarray,
             st[...] = st0
             probs[...] = probs0
             size = 2 * nb
-        return counts, ticks[:n], out[:nb]
+        return counts, ticks, out[:nb]
 
     parts = _map(one, len(bands))
     for (r0, r1), (_, ticks, body) in zip(bands, parts, strict=True):

@@ -373,37 +373,37 @@ def _trend(model, q, width, a, tp, starts, counts, ticks, last0, ptr):
 
 
 @njit(cache=True, inline="always")
-def _nb_at(n, tau, starts, counts, ticks, last0, k):
-    """Neighbour n's interval holding tick tau (−1: not known) and the index k of its first spike after tau.
+def _nb_at(lo, hi, prev0, tau, ticks, k):
+    """A neighbour's interval holding tick tau (−1: not known) and the index k of its first spike after tau.
 
-    ``k`` is the index found for the previous tau of the same pixel (ticks rise, so the walk is short).
+    The neighbour's spikes are ``ticks[lo:hi]``, its last spike before the segment ``prev0``;
+    ``k`` is the index found for the previous tau of the same pixel (ticks rise: a short walk).
     """
-    lo = starts[n]
-    hi = lo + counts[n]
     while k < hi and ticks[k] <= tau:
         k += 1
     while k > lo and ticks[k - 1] > tau:
         k -= 1
     if k >= hi:
         return np.int64(-1), k
-    prev = ticks[k - 1] if k > lo else last0[n]
+    prev = ticks[k - 1] if k > lo else prev0
     if prev < 0:
         return np.int64(-1), k
     return ticks[k] - prev, k
 
 
 @njit(cache=True, inline="always")
-def _neighbours4(q, width, has_left, has_up, p, tp, starts, counts, ticks, last0, kl, ku):
-    """Version-4 neighbour context (see :func:`_trend`) with the walk indices of the left and up neighbours."""
+def _neighbours4(has_left, has_up, p, tp, ticks, llo, lhi, lp0, ulo, uhi, up0, kl, ku):
+    """Version-4 neighbour context (see :func:`_trend`); the left and up neighbours' spans are hoisted
+    out of the spike loop (2× faster than looking them up per spike) and ``kl``, ``ku`` are their walks."""
     tot = np.int64(0)
     have = 0
     if has_left:
-        now, kl = _nb_at(q - 1, tp, starts, counts, ticks, last0, kl)
+        now, kl = _nb_at(llo, lhi, lp0, tp, ticks, kl)
         if now > 0:
             tot += now - p
             have += 1
     if has_up:
-        now, ku = _nb_at(q - width, tp, starts, counts, ticks, last0, ku)
+        now, ku = _nb_at(ulo, uhi, up0, tp, ticks, ku)
         if now > 0:
             tot += now - p
             have += 1
@@ -486,6 +486,12 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
         has_up = q >= width
         kl = starts[q - 1] if has_left else 0
         ku = starts[q - width] if has_up else 0
+        llo = kl
+        lhi = kl + counts[q - 1] if has_left else 0
+        lp0 = last0[q - 1] if has_left else -1
+        ulo = ku
+        uhi = ku + counts[q - width] if has_up else 0
+        up0 = last0[q - width] if has_up else -1
         if a < 0:
             col = q % width
             lf = 1 if (col > 0 and counts[q - 1] > 0) else 0
@@ -541,7 +547,7 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
                 iv = ticks[r + k] - a
                 d = iv - p
                 if model >= 4:
-                    tr, kl, ku = _neighbours4(q, width, has_left, has_up, p, a + p, starts, counts, ticks, last0,
+                    tr, kl, ku = _neighbours4(has_left, has_up, p, a + p, ticks, llo, lhi, lp0, ulo, uhi, up0,
                                               kl, ku)
                 else:
                     tr = _trend(model, q, width, a, a + p, starts, counts, ticks, last0, ptr)
@@ -584,6 +590,12 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
         has_up = q >= width
         kl = starts[q - 1] if has_left else 0
         ku = starts[q - width] if has_up else 0
+        llo = kl
+        lhi = kl + counts[q - 1] if has_left else 0
+        lp0 = last0[q - 1] if has_left else -1
+        ulo = ku
+        uhi = ku + counts[q - width] if has_up else 0
+        up0 = last0[q - width] if has_up else -1
         a = last0[q]
         if a < -1 or a >= seg_start:
             return 1, r
@@ -651,7 +663,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
                     break
                 # the pixel's own spikes so far are visible to _trend only through its neighbours
                 if model >= 4:
-                    tr, kl, ku = _neighbours4(q, width, has_left, has_up, p, a + p, starts, counts, ticks, last0,
+                    tr, kl, ku = _neighbours4(has_left, has_up, p, a + p, ticks, llo, lhi, lp0, ulo, uhi, up0,
                                               kl, ku)
                 else:
                     tr = _trend(model, q, width, a, a + p, starts, counts, ticks, last0, ptr)
@@ -752,18 +764,16 @@ def records_from_ticks(tick_counts, ticks, anchor0, ref0, counts, rec_m, rec_g, 
 # ---------------------------------------------------------------------------- dense ↔ ticks (version 4 bands)
 
 @njit(cache=True, nogil=True)
-def band_ticks(dense, row0, row1, seg_start, counts, ticks):
+def band_ticks(dense, row0, row1, seg_start):
     """Spike ticks of rows ``row0:row1`` of a segment's bool array ``dense`` (T, H, W).
 
-    Fills ``counts`` (one per pixel of the band, row-major) and ``ticks`` (absolute ticks,
-    grouped by pixel, in time order; ``seg_start`` is the tick of ``dense[0]``). Returns the
-    spike count. ``ticks`` must hold them (size ≥ the band's spike count).
+    Returns ``counts`` (one per pixel of the band, row-major) and ``ticks`` (absolute ticks,
+    grouped by pixel, in time order; ``seg_start`` is the tick of ``dense[0]``).
     """
     n_ticks = dense.shape[0]
     width = dense.shape[2]
     npix = (row1 - row0) * width
-    for q in range(npix):
-        counts[q] = 0
+    counts = np.zeros(npix, np.int64)
     for k in range(n_ticks):
         for r in range(row0, row1):
             base = (r - row0) * width
@@ -775,6 +785,7 @@ def band_ticks(dense, row0, row1, seg_start, counts, ticks):
     for q in range(npix):
         pos[q] = total
         total += counts[q]
+    ticks = np.empty(total, np.int64)
     for k in range(n_ticks):
         for r in range(row0, row1):
             base = (r - row0) * width
@@ -782,19 +793,7 @@ def band_ticks(dense, row0, row1, seg_start, counts, ticks):
                 if dense[k, r, c]:
                     ticks[pos[base + c]] = seg_start + k
                     pos[base + c] += 1
-    return total
-
-
-@njit(cache=True, nogil=True)
-def band_spike_count(dense, row0, row1):
-    """Number of spikes in rows ``row0:row1`` of ``dense`` (T, H, W)."""
-    n = np.int64(0)
-    for k in range(dense.shape[0]):
-        for r in range(row0, row1):
-            for c in range(dense.shape[2]):
-                if dense[k, r, c]:
-                    n += 1
-    return n
+    return counts, ticks
 
 
 @njit(cache=True, nogil=True)
