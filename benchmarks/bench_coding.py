@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import zstandard
 
-from viform.coding.aer_file import CodedFile, encode_source
+from viform.coding.aer_file import VERSION, CodedFile, coding_threads, encode_source
 from viform.stream.container import SpikeStream
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "spike"
@@ -139,7 +139,7 @@ def bench_stream(name: str, stream: SpikeStream, tmp: Path, lossy: bool = True, 
     ref_tfp = tfp_images(spikes, probes)
     ref_iv = interval_images(spikes, probes)
     q = stream.threshold_electrons
-    modes = [("strict", "strict", None)]
+    modes = [("strict", "strict", None), ("strict 1 thread", "strict", None), ("strict version 3", "strict", None)]
     if lossy and q is not None:
         modes += [(f"statistical k={k:g}", "statistical", k) for k in K_VALUES]
     if lossy:
@@ -147,19 +147,30 @@ def bench_stream(name: str, stream: SpikeStream, tmp: Path, lossy: bool = True, 
     row["modes"] = {}
     for label, mode, k in modes:
         path = tmp / "s.vfc"
-        tracemalloc.start()
-        t0 = time.perf_counter()
-        info = encode_source(stream, path, mode, k=k, threshold_electrons=q, slack_ticks=1 if mode != "strict" else 0)
-        enc_s = time.perf_counter() - t0
-        enc_peak = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
-        tracemalloc.start()
-        t0 = time.perf_counter()
-        cf = CodedFile(path)
-        dec = np.concatenate([b for _, b in cf.iter_blocks(1024)])
-        dec_s = time.perf_counter() - t0
-        dec_peak = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
+        version = 3 if label.endswith("version 3") else VERSION
+        threads = os.environ.get("VIFORM_THREADS")
+        if label.endswith("1 thread"):
+            os.environ["VIFORM_THREADS"] = "1"
+        try:
+            tracemalloc.start()
+            t0 = time.perf_counter()
+            info = encode_source(stream, path, mode, k=k, threshold_electrons=q,
+                                 slack_ticks=1 if mode != "strict" else 0, version=version)
+            enc_s = time.perf_counter() - t0
+            enc_peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+            tracemalloc.start()
+            t0 = time.perf_counter()
+            cf = CodedFile(path)
+            dec = np.concatenate([b for _, b in cf.iter_blocks(1024)])
+            dec_s = time.perf_counter() - t0
+            dec_peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+        finally:
+            if threads is None:
+                os.environ.pop("VIFORM_THREADS", None)
+            else:
+                os.environ["VIFORM_THREADS"] = threads
         r = {"bytes": info["bytes"], "ratio_vs_raw": raw / info["bytes"],
              "ratio_vs_best_generic": best[1]["bytes"] / info["bytes"],
              "bits_per_spike": 8 * info["bytes"] / max(1, n_spikes),
@@ -319,7 +330,8 @@ def main(argv=None):
     from viform.stream.io import open_spikes
 
     print(f"load: {os.getloadavg()[0]:.1f} {os.getloadavg()[1]:.1f} {os.getloadavg()[2]:.1f} on {os.cpu_count()} CPUs "
-          "(speeds are shared-machine figures)")
+          f"(speeds are shared-machine figures); coding threads: {coding_threads()} (VIFORM_THREADS); "
+          f"'strict' is format version {VERSION}, 'strict version 3' the previous format")
     rows = []
     size = (48, 48) if args.quick else (96, 96)
     ticks = 2000 if args.quick else 4000
@@ -336,6 +348,10 @@ def main(argv=None):
         streams.append(("sim static Q=1e4 noisy", lambda: static_scene(1e4, size, ticks, noise=True)))
         for q in (100.0, 1e4):
             streams.append((f"sim moving 400 px/s Q={q:g}", lambda q=q: (moving_scene(q, size, ticks), None)))
+        warm = static_scene(100.0, (24, 24), 200)[0]
+        for version in (3, VERSION):  # compile (or load) the coders before any timing
+            encode_source(warm, tmp / "warm.vfc", version=version)
+            CodedFile(tmp / "warm.vfc").verify()
         for name, make in streams:
             if args.only and args.only not in name:
                 continue
