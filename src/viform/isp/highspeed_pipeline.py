@@ -509,7 +509,15 @@ def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", s
 
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
     k = np.arange(len(result.exposure_s))
-    ax1.plot(k, result.exposure_s * 1e6, drawstyle="steps-post", color="C0")
+    ax1.plot(k, result.exposure_s * 1e6, drawstyle="steps-post", color="C0", label="exposure")
+    longest_s = result.timing.get("max_exposure_s")
+    if longest_s:
+        # auto-exposure cannot lengthen the exposure past the frame time: say so, or a flat line
+        # after the light drops reads as a controller that gave up
+        ax1.axhline(longest_s * 1e6, color="0.4", ls="--", lw=1,
+                    label=f"longest possible: the frame time ({longest_s * 1e6:.0f} µs)")
+        ax1.set_ylim(0, longest_s * 1e6 * 1.15)
+        ax1.legend(loc="lower right", fontsize=8)
     ax1.set_ylabel("exposure (µs)")
     ax1.set_title(f"{result.timing['frame_rate_hz']:.1f} fps, meter={result.config['meter']}, "
                   f"AE {'on' if result.config['ae'] else 'off'}")
