@@ -593,6 +593,19 @@ def test_coding_threads_setting_is_validated(monkeypatch):
             coding_threads()
 
 
+def test_bad_thread_setting_is_not_reported_as_file_damage(tmp_path, monkeypatch):
+    s = _banded_stream((40, 96, 2))
+    encode_source(s, tmp_path / "a.vfc")
+    monkeypatch.setenv("VIFORM_THREADS", "x")
+    with pytest.raises(ViformError, match="^VIFORM_THREADS = 'x'"):
+        CodedFile(tmp_path / "a.vfc").read_ticks(0, 40)
+    with pytest.raises(ViformError, match="^VIFORM_THREADS = 'x'"):
+        encode_source(s, tmp_path / "b.vfc")
+    assert not (tmp_path / "b.vfc").exists()
+    monkeypatch.delenv("VIFORM_THREADS")
+    assert describe_coded_file(tmp_path / "a.vfc")["band_rows"] == 48
+
+
 def test_v4_fuzz_truncations_and_flips(tmp_path):
     """Every truncation and 300 byte flips of a banded file: a one-line ViformError or the exact original."""
     encode_source(_banded_stream((100, 96, 2)), tmp_path / "g.vfc", segment_ticks=32, block_ticks=37)

@@ -985,6 +985,7 @@ class CodedWriter:
                                   f"{self.width} pixels: a segment would hold {pixel_ticks:,} pixel-ticks in memory "
                                   f"(at most {MAX_SEGMENT_PIXEL_TICKS:,}); give at most "
                                   f"{MAX_SEGMENT_PIXEL_TICKS // (self.height * self.width)} ticks")
+            coding_threads()  # refuse a bad VIFORM_THREADS before the file is opened
             self.band_rows = default_band_rows(self.height)
             self.header["band_rows"] = self.band_rows
             self.ivprobs = new_band_probabilities(self.height, self.band_rows)
@@ -1267,6 +1268,7 @@ class CodedFile(SpikeSource):
         strict = self.mode == "strict"
         banded = self.version >= 4 and strict
         if banded:  # version 4: segments of spike ticks; ``dec`` is not used
+            coding_threads()  # a bad VIFORM_THREADS is the user's setting, not damage in the file
             ivprobs = new_band_probabilities(self.height, self.header["band_rows"])
             last = np.full(n_pixels, -1, np.int64)
         total = 0
@@ -1397,7 +1399,8 @@ def describe_coded_file(path) -> dict:
         "height": cf.height, "width": cf.width, "n_ticks": cf.n_ticks, "clock_hz": cf.clock_hz,
         "duration_s": cf.n_ticks / cf.clock_hz, "start_time_s": cf.start_time_s,
         "threshold_electrons": cf.threshold_electrons, "mode": h["mode"], "k": h["k"],
-        "slack_ticks": h.get("slack_ticks", 0), "segment_ticks": h["segment_ticks"], "segments": len(cf._index),
+        "slack_ticks": h.get("slack_ticks", 0), "segment_ticks": h["segment_ticks"],
+        **({"band_rows": h["band_rows"]} if "band_rows" in h else {}), "segments": len(cf._index),
         "spike_count": cf.spikes_stored, "file_bytes": cf.size, "raw_bytes": raw,
         "ratio_vs_raw": raw / cf.size, "bits_per_spike": 8 * cf.size / max(1, cf.spikes_stored),
         "metadata": h.get("metadata", {}),
