@@ -105,3 +105,14 @@ def test_empty_numba_cache_reads_as_cold(tmp_path):
     code = "from viform.coding._compile_cache import kernels_cached as k; print(k('encode'), k('decode'))"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
     assert out.split() == ["False", "False"]
+
+
+def test_segment_ticks_too_large_for_the_sensor_is_refused_by_flag(tmp_path, capsys):
+    """A strict segment is held in memory while it is coded: --segment-ticks beyond 2^28 pixel-ticks is refused."""
+    src = tmp_path / "wide.npz"
+    save_spikes(src, SpikeStream(np.zeros((2, 1024, 1024), bool), 20_000.0))
+    assert main(["encode", str(src), str(tmp_path / "w.vfc"), "--segment-ticks", "300"]) == 2
+    err = capsys.readouterr().err
+    assert "--segment-ticks = 300" in err and "at most 256 ticks" in err and err.count("\n") == 1
+    assert not (tmp_path / "w.vfc").exists()
+    assert main(["encode", str(src), str(tmp_path / "w.vfc"), "--segment-ticks", "256"]) == 0

@@ -66,7 +66,9 @@ def _json_options(f):
 @click.option("--height", type=int, default=None, help="Height, pixels, of a .dat file without a sidecar.")
 @click.option("--width", type=int, default=None, help="Width, pixels, of a .dat file without a sidecar.")
 @click.option("--segment-ticks", type=int, default=None,
-              help="Ticks per independently decodable segment of the coded file (≥ 1).  [default: 4096]")
+              help="Ticks per independently decodable segment of the coded file (≥ 1).  [default: 4096, "
+                   "fewer for sensors above 8,192 pixels in strict mode: a segment holds at most 2^25 "
+                   "pixel-ticks by default and 2^28 if you set it]")
 @_json_options
 def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks, as_json, json_file):
     """Code the spike stream SRC into the first-spike coded file DST (.vfc)."""
@@ -80,6 +82,14 @@ def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks
         check_int("--segment-ticks", segment_ticks, 1)
     check_json_file(json_file)
     source = open_spikes(src, height, width)
+    if segment_ticks is not None and mode == "strict":
+        from viform.coding.aer_file import MAX_SEGMENT_PIXEL_TICKS
+
+        n_pixels = source.height * source.width
+        if segment_ticks * n_pixels > MAX_SEGMENT_PIXEL_TICKS:
+            raise ViformError(f"--segment-ticks = {segment_ticks} is not allowed for {source.height}×{source.width} "
+                              f"pixels: a segment is held in memory while it is coded; give at most "
+                              f"{MAX_SEGMENT_PIXEL_TICKS // n_pixels} ticks")
     _announce_compile("encode")
     t0 = time.perf_counter()
     summary = encode_source(source, dst, mode, k=k, threshold_electrons=threshold, slack_ticks=slack,
