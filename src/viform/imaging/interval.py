@@ -188,8 +188,11 @@ def _interval_block(bits, first, n_block, next_after, prev, out, censored, n_tot
 
 
 def interval_frames(source: SpikeSource, block_ticks: int = 1024,
-                    lookahead_ticks: int = DEFAULT_LOOKAHEAD_TICKS, with_censored: bool = False):
+                    lookahead_ticks: int = DEFAULT_LOOKAHEAD_TICKS, with_censored: bool = False,
+                    dtype=np.int32):
     """τ (ticks) at every tick, streamed: yields ``(first_tick, tau)`` with tau (T, H, W) int32.
+
+    ``dtype=np.int64`` yields the kernel's own array (no conversion copy).
 
     With ``with_censored`` yields ``(first_tick, tau, censored)``: censored (T, H, W) bool
     marks intervals cut by an end of the stream.
@@ -230,10 +233,11 @@ def interval_frames(source: SpikeSource, block_ticks: int = 1024,
         _interval_block(buffer, first, last - first, next_after, prev, out, censored, n_total)
         buffer = buffer[last - first:]
         shape = (last - first, source.height, source.width)
+        tau = out.reshape(shape) if np.dtype(dtype) == np.int64 else out.astype(dtype).reshape(shape)
         if with_censored:
-            yield first, out.astype(np.int32).reshape(shape), censored.reshape(shape)
+            yield first, tau, censored.reshape(shape)
         else:
-            yield first, out.astype(np.int32).reshape(shape)
+            yield first, tau
 
 
 # ------------------------------------------------------------------ display mappings

@@ -83,11 +83,12 @@ def _interval_stream(source, ticks, sensor_parameters):
             yield int(k), _interval_image(source, tau[0], censored[0], sensor_parameters)
         return
     pos = 0
-    for first, tau, censored in interval_frames(source, block_ticks=_block_ticks(source), with_censored=True):
+    for first, tau, censored in interval_frames(source, block_ticks=_block_ticks(source), with_censored=True,
+                                                dtype=np.int64):
         while pos < wanted.size and wanted[pos] < first + tau.shape[0]:
             k = int(wanted[pos])
-            t = tau[k - first].astype(np.int64)
-            yield k, _interval_image(source, t, censored[k - first].copy(), sensor_parameters)
+            # a view of the block's int64 array (no copy per frame)
+            yield k, _interval_image(source, tau[k - first], censored[k - first].copy(), sensor_parameters)
             pos += 1
         if pos == wanted.size:
             break
