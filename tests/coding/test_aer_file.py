@@ -667,3 +667,20 @@ def test_v4_forged_band_tables_and_header(tmp_path):
         data = _resign(dict(header, band_rows=bad), payloads, 64, spikes, version=4)
         with pytest.raises(ViformError, match="band_rows"):
             _decode_bytes(tmp_path, data)
+
+
+def test_v4_coding_in_a_forked_child_does_not_hang(tmp_path):
+    """A child forked after the coding threads started gets its own threads (a fork keeps the pool, not them)."""
+    import multiprocessing as mp
+
+    s = _banded_stream((40, 96, 2))
+    encode_source(s, tmp_path / "parent.vfc")  # the parent's pool now has threads
+    ctx = mp.get_context("fork")
+    child = ctx.Process(target=encode_source, args=(s, tmp_path / "child.vfc"))
+    child.start()
+    child.join(60)
+    alive = child.is_alive()
+    if alive:
+        child.kill()
+    assert not alive and child.exitcode == 0
+    assert (tmp_path / "child.vfc").read_bytes() == (tmp_path / "parent.vfc").read_bytes()

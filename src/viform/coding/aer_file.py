@@ -731,6 +731,7 @@ MAX_SEGMENT_PIXEL_TICKS = 1 << 28
 #: Default pixel-ticks of a strict version-4 segment (the segment length shrinks for large sensors).
 DEFAULT_SEGMENT_PIXEL_TICKS = 1 << 25
 _POOL: ThreadPoolExecutor | None = None
+_POOL_PID = -1
 
 
 def coding_threads() -> int:
@@ -751,10 +752,12 @@ def coding_threads() -> int:
 
 
 def _pool() -> ThreadPoolExecutor:
-    global _POOL
+    global _POOL, _POOL_PID
     n = coding_threads()
-    if _POOL is None or _POOL._max_workers != n:
+    # a forked child inherits the pool object but not its threads: make its own
+    if _POOL is None or _POOL._max_workers != n or _POOL_PID != os.getpid():
         _POOL = ThreadPoolExecutor(max_workers=n, thread_name_prefix="viform-coding")
+        _POOL_PID = os.getpid()
     return _POOL
 
 
