@@ -219,7 +219,8 @@ def format_report(res: dict) -> str:
                            for r in alt)
         lines.append("  why the default differs from the published counts: its 6.3 cd/lx reflector is bright (few "
                      "pulses at 300 m) and its 50 nm filter lets in so much sun that at 800 m the CNR levels off "
-                     f"below 3; a 0.7 cd/lx reflector with a 10 nm filter (last rows) needs {ths} pulses")
+                     f"below 3; a 0.7 cd/lx reflector behind a 50 mm f/1.8 lens and a 10 nm filter (last rows) "
+                     f"needs {ths} pulses")
     sw = res["gate_sweep"]
     cells = ", ".join(f"{lab} → {'never' if v is None else f'{v:g} m'}" for lab, v in sw["vanish_gate_m"].items())
     lines.append(f"gate sweep 0–400 m, X = {sw['pulses']}: glint vanishes at gate {cells}")
