@@ -401,14 +401,13 @@ def test_v3_regular_stream_round_trip_and_interval_coding(tmp_path):
     assert len(data) < 0.8 * v2["bytes"]
 
 
-def test_v3_fuzz_truncations_and_flips(tmp_path):
-    """Version 3 (interval-coded segments): every truncation and 300 byte flips give a one-line
-    ViformError or the exact original, never other spikes."""
-    good = _regular_file(tmp_path, shape=(120, 4, 5), segment_ticks=32)
+def _assert_damage_is_refused_or_harmless(tmp_path, good: bytes, step: int, seed: int, flips: int = 300):
+    """Every ``step``-th truncation and ``flips`` random bit flips of ``good``: a one-line ViformError
+    or exactly the original spikes, never other spikes."""
     original = _decode_bytes(tmp_path, good, "orig.vfc")
-    rng = np.random.default_rng(99)
-    cases = [good[:c] for c in range(0, len(good), 3)]
-    for _ in range(300):
+    rng = np.random.default_rng(seed)
+    cases = [good[:c] for c in range(0, len(good), step)]
+    for _ in range(flips):
         b = bytearray(good)
         b[int(rng.integers(len(b)))] ^= 1 << int(rng.integers(8))
         cases.append(bytes(b))
@@ -419,6 +418,13 @@ def test_v3_fuzz_truncations_and_flips(tmp_path):
             assert str(exc) and "\n" not in str(exc)
             continue
         assert np.array_equal(out, original)
+
+
+def test_v3_fuzz_truncations_and_flips(tmp_path):
+    """Version 3 (interval-coded segments): every truncation and 300 byte flips give a one-line
+    ViformError or the exact original, never other spikes."""
+    good = _regular_file(tmp_path, shape=(120, 4, 5), segment_ticks=32)
+    _assert_damage_is_refused_or_harmless(tmp_path, good, step=3, seed=99)
 
 
 def test_v3_forged_interval_payloads(tmp_path):
@@ -610,20 +616,7 @@ def test_v4_fuzz_truncations_and_flips(tmp_path):
     """Every truncation and 300 byte flips of a banded file: a one-line ViformError or the exact original."""
     encode_source(_banded_stream((100, 96, 2)), tmp_path / "g.vfc", segment_ticks=32, block_ticks=37)
     good = (tmp_path / "g.vfc").read_bytes()
-    original = _decode_bytes(tmp_path, good, "orig.vfc")
-    rng = np.random.default_rng(98)
-    cases = [good[:c] for c in range(0, len(good), 5)]
-    for _ in range(300):
-        b = bytearray(good)
-        b[int(rng.integers(len(b)))] ^= 1 << int(rng.integers(8))
-        cases.append(bytes(b))
-    for data in cases:
-        try:
-            out = _decode_bytes(tmp_path, data)
-        except ViformError as exc:
-            assert str(exc) and "\n" not in str(exc)
-            continue
-        assert np.array_equal(out, original)
+    _assert_damage_is_refused_or_harmless(tmp_path, good, step=5, seed=98)
 
 
 def test_v4_forged_band_tables_and_header(tmp_path):

@@ -709,16 +709,9 @@ def _decode_payload_v3(payload: bytes, n_pixels: int, width: int, anchor0, ref0,
         cap = min(spikes, 4 * cap)
     if err:
         raise ViformError(f"segment at tick {start} is damaged ({interval_model.ERRORS[err]})")
-    counts = np.empty(n_pixels, np.int64)
-    tail_m = np.empty(n_pixels, np.int64)
-    tail_g = np.empty(n_pixels, np.int64)
-    rec_m, rec_g, rec_o = (np.empty(spikes, np.int64) for _ in range(3))
-    nr = interval_model.records_from_ticks(tick_counts, ticks, anchor0, ref0, counts, rec_m, rec_g, rec_o,
-                                           tail_m, tail_g)
-    if nr != n_rec:
-        raise ViformError(f"segment at tick {start} decodes to {nr} first spikes, its header says {n_rec}")
-    seg = Segment(start, n_ticks, counts, rec_m[:nr], rec_g[:nr], rec_o[:nr], np.zeros(0, np.int64), tail_m,
-                  tail_g, np.zeros(0, np.int64))
+    seg = _segment_from_ticks(tick_counts, ticks[:spikes], anchor0, ref0, start, n_ticks)
+    if seg.m.size != n_rec:
+        raise ViformError(f"segment at tick {start} decodes to {seg.m.size} first spikes, its header says {n_rec}")
     return seg, spikes
 
 

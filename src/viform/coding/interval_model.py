@@ -392,6 +392,21 @@ def _nb_at(lo, hi, prev0, tau, ticks, k):
 
 
 @njit(cache=True, inline="always")
+def _neighbour_spans(q, width, starts, counts, last0):
+    """Pixel q's left and up neighbours: whether each exists, its spikes ``ticks[lo:hi]`` and its last
+    spike before the segment (−1: none), as (has_left, has_up, llo, lhi, lp0, ulo, uhi, up0)."""
+    has_left = q % width > 0
+    has_up = q >= width
+    llo = starts[q - 1] if has_left else 0
+    lhi = llo + counts[q - 1] if has_left else 0
+    lp0 = last0[q - 1] if has_left else -1
+    ulo = starts[q - width] if has_up else 0
+    uhi = ulo + counts[q - width] if has_up else 0
+    up0 = last0[q - width] if has_up else -1
+    return has_left, has_up, llo, lhi, lp0, ulo, uhi, up0
+
+
+@njit(cache=True, inline="always")
 def _neighbours4(has_left, has_up, p, tp, ticks, llo, lhi, lp0, ulo, uhi, up0, kl, ku):
     """Version-4 neighbour context (see :func:`_trend`); the left and up neighbours' spans are hoisted
     out of the spike loop (2× faster than looking them up per spike) and ``kl``, ``ku`` are their walks."""
@@ -482,16 +497,9 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
         a = last0[q]
         k = 0
         ptr[:] = 0
-        has_left = q % width > 0
-        has_up = q >= width
-        kl = starts[q - 1] if has_left else 0
-        ku = starts[q - width] if has_up else 0
-        llo = kl
-        lhi = kl + counts[q - 1] if has_left else 0
-        lp0 = last0[q - 1] if has_left else -1
-        ulo = ku
-        uhi = ku + counts[q - width] if has_up else 0
-        up0 = last0[q - width] if has_up else -1
+        has_left, has_up, llo, lhi, lp0, ulo, uhi, up0 = _neighbour_spans(q, width, starts, counts, last0)
+        kl = llo
+        ku = ulo
         if a < 0:
             col = q % width
             lf = 1 if (col > 0 and counts[q - 1] > 0) else 0
@@ -586,16 +594,9 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
         starts[q] = r
         counts[q] = 0
         ptr[:] = 0
-        has_left = q % width > 0
-        has_up = q >= width
-        kl = starts[q - 1] if has_left else 0
-        ku = starts[q - width] if has_up else 0
-        llo = kl
-        lhi = kl + counts[q - 1] if has_left else 0
-        lp0 = last0[q - 1] if has_left else -1
-        ulo = ku
-        uhi = ku + counts[q - width] if has_up else 0
-        up0 = last0[q - width] if has_up else -1
+        has_left, has_up, llo, lhi, lp0, ulo, uhi, up0 = _neighbour_spans(q, width, starts, counts, last0)
+        kl = llo
+        ku = ulo
         a = last0[q]
         if a < -1 or a >= seg_start:
             return 1, r
