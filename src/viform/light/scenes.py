@@ -31,6 +31,7 @@ from viform._validate import (
     one_line,
 )
 from viform.light.radiometry import check_lux
+from viform.light.truth import FlowTruth, ObjectTruth, TruthUnavailable
 
 
 class Scene(ABC):
@@ -96,6 +97,41 @@ class Scene(ABC):
         """Metadata saved with captures."""
         return {"name": self.name, "height": self.height, "width": self.width,
                 "duration_s": self.duration_s}
+
+    # ------------------------------------------------------------------ ground truth
+    # Conventions (coordinates, flow direction, boxes): viform.light.truth. Scenes that know
+    # their geometry override these; the defaults say that this scene has no such truth.
+
+    def truth_kinds(self) -> tuple[str, ...]:
+        """Which truths this scene gives: a subset of ``("motion", "depth", "objects")``."""
+        return ()
+
+    def _no_truth(self, kind: str):
+        raise TruthUnavailable(
+            f"scene {self.name!r} has no {kind} truth: "
+            + ("image and video files carry only light, no motion, depth or objects"
+               if isinstance(self, (StillScene, VideoScene)) and not self.truth_kinds()
+               else f"it gives {', '.join(self.truth_kinds()) or 'none'}"))
+
+    def motion_px_per_s(self, t_s: float) -> np.ndarray:
+        """Image-plane velocity of every pixel at ``t_s``: shape (2, H, W), (vx, vy) in px/s, NaN where undefined."""
+        self._no_truth("motion")
+
+    def optical_flow_px(self, t0_s: float, t1_s: float) -> FlowTruth:
+        """Forward optical flow from ``t0_s`` to ``t1_s`` (px) with its validity mask."""
+        self._no_truth("motion")
+
+    def depth_m(self, t_s: float) -> np.ndarray:
+        """Distance (m) from the camera of the surface seen at every pixel at ``t_s``, shape (H, W)."""
+        self._no_truth("depth")
+
+    def objects(self, t_s: float) -> list[ObjectTruth]:
+        """The labelled objects at ``t_s`` (ids stable over time); [] when none is in the field."""
+        self._no_truth("objects")
+
+    def object_labels(self, t_s: float) -> np.ndarray:
+        """Visible object id per pixel at ``t_s`` (int32, 0 = background), shape (H, W)."""
+        self._no_truth("objects")
 
 
 # --------------------------------------------------------------------------- images
