@@ -132,3 +132,13 @@ class BlockReader:
         while len(self._cache) > CACHED_BLOCKS:
             self._cache.popitem(last=False)
         return data
+
+
+def header_digest(header: dict) -> str:
+    """BLAKE2b (16 bytes, hex) of a JSON header without its ``header_blake2b`` field (sorted keys)."""
+    import hashlib
+    import json
+
+    body = {k: v for k, v in header.items() if k != "header_blake2b"}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()

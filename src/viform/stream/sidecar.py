@@ -315,9 +315,10 @@ def check_marks(header: dict, path) -> None:
     needed = [DIGEST_KEY, "data_bytes", "blake2b"] + (["block_bytes", "block_crc32"] if version >= 2 else [])
     missing = [k for k in needed if header.get(k) is None]
     if missing:
-        raise ViformError(f"{where}: the sidecar is damaged or was edited: viform writes {', '.join(needed)} and "
-                          f"{', '.join(repr(k) for k in missing)} {'is' if len(missing) == 1 else 'are'} missing; "
-                          "write the file again with viform")
+        raise ViformError(f"{where}: the sidecar is damaged or was edited: field"
+                          f"{'' if len(missing) == 1 else 's'} {', '.join(repr(k) for k in missing)}, which viform "
+                          f"writes in every sidecar of version {version}, {'is' if len(missing) == 1 else 'are'} "
+                          "missing; write the file again with viform")
     if header[DIGEST_KEY] != _digest(header):
         raise ViformError(f"{where}: the sidecar is damaged or was edited (its checksum {DIGEST_KEY!r} differs); "
                           "write the file again with viform")
