@@ -101,6 +101,11 @@ class NpzSpikes(SpikeSource):
                 raise ViformError(f"{str(path)!r} is not a .npz file (not a zip archive)")
             self._zip = zipfile.ZipFile(path)
             infos = {i.filename: i for i in self._zip.infolist()}
+            if len(infos) != len(self._zip.infolist()):  # readers disagree on which one counts
+                twice = sorted({i.filename for i in self._zip.infolist()
+                                if sum(j.filename == i.filename for j in self._zip.infolist()) > 1})
+                raise ViformError(f"{str(path)!r} is damaged or was tampered with: it holds several members "
+                                  f"named {twice[0]!r}")
         except ViformError:
             raise
         except _ERRORS as exc:
