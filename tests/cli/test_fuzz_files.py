@@ -440,6 +440,26 @@ def test_damaged_files_fail_cleanly():
     assert result["peak_rss_mb"] < 1024
 
 
+def test_degenerate_streams_get_one_line_from_every_command(tmp_path):
+    """0 ticks: exit 2, one line naming the file; 1 tick: every command works (issue 26.2)."""
+    from viform.stream.container import SpikeStream
+    from viform.stream.io import save_spikes
+
+    empty = tmp_path / "empty.npz"
+    np.savez(empty, spk=np.zeros((0, 8, 16), np.uint8))
+    one = save_spikes(tmp_path / "one.dat", SpikeStream(np.ones((1, 8, 16), bool), 40_000.0, 60.0))
+    for path, expect in ((empty, 2), (one, 0)):
+        runs = [["info", str(path)], ["verify", str(path)], ["encode", str(path), str(tmp_path / "o.vfc")]]
+        runs += [["reconstruct", str(path), "--method", m, "--at", "0", "--out", str(tmp_path / f"{m}.png")]
+                 for m in METHODS]
+        for args in runs:
+            result = run_command(args)
+            assert result["rc"] == expect, (args, result)
+            if expect == 2:
+                assert result["err"].count("\n") == 1 and "empty.npz" in result["err"] \
+                    and "empty stream" in result["err"], result["err"]
+
+
 def main_cli() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", type=int, default=400)
