@@ -286,14 +286,24 @@ class NpzSpikes(SpikeSource):
             raise ViformError(f"{str(self.path)!r}: array {self.key!r} is damaged: {_short(exc)}") from None
         return data
 
-    def _check_member(self) -> None:
-        """A streamed pass over the whole member: its zip CRC-32 is checked before any of it is used."""
+    def _check_member(self, keep: tuple[int, int] = (0, 0)) -> bytes:
+        """A streamed pass over the whole member: its zip CRC-32 is checked before any of it is used.
+
+        Returns the ``keep = (offset, count)`` bytes it passed (member coordinates), so the read
+        that asked for the check does not decompress the member a second time.
+        """
+        offset, count = keep
+        kept = bytearray()
         pos, step = 0, 8 << 20
         while pos < self._member_bytes:
             n = min(step, self._member_bytes - pos)
-            if len(self._member_read(pos, n)) != n:
+            chunk = self._member_read(pos, n)
+            if len(chunk) != n:
                 raise ViformError(f"{str(self.path)!r}: array {self.key!r} is truncated")
+            if pos < offset + count and offset < pos + n:
+                kept += chunk[max(0, offset - pos): offset + count - pos]
             pos += n
+        return kept
 
     def _read_bytes(self, offset: int, count: int) -> bytes:
         """``count`` bytes of the array's data from ``offset``, checked before they are returned.
@@ -304,12 +314,10 @@ class NpzSpikes(SpikeSource):
         """
         if self._blocks is not None:
             data = self._blocks.read(self._header_bytes + offset, count)
+        elif not self._zip_checked:  # the first read passes the whole member (its CRC-32 checked at the end)
+            data = self._check_member((self._header_bytes + offset, count))
         else:
-            if not self._zip_checked and not (offset == 0 and count == self._data_bytes):
-                self._check_member()
             data = self._member_read(self._header_bytes + offset, count)
-            if offset == 0 and count == self._data_bytes and not self._zip_checked:
-                self._check_member()
         if len(data) != count:
             raise ViformError(f"{str(self.path)!r}: array {self.key!r} is truncated (data ends "
                               f"{count - len(data)} bytes early)")
