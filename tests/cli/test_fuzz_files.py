@@ -295,6 +295,7 @@ def run_command(args: list[str], timeout_s: float = COMMAND_TIMEOUT_S) -> dict:
     old = signal.signal(signal.SIGALRM, on_alarm)
     signal.setitimer(signal.ITIMER_REAL, timeout_s)
     started = time.perf_counter()
+    cpu_started = time.process_time()
     try:
         with redirect_stderr(err), redirect_stdout(out):
             rc = main(args)
@@ -305,7 +306,8 @@ def run_command(args: list[str], timeout_s: float = COMMAND_TIMEOUT_S) -> dict:
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, old)
-    return {"rc": rc, "err": err.getvalue(), "out": out.getvalue()[-300:], "s": time.perf_counter() - started}
+    return {"rc": rc, "err": err.getvalue(), "out": out.getvalue()[-300:], "s": time.perf_counter() - started,
+            "cpu_s": time.process_time() - cpu_started}
 
 
 def leftovers(*folders: Path) -> list[str]:

@@ -192,10 +192,16 @@ def campaign(timeout_s: float, values=None) -> dict:
                 counts[kind] = counts.get(kind, 0) + 1
                 if kind not in ("ok", "refused"):
                     examples.setdefault(kind, []).append([command, flag, value, str(result["rc"]),
+                                                          f"{result['s']:.1f} s wall, {result['cpu_s']:.1f} s CPU",
                                                           result["err"].strip()[-300:]])
-                print(f"{kind:9s} {result['s']:6.1f}s {command} {flag} {value}", file=sys.stderr, flush=True)
+                print(f"{kind:9s} {result['s']:6.1f}s {result['cpu_s']:6.1f}s CPU {command} {flag} {value}",
+                      file=sys.stderr, flush=True)
                 shutil.rmtree(work / "out", ignore_errors=True)
-    return {"counts": counts, "examples": examples}
+    import resource
+
+    # every run is in this process: its peak resident memory bounds each run's
+    return {"counts": counts, "examples": examples,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
 if __name__ == "__main__":
