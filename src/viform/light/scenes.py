@@ -580,6 +580,15 @@ def _dilemma_scene(name):  # lazy: viform.light.dilemma imports this module
 
 BUILTIN_SCENES.update({name: _dilemma_scene(name) for name in ("dilemma", "night-road-fog")})
 
+
+def _multi_object_scene(height, width, **kw):  # lazy: viform.light.multi_object imports this module
+    from viform.light.multi_object import MultiObjectScene
+
+    return MultiObjectScene(height=height, width=width, **kw)
+
+
+BUILTIN_SCENES["multi-object"] = _multi_object_scene
+
 _VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".gif", ".webm")
 
 
