@@ -665,6 +665,15 @@ def _waving_hand(height, width, **kw):  # lazy: viform.light.articulated imports
 
 BUILTIN_SCENES["waving-hand"] = _waving_hand
 
+
+def _multi_object_scene(height, width, **kw):  # lazy: viform.light.multi_object imports this module
+    from viform.light.multi_object import MultiObjectScene
+
+    return MultiObjectScene(height=height, width=width, **kw)
+
+
+BUILTIN_SCENES["multi-object"] = _multi_object_scene
+
 _VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".gif", ".webm")
 
 
