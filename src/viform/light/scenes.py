@@ -102,9 +102,13 @@ class Scene(ABC):
             type(self).illuminance_lux_many is Scene.illuminance_lux_many
 
     def describe(self) -> dict:
-        """Metadata saved with captures."""
-        return {"name": self.name, "height": self.height, "width": self.width,
-                "duration_s": self.duration_s}
+        """Metadata saved with captures (with ``builtin``: how to remake a built-in scene, see
+        :func:`scene_from_description`)."""
+        d = {"name": self.name, "height": self.height, "width": self.width, "duration_s": self.duration_s}
+        spec = getattr(self, "builtin_spec", None)
+        if spec is not None:
+            d["builtin"] = spec
+        return d
 
     # ------------------------------------------------------------------ ground truth
     # Conventions (coordinates, flow direction, boxes): viform.light.truth. Scenes that know
@@ -632,7 +636,38 @@ def builtin_scene(name: str, height: int = 250, width: int = 400, **kw) -> Scene
     check_choice("scene", name, tuple(BUILTIN_SCENES))
     scene = BUILTIN_SCENES[name](height=height, width=width, **kw)
     scene.name = name  # metadata records the name the user gave ("moving-edge", not its class's "translating")
+    # enough to remake the scene, and so its exact truth, from a file's metadata
+    scene.builtin_spec = {"name": name, "height": int(height), "width": int(width), "parameters": _plain(kw)}
     return scene
+
+
+def _plain(parameters: dict) -> dict:
+    """Keyword arguments as JSON values (tuples → lists); refuses what JSON cannot carry."""
+    import json
+
+    try:
+        return json.loads(json.dumps(parameters))
+    except TypeError:
+        return {"unrecordable": True}
+
+
+def scene_from_description(described: dict | None) -> Scene:
+    """Remake a built-in scene from the ``scene`` metadata a capture recorded (its truth included).
+
+    Raises :class:`~viform.light.truth.TruthUnavailable` for scenes that were not built-in
+    (an image or a video) or whose parameters were not recorded.
+    """
+    spec = (described or {}).get("builtin") if isinstance(described, dict) else None
+    name = (described or {}).get("name", "unknown") if isinstance(described, dict) else "unknown"
+    if not isinstance(spec, dict) or spec.get("name") not in BUILTIN_SCENES or \
+            not isinstance(spec.get("parameters"), dict) or spec["parameters"].get("unrecordable"):
+        raise TruthUnavailable(f"the stream's scene {name!r} is not a built-in scene viform can remake, so it "
+                               "carries no truth (image and video files have none)")
+    try:
+        parameters = {k: tuple(v) if isinstance(v, list) else v for k, v in spec["parameters"].items()}
+        return builtin_scene(spec["name"], int(spec["height"]), int(spec["width"]), **parameters)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise TruthUnavailable(f"the stream's scene description cannot be remade: {one_line(exc)}") from None
 
 
 BUILTIN_SCENES = {
