@@ -90,6 +90,7 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
                              frame_rate_hz=frame_rate_hz, max_lux=max_lux, interpolation=interpolation,
                              light_sample_ticks=light_sample_ticks,
                              truth_every_ticks=truth_every_ticks if scenes is not None else None)
+    _check_max_lux(settings)
     if scenes is not None:
         src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs)
     summary = build_dataset(src, out_dir, settings, workers=workers, scheduler=scheduler,
@@ -119,6 +120,20 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
     if summary["failed"]:
         raise ClipsFailed(f"{len(summary['failed'])} of {summary['clips']} clips failed (listed above); "
                           "the others are written, and running the command again retries only the failed ones")
+
+
+def _check_max_lux(settings) -> None:
+    """A full-scale pixel brighter than the simulator can represent would fail every clip on its
+    worker: refuse --max-lux here, before any work, with the line ``simulate`` prints."""
+    import numpy as np
+
+    from viform._validate import ViformError
+    from viform.sensors.spike import SpikeSensor
+
+    try:
+        SpikeSensor(settings.parameters, 1, 1)._fixed_point_rates(np.array([[settings.max_lux]]), 1, 1)
+    except ViformError as exc:
+        raise ViformError(f"--max-lux = {settings.max_lux:g}: {exc}") from None
 
 
 class ClipsFailed(click.ClickException):

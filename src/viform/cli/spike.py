@@ -141,17 +141,20 @@ def _apply(options):
                    "range (depth/, m) and object tracks (mot/: MOTChallenge gt.txt, seqinfo.ini).")
 @click.option("--truth-every-ticks", type=int, default=40, show_default=True,
               help="Ticks per truth frame (40 ticks = 1 ms at 40 kHz).")
+@click.option("--force", is_flag=True,
+              help="Run a simulation estimated to take more than a minute (refused without it, with the estimate).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 @_apply(sensor_options)
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
-             light_sample_ticks, truth_dir, truth_every_ticks, as_json, json_file, **sensor_kw):
+             light_sample_ticks, truth_dir, truth_every_ticks, force, as_json, json_file, **sensor_kw):
     """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the spike stream.
 
     Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
     Memory stays bounded (blocks of about 50 MB) whatever the resolution and duration.
     """
     from viform._io import check_json_file, check_output_folder, write_json
+    from viform.cli._types import check_simulation_work
     from viform.light.scenes import VideoScene, load_scene
     from viform.stream.io import FORMATS, save_spikes
 
@@ -168,6 +171,8 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     fit = (height, width)  # files: resized only when the user asked
     height = height if height is not None else (preset.height if preset is not None else 250)
     width = width if width is not None else (preset.width if preset is not None else 400)
+    if all(v is not None for v in fit) or not Path(scene).exists():  # the size is known before the scene loads
+        check_simulation_work(duration_s, sensor.parameters.clock_hz, height * width, force)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
                        interpolation=interpolation, fit=fit)
     if truth_dir is not None:
@@ -178,6 +183,7 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
             raise ViformError(f"--truth: scene {scene!r} has no truth: image and video files carry only light; "
                               "use a built-in scene (translating, rotating, dilemma, multi-object, …)")
         check_output_folder("--truth", Path(truth_dir))
+    check_simulation_work(duration_s, sensor.parameters.clock_hz, light.height * light.width, force)
     scene_s = light.duration_s if isinstance(light, VideoScene) else None
     if scene_s is not None and duration_s > scene_s * (1 + 1e-9) and not as_json:
         click.echo(f"viform: warning: the video lasts {scene_s:.4g} s; its last frame is held for the other "
