@@ -9,7 +9,14 @@ from scipy import ndimage
 
 from viform.cli import main
 from viform.light.scenes import FlickerScene, StillScene
-from viform.measure.calibration import calibrate, pixel_intervals, preset_from_calibration, rounding_variance
+from viform.measure.calibration import (
+    calibrate,
+    interval_statistics,
+    pixel_intervals,
+    preset_from_calibration,
+    rounding_variance,
+    statistics_of,
+)
 from viform.sensors.spike import SpikeSensor
 from viform.sensors.spike_presets import load_spike_preset
 from viform.stream.container import SpikeStream
@@ -241,3 +248,20 @@ def test_reading_stops_at_the_spike_budget():
     # the same spikes as the first part of the whole read
     spikes = rec.spikes[: part.n_ticks]
     assert np.array_equal(part.n_spikes, spikes.reshape(part.n_ticks, -1).sum(axis=0))
+
+
+@pytest.mark.parametrize("block_ticks,budget", [(37, None), (50, 3)])
+def test_streamed_statistics_equal_the_collected_intervals(block_ticks, budget):
+    """Calibration reads per-pixel sums block by block (bounded memory: one block and 19
+    numbers per pixel, not every interval). They equal the sums of the collected intervals
+    (to float rounding), whatever the block size, and stop at the same spike budget."""
+    rec = _ramp_recording(10_000, 0.03, size=24, ticks=300)
+    max_spikes = 20_000_000 if budget is None else int(rec.spikes.sum()) // budget
+    whole = pixel_intervals(rec, block_ticks=block_ticks, max_spikes=max_spikes)
+    streamed = interval_statistics(rec, block_ticks=block_ticks, max_spikes=max_spikes)
+    collected = statistics_of(whole)
+    assert streamed.n_ticks == whole.n_ticks
+    for name in collected.__dataclass_fields__:
+        value = getattr(collected, name)
+        if isinstance(value, np.ndarray):
+            assert np.allclose(getattr(streamed, name), value, rtol=1e-12, atol=0), name
