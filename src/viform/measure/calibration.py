@@ -571,47 +571,110 @@ def _gain_spread(iv: PixelIntervals, sigma2_per_mu2: float, tile: int, min_spike
     return (math.sqrt(var) if var > 0 else 0.0), info
 
 
-def _hot_in(counts: np.ndarray, local: np.ndarray,
-            q_electrons: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(hot, excess, σ) of one stretch of the recording: far above the local median m.
+#: A pixel is hot only where its excess exceeds this many robust standard deviations of the
+#: scene's relative pixel-to-pixel contrast (texture is multiplicative, a dark current additive).
+HOT_TEXTURE_SIGMAS = 8.0
+#: Hot-pixel positions listed in the result at most.
+MAX_LISTED_HOT_PIXELS = 1000
 
-    A pixel that is not hot counts about m spikes; its photo-electrons are Poisson, so its
-    count varies by σ = √(m/Q + 1) (the 1: where the first and last spikes fall). Without
-    a Q, Q = 1 (plain Poisson counts, conservative). Hot: excess c − m ≥ 5σ, ≥ 5 spikes,
-    and ≥ 8 robust standard deviations of the excess over the image (PRNU, scene texture).
+
+def _relative_contrast(counts: np.ndarray, local: np.ndarray) -> float:
+    """Robust std of (count − local median)/local median: the scene's texture at the pixel scale
+    (plus count noise), over pixels with ≥ 20 spikes locally (all lit pixels if too few)."""
+    lit = local >= 20
+    if lit.sum() < 100:
+        lit = local > 0
+    if not lit.any():
+        return 0.0
+    z = (counts[lit] - local[lit]) / local[lit]
+    # mean absolute deviation (× √(π/2): a normal's std) of the central 98 %: robust to the few
+    # hot pixels, and unlike the median absolute deviation it does not collapse to 0 on the
+    # whole-number counts of a short recording
+    lo, hi = np.percentile(z, [1.0, 99.0])
+    central = z[(z >= lo) & (z <= hi)]
+    return 1.2533 * float(np.mean(np.abs(central - np.median(central))))
+
+
+def _hot_threshold(local: np.ndarray, q_electrons: float | None, contrast: float) -> np.ndarray:
+    """Excess (spikes) a pixel needs over its local median to be called hot in one stretch.
+
+    Photon noise: a pixel that is not hot counts about m spikes, varying by σ = √(m/Q + 1)
+    (the 1: where the first and last spikes fall; Q = 1 when unknown, conservative), so ≥ 5σ
+    and ≥ 5 spikes. Texture: the light of a textured scene varies from pixel to pixel in
+    proportion to the light (reflectance × illumination), by the relative ``contrast``
+    measured over the image, so ≥ :data:`HOT_TEXTURE_SIGMAS`·contrast·m as well: a dark
+    current, which adds the same charge whatever the light, stands out where the scene is
+    dark and cannot be told from texture where it is bright.
     """
-    excess = counts - local
-    scale = 1.4826 * float(np.median(np.abs(excess - np.median(excess))))
     sigma = np.sqrt(np.maximum(local, 0.0) / max(q_electrons or 1.0, 1.0) + 1.0)
-    hot = excess >= np.maximum(5.0 * sigma, max(5.0, 8.0 * scale))
-    return hot, excess, sigma
+    return np.maximum(np.maximum(5.0 * sigma, 5.0), HOT_TEXTURE_SIGMAS * contrast * np.maximum(local, 0.0))
 
 
-def _hot_dead(iv: PixelIntervals, q_electrons: float | None):
+def _hot_dead(iv, q_electrons: float | None):
+    """Hot pixels (by dark current), dead pixels and the darkest pixels' counts (module notes).
+
+    Hot: a dark current is steady, so the pixel must stand out in BOTH halves of the
+    recording, by the same excess within the noise (moving light lifts a pixel only while a
+    bright feature passes it), and above the scene's texture at its light level
+    (:func:`_hot_threshold`). A pixel's detection limit, in e⁻/s, is the larger of its two
+    halves' thresholds × Q / (half the duration); the hot fraction is estimated among the
+    pixels whose limit lies below the dark current of the hot pixels found (elsewhere a hot
+    pixel would hide under the light), and when none is found only a bound is given.
+    """
     from scipy import ndimage
 
     h, w = iv.height, iv.width
     counts = iv.n_spikes.reshape(h, w).astype(np.float64)
     local = ndimage.median_filter(counts, size=5, mode="nearest")
     excess = counts - local
-    # hot: a dark current is steady, so the pixel must stand out in BOTH halves of the
-    # recording, by the same excess within the noise; moving light makes a pixel outshine
-    # its neighbours only while a bright feature passes it.
     first = (iv.n_spikes_first_half if iv.n_spikes_first_half is not None else iv.n_spikes // 2)
     first = first.reshape(h, w).astype(np.float64)
     second = counts - first
-    hot1, e1, s1 = _hot_in(first, ndimage.median_filter(first, size=5, mode="nearest"), q_electrons)
-    hot2, e2, s2 = _hot_in(second, ndimage.median_filter(second, size=5, mode="nearest"), q_electrons)
+    duration_s = iv.n_ticks / iv.clock_hz
+    q_for_rate = q_electrons or 1.0
+    halves = []
+    for part, part_s in ((first, (iv.n_ticks // 2) / iv.clock_hz), (second, (iv.n_ticks - iv.n_ticks // 2)
+                                                                     / iv.clock_hz)):
+        part_local = ndimage.median_filter(part, size=5, mode="nearest")
+        contrast = _relative_contrast(part, part_local)
+        need = _hot_threshold(part_local, q_electrons, contrast)
+        part_excess = part - part_local
+        sigma = np.sqrt(np.maximum(part_local, 0.0) / max(q_electrons or 1.0, 1.0) + 1.0)
+        halves.append((part_excess >= need, part_excess, sigma, need * q_for_rate / max(part_s, 1e-300), contrast))
+    (hot1, e1, s1, lim1, c1), (hot2, e2, s2, lim2, c2) = halves
     # same excess in both halves: within 5 σ of the difference, and 20 % (slack for the light)
     steady = np.abs(e1 - e2) <= 5.0 * np.hypot(s1, s2) + 0.2 * np.maximum(e1, e2)
     hot = hot1 & hot2 & steady
+    limit_e_per_s = np.maximum(lim1, lim2)  # the dark current a pixel needs to be found
     # dead: silent where the neighbourhood gives ≥ 10 spikes (P(0) < e^-10 for a live pixel)
     dead = (counts == 0) & (local >= 10)
-    duration_s = iv.n_ticks / iv.clock_hz
-    out = {"hot_pixels": int(hot.sum()), "hot_pixel_fraction": float(hot.mean()),
-           "dead_pixels": int(dead.sum()), "dead_pixel_fraction": float(dead.mean())}
-    if hot.any() and q_electrons is not None:
-        out["hot_pixel_dark_current_e_per_s"] = float(np.median(excess[hot]) / duration_s * q_electrons)
+    n_hot = int(hot.sum())
+    out = {"hot_pixels": n_hot, "hot_pixel_fraction_of_all": float(hot.mean()),
+           "dead_pixels": int(dead.sum()), "dead_pixel_fraction": float(dead.mean()),
+           "scene_relative_contrast": float(max(c1, c2)),
+           "hot_pixel_detection_limit_median_e_per_s": float(np.median(limit_e_per_s)) if q_electrons else None}
+    ys, xs = np.nonzero(hot)
+    out["hot_pixel_positions"] = [[int(y), int(x)] for y, x in zip(ys[:MAX_LISTED_HOT_PIXELS],
+                                                                     xs[:MAX_LISTED_HOT_PIXELS], strict=True)]
+    if n_hot and q_electrons is not None:
+        currents = excess[hot] / duration_s * q_electrons
+        level = float(np.median(currents))
+        searchable = int(np.count_nonzero(limit_e_per_s <= level))
+        out["hot_pixel_dark_current_e_per_s"] = level
+        out["hot_pixel_dark_current_standard_error_e_per_s"] = (float(1.2533 * np.std(currents) / math.sqrt(n_hot))
+                                                                if n_hot > 1 else None)
+        out["hot_pixel_searchable_pixels"] = searchable
+        fraction = n_hot / max(searchable, n_hot)
+        out["hot_pixel_fraction"] = fraction
+        out["hot_pixel_fraction_standard_error"] = math.sqrt(fraction * (1 - fraction) / max(searchable, n_hot))
+    else:
+        out["hot_pixel_fraction"] = float(hot.mean())
+    if not n_hot and q_electrons is not None:
+        limit = float(np.median(limit_e_per_s))
+        searchable = int(np.count_nonzero(limit_e_per_s <= limit))
+        # none in n pixels: the fraction is below 3/n at 95 % (the rule of three)
+        out["hot_pixel_bound"] = {"dark_current_at_least_e_per_s": limit, "searchable_pixels": searchable,
+                                  "fraction_upper_bound": 3.0 / max(searchable, 1)}
     # dark current: only the darkest pixels bound it (they may still see light)
     live = counts[~dead]
     darkest = float(np.percentile(live, 1)) if live.size else 0.0
@@ -730,35 +793,56 @@ def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_
         threshold_level_electrons,
     )
 
+    # measured: an estimate with its error in the result; bounds: {field: {"value", "kind", "why"}},
+    # the value the preset simulates with; assumed: the chip preset's value
     measured, assumed, bounds = {}, {}, {}
+
+    def bound(name, value, kind, why):
+        bounds[name] = {"value": float(value), "kind": kind, "why": why}
+
     q = result["threshold"].get("q_eff_electrons")
     q_low = result["threshold"].get("q_eff_lower_bound_electrons")
     if q:
         measured["threshold_electrons"] = float(round(q))
     elif q_low:
         # the recording bounds Q_eff from below: the least regular sensor it allows
-        measured["threshold_electrons"] = float(round(q_low))
-        bounds["threshold_electrons"] = "lower bound (the recording is not steady enough for an estimate)"
+        bound("threshold_electrons", round(q_low), "lower bound", "the recording is not steady enough for an estimate")
     else:
         q_fb = fallback_threshold_electrons or threshold_level_electrons(DEFAULT_THRESHOLD_LEVEL)
         assumed["threshold_electrons"] = float(q_fb)
     g = result["gain_spread"].get("gain_spread_fraction")
     if g is not None:
-        measured["gain_spread_fraction"] = float(g)
+        bound("gain_spread_fraction", g, "upper bound", "scene texture at the pixel scale cannot be told from the "
+              "pixels' gain spread in one static recording")
     d = result["defects"]
     if d.get("hot_pixels") and d.get("hot_pixel_dark_current_e_per_s"):
         measured["hot_pixel_fraction"] = d["hot_pixel_fraction"]
-        measured["hot_pixel_dark_current_e_per_s"] = d["hot_pixel_dark_current_e_per_s"]
+        if q:
+            measured["hot_pixel_dark_current_e_per_s"] = d["hot_pixel_dark_current_e_per_s"]
+        else:
+            bound("hot_pixel_dark_current_e_per_s", d["hot_pixel_dark_current_e_per_s"], "lower bound",
+                  "from the lower bound of the threshold")
     elif d.get("hot_pixels") == 0:
-        measured["hot_pixel_fraction"] = 0.0
+        hb = d.get("hot_pixel_bound")
+        why = "none found"
+        if hb:
+            why += (f" with a dark current ≥ {hb['dark_current_at_least_e_per_s']:.3g} e⁻/s in "
+                    f"{hb['searchable_pixels']} pixels dark enough to show one (95 %)")
+        bound("hot_pixel_fraction", hb["fraction_upper_bound"] if hb else 0.0, "upper bound",
+              why + "; hot pixels with less dark current hide under the light")
     params = _chip_parameters(result["clock_hz"])
     import dataclasses
 
     fields = {f.name for f in dataclasses.fields(params)}
-    params = dataclasses.replace(params, **{k: v for k, v in {**measured, **assumed}.items() if k in fields})
-    what = ", ".join(f"{k} = {v:.4g}" + (" (lower bound)" if k in bounds else "")
-                     for k, v in measured.items()) or "nothing"
+    values = {**measured, **assumed, **{k: v["value"] for k, v in bounds.items()}}
+    if "hot_pixel_fraction" in bounds and "hot_pixel_fraction" not in measured:
+        values["hot_pixel_fraction"] = 0.0  # simulate none: the bound only says how many could hide
+    params = dataclasses.replace(params, **{k: v for k, v in values.items() if k in fields})
+    what = ", ".join(f"{k} = {v:.4g}" for k, v in measured.items()) or "nothing"
     description = f"calibrated from a {result['height']}×{result['width']} recording: measured {what}"
+    if bounds:
+        description += "; bounds " + ", ".join(f"{k} {'≥' if v['kind'] == 'lower bound' else '≤'} {v['value']:.4g}"
+                                               for k, v in bounds.items())
     if assumed:
         description += "; assumed " + ", ".join(f"{k} = {v:.4g}" for k, v in assumed.items())
     calibration = {"measured": measured, "assumed": assumed, "bounds": bounds,
