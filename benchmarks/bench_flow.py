@@ -208,7 +208,8 @@ def main():
                                       ("SpikeOne", spikeone, "accumulation")):
             s = speed(params, method)
             print(f"\nspeed, {label}, {method} images, 400×250, one field per 40 ticks: {s['fields_per_s']:.3g} "
-                  f"flow fields/s end to end ({s['cpu_s_per_field'] * 1e3:.3g} ms CPU each); images {s['images_per_s']:.3g}/s, DIS "
+                  f"flow fields/s end to end ({s['cpu_s_per_field'] * 1e3:.3g} ms CPU each); "
+                  f"images {s['images_per_s']:.3g}/s, DIS "
                   f"{s['dis_fields_per_s']:.3g} fields/s = {s['dis_over_ilk']:.3g}× scikit-image ILK "
                   f"({s['ilk_fields_per_s']:.3g}/s) on the same pairs")
     print(f"\npeak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
