@@ -30,7 +30,7 @@ from pathlib import Path
 
 import click
 
-from viform._io import JSON_FILE_HELP, check_json_file
+from viform._io import JSON_FILE_HELP, check_json_file, folder_writable
 from viform._validate import ViformError
 
 #: Largest magnitude of a float option unless the option declares ``viform_limit``.
@@ -319,7 +319,7 @@ def _check_output(flag: str, path: Path) -> None:
         existing = existing.parent
     if not existing.is_dir():
         raise ViformError(f"{flag} = {str(path)!r} cannot be written: {str(existing)!r} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
+    if not folder_writable(existing):
         raise ViformError(f"{flag} = {str(path)!r} cannot be written: the folder {str(existing)!r} is not writable")
 
 

@@ -7,6 +7,7 @@ import json
 import click
 
 from viform.cli._common import open_source as _open
+from viform.cli._common import spike_file_options
 from viform.cli.app import cli
 
 #: Units shown after the values of ``info`` (by the summary's key).
@@ -14,18 +15,6 @@ _UNITS = {"clock_hz": "Hz", "duration_s": "s", "start_time_s": "s", "threshold_e
           "spikes_per_s": "spikes/s", "mean_firing_rate_hz": "Hz", "raw_data_rate_bit_per_s": "bit/s",
           "raw_data_rate_mb_per_s": "MB/s", "mean_firing_rate_per_tick": "per tick",
           "dark_current_e_per_s": "e⁻/s", "bytes": "bytes"}
-
-_file_options = [
-    click.option("--height", type=int, default=None, help="Height of a .dat file without a sidecar."),
-    click.option("--width", type=int, default=None, help="Width of a .dat file without a sidecar."),
-    click.option("--clock-hz", type=float, default=None,
-                 help="Readout clock, Hz, when the file does not record it (default 40 kHz)."),
-    click.option("--allow-partial", is_flag=True, help="Keep the whole frames of a .dat with trailing bytes."),
-    click.option("--key", default=None, help="Array name in a .npz (default: spk, then spikes)."),
-    click.option("--axes", default=None,
-                 help="Axis order of a .npz array that does not declare it: thw (ticks, rows, columns) or hwt."),
-]
-
 
 _json_options = [
     click.option("--json", "as_json", is_flag=True, help="Print the result as JSON instead of the table."),
@@ -128,8 +117,8 @@ def _table(summary: dict) -> None:
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
 @_apply(_json_options)
-@_apply(_file_options)
-def info(file, as_json, json_file, height, width, clock_hz, allow_partial, key, axes):
+@spike_file_options(partial=True)
+def info(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, allow_partial):
     """Resolution, duration, ticks, spike count, firing and data rates of a spike stream (or a coded file).
 
     Reading the stream checks it: zarr chunk checksums, the .npz zip checksums, a .dat
@@ -137,7 +126,8 @@ def info(file, as_json, json_file, height, width, clock_hz, allow_partial, key, 
     """
     summary = _coded_file_summary(file)
     if summary is None:
-        source = _open(file, height, width, clock_hz, allow_partial=allow_partial, axes=axes, key=key)
+        source = _open(file, height, width, clock_hz, flip=not no_flip, allow_partial=allow_partial, axes=axes,
+                       key=key)
         summary = {"file": str(file), "format": source.metadata.get("format"), **source.summary()}
         meta = source.metadata
         for field in ("scene", "seed", "viform_version", "utc_date"):
@@ -173,8 +163,8 @@ def _verification(source) -> dict:
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
 @_apply(_json_options)
-@_apply(_file_options)
-def verify(file, as_json, json_file, height, width, clock_hz, allow_partial, key, axes):
+@spike_file_options(partial=True)
+def verify(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, allow_partial):
     """Check that FILE (.dat with its sidecar, .npz, .zarr or .vfc) is whole and consistent.
 
     Reads everything: a .dat against the size and checksum in its sidecar, every member of a
@@ -187,7 +177,7 @@ def verify(file, as_json, json_file, height, width, clock_hz, allow_partial, key
     result = _verify_coded(file)
     if result is None:
         result = verify_spikes(file, height=height, width=width, clock_hz=clock_hz, allow_partial=allow_partial,
-                               key=key, axes=axes)
+                               key=key, axes=axes, flip=None if not no_flip else False)
     if _emit_json(result, as_json, json_file):
         return
     if not result["verified"]:
