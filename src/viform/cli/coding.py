@@ -74,8 +74,8 @@ def encode_cmd(src, dst, mode, k, threshold, slack, height, width, no_flip, cloc
                json_file):
     """Code the spike stream SRC into the first-spike coded file DST (.vfc)."""
     from viform._validate import check_int
-    from viform.coding.aer_file import EXTENSION, encode_source
     from viform.cli._common import open_source
+    from viform.coding.aer_file import EXTENSION, encode_source
 
     if Path(dst).suffix.lower() != EXTENSION:
         raise ViformError(f"output {dst!r} must end in {EXTENSION}")

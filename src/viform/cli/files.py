@@ -51,11 +51,25 @@ def _coded_module():
     return aer_file
 
 
+def _not_coded(file, is_coded) -> None:
+    """A ``.vfc`` that does not start with the coded-file magic number: say so (not "unknown type")."""
+    from pathlib import Path
+
+    from viform._validate import ViformError
+
+    if Path(file).suffix.lower() == ".vfc" and (is_coded is None or not is_coded(file)):
+        size = Path(file).stat().st_size if Path(file).is_file() else None
+        what = "is empty" if size == 0 else "is a folder" if size is None else \
+            "does not start with the coded-file marker (damaged, or another format named .vfc)"
+        raise ViformError(f"FILE {str(file)!r} is not a readable coded spike file: it {what}")
+
+
 def _coded_file_summary(file):
     """The first-spike coding module's description of a coded file, if FILE is one."""
     aer_file = _coded_module()
     if aer_file is None:
         return None
+    _not_coded(file, getattr(aer_file, "is_coded_file", None))
     describe = getattr(aer_file, "describe_coded_file", None)
     is_coded = getattr(aer_file, "is_coded_file", None)
     if describe is None or is_coded is None or not is_coded(file):
@@ -69,6 +83,7 @@ def _verify_coded(file) -> dict | None:
     if aer_file is None:
         return None
     is_coded = getattr(aer_file, "is_coded_file", None)
+    _not_coded(file, is_coded)
     if is_coded is None or not is_coded(file):
         return None
     verify = getattr(aer_file, "verify_coded_file", None)

@@ -61,8 +61,9 @@ def _no_measurement(source) -> str:
     if not rate > 0:
         return f"no pixel has a measurement: the stream holds no spike at all ({length})"
     interval = 1.0 / rate
-    return (f"no pixel has a measurement at an instant marked 0.0 %: none spikes both before and after it. A pixel fires on "
-            f"average every {interval:,.0f} ticks ({interval / source.clock_hz * 1e3:.3g} ms) and {length}; a clip "
+    every_ms = interval / source.clock_hz * 1e3
+    return (f"no pixel has a measurement at an instant marked 0.0 %: none spikes both before and after it. A pixel "
+            f"fires on average every {interval:,.0f} ticks ({every_ms:.3g} ms) and {length}; a clip "
             f"of at least {2 * interval:,.0f} ticks ({2 * interval / source.clock_hz * 1e3:.3g} ms) with the instant "
             "in its middle gives a typical pixel an interval, or use --method accumulation (a spike count, no "
             "interval needed)")
@@ -277,8 +278,9 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
             click.echo(f"{'…':>8}")
             continue
         k, t, r, lux, frac = row
+        measured = f" {100 * frac:>11.1f}%" if censoring else ""
         click.echo(f"{k:>8d} {t:>11.6f} {'—' if r is None else format(r, '.4g'):>13} "
-                   f"{'—' if lux is None else format(lux, '.4g'):>11}" + (f" {100 * frac:>11.1f}%" if censoring else ""))
+                   f"{'—' if lux is None else format(lux, '.4g'):>11}{measured}")
     if censoring:
         click.echo("measured px: pixels with a complete interval around the instant; the others' intervals are cut "
                    "by an end of the stream, so their light is only an upper bound and is left out of the means")

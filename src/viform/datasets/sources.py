@@ -135,7 +135,7 @@ def fit_to_sensor(native: tuple[int, int], shape: tuple[int, int]) -> dict:
 
 def describe_fit(fit: dict) -> str:
     """One line for a user: how the source frames became sensor frames."""
-    (h0, w0), (hs, ws), (r0, c0), (h, w) = fit["source_shape"], fit["scaled_shape"], fit["crop"], fit["sensor_shape"]
+    (h0, w0), (hs, ws), (h, w) = fit["source_shape"], fit["scaled_shape"], fit["sensor_shape"]
     text = f"{w0}×{h0} source frames scaled ×{fit['scale']:.3g} to {ws}×{hs}"
     if (hs, ws) == (h, w):
         return text + " (aspect ratio kept, nothing cropped)"
