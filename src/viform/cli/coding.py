@@ -183,6 +183,8 @@ def dr_cmd(as_json, json_file, threshold_electrons, clock_hz, dark_current_e_per
             raise ViformError(f"--longest = {longest:g} s is not allowed: it must exceed --shortest = {shortest:g} s")
         out["shortest_interval_s"], out["longest_interval_s"] = shortest, longest
         out["dr_db"] = dr.dynamic_range_db(shortest, longest)
+        out["clip_limited_dr_db"] = {f"{t:g} s": dr.clip_limited_dynamic_range_db(shortest, longest, t)
+                                     for t in dr.CLIP_LENGTHS_S}
         if sensitivity is not None:
             out["subthreshold_dr_db"] = dr.subthreshold_dynamic_range_db(shortest, sensitivity, levels)
     elif sensitivity is not None:
@@ -206,6 +208,8 @@ def dr_cmd(as_json, json_file, threshold_electrons, clock_hz, dark_current_e_per
     if "dr_db" in out:
         click.echo(f"your sensor: shortest interval {shortest:.4g} s, longest {longest:.4g} s → "
                    f"dynamic range {out['dr_db']:.1f} dB")
+        for line in dr.clip_limited_lines(shortest, longest, out["dr_db"]):
+            click.echo(f"  {line}")
     if "subthreshold_dr_db" in out:
         click.echo(f"with sub-threshold readout ({levels} levels every {sensitivity:.4g} s): "
                    f"{out['subthreshold_dr_db']:.1f} dB")
