@@ -120,13 +120,36 @@ def _label(key: str) -> str:
     return key.replace("_", " ")
 
 
-def _table(summary: dict) -> None:
-    width = max(len(k) for k in summary)
+#: Quantities given in two units: one row each, named once, the second unit in brackets
+#: (``mean firing rate: 0.15 per tick (6027 Hz)``), and their own names (not "spikes rate").
+_PAIRS = {"mean_firing_rate_per_tick": "mean_firing_rate_hz", "raw_data_rate_mb_per_s": "raw_data_rate_bit_per_s"}
+_NAMES = {"spikes_per_s": "spikes per second", "spike_count": "spikes",
+          "mean_firing_rate_per_tick": "mean firing rate, per pixel",
+          "raw_data_rate_mb_per_s": "raw data rate"}
+
+
+def _table_rows(summary: dict) -> list[tuple[str, str]]:
+    """(label, value with unit) of every field, each quantity once."""
+    rows = []
+    seconds = set(_PAIRS.values())
     for key, value in summary.items():
+        if key in seconds and any(k in summary for k, v in _PAIRS.items() if v == key):
+            continue  # shown in brackets beside its pair
         if isinstance(value, (dict, list)):
             value = json.dumps(value, default=str)
             value = value if len(value) <= 100 else value[:99] + "…"
-        click.echo(f"{_label(key):>{width}}: {_fmt(key, value)}")
+        text = _fmt(key, value)
+        if key in _PAIRS and _PAIRS[key] in summary:
+            text += f" ({_fmt(_PAIRS[key], summary[_PAIRS[key]])})"
+        rows.append((_NAMES.get(key, _label(key)), text))
+    return rows
+
+
+def _table(summary: dict) -> None:
+    rows = _table_rows(summary)
+    width = max(len(label) for label, _ in rows)
+    for label, text in rows:
+        click.echo(f"{label:>{width}}: {text}")
 
 
 @cli.command()
