@@ -653,7 +653,9 @@ def frame_interval_s(shot) -> float:
 
 
 def _timing(shot) -> str:
-    return f"integration {_ms(shot.time_resolution_s)}, a new image every {_ms(frame_interval_s(shot))}"
+    interval = frame_interval_s(shot)
+    return f"integration {_ms(shot.time_resolution_s)}" + (
+        f", a new image every {_ms(interval)}" if math.isfinite(interval) else "")
 
 
 def _blur_cause(shot) -> str:
