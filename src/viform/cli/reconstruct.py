@@ -77,7 +77,8 @@ def _no_measurement(source) -> str:
                    "low-noise at every light level; motion: accumulation along the estimated motion over "
                    "±60 ticks (short windows where that fails), averaged with multi-interval, the best on moving "
                    "scenes but about 200× slower; interval: Q/τ of the one interval holding the instant, the "
-                   "sharpest and noisiest; accumulation: spike count over a window (the common TFP picture).")
+                   "sharpest and noisiest; accumulation: spike count over a window (the usual 8-bit spike-count "
+                   "picture).")
 @click.option("--at", "at", default=None, help="Instant(s) in seconds, comma-separated: --at 0.01,0.02")
 @click.option("--every", "every", type=int, default=None,
               help="Whole stream: one image every N ticks (instead of --at).")
