@@ -55,7 +55,18 @@ OPTION_BOUNDS = {
                                                     "3e-6 at 95 %, and every bit is simulated tick by tick"),
     ("display", "eye_ms"): (0.025, 200.0, "ms", "at least one 25 µs tick of the 40 kHz camera; the eye integrates "
                                                 "for 10–100 ms, and 200 ms already simulates 0.32 s of the camera"),
+    ("reconstruct", "fps"): (0.1, 1000.0, "frames/s", "a GIF holds each frame at most 655 s, and no display shows "
+                                                      "more than about 1000 frames a second"),
+    ("dataset", "frame_rate_hz"): (1.0, 1e6, "Hz", "the frame rate of real videos and image sequences; a clip lasts "
+                                                   "its frames ÷ this rate, all of it simulated at the spike clock"),
 }
+#: Simulation work a command runs without ``--force``, estimated seconds (about a minute). The
+#: estimate uses the simulator's speed on one core of an idle machine (README "Speed": 1.6–3.8e8
+#: pixel-ticks/s on textured scenes; issue 26 measured ~14 µs of scene and bookkeeping per tick
+#: at 32×48): :data:`SIM_PIXEL_TICKS_PER_S` and :data:`SIM_S_PER_TICK`, on the slow side.
+FORCE_WORK_S = 60.0
+SIM_PIXEL_TICKS_PER_S = 1e8
+SIM_S_PER_TICK = 1e-5
 #: Ticks one run of the light link may simulate: it holds them all (about 1 kB each over its
 #: 8×8 pixels, ~8 µs each on one core), so 10⁶ ticks is about 1 GB and 10 s.
 MAX_LINK_TICKS = 1e6
@@ -291,6 +302,20 @@ def check_request(command: click.Command, kwargs: dict) -> None:
         elif path.exists() and not (path.is_file() or path.is_dir()):
             raise ViformError(f"{flags[param.name]}: {str(path)!r} is not a regular file or folder "
                               "(a FIFO, socket or device cannot be read as data)")
+
+
+def check_simulation_work(duration_s: float, clock_hz: float, pixels: int, force: bool) -> None:
+    """Refuse, unless ``--force``, a simulation estimated to take more than :data:`FORCE_WORK_S`.
+
+    The user is told the size and the estimate before minutes of work, and how to go on.
+    """
+    ticks = duration_s * clock_hz
+    seconds = ticks * SIM_S_PER_TICK + ticks * pixels / SIM_PIXEL_TICKS_PER_S
+    if seconds > FORCE_WORK_S and not force:
+        raise ViformError(f"--duration {duration_s:g} s at --clock-hz {clock_hz:g} Hz over {pixels:,} pixels is "
+                          f"{ticks:.3g} ticks ({ticks * pixels:.3g} pixel-ticks), about {seconds / 60:.0f} min of "
+                          f"simulation or more (the limit without --force is {FORCE_WORK_S:.0f} s): add --force to "
+                          "run it, or shorten --duration")
 
 
 def _check_link_work(kwargs: dict, flags: dict) -> None:

@@ -68,9 +68,19 @@ def _lines(file, r: dict, out) -> list[str]:
     if levels:
         lines.append(f"  {'':<22}median tile spread by light level: " + ", ".join(
             f"{100 * v['median_spread']:.3g} % at {v['mean_interval_ticks']:.3g} ticks" for v in levels))
-    lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} ({100 * d['hot_pixel_fraction']:.3g} %)"
-                 + (f", about {d['hot_pixel_dark_current_e_per_s']:.3g} e⁻/s each"
-                    if d.get("hot_pixel_dark_current_e_per_s") else ""))
+    if d.get("hot_pixel_dark_current_e_per_s"):
+        lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} found, about "
+                     f"{d['hot_pixel_dark_current_e_per_s']:.3g} e⁻/s of dark current each; "
+                     f"{100 * d['hot_pixel_fraction']:.3g} ± "
+                     f"{100 * d['hot_pixel_fraction_standard_error']:.2g} % of the {d['hot_pixel_searchable_pixels']} "
+                     "pixels dark enough to show them")
+    elif d.get("hot_pixel_bound"):
+        hb = d["hot_pixel_bound"]
+        lines.append(f"  {'hot pixels':<22}none with ≥ {hb['dark_current_at_least_e_per_s']:.3g} e⁻/s of dark current "
+                     f"(fewer than {100 * hb['fraction_upper_bound']:.2g} % of pixels, 95 %); weaker ones hide "
+                     "under the light")
+    else:
+        lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} ({100 * d['hot_pixel_fraction']:.3g} %)")
     lines.append(f"  {'dead pixels':<22}{d['dead_pixels']} ({100 * d['dead_pixel_fraction']:.3g} %)")
     bound = dark.get("dark_current_upper_bound_e_per_s")
     lines.append(f"  {'dark current':<22}not measurable" + (f" (≤ {bound:.3g} e⁻/s)" if bound else "")

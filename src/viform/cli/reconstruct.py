@@ -176,6 +176,7 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
     peak = None
     lux_per_rate = None  # lux per spike a tick of the first image (light ∝ firing rate)
     summary_rows = []
+    made_folder = folder is not None and not folder.exists()
     try:
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
@@ -249,8 +250,14 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         if video_writer is not None:
             video_writer.close()
             video_context.__exit__(type(exc), exc, exc.__traceback__)
+        if writer is not None:
+            writer.abort()
         if npz_context is not None:
             npz_context.__exit__(type(exc), exc, exc.__traceback__)
+        for written in files:  # e.g. damage found at a later instant: no partial set of images is left
+            Path(written).unlink(missing_ok=True)
+        if made_folder and folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
         raise
     summary = {"method": method, "align": align if method == "accumulation" else None,
                "window_ticks": window_ticks if method == "accumulation" else None,
