@@ -105,7 +105,9 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
             ("sensor", f"{settings.width}×{settings.height} px, {_sig(settings.parameters.clock_hz / 1e3)} kHz, "
                        f"full scale {_sig(settings.max_lux)} lux"),
             ("clips", f"{summary['clips']} (converted {summary['converted']}, skipped {summary['skipped']} "
-                      f"already done, failed {len(summary['failed'])})"),
+                      f"already done, failed {len(summary['failed'])}"
+                      + (f": {', '.join(f['clip'] for f in summary['failed'])}" if summary["failed"] else "") + ")"),
+            *(("frames", fit) for fit in summary.get("fits", [])),
             ("ticks", f"{summary['ticks']:,}"),
             ("spikes", f"{summary['spikes']:,}"),
             ("spike data", f"{_sig(summary['bytes'] / 1e6)} MB"),

@@ -51,6 +51,8 @@ def _sensor_from_options(preset, threshold_level, quantum_efficiency, pixel_pitc
             raise ViformError(f"--threshold-level = {threshold_level!r} is not allowed: it must be a whole "
                               "number in [0, 15] (the chip's 16 levels)") from None
     changes = {_FIELDS[k]: v for k, v in given.items() if v is not None}
+    if pixel_pitch_um is not None and not pixel_pitch_um > 0:  # checked here: the optics hold metres
+        raise ViformError(f"--pixel-pitch-um = {pixel_pitch_um!r} is not allowed: it must be > 0 µm")
     optics = {"quantum_efficiency": quantum_efficiency, "fill_factor": fill_factor,
               "pixel_pitch_m": None if pixel_pitch_um is None else pixel_pitch_um * 1e-6}
     optics = {k: v for k, v in optics.items() if v is not None}
@@ -106,6 +108,21 @@ sensor_options = [
 ]
 
 
+def check_request_duration(duration_s: float, sensor, light) -> None:
+    """The size checks the CLI makes on --duration (ticks, pixel-ticks), for a duration taken from the video."""
+    from viform.cli._types import MAX_TICKS, max_pixel_ticks
+
+    ticks = duration_s * sensor.parameters.clock_hz
+    pixels = light.height * light.width if hasattr(light, "height") else 0
+    if ticks > MAX_TICKS:
+        raise ViformError(f"the video lasts {duration_s:g} s, {ticks:.4g} ticks at {sensor.parameters.clock_hz:g} Hz, "
+                          f"more than the {MAX_TICKS:.4g} a stream may hold: give a shorter --duration")
+    if ticks * pixels > max_pixel_ticks():
+        raise ViformError(f"the video lasts {duration_s:g} s: {ticks * pixels:.4g} pixel-ticks, more than the limit "
+                          f"of {max_pixel_ticks():.4g}; give a shorter --duration, or raise the environment "
+                          "variable VIFORM_MAX_PIXEL_TICKS")
+
+
 def _apply(options):
     def decorator(f):
         for option in reversed(options):
@@ -117,7 +134,9 @@ def _apply(options):
 
 @cli.command()
 @click.argument("scene")
-@click.option("--duration", "duration_s", type=float, required=True, help="Length of the stream, seconds.")
+@click.option("--duration", "duration_s", type=float, default=None,
+              help="Length of the stream, seconds [default: a video's or image folder's own length; required for "
+                   "built-in scenes and still images].")
 @click.option("--out", "out_path", type=click.Path(dir_okay=True), required=True,
               help="Output file: .dat (spike-camera layout), .zarr (chunked, with metadata) or .npz.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Photon-noise seed.")
@@ -171,7 +190,11 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     fit = (height, width)  # files: resized only when the user asked
     height = height if height is not None else (preset.height if preset is not None else 250)
     width = width if width is not None else (preset.width if preset is not None else 400)
-    if all(v is not None for v in fit) or not Path(scene).exists():  # the size is known before the scene loads
+    if duration_s is None and not Path(scene).exists():
+        raise ViformError(f"--duration is required: SCENE = {scene!r} is a built-in scene, which has no length of "
+                          "its own (a video or image folder gives its own)")
+    # the size is known before the scene loads
+    if duration_s is not None and (all(v is not None for v in fit) or not Path(scene).exists()):
         check_simulation_work(duration_s, sensor.parameters.clock_hz, height * width, force)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
                        interpolation=interpolation, fit=fit)
@@ -183,8 +206,15 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
             raise ViformError(f"--truth: scene {scene!r} has no truth: image and video files carry only light; "
                               "use a built-in scene (translating, rotating, dilemma, multi-object, …)")
         check_output_folder("--truth", Path(truth_dir))
-    check_simulation_work(duration_s, sensor.parameters.clock_hz, light.height * light.width, force)
     scene_s = light.duration_s if isinstance(light, VideoScene) else None
+    duration_from = "given"
+    if duration_s is None:
+        if scene_s is None:
+            raise ViformError(f"--duration is required: SCENE = {scene!r} is a still image, which has no length "
+                              "of its own (a video or image folder gives its own)")
+        duration_s, duration_from = scene_s, "the video's length"
+        check_request_duration(duration_s, sensor, light)
+    check_simulation_work(duration_s, sensor.parameters.clock_hz, light.height * light.width, force)
     if scene_s is not None and duration_s > scene_s * (1 + 1e-9) and not as_json:
         click.echo(f"viform: warning: the video lasts {scene_s:.4g} s; its last frame is held for the other "
                    f"{duration_s - scene_s:.4g} s of --duration {duration_s:g}", err=True)
@@ -207,6 +237,7 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
                "width": stream.width, "clock_hz": stream.clock_hz,
                "threshold_electrons": stream.threshold_electrons, "seed": seed,
                "preset": None if preset is None else preset.name,
+               "duration_s": stream.n_ticks / stream.clock_hz, "duration_from": duration_from,
                "gain_spread_fraction": p.gain_spread_fraction, "dead_time_s": p.dead_time_s,
                "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed, "truth": truth}
     if json_file:
@@ -215,6 +246,8 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
         click.echo(json.dumps(summary, indent=2))
         return
     rows = [("file", str(out_path)), ("ticks", f"{stream.n_ticks}"),
+            ("duration", f"{stream.n_ticks / stream.clock_hz:.6g} s"
+                         + (f" ({duration_from}: no --duration given)" if duration_from != "given" else "")),
             ("size", f"{stream.height} × {stream.width} pixels"), ("clock", f"{stream.clock_hz:,.0f} Hz"),
             ("threshold Q", f"{stream.threshold_electrons:.4g} e-"),
             ("preset", "none" if preset is None else preset.name),

@@ -46,7 +46,7 @@ from viform.datasets.layout import (
     sha256_file,
     write_config,
 )
-from viform.datasets.sources import SourceClip, find_clips, lux_to_gt_image, read_clip
+from viform.datasets.sources import SourceClip, describe_fit, find_clips, lux_to_gt_image, read_clip
 
 #: Preset used when none is given: the 400×250, 40 kHz chip of seed 000 §6.
 DEFAULT_PRESET = "spikeone"
@@ -294,6 +294,18 @@ def convert_clip(task: ClipTask) -> dict:
         set_num_threads(threads)
 
 
+def _convert_or_report(task: ClipTask) -> dict:
+    """:func:`convert_clip` on a worker, a clip's bad input returned as ``{"status": "failed", "error"}``.
+
+    Returned rather than raised, so that the worker does not log a "Compute Failed" block with a
+    traceback for what is the user's data (the summary names the clip, the file and the fault).
+    """
+    try:
+        return convert_clip(task)
+    except ViformError as exc:
+        return {"status": "failed", "error": str(exc)}
+
+
 def _clean_parameters(parameters):
     """The clean twin's sensor: photon noise and every fixed pattern off (same light, same seed)."""
     from dataclasses import replace
@@ -371,7 +383,7 @@ def _convert(task: ClipTask, dat: Path, started: float) -> dict:
         return _convert_scene(task, dat, started)
     _sidecar_tools()[1](dat).unlink(missing_ok=True)  # a redone clip is unfinished until its new sidecar
 
-    frames, declared_hz = read_clip(clip, s.height, s.width, s.max_lux)
+    frames, declared_hz, fit = read_clip(clip, s.height, s.width, s.max_lux)
     frame_rate_hz = s.frame_rate_hz or declared_hz
     if frame_rate_hz is None:
         raise ViformError(f"clip {clip.name!r} declares no frame rate: give --frame-rate-hz")
@@ -401,7 +413,7 @@ def _convert(task: ClipTask, dat: Path, started: float) -> dict:
         "spikes": spikes, "sha256": digest, "bytes": dat.stat().st_size,
         "height": s.height, "width": s.width, "clock_hz": clock_hz, "n_frames": n_frames,
         "frame_rate_hz": frame_rate_hz, "rate": full_scale_rate, "gt_frames": gt_frames,
-        "settings_sha256": s.fingerprint(),
+        "settings_sha256": s.fingerprint(), "fit": fit,
     }
     _write_clip_sidecar(dat, source, sensor, task, record)
     return {**record, "status": "converted", "seconds": time.perf_counter() - started}
@@ -564,9 +576,22 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
         raise ViformError(f"--out {str(out)!r} is a file, not a folder")
     config = _config(out, settings, clips)
     _check_existing_config(out, config)
-    (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
-    (out / GT_DIR).mkdir(parents=True, exist_ok=True)
-    write_config(out / CONFIG_NAME, config)
+    # reach the scheduler (or start the workers) before anything is written: a wrong
+    # --scheduler must leave no half-made dataset behind
+    own_client = client is None
+    own_cluster = None
+    if own_client:
+        client, own_cluster = _open_client(workers, scheduler, memory_limit)
+    try:
+        (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
+        (out / GT_DIR).mkdir(parents=True, exist_ok=True)
+        write_config(out / CONFIG_NAME, config)
+    except BaseException:
+        if own_client:
+            client.close()
+        if own_cluster is not None:
+            own_cluster.close()
+        raise
 
     prov = _provenance()
     tasks = [ClipTask(c, str(out), settings, prov, block_ticks,
@@ -582,10 +607,6 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
             failed[task.clip.name] = error
         _write_manifest(out, settings, rows, failed)
 
-    own_client = client is None
-    own_cluster = None
-    if own_client:
-        client, own_cluster = _open_client(workers, scheduler, memory_limit)
     bar = None
     try:
         n_workers = len(client.scheduler_info().get("workers", {}))
@@ -595,12 +616,16 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
 
         bar = tqdm(total=len(tasks), unit="clip", desc="dataset", disable=not progress, leave=True)
         token = uuid.uuid4().hex[:8]
-        futures = {client.submit(convert_clip, t, key=f"viform-clip-{t.clip.name}-{token}", pure=False): t
+        futures = {client.submit(_convert_or_report, t, key=f"viform-clip-{t.clip.name}-{token}", pure=False): t
                    for t in tasks}
         for fut in as_completed(futures):
             task = futures[fut]
             try:
-                record(task, fut.result(), None)
+                result = fut.result()
+                if result.get("status") == "failed":
+                    record(task, None, result["error"])
+                else:
+                    record(task, result, None)
             except ViformError as exc:
                 record(task, None, str(exc))
             except Exception as exc:  # a worker lost too often, an unexpected failure: report, go on
@@ -627,7 +652,7 @@ _SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth")
 def _write_manifest(out: Path, settings: DatasetSettings, rows: dict, failed: dict) -> None:
     """manifest.json: clips sorted by name, without timings (same bits, same manifest)."""
     keep = ("clip", "source", "seed", "ticks", "spikes", "sha256", "bytes", "n_frames", "frame_rate_hz",
-            "rate", "gt_frames")
+            "rate", "gt_frames", "fit")
     write_json(out / MANIFEST_NAME, {
         "format": LAYOUT_FORMAT, "spike_h": settings.height, "spike_w": settings.width,
         "clock_hz": float(settings.parameters.clock_hz), "settings_sha256": settings.fingerprint(),
@@ -655,6 +680,8 @@ def _summary(out, clips, rows, failed, seconds, workers) -> dict:
         "pixel_ticks_per_s": pixel_ticks / seconds if seconds > 0 else 0.0,
         "workers": workers,
         "manifest": str(Path(out) / MANIFEST_NAME),
+        # how the source frames were fitted to the sensor (scaled, centre-cropped: never stretched)
+        "fits": sorted({describe_fit(r["fit"]) for r in rows.values() if r.get("fit")}),
     }
 
 

@@ -367,17 +367,26 @@ class DilemmaScene(Scene):
         ey, ex = np.nonzero(self.led)
         v0, v1 = self.vehicle_rows
         front = self.vehicle_front_px(t_s)
+        ox = (self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width
         return {
             f"sunlit window {_lux(self.window_lux)}–{_lux(3 * self.window_lux)} lux": (xs.mean(), ys.max() + 1),
             f"lamp {_lux(self.lamp_lux)} lux": (lx.mean(), ly.max() + 1),
+            # labels of the parts above the object's row stand above them (with an arrow), so that
+            # none covers the small object as it crosses beneath
             f"propeller {self.prop_lux:.3g} lux, tip {self.prop_tip_speed_px_per_s:.0f} px/s":
-                (self.prop_centre[0], self.prop_centre[1] + self.prop_radius_px),
-            f"LED {self.led_frequency_hz:g} Hz PWM": (ex.mean(), ey.max() + 1),
+                (self.prop_centre[0], self.prop_centre[1] - 0.5 * self.prop_radius_px, self.prop_centre[0],
+                 0.05 * self.height),
+            f"LED {self.led_frequency_hz:g} Hz PWM": (ex.min(), ey.mean(), 0.70 * self.width, 0.40 * self.height),
             f"vehicle {self.vehicle_speed_px_per_s:.0f} px/s": (min(front, self.width - 1) - 0.1 * self.width,
                                                                (v0 + v1) / 2),
-            f"small dim object {self.object_speed_px_per_s:.0f} px/s":
-                ((self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width, self.object_row_px),
+            # the object is a faint blob a couple of pixels wide: its label stands apart, with an arrow
+            f"small dim object, {_lux(self.object_lux)} lux, {self.object_speed_px_per_s:.0f} px/s":
+                (ox, self.object_row_px, min(ox, 0.62 * self.width) + 0.04 * self.width, 0.56 * self.height),
             f"deep shadow {self.shadow_lux:.3g} lux": (0.02 * self.width, 0.68 * self.height),
+            # the road crosses the deep-shadow corner: its lower part is the second dark strip
+            f"deep shadow {self.shadow_lux:.3g} lux (below the road)":
+                (0.2 * self.width, 0.5 * (self.road_rows[1] + self.height) - 0.5, 0.26 * self.width,
+                 0.5 * (self.road_rows[1] + self.height) - 0.5),
         }
 
     def regions(self) -> dict:

@@ -299,8 +299,8 @@ class VideoScene(Scene):
             declared = None  # some files declare 0 or garbage: treat as not declared
         rate = frame_rate_hz if frame_rate_hz is not None else declared
         if rate is None:
-            raise ViformError(f"{str(path)!r} declares no usable frame rate: give it with --frame-rate-hz "
-                              "(frame_rate_hz in Python)")
+            # the command line turns frame_rate_hz into its flag (--frame-rate-hz, highspeed's --scene-fps)
+            raise ViformError(f"{str(path)!r} declares no usable frame rate: give it with frame_rate_hz")
         return cls(np.stack(frames), rate, interpolation)
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
@@ -741,7 +741,15 @@ def load_scene(spec: str, height: int = 250, width: int = 400, max_lux: float = 
     are lux already. Built-in scenes are made at ``height`` × ``width``; files keep their own
     size unless ``resize`` (to exactly ``height`` × ``width``) or ``fit`` = (height or None,
     width or None), which resizes keeping the aspect ratio (see :func:`fit_shape`).
+    ``max_lux`` and ``frame_rate_hz`` are checked for every scene (a built-in one ignores them,
+    but a negative full scale or frame rate is a mistake worth saying).
     """
+    from viform._validate import check_positive
+
+    if max_lux is not None:
+        check_positive("max_lux", max_lux)
+    if frame_rate_hz is not None:
+        check_positive("frame_rate_hz", frame_rate_hz)
     if spec in BUILTIN_SCENES:
         return builtin_scene(spec, height, width)
     path = Path(spec)
