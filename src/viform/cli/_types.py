@@ -30,7 +30,7 @@ from pathlib import Path
 
 import click
 
-from viform._io import JSON_FILE_HELP, check_json_file
+from viform._io import JSON_FILE_HELP, check_json_file, folder_writable
 from viform._validate import ViformError
 
 #: Largest magnitude of a float option unless the option declares ``viform_limit``.
@@ -75,8 +75,17 @@ MAX_LINK_TICKS_TOTAL = 4e6
 #: Runs and payload bits of the distance and ambient-light sweeps (``lightcomm --sweeps`` / ``--out``).
 SWEEP_RUNS, SWEEP_BITS = 23, 300
 
+#: Library parameter names that hold the value of a command's option in the same unit, by
+#: (command, option name): an error raised deep inside (``gate_range_m = 1e+09 m is beyond…``)
+#: then names the flag the user typed (``--gate-m``).
+LIBRARY_NAMES = {
+    ("gated", "gate_m"): ("gate_range_m",),
+    ("lightcomm", "led_cd"): ("luminous_intensity_cd",),
+    ("highspeed", "scene_fps"): ("frame_rate_hz",),
+}
+
 #: Option names that hold an output path.
-OUTPUT_NAMES = ("out", "out_path", "out_dir", "output", "json_file", "json_path", "preview", "dst")
+OUTPUT_NAMES = ("out", "out_path", "out_dir", "output", "json_file", "json_path", "preview", "dst", "video")
 #: Suffixes that name files (an existing folder of that name cannot be replaced by a file).
 FILE_SUFFIXES = (".dat", ".npz", ".vfc", ".png", ".json", ".gif", ".mp4", ".html", ".csv", ".txt", ".yaml")
 
@@ -199,6 +208,8 @@ def _bounded(kind: click.ParamType, param, bounds=None) -> click.ParamType:
 
 def flag_of(param: click.Parameter) -> str:
     """The flag the user types for ``param`` (its longest ``--`` form), or its metavar name."""
+    if isinstance(param, click.Argument):
+        return (param.name or "").upper()  # as the usage line shows it (DST)
     longs = [o for o in param.opts if o.startswith("--")]
     if longs:
         return max(longs, key=len)
@@ -228,6 +239,8 @@ def name_flags(message: str, command: click.Command) -> str:
         if param.name not in names_with_units:
             message = re.sub(rf"(?<![\w'\"./-]){re.escape(param.name)}_(?:{_UNIT_SUFFIXES})(?![\w'\"-])", flag,
                              message)
+        for alias in LIBRARY_NAMES.get((command.name, param.name), ()):
+            message = re.sub(rf"(?<![\w'\"./-]){re.escape(alias)}(?![\w'\"-])", flag, message)
     return message
 
 
@@ -344,7 +357,7 @@ def _check_output(flag: str, path: Path) -> None:
         existing = existing.parent
     if not existing.is_dir():
         raise ViformError(f"{flag} = {str(path)!r} cannot be written: {str(existing)!r} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
+    if not folder_writable(existing):
         raise ViformError(f"{flag} = {str(path)!r} cannot be written: the folder {str(existing)!r} is not writable")
 
 

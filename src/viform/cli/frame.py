@@ -272,6 +272,13 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
             f"{r['expected']['dynamic_range_db']:.4g} dB: longest interval = threshold / dark current = "
             f"{r['longest_interval_s']:.3g} s, shortest = one tick = {r['shortest_interval_s'] * 1e6:.3g} µs)"
         ]
+        from viform.measure.dynamic_range import CLIP_LENGTHS_S, clip_limited_dynamic_range_db, clip_limited_lines
+
+        r["clip_limited_dr_db"] = {f"{t:g} s": clip_limited_dynamic_range_db(r["shortest_interval_s"],
+                                                                            r["longest_interval_s"], t)
+                                   for t in CLIP_LENGTHS_S}
+        lines += [f"  {line}" for line in clip_limited_lines(r["shortest_interval_s"], r["longest_interval_s"],
+                                                             r["dynamic_range_db"])]
     else:
         kw = {"height": min(size, 64), "width": min(size, 64)} if sensor == "seed003-overflow" else {}
         dev = presets.make_sensor(sensor, **kw)

@@ -131,7 +131,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
                           exposure_s=check_positive("exposure_us", exposure_us) * 1e-6, n_frames=n_frames,
                           seed=seed)
     # Check everything before the progress bar starts, so an error is a single clean line.
-    check_range("target", target_gray, 0, 255)
+    check_range("--target", target_gray, 0, 255)
     if ae_saturated_cut is not None:
         check_range("ae_saturated_cut", ae_saturated_cut, 0, 1, low_open=True, high_open=True)
     timing.exposure_cycles(cfg.exposure_s, window)

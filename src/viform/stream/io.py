@@ -45,6 +45,8 @@ def open_spikes(path, height: int | None = None, width: int | None = None, *,
             raise ViformError(f"spike file {str(path)!r} does not exist")
     if not (path.is_file() or path.is_dir()):  # a FIFO or device would block the reader
         raise ViformError(f"{str(path)!r} is not a regular file or folder")
+    if suffix in (".dat", ".npz") and path.is_dir():
+        raise ViformError(f"{str(path)!r} is a folder, not a {suffix} file")
     if suffix == ".dat":
         source = DatFile(path, height, width, flip=flip, allow_partial=allow_partial,
                          clock_hz=clock_hz, threshold_electrons=threshold_electrons)

@@ -115,7 +115,7 @@ class NpzSpikes(SpikeSource):
             key = next((k for k in DEFAULT_KEYS if k in names), None)
             if key is None:
                 raise ViformError(f"{str(path)!r} has no 'spk' or 'spikes' array (it has {names[:20]}); "
-                                  "name the array with key=")
+                                  "choose one with key = NAME")
         elif key not in names:
             raise ViformError(f"{str(path)!r} has no array {key!r} (it has {names[:20]})")
         self.key = key
@@ -167,7 +167,8 @@ class NpzSpikes(SpikeSource):
             self._blocks.read(0, self._header_bytes)  # shape, order and dtype are checked too
         if axes is None:
             raise ViformError(f"{str(path)!r}: the axis order of array {key!r} (shape {self._shape}) is not "
-                              "declared: give it explicitly, e.g. axes='thw' (ticks, rows, columns) or 'hwt'")
+                              "declared: give it with axes = 'thw' (ticks, rows, columns) or 'hwt' (rows, columns, "
+                              "ticks)")
         self.axes = axes
         dims = dict(zip(axes, self._shape, strict=True))
         self.n_ticks, self.height, self.width = dims["t"], dims["h"], dims["w"]
