@@ -57,6 +57,8 @@ OPTION_BOUNDS = {
                                                 "for 10–100 ms, and 200 ms already simulates 0.32 s of the camera"),
     ("reconstruct", "fps"): (0.1, 1000.0, "frames/s", "a GIF holds each frame at most 655 s, and no display shows "
                                                       "more than about 1000 frames a second"),
+    ("simulate", "clock_hz"): (1.0, 1e12, "Hz", "the clock range a spike file may record: a file written at "
+                                               "another clock could not be read back"),
     ("dataset", "frame_rate_hz"): (1.0, 1e6, "Hz", "the frame rate of real videos and image sequences; a clip lasts "
                                                    "its frames ÷ this rate, all of it simulated at the spike clock"),
 }
