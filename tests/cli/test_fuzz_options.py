@@ -175,7 +175,10 @@ def campaign(timeout_s: float, values=None) -> dict:
 
     os.environ.update(FUZZ_ENV)
     values = values or PARSE_VALUES + ["0", "-1", "-1e12", "2147483648", "1e-300"]
-    counts, examples = {}, {}
+    import resource
+
+    counts, examples, peaks = {}, {}, []
+    peak_seen_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     with tempfile.TemporaryDirectory(prefix="viform-optfuzz-") as work:
         work = Path(work)
         bases = base_invocations(work)
@@ -185,6 +188,10 @@ def campaign(timeout_s: float, values=None) -> dict:
                 (work / "out").mkdir(exist_ok=True)
                 args = _with(base, flag, value)
                 result = run_command(args, timeout_s)
+                peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+                if peak_mb > peak_seen_mb + 50:  # this run raised the process's peak: it used at least that much
+                    peaks.append([command, flag, value, round(peak_mb)])
+                    peak_seen_mb = peak_mb
                 kind = classify(result["rc"], result["err"])
                 left = [str(p) for p in work.rglob("*") if ".viform-" in p.name]
                 if left:
@@ -197,11 +204,10 @@ def campaign(timeout_s: float, values=None) -> dict:
                 print(f"{kind:9s} {result['s']:6.1f}s {result['cpu_s']:6.1f}s CPU {command} {flag} {value}",
                       file=sys.stderr, flush=True)
                 shutil.rmtree(work / "out", ignore_errors=True)
-    import resource
-
-    # every run is in this process: its peak resident memory bounds each run's
+    # every run is in this process: its peak resident memory bounds each run's; ``peaks`` names the runs
+    # that raised it (by more than 50 MB), with the new peak
     return {"counts": counts, "examples": examples,
-            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "peak_raised_by": peaks}
 
 
 if __name__ == "__main__":
