@@ -100,7 +100,7 @@ class BlockReader:
         self._read_raw, self.where = read_raw, where
         self._cache: OrderedDict[int, bytes] = OrderedDict()
 
-    def read(self, offset: int, count: int) -> bytes:
+    def read(self, offset: int, count: int) -> bytes | bytearray:
         """``count`` bytes from ``offset``, from blocks whose CRC-32 matched."""
         if count <= 0:
             return b""
@@ -109,11 +109,18 @@ class BlockReader:
                               f"{self.total_bytes} bytes its checksums cover")
         size = self.block_bytes
         first, last = offset // size, (offset + count - 1) // size
-        parts = [self._block(i) for i in range(first, last + 1)]
         start = offset - first * size
-        if len(parts) == 1:
-            return parts[0][start:start + count]
-        return b"".join(parts)[start:start + count]
+        if first == last:
+            return self._block(first)[start:start + count]
+        out = bytearray(count)  # one copy of the checked blocks into the result
+        filled = 0
+        for i in range(first, last + 1):
+            block = memoryview(self._block(i))
+            a = start if i == first else 0
+            b = min(len(block), a + count - filled)
+            out[filled:filled + b - a] = block[a:b]
+            filled += b - a
+        return out
 
     def _block(self, index: int) -> bytes:
         if index in self._cache:
