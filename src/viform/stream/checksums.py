@@ -18,8 +18,9 @@ from viform._validate import ViformError
 
 #: Smallest block of stored bytes with its own CRC-32 (1 MiB: CRC-32 of a block takes < 1 ms).
 MIN_BLOCK_BYTES = 1 << 20
-#: Most blocks in a manifest (so it stays under 1 MB of JSON whatever the file size).
-MAX_BLOCKS = 1 << 16
+#: Most blocks in a manifest (so it stays under 0.4 MB of JSON, 1.6 MB as the UTF-32 string of an
+#: .npz header member, whatever the file size: a 100 GB file has 4 MiB blocks).
+MAX_BLOCKS = 1 << 15
 #: Blocks kept in memory after their check (sequential reads that straddle a block reuse it).
 CACHED_BLOCKS = 2
 
