@@ -30,6 +30,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -61,7 +62,10 @@ MAX_WHOLE_BYTES = 256 << 20
 #: Largest small member (header, scalars) read, bytes.
 MAX_SMALL_MEMBER_BYTES = 4 << 20
 _ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError, NotImplementedError,
-           RuntimeError, OverflowError, UnicodeDecodeError)
+           RuntimeError, OverflowError, UnicodeDecodeError, tokenize.TokenError, SyntaxError, TypeError,
+           RecursionError)  # (numpy parses a damaged .npy header with tokenize and ast)
+#: Members whose value viform uses: one that cannot be read is refused, never skipped.
+_SCALARS = ("clock_hz", "threshold_electrons", "start_time_s")
 
 
 def _check_axes(axes) -> str | None:
@@ -125,6 +129,9 @@ class NpzSpikes(SpikeSource):
                 continue
             info = infos[name + ".npy"]
             if info.file_size > MAX_SMALL_MEMBER_BYTES:
+                if name in (HEADER_KEY, *_SCALARS):
+                    raise ViformError(f"{str(path)!r}: member {name!r} holds {info.file_size} bytes, more than the "
+                                      f"{MAX_SMALL_MEMBER_BYTES} a header or a number may")
                 continue  # not a scalar: not metadata
             value = self._read_small(name + ".npy")
             if value is not None:
@@ -214,15 +221,23 @@ class NpzSpikes(SpikeSource):
 
     # ---- zip member access
     def _read_small(self, member: str):
+        damage = (zipfile.BadZipFile, zlib.error, EOFError, OSError)
         try:
             with self._zip.open(member) as fp:
-                value = np.lib.format.read_array(fp, allow_pickle=False)
-                fp.read()  # to the end: the zip CRC is checked
-                return value
-        except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:  # damage: never ignored
+                try:
+                    value = np.lib.format.read_array(fp, allow_pickle=False)
+                except damage:
+                    raise
+                except _ERRORS:
+                    value = None  # an object (pickled) or exotic array from another tool: not our metadata
+                while fp.read(1 << 20):  # to the end, unparsable or not: the zip CRC is checked
+                    pass
+        except damage as exc:  # damage: never ignored
             raise ViformError(f"{str(self.path)!r}: member {member!r} is damaged: {_short(exc)}") from None
-        except _ERRORS:
-            return None  # an object (pickled) or exotic array from another tool: not our metadata
+        if value is None and member[:-4] in (HEADER_KEY, *_SCALARS):
+            raise ViformError(f"{str(self.path)!r}: member {member!r} cannot be read as a .npy array of numbers "
+                              "or text")
+        return value
 
     def _open_member(self, member: str, info: zipfile.ZipInfo) -> None:
         self._member = member
