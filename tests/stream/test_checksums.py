@@ -199,3 +199,28 @@ def test_empty_stream_is_one_clear_error(tmp_path, name):
         match = "empty stream"
     with pytest.raises(ViformError, match=match):
         open_spikes(path, 4, 8) if name.endswith(".dat") else open_spikes(path)
+
+
+@pytest.mark.parametrize("member", ["spk", "clock_hz"])
+def test_damaged_npy_header_is_refused_not_skipped(tmp_path, member):
+    """numpy parses .npy headers with tokenize/ast: their errors are damage, and a clock that
+    cannot be read is never replaced by the default one."""
+    value = np.zeros((10, 4, 8), np.uint8) if member == "spk" else np.zeros((1, 1))
+    raw = _npy(value)
+    shape = repr(value.shape).encode()
+    raw = raw.replace(shape, shape[:-1] + b" ", 1)  # an unclosed parenthesis, same length
+    path = tmp_path / "zoo.npz"
+    with zipfile.ZipFile(path, "w") as zf:
+        if member != "spk":
+            zf.writestr("spk.npy", _npy(np.zeros((10, 4, 8), np.uint8)))
+        zf.writestr(f"{member}.npy", raw)
+    with pytest.raises(ViformError, match=member):
+        open_spikes(path)
+
+
+def _npy(array) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.save(buf, array)
+    return buf.getvalue()
