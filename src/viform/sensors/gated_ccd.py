@@ -14,8 +14,11 @@ Gate timing (seed 004, Fig. 3):
 * delay t_откл = 2R/c, R the gate's near range (the "minimum illumination distance");
 * t_нак = τ_pulse + t_min, t_min the sensor's minimum time between the SUB falling edge
   and the V2/V3 transfer pulse (a datasheet figure; 1 µs assumed for the ICX618 here);
+* the V2/V3 readout pulse (t_read, assumed 1 µs) follows; the photodiodes keep passing
+  charge to the register while it is high, so light counts from SUB's fall to the pulse's
+  end, t_нак + t_read (:class:`GateTiming`; the drawn waveforms use the same instants);
 * a return from range r lasts [2r/c, 2r/c + τ]; it is (partly) recorded for
-  R − cτ/2 < r < R + c·t_нак/2.
+  R − cτ/2 < r < R + c·(t_нак + t_read)/2.
 
 Three ways of using X pulses are compared (seed 004, "Requirements"):
 
@@ -97,6 +100,9 @@ class InterlineCCDParameters:
         Full format (ICX618: 494 × 659).
     min_transfer_time_s : float
         Shortest SUB-fall → V2/V3 transfer interval, s (seed: t_нак = pulse + this).
+    readout_pulse_s : float
+        Width of the +15 V V2/V3 readout pulse, s (assumed 1 µs; Sony ICX parts 1–3 µs). The
+        photodiodes keep collecting while it is high (see :class:`GateTiming`).
     readout_time_s : float
         Time to shift the whole frame out, s (ICX618: 60 frames/s progressive → 1/60 s).
     shutter_leak_ratio : float
@@ -107,6 +113,7 @@ class InterlineCCDParameters:
     sensor_height_px: int = 494
     sensor_width_px: int = 659
     min_transfer_time_s: float = 1.0e-6
+    readout_pulse_s: float = 1.0e-6
     readout_time_s: float = 1.0 / 60.0
     shutter_leak_ratio: float = 1e-5
 
@@ -114,6 +121,7 @@ class InterlineCCDParameters:
         check_int("sensor_height_px", self.sensor_height_px, 1)
         check_int("sensor_width_px", self.sensor_width_px, 1)
         check_positive("min_transfer_time_s", self.min_transfer_time_s)
+        check_positive("readout_pulse_s", self.readout_pulse_s)
         check_positive("readout_time_s", self.readout_time_s)
         check_non_negative("shutter_leak_ratio", self.shutter_leak_ratio)
         if self.shutter_leak_ratio > 1:
@@ -122,7 +130,24 @@ class InterlineCCDParameters:
 
 @dataclass(frozen=True)
 class GateTiming:
-    """Gate of one laser pulse (seed 004, Fig. 3): opens 2R/c after the pulse, lasts τ + t_min.
+    """The one timing model of a gate (seed 004, Fig. 3), from which both the physics
+    (:class:`GatedInterlineCCD`) and the drawn drive (:func:`~viform.sensors.gated_waveforms.drive_waveforms`)
+    are derived.
+
+    Instants after the laser pulse starts:
+
+    * ``open_s`` = 2R/c: SUB falls, the photodiodes start to integrate;
+    * ``transfer_start_s`` = open + τ + t_min: V2/V3 rise to +15 V (the seed's t_нак = τ + t_min
+      ends here, and its t_экспозиции = X·t_нак counts only this);
+    * ``close_s`` = transfer_start + ``readout_pulse_s``: V2/V3 fall and SUB rises again.
+
+    While the readout pulse is high the photodiode is connected to the vertical register, so
+    the charge it collects during the pulse is moved too (the seed itself says charge
+    accumulates again only "as soon as the positive potential stops being applied"); SUB
+    cannot rise earlier without draining the packet being transferred. The light is therefore
+    collected over [open_s, close_s] = τ + t_min + t_readout — 2.135 µs with the assumed 1 µs
+    pulse, not the seed's 1.135 µs. The seed's figure (only its caption survives in the text)
+    gives no pulse width; its text supports t_нак = τ + t_min as the *drawn* SUB→V2/V3 interval.
 
     Raises :class:`ViformError` if the gate is not inside one pulse period (range beyond
     the unambiguous range c/(2 f_rep)).
@@ -131,6 +156,7 @@ class GateTiming:
     gate_range_m: float
     laser: PulsedLaser
     min_transfer_time_s: float
+    readout_pulse_s: float = 1.0e-6
 
     def __post_init__(self):
         r = self.gate_range_m
@@ -138,17 +164,19 @@ class GateTiming:
             raise ViformError(f"gate_range_m = {r!r} is not allowed: the gate range must be ≥ 0 m")
         check_non_negative("gate_range_m", r)
         check_positive("min_transfer_time_s", self.min_transfer_time_s)
+        check_positive("readout_pulse_s", self.readout_pulse_s)
         if self.close_s >= self.laser.period_s:
             raise ViformError(
                 f"gate_range_m = {r:g} m is beyond the unambiguous range: the gate would close "
                 f"{self.close_s * 1e6:.2f} µs after the pulse, after the next pulse "
                 f"({self.laser.period_s * 1e6:.1f} µs at {self.laser.repetition_hz:g} Hz); the largest "
-                f"gate range is {self.max_gate_range_m(self.laser, self.min_transfer_time_s):.0f} m"
+                f"gate range is "
+                f"{self.max_gate_range_m(self.laser, self.min_transfer_time_s, self.readout_pulse_s):.0f} m"
             )
 
     @staticmethod
-    def max_gate_range_m(laser: PulsedLaser, min_transfer_time_s: float) -> float:
-        return range_from_delay_m(laser.period_s - laser.pulse_width_s - min_transfer_time_s)
+    def max_gate_range_m(laser: PulsedLaser, min_transfer_time_s: float, readout_pulse_s: float = 1.0e-6) -> float:
+        return range_from_delay_m(laser.period_s - laser.pulse_width_s - min_transfer_time_s - readout_pulse_s)
 
     @property
     def open_s(self) -> float:
@@ -156,18 +184,28 @@ class GateTiming:
         return round_trip_time_s(self.gate_range_m)
 
     @property
-    def width_s(self) -> float:
-        """t_нак = pulse width + minimum transfer time, s."""
+    def accumulation_s(self) -> float:
+        """The seed's t_нак = pulse width + minimum SUB → V2/V3 time, s (drawn, not collected)."""
         return self.laser.pulse_width_s + self.min_transfer_time_s
 
     @property
+    def transfer_start_s(self) -> float:
+        """Rising edge of the V2/V3 readout pulse, s after the pulse start."""
+        return self.open_s + self.accumulation_s
+
+    @property
     def close_s(self) -> float:
-        """Transfer (V2/V3) instant, s after the pulse start."""
-        return self.open_s + self.width_s
+        """End of the readout pulse (SUB rises), s after the pulse start: light stops counting here."""
+        return self.transfer_start_s + self.readout_pulse_s
+
+    @property
+    def width_s(self) -> float:
+        """Collection window per pulse, s: t_нак + the readout pulse."""
+        return self.close_s - self.open_s
 
     @property
     def range_window_m(self) -> tuple[float, float]:
-        """Ranges with some return inside the gate: (R − cτ/2, R + c·t_нак/2)."""
+        """Ranges with some return inside the gate: (R − cτ/2, R + c·width/2)."""
         c_half = range_from_delay_m(1.0)
         return (
             max(0.0, self.gate_range_m - c_half * self.laser.pulse_width_s),
@@ -176,13 +214,16 @@ class GateTiming:
 
     @property
     def full_range_window_m(self) -> tuple[float, float]:
-        """Ranges whose whole return lies inside the gate: [R, R + c·t_min/2]."""
-        return (self.gate_range_m, self.gate_range_m + range_from_delay_m(self.min_transfer_time_s))
+        """Ranges whose whole return lies inside the gate: [R, R + c·(width − τ)/2]."""
+        return (self.gate_range_m, self.gate_range_m + range_from_delay_m(self.width_s - self.laser.pulse_width_s))
 
     def to_dict(self) -> dict:
         return {
             "gate_range_m": self.gate_range_m,
             "open_s": self.open_s,
+            "accumulation_s": self.accumulation_s,
+            "transfer_start_s": self.transfer_start_s,
+            "readout_pulse_s": self.readout_pulse_s,
             "width_s": self.width_s,
             "close_s": self.close_s,
             "range_window_m": list(self.range_window_m),
@@ -262,7 +303,8 @@ class GatedInterlineCCD(Sensor):
         self.mode = check_choice("mode", mode, MODES)
         self.pulses = check_int("pulses", pulses, 1)
         self.frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
-        self.timing = GateTiming(gate_range_m, self.laser, self.parameters.min_transfer_time_s)
+        self.timing = GateTiming(gate_range_m, self.laser, self.parameters.min_transfer_time_s,
+                                 self.parameters.readout_pulse_s)
         px = self.parameters.pixel
         self.geometry = ActiveImagingGeometry(
             self.laser,
@@ -302,6 +344,14 @@ class GatedInterlineCCD(Sensor):
         if mode == "sum":
             return int(math.floor(period / max(t_read, self.laser.period_s) + 1e-9))
         return max(0, int(math.floor((period - t_read) * self.laser.repetition_hz + 1e-9)))
+
+    def drive_waveforms(self, part: str = "icx618", pulses: int | None = None, lines: int | None = None):
+        """The drive (laser, SUB, V1–V4) of this sensor's gate, drawn from the same
+        :class:`GateTiming` the physics uses (:func:`~viform.sensors.gated_waveforms.drive_waveforms`)."""
+        from viform.sensors.gated_waveforms import drive_waveforms
+
+        return drive_waveforms(part, pulses=self.pulses if pulses is None else pulses, lines=lines,
+                               timing=self.timing)
 
     # ------------------------------------------------------------------ physics
     def pixel_array(self, height: int, width: int) -> FramePixelArray:
@@ -431,6 +481,7 @@ class GatedInterlineCCD(Sensor):
             "gate": self.timing.to_dict(),
             "geometry": self.geometry.to_dict(),
             "min_transfer_time_s": par.min_transfer_time_s,
+            "readout_pulse_s": par.readout_pulse_s,
             "readout_time_s": par.readout_time_s,
             "shutter_leak_ratio": par.shutter_leak_ratio,
             "noise": self.noise,

@@ -68,15 +68,16 @@ def check_segments(
         )
     for i, b in enumerate(levels):
         check_positive(f"clamp_levels_electrons[{i}]", b)
+        # checked before the order, so a barrier above the well is named as such (issue 28)
+        if b > full_well_electrons * (1 + 1e-12):
+            raise ViformError(
+                f"clamp_levels_electrons[{i}] = {b:g} exceeds the full well {full_well_electrons:g} e⁻; "
+                "a barrier can be at most the full well"
+            )
     if n > 1 and not np.all(np.diff(levels) > 0):
         raise ViformError(
             f"clamp_levels_electrons = {levels.tolist()} must increase strictly from "
             "segment to segment (seed 001: the Rpd barrier rises, V2 > V3 > V4)"
-        )
-    if levels[-1] > full_well_electrons * (1 + 1e-12):
-        raise ViformError(
-            f"clamp_levels_electrons[-1] = {levels[-1]:g} exceeds the full well "
-            f"{full_well_electrons:g} e⁻"
         )
     return tuple(float(t) for t in times), tuple(float(b) for b in levels)
 
@@ -197,7 +198,6 @@ class SegmentedExposureSensor(FrameSensor):
                 m = np.broadcast_to(base, (len(base), height, width))
             self._barrier_maps[key] = m
         return self._barrier_maps[key]
-        return len(self.segment_times_s)
 
     def scaled_segments_s(self, exposure_s: float) -> np.ndarray:
         """Segment durations scaled to a total of ``exposure_s``."""
