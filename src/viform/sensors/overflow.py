@@ -70,7 +70,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from viform._validate import ViformError, check_int, check_positive, check_range
+from viform._validate import ViformError, check_int, check_non_negative, check_positive, check_range
 from viform.light.radiometry import ELEMENTARY_CHARGE_C
 from viform.light.scenes import Scene, StillScene
 from viform.sensors.frame import FramePixelParameters, FrameSensor
@@ -213,6 +213,26 @@ class OverflowSensor(FrameSensor):
         False (the seed's own analysis ignores it).
     temperature_k : float
         Temperature of the kTC noise, K.
+    comparator_offset_v : float
+        Column-to-column spread (std, V) of the overflow comparator's offset: column c shares
+        when V_PD < VF + δ_c (fixed pattern, seeded by ``fixed_pattern_seed``). Default 0.
+        A positive δ_c makes a photodiode slightly *above* VF share, pulling it down towards VF
+        by (V_PD − VF)·C_F/(C_F + C_PD): a kink in the response whose place varies by column.
+    comparator_noise_v : float
+        Temporal noise (std, V) of each overflow decision: a decision within a few σ of the
+        threshold flips at random, P(share) = Φ((VF + δ_c − V_PD)/σ). Default 0.
+    overflow_capacitance_spread : float
+        Column-to-column relative spread (std / mean) of C_F (fixed pattern): the sharing
+        ratio, and so the response above the first overflow, varies by column (column FPN).
+        Default 0.
+    charge_injection_electrons : float
+        Charge the share switch injects into the photodiode when it opens, e⁻ of discharge
+        per sharing (signed; half the channel charge of a minimum switch is a few hundred e⁻
+        at 0.35 µm). Default 0.
+    column_bus_capacitance_f : float
+        Capacitance of the column bus that connects the column-shared C_F to the pixel, F;
+        it is reset to VF with C_F and shares with it, so C_F acts as C_F + C_bus. Default 0
+        (a 32-row column of 0.35 µm metal is ≈ 50–100 fF).
     """
 
     name = "overflow"
@@ -232,8 +252,21 @@ class OverflowSensor(FrameSensor):
         fixed_pattern_seed: int = 1288,
         ktc_noise: bool = False,
         temperature_k: float = 300.0,
+        comparator_offset_v: float = 0.0,
+        comparator_noise_v: float = 0.0,
+        overflow_capacitance_spread: float = 0.0,
+        charge_injection_electrons: float = 0.0,
+        column_bus_capacitance_f: float = 0.0,
     ):
         parameters = parameters or seed003_pixel_parameters()
+        self.comparator_offset_v = check_non_negative("comparator_offset_v", comparator_offset_v)
+        self.comparator_noise_v = check_non_negative("comparator_noise_v", comparator_noise_v)
+        self.overflow_capacitance_spread = check_range("overflow_capacitance_spread", overflow_capacitance_spread,
+                                                       0.0, 0.3)
+        self.charge_injection_electrons = check_range("charge_injection_electrons", charge_injection_electrons,
+                                                      -1e7, 1e7)
+        self.column_bus_capacitance_f = check_non_negative("column_bus_capacitance_f", column_bus_capacitance_f)
+        self._column_maps: dict = {}
         self.ktc_noise = bool(ktc_noise)
         self.temperature_k = check_positive("temperature_k", temperature_k)
         frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
@@ -311,12 +344,42 @@ class OverflowSensor(FrameSensor):
             )
 
     # ------------------------------------------------------------------ pixel physics
-    def _share_electrons(self, n):
-        """Eq. 1 in electrons of photodiode discharge: n = (V_res − V)·C_PD/q."""
+    @property
+    def effective_overflow_capacitance_f(self) -> float:
+        """C_F + the column bus that shares with it, F."""
+        return self.overflow_capacitance_f + self.column_bus_capacitance_f
+
+    def column_maps(self, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per-column comparator offset δ_c (V) and effective C_F (F), fixed pattern (W,) each."""
+        if width not in self._column_maps:
+            rng = np.random.default_rng([self.fixed_pattern_seed, 0xC0F])
+            offset = self.comparator_offset_v * rng.standard_normal(width)
+            c_f = self.effective_overflow_capacitance_f * np.clip(
+                1.0 + self.overflow_capacitance_spread * rng.standard_normal(width), 0.05, None)
+            self._column_maps[width] = (offset, c_f)
+        return self._column_maps[width]
+
+    def _share_electrons(self, n, c_f_f=None, decide=None):
+        """Eq. 1 in electrons of photodiode discharge: n = (V_res − V)·C_PD/q.
+
+        ``decide`` (bool array) overrides the ideal comparator V_PD < VF; ``c_f_f`` may be a
+        per-column array. Sharing pixels also take the switch's injected charge."""
+        cg = self.parameters.conversion_gain_v_per_e
+        c_f = self.effective_overflow_capacitance_f if c_f_f is None else c_f_f
+        v = self.v_reset_v - n * cg
+        shared_v = (v * self.c_pd_f + self.v_f_v * c_f) / (c_f + self.c_pd_f)
+        share = v < self.v_f_v if decide is None else decide
+        v = np.where(share, shared_v, v)
+        return (self.v_reset_v - v) / cg + np.where(share, self.charge_injection_electrons, 0.0)
+
+    def share_decisions(self, n, rng: np.random.Generator | None, width: int) -> np.ndarray:
+        """Which pixels the comparator lets share: V_PD < VF + δ_c (+ σ·N(0, 1) per decision)."""
         cg = self.parameters.conversion_gain_v_per_e
         v = self.v_reset_v - n * cg
-        v = share_charge_v(v, self.v_f_v, self.c_pd_f, self.overflow_capacitance_f)
-        return (self.v_reset_v - v) / cg
+        threshold = self.v_f_v + self.column_maps(width)[0]
+        if self.comparator_noise_v > 0 and self.noise and rng is not None:
+            threshold = threshold + self.comparator_noise_v * rng.standard_normal(np.shape(n))
+        return v < threshold
 
     def capture_frame(
         self,
@@ -356,8 +419,8 @@ class OverflowSensor(FrameSensor):
                 n + pixels.collect_electrons(lux, t, rng, self.noise), fw
             )  # eq. 3, V ≥ V_sat
             if k < 2:
-                shared = self.v_reset_v - n * self.parameters.conversion_gain_v_per_e < self.v_f_v
-                n = self._share_electrons(n)  # eqs. 1, 5, 6
+                shared = self.share_decisions(n, rng, width)
+                n = self._share_electrons(n, self.column_maps(width)[1], shared)  # eqs. 1, 5, 6
                 if ktc:  # C_F's reset noise and the switch's partition noise, where it shared
                     n = n + np.where(shared, self.share_ktc_electrons * rng.standard_normal(n.shape), 0.0)
             t0 += t
@@ -408,7 +471,7 @@ class OverflowSensor(FrameSensor):
         return overflow_voltages_v(
             photocurrent_a,
             self.c_pd_f,
-            self.overflow_capacitance_f,
+            self.effective_overflow_capacitance_f,
             self.v_reset_v,
             self.v_f_v,
             self.v_sat_v,
@@ -422,8 +485,9 @@ class OverflowSensor(FrameSensor):
         return (self.v_reset_v - v3) / self.parameters.conversion_gain_v_per_e
 
     def _circuit(self) -> tuple:
-        """(C_PD, C_F, V_res, V_F, V_sat, integration times): the arguments of the closed forms."""
-        return (self.c_pd_f, self.overflow_capacitance_f, self.v_reset_v, self.v_f_v, self.v_sat_v,
+        """(C_PD, C_F, V_res, V_F, V_sat, integration times): the arguments of the closed forms
+        (C_F includes the column bus)."""
+        return (self.c_pd_f, self.effective_overflow_capacitance_f, self.v_reset_v, self.v_f_v, self.v_sat_v,
                 self.integration_times_s)
 
     def dynamic_range_gain_db(self) -> float:
@@ -447,6 +511,11 @@ class OverflowSensor(FrameSensor):
             share_use_time_s=self.share_use_time_s,
             row_share_time_s=self.row_share_time_s,
             ktc_noise=self.ktc_noise,
+            comparator_offset_v=self.comparator_offset_v,
+            comparator_noise_v=self.comparator_noise_v,
+            overflow_capacitance_spread=self.overflow_capacitance_spread,
+            charge_injection_electrons=self.charge_injection_electrons,
+            column_bus_capacitance_f=self.column_bus_capacitance_f,
             reset_ktc_electrons=self.reset_ktc_electrons,
             share_ktc_electrons=self.share_ktc_electrons,
         )
