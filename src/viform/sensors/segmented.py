@@ -242,6 +242,8 @@ class SegmentedExposureSensor(FrameSensor):
         pixels = self.pixel_array(height, width)
         rng = pixels.rng(seed, frame_index)
         q = self.charge_electrons(scene, start_s, exposure_s, rng, height, width)
+        # the 5T global shutter's storage node waits for its row to be read (PLS, leakage)
+        q = q + pixels.storage_electrons(scene, start_s + exposure_s, rng, self.noise)
         return pixels.digitize(q, rng, self.noise)
 
     def expected_charge_electrons(self, lux, exposure_s: float | None = None) -> np.ndarray:
