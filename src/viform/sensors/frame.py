@@ -72,6 +72,15 @@ class FramePixelParameters:
         Light arriving during the wait adds PLS × rate × wait (Poisson). Default 0.
     storage_leakage_e_per_s : float
         Dark leakage into the storage node while it holds the frame, e⁻/s (Poisson). Default 0.
+    black_sun_fraction : float
+        Fraction β of the photo-rate that reaches the sense node between its reset and the
+        reset sample of the correlated double sampling ("black sun", seed 001 §3.3 mentions it).
+        Under extreme light the reset sample already holds n_r = β·rate·t_rs electrons, so the
+        CDS output min(Q + n_r, FW) − min(n_r, FW) falls once Q + n_r passes the full well and
+        reaches 0 (a black sun) when n_r ≥ FW. Default 0.
+    reset_sample_time_s : float
+        t_rs, the time from the sense node's reset to its reset sample, s. Default 1 µs (used
+        only when ``black_sun_fraction`` > 0).
     """
 
     optics: PixelOptics = field(default_factory=lambda: PixelOptics(pixel_pitch_m=5.86e-6,
@@ -89,6 +98,8 @@ class FramePixelParameters:
     readout_time_s: float = 0.0
     parasitic_light_sensitivity: float = 0.0
     storage_leakage_e_per_s: float = 0.0
+    black_sun_fraction: float = 0.0
+    reset_sample_time_s: float = 1e-6
 
     def __post_init__(self):
         check_positive("full_well_electrons", self.full_well_electrons)
@@ -108,6 +119,8 @@ class FramePixelParameters:
         check_non_negative("readout_time_s", self.readout_time_s)
         check_range("parasitic_light_sensitivity", self.parasitic_light_sensitivity, 0.0, 1.0)
         check_non_negative("storage_leakage_e_per_s", self.storage_leakage_e_per_s)
+        check_range("black_sun_fraction", self.black_sun_fraction, 0.0, 1.0)
+        check_non_negative("reset_sample_time_s", self.reset_sample_time_s)
 
     @property
     def shutter_efficiency(self) -> float:
@@ -202,6 +215,19 @@ class FramePixelArray:
             mean = mean + p.parasitic_light_sensitivity * self.mean_signal_electrons(rows, 1.0) * wait
         return rng.poisson(mean).astype(np.float64) if noise else mean
 
+    def black_sun_electrons(self, electrons, mean_lux) -> np.ndarray:
+        """CDS output with the reset sample eaten by the light (black sun), e⁻.
+
+        n_r = β·η·Φ(lux)·t_rs reaches the sense node before its reset sample; the signal sample
+        holds Q + n_r, both clipped at the full well: output min(Q + n_r, FW) − min(n_r, FW).
+        The light at the reset sample is taken as ``mean_lux`` (the exposure's mean light).
+        """
+        p = self.parameters
+        fw = p.full_well_electrons
+        q = np.minimum(np.asarray(electrons, dtype=np.float64), fw)
+        n_r = p.black_sun_fraction * p.optics.electrons_per_s(check_lux(mean_lux, "mean_lux")) * p.reset_sample_time_s
+        return np.minimum(q + n_r, fw) - np.minimum(n_r, fw)
+
     def digitize(self, electrons, rng: np.random.Generator, noise: bool = True) -> np.ndarray:
         """Full-well clip, DSNU, read noise, gain, black offset and ADC: electrons → DN (uint16)."""
         p = self.parameters
@@ -264,6 +290,8 @@ class FrameSensor(Sensor):
         electrons = pixels.collect_electrons(lux, exposure_s, rng, self.noise)
         # global shutter: the frame waits in the storage nodes while rows are read
         electrons = electrons + pixels.storage_electrons(scene, start_s + exposure_s, rng, self.noise)
+        if self.parameters.black_sun_fraction > 0:
+            electrons = pixels.black_sun_electrons(electrons, lux)
         return pixels.digitize(electrons, rng, self.noise)
 
     def capture(self, scene: Scene, duration_s: float, *, seed: int = 0) -> FrameStack:
