@@ -106,7 +106,31 @@ class InterlineCCDParameters:
     readout_time_s : float
         Time to shift the whole frame out, s (ICX618: 60 frames/s progressive → 1/60 s).
     shutter_leak_ratio : float
-        Fraction of the light arriving outside the gate that still reaches the buffer.
+        Fraction of the light arriving outside the gate that still reaches the buffer (the
+        smear ratio: light reaching the vertical register relative to the photodiode).
+    gate_jitter_s : float
+        Rms timing jitter between the laser pulse and the drive edges (Gaussian; SUB and the
+        transfer pulse move together), s. The expected gate is the nominal one averaged over
+        the jitter. Default 0 (typical trigger jitter of an FPGA-timed diode laser: 1–5 ns).
+    sub_fall_time_s : float
+        Duration of SUB's falling edge, s: the photodiodes start collecting progressively, as
+        a linear ramp centred on ``open_s`` (equivalently, the opening instant averaged
+        uniformly over the edge). Default 0 (ideal edge; typical 20–100 ns for a +20 V swing).
+    transfer_smear : bool
+        Add the smear of the vertical transfer: each packet crosses the rows between it and the
+        horizontal register, one line time each, and gathers ``shutter_leak_ratio`` × their
+        light (ambient; the laser is off during readout): a vertical streak under bright
+        ambient light (sunlit surfaces, the sun). Default False.
+    bloom : bool
+        Charge above ``register_capacity_electrons`` in a vertical-register packet spills into
+        its neighbours along the column (half up, half down) until every packet fits: a
+        blooming streak. Default False (the excess is clipped, as by the readout).
+    register_capacity_electrons : float or None
+        Vertical-register packet capacity, e⁻ (default: the pixel's full well).
+    interlaced : bool
+        An interlaced part (ICX279, ICX659) read in field-integration mode: each output row is
+        the sum of two adjacent photodiode rows (the readout pulse on V1 and V3 puts both into
+        one field), so the output has half the rows and twice the signal per row. Default False.
     """
 
     pixel: FramePixelParameters = field(default_factory=icx618_pixel_parameters)
@@ -116,6 +140,12 @@ class InterlineCCDParameters:
     readout_pulse_s: float = 1.0e-6
     readout_time_s: float = 1.0 / 60.0
     shutter_leak_ratio: float = 1e-5
+    gate_jitter_s: float = 0.0
+    sub_fall_time_s: float = 0.0
+    transfer_smear: bool = False
+    bloom: bool = False
+    register_capacity_electrons: float | None = None
+    interlaced: bool = False
 
     def __post_init__(self):
         check_int("sensor_height_px", self.sensor_height_px, 1)
@@ -126,6 +156,16 @@ class InterlineCCDParameters:
         check_non_negative("shutter_leak_ratio", self.shutter_leak_ratio)
         if self.shutter_leak_ratio > 1:
             raise ViformError(f"shutter_leak_ratio = {self.shutter_leak_ratio!r} must be ≤ 1")
+        check_non_negative("gate_jitter_s", self.gate_jitter_s)
+        check_non_negative("sub_fall_time_s", self.sub_fall_time_s)
+        if self.register_capacity_electrons is not None:
+            check_positive("register_capacity_electrons", self.register_capacity_electrons)
+
+    @property
+    def capacity_electrons(self) -> float:
+        """Vertical-register packet capacity, e⁻."""
+        return (self.pixel.full_well_electrons if self.register_capacity_electrons is None
+                else float(self.register_capacity_electrons))
 
 
 @dataclass(frozen=True)
@@ -363,12 +403,45 @@ class GatedInterlineCCD(Sensor):
     def per_pulse_electrons(self, scene: ActiveScene) -> dict:
         """Expected electrons of one pulse: ``gated`` and ``all`` laser parts (dicts by source) and
         the ambient rate ``ambient_per_s`` (e⁻/s); independent of X and of the mode."""
-        g, t = self.geometry, self.timing
+        g = self.geometry
         return {
-            "gated": g.laser_electrons(scene, t.open_s, t.close_s),
+            "gated": self.gated_laser_electrons(scene),
             "all": g.laser_electrons(scene),
             "ambient_per_s": g.ambient_electrons_per_s(scene),
         }
+
+    def gate_edge_offsets_s(self, jitter_nodes: int = 48, ramp_nodes: int = 8) -> list[tuple[float, float]]:
+        """(opening shift, common shift) pairs of equal weight that sample the real edges: the
+        SUB ramp (uniform over ±t_f/2, opening only) and the jitter (Gaussian, both edges), by
+        their quantile midpoints."""
+        from scipy.stats import norm
+
+        par = self.parameters
+        jit = ([par.gate_jitter_s * float(norm.ppf((i + 0.5) / jitter_nodes)) for i in range(jitter_nodes)]
+               if par.gate_jitter_s > 0 else [0.0])
+        ramp = ([par.sub_fall_time_s * ((j + 0.5) / ramp_nodes - 0.5) for j in range(ramp_nodes)]
+                if par.sub_fall_time_s > 0 else [0.0])
+        return [(u, d) for u in ramp for d in jit]
+
+    def gated_laser_electrons(self, scene: ActiveScene) -> dict:
+        """Laser electrons of one pulse inside the real gate (edges from :meth:`gate_edge_offsets_s`)."""
+        g, t = self.geometry, self.timing
+        offsets = self.gate_edge_offsets_s()
+        if len(offsets) == 1:
+            return g.laser_electrons(scene, t.open_s, t.close_s)
+        parts = [g.laser_electrons(scene, t.open_s + u + d, t.close_s + d) for u, d in offsets]
+        return {k: sum(p[k] for p in parts) / len(parts) for k in parts[0]}
+
+    def transfer_smear_electrons(self, scene: ActiveScene, ambient_per_s=None) -> np.ndarray:
+        """Smear of one vertical transfer, e⁻ (H, W): packet r crosses rows 0 … r − 1 (row 0 next
+        to the horizontal register) for one line time each, gathering s × their ambient rate:
+        s·t_line·Σ_{j<r} A_j, with t_line = readout_time_s / sensor_height_px."""
+        par = self.parameters
+        amb = self.geometry.ambient_electrons_per_s(scene) if ambient_per_s is None else ambient_per_s
+        amb = np.broadcast_to(np.asarray(amb, dtype=np.float64), scene.shape)
+        t_line = par.readout_time_s / par.sensor_height_px
+        above = np.cumsum(amb, axis=0) - amb
+        return par.shutter_leak_ratio * t_line * above
 
     def electron_budget(
         self, scene: ActiveScene, per_pulse: dict | None = None, pulses: int | None = None, mode: str | None = None
@@ -401,6 +474,8 @@ class GatedInterlineCCD(Sensor):
             photo = gated + (x - 1) * all_ + amb * exposure
             dark = dark_rate * exposure
             readouts = 1
+        if self.parameters.transfer_smear:  # every readout shifts the register out once
+            photo = photo + readouts * self.transfer_smear_electrons(scene, amb)
         return {
             "per_pulse": pp,
             "photo": photo,
@@ -422,15 +497,23 @@ class GatedInterlineCCD(Sensor):
         b = budget or self.electron_budget(scene)
         rng = pixels.rng(seed, frame_index)
         mean_per_readout = b["per_readout_photo"] * pixels.prnu_gain + b["per_readout_dark"]
-        total = np.zeros((h, w))
+        par = self.parameters
+        out_h = h // 2 if par.interlaced else h
+        total = np.zeros((out_h, w))
         for _ in range(b["readouts"]):
             e = rng.poisson(mean_per_readout).astype(np.float64) if self.noise else mean_per_readout
-            total += pixels.digitize(e, rng, self.noise)
+            if par.interlaced:  # field integration: rows 2k and 2k + 1 share one register packet
+                e = e[: 2 * out_h: 2] + e[1: 2 * out_h: 2]
+            if par.bloom:
+                e = bloom_columns(e, par.capacity_electrons)
+            else:
+                e = np.minimum(e, par.capacity_electrons)
+            total += self.pixel_array(out_h, w).digitize(e, rng, self.noise)
         return GatedFrame(
             dn=total,
             black_dn=p.black_offset_dn * b["readouts"],
             system_gain_dn_per_e=p.system_gain_dn_per_e,
-            mean_electrons=b["photo"] + b["dark"],
+            mean_electrons=b["photo"] + b["dark"],  # per photodiode (before field summing)
             mode=b["mode"],
             pulses=b["pulses"],
             frame_time_s=self.frame_time_s(b["pulses"], b["mode"]),
@@ -447,6 +530,9 @@ class GatedInterlineCCD(Sensor):
         """
         if budget is None and scene is None:
             raise ViformError("expected_frame_stats needs a scene or a budget")
+        if self.parameters.interlaced or self.parameters.bloom:
+            raise ViformError("expected_frame_stats gives per-photodiode statistics of a progressive part "
+                              "without blooming; simulate frames (capture_frame) for interlaced=True or bloom=True")
         b = budget or self.electron_budget(scene)
         p = self.parameters.pixel
         n = b["readouts"]
@@ -471,6 +557,8 @@ class GatedInterlineCCD(Sensor):
 
     def describe(self) -> dict:
         par = self.parameters
+        extra = {k: getattr(par, k) for k in ("readout_pulse_s", "gate_jitter_s", "sub_fall_time_s", "transfer_smear",
+                                               "bloom", "register_capacity_electrons", "interlaced")}
         return {
             "model": self.name,
             "mode": self.mode,
@@ -481,9 +569,35 @@ class GatedInterlineCCD(Sensor):
             "gate": self.timing.to_dict(),
             "geometry": self.geometry.to_dict(),
             "min_transfer_time_s": par.min_transfer_time_s,
-            "readout_pulse_s": par.readout_pulse_s,
             "readout_time_s": par.readout_time_s,
             "shutter_leak_ratio": par.shutter_leak_ratio,
+            **extra,
             "noise": self.noise,
             "pixel": par.pixel.to_dict(),
         }
+
+
+def bloom_columns(electrons, capacity_electrons: float) -> np.ndarray:
+    """Spill charge above ``capacity_electrons`` along each column (axis 0): each overfilled
+    packet, in turn, keeps C and sends half its excess up and half down the column, each half
+    filling the free room of the packets it meets; what reaches a column's end is lost (drained
+    by the horizontal register / the dump). Charge is conserved otherwise, so a packet of
+    Q ≫ C becomes a streak of ≈ Q/C full packets centred on it (a blooming streak)."""
+    e = np.array(electrons, dtype=np.float64)
+    cap = float(capacity_electrons)
+    n = e.shape[0]
+    for c in np.flatnonzero((e > cap).any(axis=0)):
+        col = e[:, c]  # a view: filled in place
+        for i in np.flatnonzero(col > cap):
+            excess = col[i] - cap
+            if excess <= 0:
+                continue
+            col[i] = cap
+            for step in (-1, 1):
+                rest, j = excess / 2, i + step
+                while rest > 0 and 0 <= j < n:
+                    take = min(max(cap - col[j], 0.0), rest)
+                    col[j] += take
+                    rest -= take
+                    j += step
+    return e
