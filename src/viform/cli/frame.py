@@ -214,6 +214,39 @@ def _jsonable(obj):
     return obj
 
 
+def parse_settings(sensor: str, settings) -> dict:
+    """``--set NAME=VALUE`` pairs → keyword arguments of :func:`viform.sensors.presets.make_sensor`."""
+    from viform._validate import ViformError
+    from viform.sensors import presets
+
+    if not settings:
+        return {}
+    if sensor not in presets.PRESETS:
+        raise ViformError(f"--set is not allowed for {sensor!r}: it changes frame presets only "
+                          f"({', '.join(presets.PRESETS)})")
+    allowed = [f for f in presets.preset_fields(sensor) if f not in ("height", "width")]
+    out = {}
+    for item in settings:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or name not in allowed:
+            raise ViformError(f"--set {item!r} is not allowed: give NAME=VALUE with NAME one of "
+                              f"{', '.join(allowed)}")
+        text = text.strip()
+        low = text.lower()
+        if low in ("true", "false"):
+            value = low == "true"
+        else:
+            try:
+                value = int(text) if text.lstrip("+-").isdigit() else float(text)
+            except ValueError:
+                raise ViformError(f"--set {item!r} is not allowed: {text!r} is not a number "
+                                  "(or true/false)") from None
+        out[name] = value
+    presets.make_sensor(sensor, **out)  # validates the values, naming the field
+    return out
+
+
 @cli.command("characterize")
 @click.argument("sensor")
 @click.option(
@@ -239,7 +272,11 @@ def _jsonable(obj):
     help="Flat-field size in pixels (square) for the EMVA 1288 sweep.",
 )
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
-def characterize(sensor, out_dir, as_json, json_path, size, seed):
+@click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
+              help="Change one parameter of a frame preset by name, e.g. --set read_noise_electrons=10 "
+                   "--set parasitic_light_sensitivity=0.01 --set comparator_noise_v=0.005 (repeatable; "
+                   "the published-figure comparison keeps the preset's own values).")
+def characterize(sensor, out_dir, as_json, json_path, size, seed, settings):
     """Characterize a preset SENSOR (EMVA 1288 R4.0 for frame sensors; interval dynamic range for spike sensors).
 
     SENSOR is one of: cmos, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
@@ -258,7 +295,10 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
         check_output_folder("--out", Path(out_dir))
     check_json_file(json_path)
     presets.describe_preset(sensor)  # clear error for an unknown name
+    overrides = parse_settings(sensor, settings)
     result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
+    if overrides:
+        result["settings"] = overrides
     figures = {}
     if sensor == "spike" or sensor.startswith("spike"):  # chip presets too
         from viform.measure.spike_characterization import characterize_spike_sensor
@@ -286,8 +326,8 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
             f"{r['longest_interval_s']:.3g} s, shortest = one tick = {r['shortest_interval_s'] * 1e6:.3g} µs)"
         ]
     else:
-        kw = {"height": min(size, 64), "width": min(size, 64)} if sensor == "seed003-overflow" else {}
-        dev = presets.make_sensor(sensor, **kw)
+        kw = {"height": min(size, 64), "width": min(size, 64)} if sensor.startswith("seed003-overflow") else {}
+        dev = presets.make_sensor(sensor, **kw, **overrides)
         lines = []
         if type(dev) is FrameSensor:
             r = emva.characterize_frame_sensor(dev, height=size, width=size, seed=seed)
@@ -396,6 +436,7 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
                 result[key] = {k: v for k, v in result[key].items() if k not in ("curves",)}
         click.echo(json.dumps(_jsonable(result), indent=2))
         return
-    click.echo(f"{sensor}: {result['description']}")
+    click.echo(f"{sensor}: {result['description']}"
+               + (f" (changed: {', '.join(f'{k} = {v}' for k, v in overrides.items())})" if overrides else ""))
     for line in lines:
         click.echo("  " + line)
