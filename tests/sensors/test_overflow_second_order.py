@@ -126,3 +126,32 @@ def test_column_bus_adds_to_the_overflow_capacitor(c_bus_f):
         assert e == pytest.approx((s.v_reset_v - v3) / s.parameters.conversion_gain_v_per_e,
                                   abs=1 / s.parameters.system_gain_dn_per_e)
     assert s.segment_boundaries_a()["E"] == pytest.approx((v30 - s.v_sat_v) * c_pd / s.integration_times_s[2])
+
+
+@pytest.mark.parametrize("m", [0.33, 0.5])
+def test_photodiode_capacitance_nonlinearity_is_measured_back_from_the_response(m):
+    """A junction photodiode, C(V) = C_res·((1 + V_res/φ)/(1 + V/φ))^m: the gain of the simulated
+    response, dV/dQ = 1/C(V), falls as the photodiode discharges; fitting ln C against
+    ln(1 + V/φ) over 3.2 … 0.5 V gives back −m. The well to V_sat grows to Q(V_sat) > C_res·3 V,
+    and the DR gain over a 4T with the same photodiode rises (≈ +0.4 dB at m = 1/3, +0.6 at 1/2)."""
+    from viform.sensors.overflow import PhotodiodeJunction
+
+    # VF just above V_sat: no overflow over the swept range, a plain integrating photodiode
+    s = OverflowSensor(_quiet(), noise=False, v_f_v=0.32, junction_grading_m=m)
+    cg, t = s.parameters.conversion_gain_v_per_e, sum(s.integration_times_s)
+    i_dark = s.parameters.dark_current_e_per_s * ELEMENTARY_CHARGE_C
+    q = np.linspace(0.1, 0.95, 40) * s.junction.discharge_c(0.5)   # charge reaching V from 3.2 to 0.5 V
+    v = np.array([s.v_reset_v - _signal_e(s, qq / t - i_dark).mean() * cg for qq in q])
+    np.testing.assert_allclose(v, s.junction.voltage_v(q), atol=1.5 * cg / s.parameters.system_gain_dn_per_e)
+    c = np.gradient(q, v) * -1.0
+    slope = np.polyfit(np.log1p(v[2:-2] / 0.7), np.log(c[2:-2]), 1)[0]
+    assert -slope == pytest.approx(m, abs=0.02)
+    linear = PhotodiodeJunction(s.c_pd_f, 3.3)
+    assert s.well_electrons > 1.2 * linear.discharge_c(0.3) / ELEMENTARY_CHARGE_C
+    gain = OverflowSensor(_quiet(), noise=False, junction_grading_m=m).dynamic_range_gain_db()
+    assert 0.2 < gain - OverflowSensor(_quiet(), noise=False).dynamic_range_gain_db() < 1.0
+    # eq. 1 with the junction conserves charge
+    j = s.junction
+    v_share = j.share_v(np.array([0.3, 1.0, 2.0]), 2.2, 500e-15)
+    np.testing.assert_allclose(j.discharge_c(v_share) + 500e-15 * (2.2 - v_share),
+                               j.discharge_c(np.array([0.3, 1.0, 2.0])), rtol=1e-9)

@@ -115,6 +115,82 @@ def share_charge_v(v_pd_v, v_cf_v: float, c_pd_f: float, c_f_f: float):
     return np.where(v < v_cf_v, shared, v)
 
 
+class PhotodiodeJunction:
+    """The photodiode's charge–voltage law, linear or a reverse-biased junction (issue 28).
+
+    A junction's capacitance grows as its reverse bias falls, C(V) = C_res·((1 + V_res/φ)/(1 + V/φ))^m
+    (m = 0.5 abrupt, 1/3 linearly graded; φ the built-in potential), equal to C_res at the reset
+    voltage. The charge removed from reset down to V is then, in closed form,
+
+        Q(V) = C_res·(1 + V_res/φ)^m · φ/(1 − m) · [(1 + V_res/φ)^{1−m} − (1 + V/φ)^{1−m}]
+
+    and m = 0 gives the linear C_res·(V_res − V). The well to a given V_sat holds more charge
+    than the linear law says, and the gain q/C(V) falls as the photodiode discharges.
+    """
+
+    def __init__(self, c_reset_f: float, v_reset_v: float, grading_m: float = 0.0, built_in_v: float = 0.7):
+        self.c_reset_f = check_positive("c_reset_f", c_reset_f)
+        self.v_reset_v = float(v_reset_v)
+        self.grading_m = check_range("junction_grading_m", grading_m, 0.0, 0.9)
+        self.built_in_v = check_positive("junction_built_in_v", built_in_v)
+        m, phi = self.grading_m, self.built_in_v
+        self._k = self.c_reset_f * (1 + self.v_reset_v / phi) ** m * phi / (1 - m)
+        self._top = (1 + self.v_reset_v / phi) ** (1 - m)
+
+    @property
+    def linear(self) -> bool:
+        return self.grading_m == 0
+
+    def capacitance_f(self, v_v):
+        """C(V), F."""
+        v = np.asarray(v_v, dtype=np.float64)
+        return self.c_reset_f * ((1 + self.v_reset_v / self.built_in_v) / (1 + v / self.built_in_v)) ** self.grading_m
+
+    def discharge_c(self, v_v):
+        """Charge removed from reset to reach V, C."""
+        v = np.asarray(v_v, dtype=np.float64)
+        if self.linear:
+            return self.c_reset_f * (self.v_reset_v - v)
+        return self._k * (self._top - (1 + v / self.built_in_v) ** (1 - self.grading_m))
+
+    def voltage_v(self, q_c):
+        """Photodiode voltage after removing charge ``q_c`` from reset, V."""
+        q = np.asarray(q_c, dtype=np.float64)
+        if self.linear:
+            return self.v_reset_v - q / self.c_reset_f
+        base = np.maximum(self._top - q / self._k, 0.0)
+        return self.built_in_v * (base ** (1 / (1 - self.grading_m)) - 1)
+
+    def share_v(self, v_v, v_f_v: float, c_f_f):
+        """Eq. 1 with this junction: V' with Q(V') + C_F·(VF − V') = Q(V) (charge conserved), for
+        V < VF; the linear law gives (V·C_PD + VF·C_F)/(C_F + C_PD)."""
+        v = np.asarray(v_v, dtype=np.float64)
+        c_f = np.asarray(c_f_f, dtype=np.float64)
+        if self.linear:
+            return (v * self.c_reset_f + v_f_v * c_f) / (c_f + self.c_reset_f)
+        target = self.discharge_c(v)
+        lo, hi = np.minimum(v, v_f_v), np.full(np.broadcast(v, c_f).shape, float(v_f_v))
+        lo = np.broadcast_to(lo, hi.shape).copy()
+        for _ in range(60):  # f(V') = Q(V') + C_F (VF − V') − Q(V) falls from > 0 at V to < 0 at VF
+            mid = 0.5 * (lo + hi)
+            f = self.discharge_c(mid) + c_f * (v_f_v - mid) - target
+            lo, hi = np.where(f > 0, mid, lo), np.where(f > 0, hi, mid)
+        return 0.5 * (lo + hi)
+
+
+def junction_segment_boundaries_a(junction: PhotodiodeJunction, c_f_f: float = 500e-15, v_f_v: float = 2.2,
+                                  v_sat_v: float = 0.3, integration_times_s=SEED003_INTEGRATIONS_S) -> dict:
+    """Points B, C, D, E (A) for any junction law: B = Q(VF)/(t1 + t2), C = Q(V_sat)/t1,
+    D and E = (Q(V_sat) − Q(V20))/t2 and /t3 with V20 the sharing of V_sat (eq. 1); the 4T's
+    saturation I_4T = Q(V_sat)/T. Equal to :func:`segment_boundaries_a` for a linear junction."""
+    t1, t2, t3 = integration_times_s
+    q = junction.discharge_c
+    v20 = float(junction.share_v(v_sat_v, v_f_v, c_f_f))
+    swing = float(q(v_sat_v) - q(v20))
+    return {"B": float(q(v_f_v)) / (t1 + t2), "C": float(q(v_sat_v)) / t1, "D": swing / t2, "E": swing / t3,
+            "v20_after_saturation_v": v20, "I_4T": float(q(v_sat_v)) / sum(integration_times_s)}
+
+
 def overflow_voltages_v(
     photocurrent_a,
     c_pd_f: float,
@@ -233,6 +309,11 @@ class OverflowSensor(FrameSensor):
         Capacitance of the column bus that connects the column-shared C_F to the pixel, F;
         it is reset to VF with C_F and shares with it, so C_F acts as C_F + C_bus. Default 0
         (a 32-row column of 0.35 µm metal is ≈ 50–100 fF).
+    junction_grading_m, junction_built_in_v : float
+        The photodiode's capacitance–voltage law (:class:`PhotodiodeJunction`): C_PD is the
+        value at the reset voltage and grows as the photodiode discharges. Default m = 0 (the
+        seed's linear C_PD); an abrupt junction has m = 0.5, φ ≈ 0.7 V. The output is the CDS
+        voltage V_res − V3, reported in electrons of the nominal gain q/C_PD.
     """
 
     name = "overflow"
@@ -257,6 +338,8 @@ class OverflowSensor(FrameSensor):
         overflow_capacitance_spread: float = 0.0,
         charge_injection_electrons: float = 0.0,
         column_bus_capacitance_f: float = 0.0,
+        junction_grading_m: float = 0.0,
+        junction_built_in_v: float = 0.7,
     ):
         parameters = parameters or seed003_pixel_parameters()
         self.comparator_offset_v = check_non_negative("comparator_offset_v", comparator_offset_v)
@@ -292,6 +375,7 @@ class OverflowSensor(FrameSensor):
         self.v_f_v = check_range("v_f_v", v_f_v, 0.0, self.v_reset_v, low_open=True, high_open=True)
         self.share_use_time_s = check_positive("share_use_time_s", share_use_time_s)
         self.c_pd_f = ELEMENTARY_CHARGE_C / parameters.conversion_gain_v_per_e
+        self.junction = PhotodiodeJunction(self.c_pd_f, self.v_reset_v, junction_grading_m, junction_built_in_v)
         self.v_sat_v = (
             self.v_reset_v - parameters.full_well_electrons * parameters.conversion_gain_v_per_e
         )
@@ -364,18 +448,16 @@ class OverflowSensor(FrameSensor):
 
         ``decide`` (bool array) overrides the ideal comparator V_PD < VF; ``c_f_f`` may be a
         per-column array. Sharing pixels also take the switch's injected charge."""
-        cg = self.parameters.conversion_gain_v_per_e
         c_f = self.effective_overflow_capacitance_f if c_f_f is None else c_f_f
-        v = self.v_reset_v - n * cg
-        shared_v = (v * self.c_pd_f + self.v_f_v * c_f) / (c_f + self.c_pd_f)
+        j = self.junction
+        v = j.voltage_v(np.asarray(n, dtype=np.float64) * ELEMENTARY_CHARGE_C)
         share = v < self.v_f_v if decide is None else decide
-        v = np.where(share, shared_v, v)
-        return (self.v_reset_v - v) / cg + np.where(share, self.charge_injection_electrons, 0.0)
+        v = np.where(share, j.share_v(np.minimum(v, self.v_f_v), self.v_f_v, c_f), v)
+        return j.discharge_c(v) / ELEMENTARY_CHARGE_C + np.where(share, self.charge_injection_electrons, 0.0)
 
     def share_decisions(self, n, rng: np.random.Generator | None, width: int) -> np.ndarray:
         """Which pixels the comparator lets share: V_PD < VF + δ_c (+ σ·N(0, 1) per decision)."""
-        cg = self.parameters.conversion_gain_v_per_e
-        v = self.v_reset_v - n * cg
+        v = self.junction.voltage_v(np.asarray(n, dtype=np.float64) * ELEMENTARY_CHARGE_C)
         threshold = self.v_f_v + self.column_maps(width)[0]
         if self.comparator_noise_v > 0 and self.noise and rng is not None:
             threshold = threshold + self.comparator_noise_v * rng.standard_normal(np.shape(n))
@@ -405,7 +487,7 @@ class OverflowSensor(FrameSensor):
             else check_positive("exposure_s", exposure_s) / self.exposure_s
         )
         times = [t * scale for t in self.integration_times_s]
-        fw = self.parameters.full_well_electrons
+        fw = self.well_electrons  # charge down to V_sat (the nominal full well if C_PD is linear)
         row_offset_s = (1.0 / self.frame_rate_hz) / height
         static = isinstance(scene, StillScene)
         n = np.zeros((height, width))
@@ -426,8 +508,19 @@ class OverflowSensor(FrameSensor):
             t0 += t
         if ktc:  # the reference sample is taken after a new, independent reset
             n = n - self.reset_ktc_electrons * rng.standard_normal(n.shape)
-        # CDS: V_res − V3 is the signal; offsets cancel (seed 003, §3).
+        # CDS: V_res − V3 is the signal; offsets cancel (seed 003, §3). It is read as a voltage:
+        # in electrons of the nominal gain q/C_PD (the same as n for a linear photodiode).
+        if not self.junction.linear:
+            v3 = self.junction.voltage_v(n * ELEMENTARY_CHARGE_C)
+            n = (self.v_reset_v - v3) / self.parameters.conversion_gain_v_per_e
         return pixels.digitize(n, rng, self.noise)
+
+    @property
+    def well_electrons(self) -> float:
+        """Charge the photodiode holds from reset down to V_sat, e⁻ (= full_well_electrons when linear)."""
+        if self.junction.linear:
+            return self.parameters.full_well_electrons
+        return float(self.junction.discharge_c(self.v_sat_v)) / ELEMENTARY_CHARGE_C
 
     @staticmethod
     def _window_lux(scene: Scene, t0: float, t: float, row_offset_s: float, static: bool):
@@ -491,12 +584,19 @@ class OverflowSensor(FrameSensor):
                 self.integration_times_s)
 
     def dynamic_range_gain_db(self) -> float:
-        """Noise-free DR gain over the plain 4T APS (see :func:`dynamic_range_gain_db`)."""
-        return dynamic_range_gain_db(*self._circuit())
+        """Noise-free DR gain over the plain 4T APS with the same photodiode (see
+        :func:`dynamic_range_gain_db`; :func:`junction_segment_boundaries_a` when C_PD is nonlinear)."""
+        if self.junction.linear:
+            return dynamic_range_gain_db(*self._circuit())
+        b = self.segment_boundaries_a()
+        return float(20 * np.log10(b["E"] / b["I_4T"]))
 
     def segment_boundaries_a(self) -> dict:
         """Photocurrents at the seed's points B, C, D, E (see :func:`segment_boundaries_a`)."""
-        return segment_boundaries_a(*self._circuit())
+        if self.junction.linear:
+            return segment_boundaries_a(*self._circuit())
+        return junction_segment_boundaries_a(self.junction, self.effective_overflow_capacitance_f, self.v_f_v,
+                                             self.v_sat_v, self.integration_times_s)
 
     def describe(self) -> dict:
         d = super().describe()
@@ -516,6 +616,8 @@ class OverflowSensor(FrameSensor):
             overflow_capacitance_spread=self.overflow_capacitance_spread,
             charge_injection_electrons=self.charge_injection_electrons,
             column_bus_capacitance_f=self.column_bus_capacitance_f,
+            junction_grading_m=self.junction.grading_m,
+            junction_built_in_v=self.junction.built_in_v,
             reset_ktc_electrons=self.reset_ktc_electrons,
             share_ktc_electrons=self.share_ktc_electrons,
         )
