@@ -119,3 +119,26 @@ def test_interlaced_part_sums_row_pairs_into_a_field():
     k = _params().pixel.system_gain_dn_per_e
     assert field.electrons.shape == (h // 2, w)
     np.testing.assert_allclose(field.electrons, prog[0::2] + prog[1::2], atol=1.5 / k)
+
+
+@pytest.mark.parametrize("part, interlaced, rows", [("icx618", False, 494), ("icx279", True, 582),
+                                                     ("icx659", True, 494)])
+def test_parts_are_sensor_models_with_their_drive(part, interlaced, rows):
+    """Seed 004's parts as CCD models: format, field integration and field time from the part's
+    drive; the drive drawn for the sensor is the part's (readout on V1/V3 for the interlaced
+    ones) with the sensor's own gate instants."""
+    from viform.sensors.gated_ccd import interline_ccd_parameters
+    from viform.sensors.gated_waveforms import DRIVES, V_READ_V
+
+    par = interline_ccd_parameters(part)
+    d = DRIVES[part]
+    assert par.interlaced is interlaced and par.sensor_height_px == rows
+    assert par.readout_time_s == pytest.approx(d.rows * d.line_time_s)
+    ccd = GatedInterlineCCD(pulses=3, parameters=par)
+    tr = ccd.drive_waveforms(lines=1)
+    assert tr.drive.name == d.name
+    fires = tr.edges("LASER", ccd.laser.peak_power_w)
+    assert tr.edges(d.readout_gates[0], V_READ_V) - fires == pytest.approx([ccd.timing.transfer_start_s] * 3,
+                                                                           abs=1e-12)
+    scene = ActiveScene(range_m=np.full((8, 6), 150.0), reflectance=np.full((8, 6), 0.3), ambient_lux=1e3)
+    assert ccd.capture_frame(scene).dn.shape == ((4, 6) if interlaced else (8, 6))

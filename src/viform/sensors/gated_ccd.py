@@ -131,6 +131,10 @@ class InterlineCCDParameters:
         An interlaced part (ICX279, ICX659) read in field-integration mode: each output row is
         the sum of two adjacent photodiode rows (the readout pulse on V1 and V3 puts both into
         one field), so the output has half the rows and twice the signal per row. Default False.
+    part : str
+        The drive this CCD takes (:data:`viform.sensors.gated_waveforms.DRIVES`): which phases
+        carry the readout pulse, extra signals; :func:`interline_ccd_parameters` builds a part's
+        CCD with its format, interlacing and field time.
     """
 
     pixel: FramePixelParameters = field(default_factory=icx618_pixel_parameters)
@@ -146,6 +150,7 @@ class InterlineCCDParameters:
     bloom: bool = False
     register_capacity_electrons: float | None = None
     interlaced: bool = False
+    part: str = "icx618"
 
     def __post_init__(self):
         check_int("sensor_height_px", self.sensor_height_px, 1)
@@ -160,12 +165,34 @@ class InterlineCCDParameters:
         check_non_negative("sub_fall_time_s", self.sub_fall_time_s)
         if self.register_capacity_electrons is not None:
             check_positive("register_capacity_electrons", self.register_capacity_electrons)
+        check_choice("part", self.part, ("icx618", "icx445", "icx279", "icx659"))
 
     @property
     def capacity_electrons(self) -> float:
         """Vertical-register packet capacity, e⁻."""
         return (self.pixel.full_well_electrons if self.register_capacity_electrons is None
                 else float(self.register_capacity_electrons))
+
+
+def interline_ccd_parameters(part: str = "icx618", **overrides) -> InterlineCCDParameters:
+    """The CCD of one of seed 004's parts, as a sensor model (not only a drive).
+
+    Format, interlacing, readout-pulse width, t_min and field (frame) readout time come from the
+    part's drive (:data:`viform.sensors.gated_waveforms.DRIVES`): the interlaced ICX279 (PAL,
+    2 × 291 lines, 64 µs per line) and ICX659 (2 × 247 lines, 63.5 µs) read one field of summed
+    row pairs; the ICX445 runs its 1280 × 600 centre window. The pixel (QE, full well, noise) is
+    the ICX618-like one of :func:`icx618_pixel_parameters` for every part (assumed: the seed gives
+    no pixel data), so the parts differ here in format, field integration and timing only.
+    """
+    from viform.sensors.gated_waveforms import DRIVES
+
+    key = check_choice("part", str(part).lower(), tuple(DRIVES))
+    d = DRIVES[key]
+    kw = dict(part=key, interlaced=d.interlaced, sensor_height_px=d.rows * (2 if d.interlaced else 1),
+              sensor_width_px=d.cols, min_transfer_time_s=d.min_transfer_time_s, readout_pulse_s=d.readout_pulse_s,
+              readout_time_s=d.rows * d.line_time_s)
+    kw.update(overrides)
+    return InterlineCCDParameters(**kw)
 
 
 @dataclass(frozen=True)
@@ -385,13 +412,14 @@ class GatedInterlineCCD(Sensor):
             return int(math.floor(period / max(t_read, self.laser.period_s) + 1e-9))
         return max(0, int(math.floor((period - t_read) * self.laser.repetition_hz + 1e-9)))
 
-    def drive_waveforms(self, part: str = "icx618", pulses: int | None = None, lines: int | None = None):
+    def drive_waveforms(self, part: str | None = None, pulses: int | None = None, lines: int | None = None):
         """The drive (laser, SUB, V1–V4) of this sensor's gate, drawn from the same
-        :class:`GateTiming` the physics uses (:func:`~viform.sensors.gated_waveforms.drive_waveforms`)."""
+        :class:`GateTiming` the physics uses (:func:`~viform.sensors.gated_waveforms.drive_waveforms`);
+        ``part`` defaults to the CCD's own."""
         from viform.sensors.gated_waveforms import drive_waveforms
 
-        return drive_waveforms(part, pulses=self.pulses if pulses is None else pulses, lines=lines,
-                               timing=self.timing)
+        return drive_waveforms(part or self.parameters.part, pulses=self.pulses if pulses is None else pulses,
+                               lines=lines, timing=self.timing)
 
     # ------------------------------------------------------------------ physics
     def pixel_array(self, height: int, width: int) -> FramePixelArray:
@@ -557,8 +585,8 @@ class GatedInterlineCCD(Sensor):
 
     def describe(self) -> dict:
         par = self.parameters
-        extra = {k: getattr(par, k) for k in ("readout_pulse_s", "gate_jitter_s", "sub_fall_time_s", "transfer_smear",
-                                               "bloom", "register_capacity_electrons", "interlaced")}
+        extra = {k: getattr(par, k) for k in ("part", "readout_pulse_s", "gate_jitter_s", "sub_fall_time_s",
+                                               "transfer_smear", "bloom", "register_capacity_electrons", "interlaced")}
         return {
             "model": self.name,
             "mode": self.mode,
