@@ -30,9 +30,9 @@ def _spot_electrons(params, range_m, pulses=4, gate_m=GATE_M):
     return ccd.capture_frame(_retro_scene(range_m)).electrons.sum()
 
 
-def _whole(range_m):
+def _whole(range_m, pulses=4):
     """The same return with the gate opened 100 m before it: all of it is collected."""
-    return _spot_electrons(_params(), range_m, gate_m=range_m - 100.0)
+    return _spot_electrons(_params(), range_m, pulses=pulses, gate_m=range_m - 100.0)
 
 
 def _g(z, sigma):
@@ -65,6 +65,25 @@ def test_sub_fall_time_ramps_the_opening(fall_s):
         y = round_trip_time_s(GATE_M + dr) + TAU - o
         expected = float(f(y + fall_s / 2) - f(y - fall_s / 2)) / (fall_s * TAU)
         measured = _spot_electrons(_params(sub_fall_time_s=fall_s), GATE_M + dr) / _whole(GATE_M + dr)
+        assert measured == pytest.approx(expected, abs=0.01), dr
+
+
+@pytest.mark.parametrize("rise_s", [10e-9, 60e-9])
+def test_laser_rise_time_smooths_both_gate_edges(rise_s):
+    """A trapezoidal pulse (rise = fall = t_r, FWHM τ, same energy) is the rectangle convolved with
+    a t_r box: at the closing edge c, the kept fraction is (F(z + t_r/2) − F(z − t_r/2))/(t_r·τ),
+    z = c − a, F the integral of clip(z, 0, τ) (the opening is far: returns near the far end)."""
+    def f(z):
+        return np.where(z <= 0, 0.0, np.where(z <= TAU, z * z / 2, TAU * TAU / 2 + TAU * (z - TAU)))
+
+    par = _params(laser_rise_time_s=rise_s)
+    c = GatedInterlineCCD(pulses=4, gate_range_m=GATE_M, parameters=par).timing.close_s
+    far = GATE_M + 299_792_458.0 * (c - round_trip_time_s(GATE_M)) / 2  # the range whose return starts at c
+    for dr in (-25.0, -15.0, -8.0, 0.0, 4.0):
+        z = c - round_trip_time_s(far + dr)
+        expected = float(f(z + rise_s / 2) - f(z - rise_s / 2)) / (rise_s * TAU)
+        # 200 pulses: the far glint holds ≫ 1 DN per pixel, so rounding does not bias the ratio
+        measured = _spot_electrons(par, far + dr, pulses=200) / _whole(far + dr, pulses=200)
         assert measured == pytest.approx(expected, abs=0.01), dr
 
 

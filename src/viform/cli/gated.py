@@ -348,7 +348,7 @@ def gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold
 #: CCD fields ``viform gated --set`` may change (the frame-level ones, interlacing and blooming,
 #: are simulated by ``GatedInterlineCCD.capture_frame`` but not by the expected-CNR tables).
 GATED_SETTABLE = ("min_transfer_time_s", "readout_pulse_s", "readout_time_s", "shutter_leak_ratio", "gate_jitter_s",
-                  "sub_fall_time_s", "transfer_smear")
+                  "sub_fall_time_s", "laser_rise_time_s", "transfer_smear")
 
 
 def ccd_parameters_from_settings(settings):

@@ -116,6 +116,11 @@ class InterlineCCDParameters:
         Duration of SUB's falling edge, s: the photodiodes start collecting progressively, as
         a linear ramp centred on ``open_s`` (equivalently, the opening instant averaged
         uniformly over the edge). Default 0 (ideal edge; typical 20–100 ns for a +20 V swing).
+    laser_rise_time_s : float
+        Rise (= fall) time of the laser pulse, s: the pulse becomes a trapezoid of the same
+        energy and FWHM τ, i.e. the rectangle convolved with a t_r-wide box, which is the same as
+        averaging both gate edges uniformly over ±t_r/2. Default 0 (rectangle; typical 5–20 ns
+        for a pulsed laser diode).
     transfer_smear : bool
         Add the smear of the vertical transfer: each packet crosses the rows between it and the
         horizontal register, one line time each, and gathers ``shutter_leak_ratio`` × their
@@ -146,6 +151,7 @@ class InterlineCCDParameters:
     shutter_leak_ratio: float = 1e-5
     gate_jitter_s: float = 0.0
     sub_fall_time_s: float = 0.0
+    laser_rise_time_s: float = 0.0
     transfer_smear: bool = False
     bloom: bool = False
     register_capacity_electrons: float | None = None
@@ -163,6 +169,7 @@ class InterlineCCDParameters:
             raise ViformError(f"shutter_leak_ratio = {self.shutter_leak_ratio!r} must be ≤ 1")
         check_non_negative("gate_jitter_s", self.gate_jitter_s)
         check_non_negative("sub_fall_time_s", self.sub_fall_time_s)
+        check_non_negative("laser_rise_time_s", self.laser_rise_time_s)
         if self.register_capacity_electrons is not None:
             check_positive("register_capacity_electrons", self.register_capacity_electrons)
         check_choice("part", self.part, ("icx618", "icx445", "icx279", "icx659"))
@@ -440,8 +447,8 @@ class GatedInterlineCCD(Sensor):
 
     def gate_edge_offsets_s(self, jitter_nodes: int = 48, ramp_nodes: int = 8) -> list[tuple[float, float]]:
         """(opening shift, common shift) pairs of equal weight that sample the real edges: the
-        SUB ramp (uniform over ±t_f/2, opening only) and the jitter (Gaussian, both edges), by
-        their quantile midpoints."""
+        SUB ramp (uniform over ±t_f/2, opening only), the jitter (Gaussian, both edges) and the
+        laser pulse's rise (uniform over ±t_r/2, both edges), by their quantile midpoints."""
         from scipy.stats import norm
 
         par = self.parameters
@@ -449,7 +456,10 @@ class GatedInterlineCCD(Sensor):
                if par.gate_jitter_s > 0 else [0.0])
         ramp = ([par.sub_fall_time_s * ((j + 0.5) / ramp_nodes - 0.5) for j in range(ramp_nodes)]
                 if par.sub_fall_time_s > 0 else [0.0])
-        return [(u, d) for u in ramp for d in jit]
+        # a trapezoidal pulse = the rectangle smoothed by a t_r box: both edges shift uniformly
+        rise = ([par.laser_rise_time_s * ((j + 0.5) / ramp_nodes - 0.5) for j in range(ramp_nodes)]
+                if par.laser_rise_time_s > 0 else [0.0])
+        return [(u, d + w) for u in ramp for d in jit for w in rise]
 
     def gated_laser_electrons(self, scene: ActiveScene) -> dict:
         """Laser electrons of one pulse inside the real gate (edges from :meth:`gate_edge_offsets_s`)."""
@@ -586,7 +596,8 @@ class GatedInterlineCCD(Sensor):
     def describe(self) -> dict:
         par = self.parameters
         extra = {k: getattr(par, k) for k in ("part", "readout_pulse_s", "gate_jitter_s", "sub_fall_time_s",
-                                               "transfer_smear", "bloom", "register_capacity_electrons", "interlaced")}
+                                               "laser_rise_time_s", "transfer_smear", "bloom",
+                                               "register_capacity_electrons", "interlaced")}
         return {
             "model": self.name,
             "mode": self.mode,
