@@ -56,7 +56,7 @@ def test_gated_cli_bad_input_one_line(capsys, tmp_path):
         (["--gate-m", "-1"], "--gate-m"),
         (["--pulses", "1000"], "pulses"),
         (["--gate-m", "20000"], "--gate-m = 20000 m is beyond"),  # the flag, not the library's gate_range_m
-        (["--waveforms", "--gate-m", "20000"], "--gate-m = 20000 m is not allowed"),
+        (["--waveforms", "--gate-m", "20000"], "--gate-m = 20000 m is beyond"),  # one gate timing for both
     ):
         out, js = tmp_path / "figs", tmp_path / "r.json"
         assert main(["gated", *args, "--out", str(out), "--json-file", str(js)]) == 2
