@@ -115,11 +115,17 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                     last1[r, c] = tick
                     continue
                 p2 = last2[r, c]
-                tau = (tick - p2) / 2.0 if p2 >= 0 else float(tick - p1)
+                n = 2.0 if p2 >= 0 else 1.0
+                span = float(tick - p2) if p2 >= 0 else float(tick - p1)
+                tau = span / n
                 cur = math.log(tau)
                 d = cur - ref[r, c]
+                # the readout knows each spike to a tick: the span of n intervals is (span − 1, span + 1)
+                # ticks, so only a change beyond that slack counts (short intervals are coarse)
+                brighter = math.log((span + 1.0) / n) - ref[r, c] < -threshold
+                darker = math.log(max(span - 1.0, 0.5) / n) - ref[r, c] > threshold
                 if censored[r, c]:
-                    flagged = d < -threshold  # only "brighter" is known against a lower bound
+                    flagged = brighter  # only "brighter" is known against a lower bound
                     if not flagged:  # the first measured interval replaces the bound
                         ref[r, c] = cur
                         censored[r, c] = False
@@ -128,7 +134,7 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                         last1[r, c] = tick
                         continue
                 else:
-                    flagged = abs(d) > threshold
+                    flagged = brighter or darker
                 if flagged and not math.isnan(prev[r, c]) and abs(cur - prev[r, c]) <= threshold:
                     # back to the background it had before something stayed on it: not an object's trail
                     ref[r, c] = prev[r, c]
@@ -153,7 +159,7 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                 for c in range(W):
                     p1 = last1[r, c]
                     if p1 >= 0 and not censored[r, c]:
-                        silence = math.log(tick + 1.0 - p1)
+                        silence = math.log(tick - p1 + 0.0 if tick > p1 else 0.5)  # one tick of slack
                         if silence - ref[r, c] > threshold and not silence - prev[r, c] <= threshold:
                             pending[r, c] = True
                             if flag_since[r, c] < 0:

@@ -1,0 +1,127 @@
+"""Spike and frame tracking on a square of light entering a plain field."""
+
+import math
+
+import numpy as np
+import pytest
+
+from viform.light.scenes import Scene
+from viform.light.truth import ObjectTruth
+from viform.sensors.spike import SpikeSensor
+from viform.stream.container import SpikeStream
+from viform.vision import motchallenge as mot
+from viform.vision.metrics import score_tracking
+from viform.vision.tracking import (
+    SpikeChangeDetector,
+    TrackerParameters,
+    detect_boxes,
+    iou_matrix,
+    track_frames,
+    track_spikes,
+)
+
+
+class Square(Scene):
+    """A 8×8 px square of ``lux`` entering from the left at ``speed`` px/s over a plain 5-lux field."""
+
+    name = "square"
+
+    def __init__(self, lux=50.0, speed=1500.0, height=24, width=48):
+        super().__init__(height, width)
+        self.lux, self.speed = lux, speed
+        self.cols = np.arange(width, dtype=float)
+
+    def box(self, t):
+        return (-8.0 + self.speed * t, 8.0, 8.0, 8.0)
+
+    def illuminance_lux(self, t):
+        x0, y0, w, h = self.box(t)
+        cover = np.clip(np.minimum(self.cols + 1, x0 + w) - np.maximum(self.cols, x0), 0, 1)
+        light = np.full(self.shape, 5.0)
+        light[8:16] += cover * (self.lux - 5.0)
+        return light
+
+    def truth_kinds(self):
+        return ("objects",)
+
+    def objects(self, t):
+        x0, y0, w, h = self.box(t)
+        if x0 + w <= 0 or x0 >= self.width:
+            return []
+        vis = (min(x0 + w, self.width) - max(x0, 0)) / w
+        return [ObjectTruth(1, "square", x0, y0, w, h, vis, (self.speed, 0.0))]
+
+
+PARAMS = TrackerParameters(min_pixels=4, merge_px=1, min_hits=2)
+
+
+@pytest.fixture(scope="module")
+def stream():
+    return SpikeSensor(threshold_electrons=100).capture(Square(), 0.02, seed=3)
+
+
+def test_tracks_the_square_with_one_identity(stream):
+    res = track_spikes(stream, 10, PARAMS)
+    gt = mot.gt_rows(Square(), res.times_s, clip_to_field=True)
+    s = score_tracking(gt, res.rows, res.times_s, stream.clock_hz)
+    assert s["id_switches"] == 0 and s["never_found"] == []
+    # measured: MOTA 0.40, IDF1 0.76 — a known defect leaves a false stationary track where the
+    # square entered the field (2 px at the border), which costs about half the frames as FPs
+    assert s["mota"] > 0.3 and s["idf1"] > 0.7
+    obj = s["objects"][1]
+    # found within a few steps of entering (the tracker confirms after 2 matched steps of 10 ticks)
+    assert obj["latency_found_ticks"] <= 60
+    assert obj["position_error_px"] < 2.0
+
+
+def test_same_result_whatever_the_block_size(stream):
+    a = track_spikes(stream, 10, PARAMS, block_ticks=1024)
+    b = track_spikes(stream, 10, PARAMS, block_ticks=7)
+    np.testing.assert_array_equal(a.rows, b.rows)
+
+
+def test_static_light_never_responds():
+    lux = np.tile(np.linspace(1.0, 50.0, 32), (16, 1))  # static texture over 1.7 decades
+    from viform.light.scenes import StillScene
+
+    spikes = SpikeSensor(threshold_electrons=100).capture(StillScene(lux), 0.02, seed=1)
+    det = SpikeChangeDetector(16, 32, 40, TrackerParameters())
+    masks = det.feed(spikes.spikes)
+    boxes = [detect_boxes(m, 1, 12)[0] for m in masks[5:]]  # after a few intervals of the dimmest pixels
+    assert sum(len(b) for b in boxes) == 0
+
+
+@pytest.mark.xfail(strict=True, reason="not met yet: the false track at the entry border finds the square first "
+                   "at Q = 100 (65 ticks) than at Q = 400 (30 ticks), against the physics (latency ∝ Q/light)")
+def test_higher_threshold_finds_later():
+    # a pixel needs about Q electrons per spike: a higher threshold sees the same change later
+    def latency(q, lux):
+        scene = Square(lux=lux, speed=800.0)
+        spk = SpikeSensor(threshold_electrons=q).capture(scene, 0.02, seed=5)
+        res = track_spikes(spk, 5, PARAMS)
+        gt = mot.gt_rows(scene, res.times_s, clip_to_field=True)
+        o = score_tracking(gt, res.rows, res.times_s, spk.clock_hz)["objects"][1]
+        return math.inf if o["latency_found_ticks"] is None else o["latency_found_ticks"]
+
+    assert latency(100, 50.0) < latency(400, 50.0)
+
+
+def test_frames_back_end_finds_it():
+    scene = Square()
+    times = np.arange(1, 21) * 1e-3
+    res = track_frames([scene.illuminance_lux(t) for t in times], times, PARAMS)
+    gt = mot.gt_rows(scene, times, clip_to_field=True)
+    s = score_tracking(gt, res.rows, times)
+    assert s["id_switches"] == 0 and s["idf1"] > 0.7
+
+
+def test_iou_and_detections():
+    assert iou_matrix([[0, 0, 2, 2]], [[1, 0, 2, 2]])[0, 0] == pytest.approx(1 / 3)
+    mask = np.zeros((10, 10), bool)
+    mask[1:3, 1:4] = True
+    mask[7, 7] = True
+    boxes, counts = detect_boxes(mask, merge_px=1, min_pixels=2)
+    np.testing.assert_array_equal(boxes, [[1, 1, 3, 2]])
+    assert counts.tolist() == [6]
+    with pytest.raises(Exception, match="step_ticks"):
+        track_spikes(SpikeStream(np.zeros((5, 4, 4), bool), 40_000.0), 0)
