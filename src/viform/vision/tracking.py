@@ -45,7 +45,7 @@ from numba import njit, prange
 from scipy import ndimage
 from scipy.optimize import linear_sum_assignment
 
-from viform._validate import ViformError, check_int, check_positive
+from viform._validate import ViformError, check_int, check_non_negative, check_positive
 
 
 @dataclass(frozen=True)
@@ -72,16 +72,22 @@ class TrackerParameters:
     gate_px : float
         Largest distance (px) between a prediction's and a detection's centres for a match,
         on top of the two boxes' half-diagonals.
+    min_speed_px_per_s, still_ticks : float, int
+        A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
+        not reported: it is where an object stood when the tracker started (background
+        subtraction's "ghost"), or an object that stopped (absorbed into the background anyway).
     """
 
     threshold_log: float = 0.4
     background_ticks: float = 80.0
-    hold_ticks: int = 400
-    merge_px: int = 1
+    hold_ticks: int = 1000
+    merge_px: int = 2
     min_pixels: int = 12
     min_hits: int = 3
     max_coast_ticks: int = 600
     gate_px: float = 8.0
+    min_speed_px_per_s: float = 50.0
+    still_ticks: int = 400
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -92,6 +98,8 @@ class TrackerParameters:
         check_int("min_hits", self.min_hits, 1)
         check_int("max_coast_ticks", self.max_coast_ticks, 0)
         check_positive("gate_px", self.gate_px)
+        check_non_negative("min_speed_px_per_s", self.min_speed_px_per_s)
+        check_int("still_ticks", self.still_ticks, 1)
 
 
 # --------------------------------------------------------------------------- spike front end
@@ -364,7 +372,8 @@ class Tracker:
             matched_tracks.add(i)
             if track.confirmed or track.hits >= p.min_hits:
                 track.confirmed = True
-                reported.append((track.track_id, boxes[j].copy()))
+                if self._moving(track, t_s):
+                    reported.append((track.track_id, boxes[j].copy()))
         coast_s = p.max_coast_ticks * self.tick_s
         self.tracks = [tr for i, tr in enumerate(self.tracks)
                        if i in matched_tracks or (tr.confirmed and t_s - tr.last_seen_t <= coast_s)]
@@ -372,13 +381,23 @@ class Tracker:
             b = boxes[j]
             state = np.array([b[0] + b[2] / 2, b[1] + b[3] / 2, 0.0, 0.0])
             cov = np.diag([self.r, self.r, 1e8, 1e8])  # unknown velocity: up to 10,000 px/s
-            track = _Track(self.next_id, state, cov, b[2:].copy(), t_s, t_s)
+            track = _Track(self.next_id, state, cov, b[2:].copy(), t_s, t_s, trail=[(t_s, state[:2].copy())])
             self.next_id += 1
             self.tracks.append(track)
             if p.min_hits <= 1:
                 track.confirmed = True
                 reported.append((track.track_id, b.copy()))
         return reported
+
+    def _moving(self, track: _Track, t_s: float) -> bool:
+        """Whether the track's measured centre moved at least ``min_speed`` over the last ``still_ticks``."""
+        window_s = self.parameters.still_ticks * self.tick_s
+        while len(track.trail) > 2 and track.trail[1][0] <= t_s - window_s:
+            track.trail.pop(0)  # keep one point at or before the window's start
+        (t0, c0), (t1, c1) = track.trail[0], track.trail[-1]
+        if t1 - t0 < window_s:
+            return True  # too young to judge
+        return math.hypot(*(c1 - c0)) >= self.parameters.min_speed_px_per_s * (t1 - t0)
 
     def _correct(self, track: _Track, box: np.ndarray, t_s: float) -> None:
         h = np.zeros((2, 4))
@@ -391,6 +410,7 @@ class Tracker:
         track.size = 0.5 * track.size + 0.5 * box[2:]
         track.hits += 1
         track.last_seen_t = t_s
+        track.trail.append((t_s, z.copy()))
 
 
 # --------------------------------------------------------------------------- pipelines
