@@ -8,7 +8,7 @@ spike stream itself. This module is that pipeline, one stage per function:
 
    * spikes (:class:`SpikeChangeDetector`): each spike gives the pixel's current interval
      τ (the mean of its last two intervals, seed 000 §3.3: light ∝ Q/τ); the background level
-     is a running mean of log τ (time constant ``background_ticks``) updated only while the
+     is a running mean of τ (time constant ``background_ticks``) updated only while the
      pixel agrees with it, so an object passing by does not leak into it; a pixel that stays
      different for longer than ``hold_ticks`` is absorbed (a stopped object, or where an object
      stood at the start: the "ghost" of background subtraction). Between spikes, a silence
@@ -106,7 +106,10 @@ class TrackerParameters:
 
 @njit(parallel=True, cache=True)
 def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev, censored, flag_since, pending,
-                        out, threshold, background_ticks, hold_ticks):  # pragma: no cover - compiled
+                        out, k_lo, k_hi, background_ticks, hold_ticks):  # pragma: no cover - compiled
+    # Intervals in ticks, compared by ratio (k_lo = e^−threshold, k_hi = e^threshold): no logarithm
+    # per spike. The background interval follows an exponential mean with weight τ/(T + τ) per
+    # interval τ (time constant T ticks).
     T, H, W = spikes.shape
     for r in prange(H):
         step = 0
@@ -118,7 +121,7 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                     continue
                 p1 = last1[r, c]
                 if p1 < 0:  # first spike: the interval is at least the stream so far (censored)
-                    ref[r, c] = math.log(tick + 1.0)
+                    ref[r, c] = tick + 1.0
                     censored[r, c] = True
                     last1[r, c] = tick
                     continue
@@ -126,16 +129,15 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                 n = 2.0 if p2 >= 0 else 1.0
                 span = float(tick - p2) if p2 >= 0 else float(tick - p1)
                 tau = span / n
-                cur = math.log(tau)
-                d = cur - ref[r, c]
+                b = ref[r, c]
                 # the readout knows each spike to a tick: the span of n intervals is (span − 1, span + 1)
                 # ticks, so only a change beyond that slack counts (short intervals are coarse)
-                brighter = math.log((span + 1.0) / n) - ref[r, c] < -threshold
-                darker = math.log(max(span - 1.0, 0.5) / n) - ref[r, c] > threshold
+                brighter = (span + 1.0) / n < b * k_lo
+                darker = (span - 1.0) / n > b * k_hi
                 if censored[r, c]:
                     flagged = brighter  # only "brighter" is known against a lower bound
                     if not flagged:  # the first measured interval replaces the bound
-                        ref[r, c] = cur
+                        ref[r, c] = tau
                         censored[r, c] = False
                         flag_since[r, c] = -1
                         last2[r, c] = p1
@@ -143,32 +145,34 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                         continue
                 else:
                     flagged = brighter or darker
-                if flagged and not math.isnan(prev[r, c]) and abs(cur - prev[r, c]) <= threshold:
+                q = prev[r, c]
+                if flagged and q > 0.0 and q * k_lo <= tau <= q * k_hi:
                     # back to the background it had before something stayed on it: not an object's trail
-                    ref[r, c] = prev[r, c]
-                    prev[r, c] = math.nan
+                    ref[r, c] = q
+                    prev[r, c] = 0.0
                     flagged = False
-                    d = cur - ref[r, c]
+                    b = q
                 if flagged:
                     if flag_since[r, c] < 0:
                         flag_since[r, c] = tick
                     if tick - flag_since[r, c] > hold_ticks:  # stayed different: it is the background now
-                        if math.isnan(prev[r, c]):
-                            prev[r, c] = ref[r, c]
-                        ref[r, c] += (1.0 - math.exp(-tau / background_ticks)) * d
+                        if q <= 0.0:
+                            prev[r, c] = b
+                        ref[r, c] = b + tau / (background_ticks + tau) * (tau - b)
                         censored[r, c] = False
                     pending[r, c] = True
                 else:
                     flag_since[r, c] = -1
-                    ref[r, c] += (1.0 - math.exp(-tau / background_ticks)) * d
+                    ref[r, c] = b + tau / (background_ticks + tau) * (tau - b)
                 last2[r, c] = p1
                 last1[r, c] = tick
             if (tick + 1) % step_ticks == 0:  # end of an output step: darker pixels, then emit
                 for c in range(W):
                     p1 = last1[r, c]
                     if p1 >= 0 and not censored[r, c]:
-                        silence = math.log(tick - p1 + 0.0 if tick > p1 else 0.5)  # one tick of slack
-                        if silence - ref[r, c] > threshold and not silence - prev[r, c] <= threshold:
+                        silence = float(tick - p1)  # the interval in progress is longer (one tick of slack)
+                        q = prev[r, c]
+                        if silence > ref[r, c] * k_hi and not (q > 0.0 and silence <= q * k_hi):
                             pending[r, c] = True
                             if flag_since[r, c] < 0:
                                 flag_since[r, c] = tick
@@ -191,8 +195,8 @@ class SpikeChangeDetector:
         shape = (check_int("height", height, 1), check_int("width", width, 1))
         self.last1 = np.full(shape, -1, np.int64)
         self.last2 = np.full(shape, -1, np.int64)
-        self.ref = np.zeros(shape, np.float64)
-        self.prev = np.full(shape, np.nan)  # the background before the last absorption
+        self.ref = np.zeros(shape, np.float64)  # background interval, ticks
+        self.prev = np.zeros(shape, np.float64)  # the background before the last absorption (0: none)
         self.censored = np.zeros(shape, np.bool_)
         self.flag_since = np.full(shape, -1, np.int64)
         self.pending = np.zeros(shape, np.bool_)
@@ -206,7 +210,8 @@ class SpikeChangeDetector:
         out = np.zeros((n_out,) + self.ref.shape, np.bool_)
         p = self.parameters
         _spike_change_block(spikes, first, self.step_ticks, self.last1, self.last2, self.ref, self.prev, self.censored,
-                            self.flag_since, self.pending, out, p.threshold_log, p.background_ticks, p.hold_ticks)
+                            self.flag_since, self.pending, out, math.exp(-p.threshold_log),
+                            math.exp(p.threshold_log), p.background_ticks, p.hold_ticks)
         self.next_tick += spikes.shape[0]
         return out
 
