@@ -7,7 +7,9 @@ import pytest
 
 from viform.light.scenes import Scene
 from viform.light.truth import ObjectTruth
+from viform.sensors.frame import FramePixelParameters, FrameSensor
 from viform.sensors.spike import SpikeSensor
+from viform.sensors.spike_presets import load_spike_preset
 from viform.stream.container import SpikeStream
 from viform.vision import motchallenge as mot
 from viform.vision.metrics import score_tracking
@@ -122,3 +124,46 @@ def test_iou_and_detections():
     assert counts.tolist() == [6]
     with pytest.raises(Exception, match="step_ticks"):
         track_spikes(SpikeStream(np.zeros((5, 4, 4), bool), 40_000.0), 0)
+
+
+# ------------------------------------------------------------------ orderings the physics predicts
+
+
+def _found(scene, sensor, seed=2):
+    stream = sensor.capture(scene, 0.02, seed=seed)
+    res = track_spikes(stream, 10, PARAMS)
+    gt = mot.gt_rows(scene, res.times_s, clip_to_field=True)
+    return score_tracking(gt, res.rows, res.times_s, stream.clock_hz)["objects"][1]["latency_found_ticks"]
+
+
+def test_spikeone_sees_what_delivers_q_and_nothing_less():
+    # A pixel shows the square only if the light it adds (or removes) during the passage is worth a
+    # threshold's charge: η·|E − E_background|·dwell against Q (seed 000 §3.3: a spike per Q electrons).
+    sensor = load_spike_preset("spikeone").sensor(height=None, width=None)
+    q = sensor.parameters.threshold_electrons
+    eta = sensor.parameters.optics.electrons_per_lux_second
+    dwell_s = 8.0 / 1500.0
+    bright, faint = Square(lux=1000.0), Square(lux=8.0)
+    assert eta * (1000.0 - 5.0) * dwell_s > 50 * q
+    assert eta * (8.0 - 5.0) * dwell_s < 0.5 * q
+    assert _found(bright, sensor) is not None
+    assert _found(faint, sensor) is None
+
+
+def test_long_exposure_loses_the_fast_object_first():
+    # blur = v·T: at 2,000 px/s a 4.5 ms exposure smears the 8-px square over 17 px (IoU < 0.5 with
+    # its true box at any instant), a 0.2 ms one over 8.4 px
+    scene = Square(speed=2000.0, width=96, enter_s=0.0)
+    scores = {}
+    for exposure_s in (0.2e-3, 4.5e-3):
+        stack = FrameSensor(FramePixelParameters(), exposure_s=exposure_s, frame_rate_hz=200.0).capture(
+            scene, 0.05, seed=1)
+        ends = stack.start_times_s + stack.exposure_s
+        res = track_frames(stack.frames_dn.astype(float), ends, TrackerParameters(min_pixels=4, min_hits=2))
+        gt = mot.gt_rows(scene, ends, clip_to_field=True)
+        scores[exposure_s] = score_tracking(gt, res.rows, ends)["objects"][1]
+    short, long = scores[0.2e-3], scores[4.5e-3]
+    # (the long exposure matches at most where the square enters and both boxes are cut by the border)
+    assert short["matched_frames"] >= long["matched_frames"] + 5
+    assert long["latency_found_s"] is not None  # it is seen, but never where it is
+    assert short["position_error_px"] < 2.0
