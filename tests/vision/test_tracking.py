@@ -167,3 +167,20 @@ def test_long_exposure_loses_the_fast_object_first():
     assert short["matched_frames"] >= long["matched_frames"] + 5
     assert long["latency_found_s"] is not None  # it is seen, but never where it is
     assert short["position_error_px"] < 2.0
+
+
+def test_detections_are_the_components_of_the_dilated_mask():
+    # the compiled union-find groups exactly as scipy.ndimage: dilate by merge_px, label 8-connected
+    from scipy import ndimage
+
+    rng = np.random.default_rng(7)
+    for merge_px in (0, 1, 2):
+        mask = rng.random((30, 40)) < 0.06
+        grown = ndimage.binary_dilation(mask, np.ones((3, 3), bool), merge_px) if merge_px else mask
+        labels, n = ndimage.label(grown, np.ones((3, 3), bool))
+        labels = labels * mask
+        counts = np.bincount(labels.ravel(), minlength=n + 1)[1:]
+        expected = sorted((sl[1].start, sl[0].start, sl[1].stop - sl[1].start, sl[0].stop - sl[0].start, counts[i])
+                          for i, sl in enumerate(ndimage.find_objects(labels, n)) if sl is not None and counts[i] >= 2)
+        boxes, got_counts = detect_boxes(mask, merge_px, 2)
+        assert sorted(tuple(int(v) for v in (*b, c)) for b, c in zip(boxes, got_counts, strict=True)) == expected

@@ -18,9 +18,10 @@ spike stream itself. This module is that pipeline, one stage per function:
      its first interval even at a high threshold Q.
    * frames (:class:`FrameChangeDetector`): the same rule on log light per frame.
 
-2. **Grouping** (:func:`detect_boxes`): foreground pixels of one output step, dilated by
-   ``merge_px`` and split into connected components (``scipy.ndimage``); each component's
-   box (x, y, w, h) over its own foreground pixels is a detection.
+2. **Grouping** (:func:`detect_boxes`): foreground pixels of one output step whose squares of
+   half-width ``merge_px`` touch form one detection (connected components by union–find,
+   compiled: scipy.ndimage's dilation + label + find_objects did the same at ~10× the cost per
+   step); its box (x, y, w, h) over its own pixels is the detection.
 
 3. **Association** (:class:`Tracker`): a constant-velocity Kalman filter per track predicts
    its box, detections are assigned to predictions by the Hungarian method
@@ -42,7 +43,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit, prange
-from scipy import ndimage
 from scipy.optimize import linear_sum_assignment
 
 from viform._validate import ViformError, check_int, check_non_negative, check_positive
@@ -113,71 +113,73 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
     T, H, W = spikes.shape
     for r in prange(H):
         step = 0
+        l1, l2, rf, pv = last1[r], last2[r], ref[r], prev[r]
+        cs, fs, pd = censored[r], flag_since[r], pending[r]
         for t in range(T):
             tick = first_tick + t
             row = spikes[t, r]
             for c in range(W):
                 if not row[c]:
                     continue
-                p1 = last1[r, c]
+                p1 = l1[c]
                 if p1 < 0:  # first spike: the interval is at least the stream so far (censored)
-                    ref[r, c] = tick + 1.0
-                    censored[r, c] = True
-                    last1[r, c] = tick
+                    rf[c] = tick + 1.0
+                    cs[c] = True
+                    l1[c] = tick
                     continue
-                p2 = last2[r, c]
+                p2 = l2[c]
                 n = 2.0 if p2 >= 0 else 1.0
                 span = float(tick - p2) if p2 >= 0 else float(tick - p1)
                 tau = span / n
-                b = ref[r, c]
+                b = rf[c]
                 # the readout knows each spike to a tick: the span of n intervals is (span − 1, span + 1)
                 # ticks, so only a change beyond that slack counts (short intervals are coarse)
                 brighter = (span + 1.0) / n < b * k_lo
                 darker = (span - 1.0) / n > b * k_hi
-                if censored[r, c]:
+                if cs[c]:
                     flagged = brighter  # only "brighter" is known against a lower bound
                     if not flagged:  # the first measured interval replaces the bound
-                        ref[r, c] = tau
-                        censored[r, c] = False
-                        flag_since[r, c] = -1
-                        last2[r, c] = p1
-                        last1[r, c] = tick
+                        rf[c] = tau
+                        cs[c] = False
+                        fs[c] = -1
+                        l2[c] = p1
+                        l1[c] = tick
                         continue
                 else:
                     flagged = brighter or darker
-                q = prev[r, c]
+                q = pv[c]
                 if flagged and q > 0.0 and q * k_lo <= tau <= q * k_hi:
                     # back to the background it had before something stayed on it: not an object's trail
-                    ref[r, c] = q
-                    prev[r, c] = 0.0
+                    rf[c] = q
+                    pv[c] = 0.0
                     flagged = False
                     b = q
                 if flagged:
-                    if flag_since[r, c] < 0:
-                        flag_since[r, c] = tick
-                    if tick - flag_since[r, c] > hold_ticks:  # stayed different: it is the background now
+                    if fs[c] < 0:
+                        fs[c] = tick
+                    if tick - fs[c] > hold_ticks:  # stayed different: it is the background now
                         if q <= 0.0:
-                            prev[r, c] = b
-                        ref[r, c] = b + tau / (background_ticks + tau) * (tau - b)
-                        censored[r, c] = False
-                    pending[r, c] = True
+                            pv[c] = b
+                        rf[c] = b + tau / (background_ticks + tau) * (tau - b)
+                        cs[c] = False
+                    pd[c] = True
                 else:
-                    flag_since[r, c] = -1
-                    ref[r, c] = b + tau / (background_ticks + tau) * (tau - b)
-                last2[r, c] = p1
-                last1[r, c] = tick
+                    fs[c] = -1
+                    rf[c] = b + tau / (background_ticks + tau) * (tau - b)
+                l2[c] = p1
+                l1[c] = tick
             if (tick + 1) % step_ticks == 0:  # end of an output step: darker pixels, then emit
                 for c in range(W):
-                    p1 = last1[r, c]
-                    if p1 >= 0 and not censored[r, c]:
+                    p1 = l1[c]
+                    if p1 >= 0 and not cs[c]:
                         silence = float(tick - p1)  # the interval in progress is longer (one tick of slack)
-                        q = prev[r, c]
-                        if silence > ref[r, c] * k_hi and not (q > 0.0 and silence <= q * k_hi):
-                            pending[r, c] = True
-                            if flag_since[r, c] < 0:
-                                flag_since[r, c] = tick
-                    out[step, r, c] = pending[r, c]
-                    pending[r, c] = False
+                        q = pv[c]
+                        if silence > rf[c] * k_hi and not (q > 0.0 and silence <= q * k_hi):
+                            pd[c] = True
+                            if fs[c] < 0:
+                                fs[c] = tick
+                    out[step, r, c] = pd[c]
+                    pd[c] = False
                 step += 1
 
 
@@ -254,32 +256,86 @@ class FrameChangeDetector:
 
 # --------------------------------------------------------------------------- grouping
 
-def detect_boxes(mask: np.ndarray, merge_px: int = 2, min_pixels: int = 4) -> np.ndarray:
+@njit(cache=True)
+def _find(parent, i):  # pragma: no cover - compiled
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True)
+def _components(mask, reach, min_pixels):  # pragma: no cover - compiled
+    """Union–find over the foreground pixels; pixels within Chebyshev distance ``reach`` join."""
+    H, W = mask.shape
+    n = 0
+    for y in range(H):
+        for x in range(W):
+            if mask[y, x]:
+                n += 1
+    ys = np.empty(n, np.int64)
+    xs = np.empty(n, np.int64)
+    index = np.full((H, W), -1, np.int64)
+    parent = np.arange(n)
+    k = 0
+    for y in range(H):
+        for x in range(W):
+            if not mask[y, x]:
+                continue
+            ys[k], xs[k] = y, x
+            index[y, x] = k
+            for yy in range(max(0, y - reach), y + 1):  # earlier pixels in scan order only
+                hi = min(W - 1, x + reach) if yy < y else x - 1
+                for xx in range(max(0, x - reach), hi + 1):
+                    j = index[yy, xx]
+                    if j >= 0:
+                        a, b = _find(parent, k), _find(parent, j)
+                        if a != b:
+                            parent[max(a, b)] = min(a, b)
+            k += 1
+    box = np.empty((n, 4), np.int64)  # x0, y0, x1, y1 per root
+    count = np.zeros(n, np.int64)
+    for k in range(n):
+        r = _find(parent, k)
+        if count[r] == 0:
+            box[r, 0], box[r, 1], box[r, 2], box[r, 3] = xs[k], ys[k], xs[k], ys[k]
+        else:
+            box[r, 0], box[r, 1] = min(box[r, 0], xs[k]), min(box[r, 1], ys[k])
+            box[r, 2], box[r, 3] = max(box[r, 2], xs[k]), max(box[r, 3], ys[k])
+        count[r] += 1
+    m = 0
+    for k in range(n):
+        if count[k] >= min_pixels:
+            m += 1
+    boxes = np.empty((m, 4), np.float64)
+    counts = np.empty(m, np.int64)
+    m = 0
+    for k in range(n):  # roots in scan order of their first pixel: a deterministic order
+        if count[k] >= min_pixels:
+            boxes[m, 0], boxes[m, 1] = box[k, 0], box[k, 1]
+            boxes[m, 2], boxes[m, 3] = box[k, 2] - box[k, 0] + 1, box[k, 3] - box[k, 1] + 1
+            counts[m] = count[k]
+            m += 1
+    return boxes, counts
+
+
+def detect_boxes(mask: np.ndarray, merge_px: int = 2, min_pixels: int = 4):
     """Detections of one foreground mask: boxes (N, 4) of (x, y, w, h) px, 0-based, and pixel counts.
 
-    Pixels within ``merge_px`` of each other join one detection (binary dilation, then
-    connected components); each box spans the component's own foreground pixels (not the
-    dilation). Components with fewer than ``min_pixels`` pixels are dropped.
+    Foreground pixels whose squares of half-width ``merge_px`` touch (Chebyshev distance
+    ≤ 2·``merge_px`` + 1; 0 = 8-connected) join one detection — the components of the mask
+    dilated by ``merge_px`` — by union–find, compiled; each box spans the detection's own pixels.
+    Detections with fewer than ``min_pixels`` pixels are dropped.
 
     Returns
     -------
     boxes : ndarray, shape (N, 4), float64
     counts : ndarray, shape (N,), int64
     """
-    mask = np.asarray(mask, dtype=bool)
-    if not mask.any():
-        return np.zeros((0, 4)), np.zeros(0, np.int64)
-    grown = ndimage.binary_dilation(mask, iterations=merge_px) if merge_px > 0 else mask
-    labels, n = ndimage.label(grown, structure=np.ones((3, 3), bool))
-    labels = labels * mask
-    counts = np.bincount(labels.ravel(), minlength=n + 1)[1:]
-    boxes, kept = [], []
-    for i, sl in enumerate(ndimage.find_objects(labels, max_label=n)):
-        if sl is None or counts[i] < min_pixels:
-            continue
-        boxes.append((sl[1].start, sl[0].start, sl[1].stop - sl[1].start, sl[0].stop - sl[0].start))
-        kept.append(counts[i])
-    return np.array(boxes, np.float64).reshape(-1, 4), np.array(kept, np.int64)
+    mask = np.ascontiguousarray(mask, dtype=np.bool_)
+    if mask.ndim != 2:
+        raise ViformError(f"mask must be 2-D (H, W); got shape {mask.shape}")
+    return _components(mask, 2 * check_int("merge_px", merge_px, 0) + 1, check_int("min_pixels", min_pixels, 1))
 
 
 def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
