@@ -92,8 +92,9 @@ def test_static_light_never_responds():
     assert sum(len(b) for b in boxes) == 0
 
 
-def test_higher_threshold_finds_later():
-    # a pixel needs about Q electrons per spike: a higher threshold sees the same change later
+def test_higher_threshold_or_dimmer_light_finds_later():
+    # a pixel needs about Q electrons per spike: a higher threshold, or less light, sees the same
+    # change later (time to a spike ∝ Q / light)
     def latency(q, lux):
         scene = Square(lux=lux, speed=800.0)
         spk = SpikeSensor(threshold_electrons=q).capture(scene, 0.02, seed=5)
@@ -103,6 +104,7 @@ def test_higher_threshold_finds_later():
         return math.inf if o["latency_found_ticks"] is None else o["latency_found_ticks"]
 
     assert latency(100, 50.0) < latency(400, 50.0)
+    assert latency(1000, 200.0) < latency(1000, 20.0)
 
 
 def test_frames_back_end_finds_it():
