@@ -68,7 +68,7 @@ def main():
                "SpikeOne preset": load_spike_preset("spikeone").sensor(height=None, width=None)}
     for name, sensor in sensors.items():
         stream = sensor.capture(scene, a.duration, seed=a.seed)
-        track_spikes(stream.slice_time(0, 20 / stream.clock_hz), a.every)  # compile outside the timing
+        track_spikes(stream.slice_time(0, 2 * a.every / stream.clock_hz), a.every)  # compile outside the timing
         t0 = time.perf_counter()
         count = sum(int(np.count_nonzero(b)) for _, b in stream.iter_blocks(1024))
         plain_s = time.perf_counter() - t0
