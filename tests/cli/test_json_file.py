@@ -39,6 +39,7 @@ ARGS = {
     "compare": ["translating", "--out", "{tmp}/cmp"],
     "chip-figures": ["--out", "{tmp}/chip"],
     "calibrate": ["{clip}"],
+    "track": ["{clip}", "--every", "10", "--out", "{tmp}/trk"],
 }
 
 
