@@ -54,3 +54,13 @@ def test_bad_input_one_line_exit_2_nothing_written(files, tmp_path, capsys, args
     err = capsys.readouterr().err
     assert rc == 2 and message in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_empty_stream_and_fractional_step(tmp_path, files, capsys):
+    empty = tmp_path / "empty.dat"
+    empty.write_bytes(b"")
+    assert main(["track", str(empty), "--height", "4", "--width", "8", "--out", str(tmp_path / "o")]) == 2
+    assert main(["track", str(files[0]), "--every", "2.5", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "no whole frame" in err[0] and "--every" in err[1]
+    assert not (tmp_path / "o").exists()
