@@ -83,7 +83,7 @@ class TrackerParameters:
     hold_ticks: int = 1000
     merge_px: int = 2
     min_pixels: int = 12
-    min_hits: int = 3
+    min_hits: int = 2
     max_coast_ticks: int = 600
     gate_px: float = 8.0
     min_speed_px_per_s: float = 50.0
