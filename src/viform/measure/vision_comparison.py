@@ -190,7 +190,9 @@ def vision_html(vision: dict, figure_img: str) -> str:
     parts.append("</ul><p class='note'>The same detection and association back end on every sensor's own output "
                  "(spikes, or frames turned into lux), with the same settings in seconds; each is scored at the "
                  "instants it reports, against the scene's exact boxes (HOTA, MOTA, IDF1 and ID switches from "
-                 "TrackEval). Latency: from an object's appearance to the first reported box overlapping it.</p>")
+                 "TrackEval). Latency: from an object's appearance to the first reported box overlapping it. "
+                 "The back end learns the background from the first frame and confirms a track after two "
+                 "detections, so a camera that delivers fewer than three frames in the clip finds nothing.</p>")
     parts.append(figure_img + "</section>")
     return "".join(parts)
 
