@@ -230,7 +230,8 @@ class IntervalStatistics:
     ``sum_k``, ``sum_kk`` (interval indices k), ``sum_y``, ``sum_yy``, ``sum_ky``; over its
     successive pairs ``n_pairs`` and ``sum_lag1`` = Σ (Y_k − Y_{k+1})²/2; over its triples
     ``n_triples``, ``sum_second`` = Σ (Y_k − 2Y_{k+1} + Y_{k+2})², ``sum_d`` and ``sum_dd``
-    (d = ((Y_k − Y_{k+2})² − (Y_k − Y_{k+1})²)/2, the static test's statistic). Plus the spike
+    (d = ((Y_k − Y_{k+2})² − (Y_k − Y_{k+1})²)/2, the static test's statistic), ``sum_lag2``
+    = Σ (Y_k − Y_{k+2})²/2. Plus the spike
     counts, first and last spike ticks and the count in the first half of the ticks read.
     """
 
@@ -254,6 +255,8 @@ class IntervalStatistics:
     sum_second: np.ndarray
     sum_d: np.ndarray
     sum_dd: np.ndarray
+    #: Σ (Y_k − Y_{k+2})²/2 over the triples (D₂, mean-free).
+    sum_lag2: np.ndarray
 
     @property
     def mean_interval(self) -> np.ndarray:
@@ -273,7 +276,7 @@ def _accumulate_block(bits, first, half, ints, floats):
     ``ints`` rows: 0 spikes, 1 first tick, 2 last tick, 3 spikes before ``half``, 4 previous
     interval, 5 the one before, 6 intervals, 7 pairs; ``floats`` rows: 0 triples, 1 Σk,
     2 Σk², 3 Σy, 4 Σy², 5 Σky, 6 Σ lag-1 statistic, 7 Σ second-difference statistic, 8 Σd,
-    9 Σd² (10 spare). Pixels in chunks (their sums stay in cache), rows of ticks inside.
+    9 Σd², 10 Σ lag-2 statistic. Pixels in chunks (their sums stay in cache), rows of ticks inside.
     One thread: the work is light (a test per pixel and tick) next to reading the file.
     """
     n, p = bits.shape
@@ -312,6 +315,7 @@ def _accumulate_block(bits, first, half, ints, floats):
                             d = ((a - y) ** 2 - (a - b) ** 2) / 2
                             floats[8, j] += d
                             floats[9, j] += d * d
+                            floats[10, j] += (a - y) ** 2 / 2
                     ints[5, j] = ints[4, j]
                     ints[4, j] = tick - last
                 ints[2, j] = tick
@@ -346,7 +350,7 @@ def interval_statistics(source: SpikeSource, *, max_ticks: int | None = None, bl
         _accumulate_block(bits, first, end // 2, ints, floats)
     return IntervalStatistics(h, w, end, float(source.clock_hz), ints[0], ints[1], ints[2], ints[3], ints[6],
                               floats[1], floats[2], floats[3], floats[4], floats[5], ints[7].astype(np.float64),
-                              floats[6], floats[0], floats[7], floats[8], floats[9])
+                              floats[6], floats[0], floats[7], floats[8], floats[9], floats[10])
 
 
 def statistics_of(iv: PixelIntervals) -> IntervalStatistics:
@@ -367,7 +371,7 @@ def statistics_of(iv: PixelIntervals) -> IntervalStatistics:
         np.bincount(px_of, y * y, npx), np.bincount(px_of, k * y, npx),
         np.bincount(pp, minlength=npx).astype(np.float64), np.bincount(pp, (a - b) ** 2 / 2, npx),
         np.bincount(p3, minlength=npx).astype(np.float64), np.bincount(p3, (y0 - 2 * y1 + y2) ** 2, npx),
-        np.bincount(p3, d, npx), np.bincount(p3, d * d, npx))
+        np.bincount(p3, d, npx), np.bincount(p3, d * d, npx), np.bincount(p3, (y0 - y2) ** 2 / 2, npx))
 
 
 def _checkerboard_static(st: IntervalStatistics, tile: int) -> tuple[np.ndarray, dict]:
@@ -560,11 +564,14 @@ def interval_table(iv, use_pixel: np.ndarray, edges, inv_q: float | None = None)
     ``rsd`` = √γ₀/μ with γ₀ the pooled within-pixel variance of the intervals (n − 1
     divisor); ``rsd_detrended`` the same after removing each pixel's linear trend of the
     intervals over the recording (n − 2 divisor), so light that drifts slowly does not count
-    as noise; ``lag1_correlation`` = γ₁/γ₀ with γ₁ = γ₀ − D₁ (−1/2 for a tick-rounded
-    regular pixel, module notes). With ``inv_q`` (1/Q_eff) each bin also gets the lag-1
-    correlation a steady pixel would show, γ₁/γ₀ = ((G₂ − 2G₁)/2)/(σ² + G₁) from each
-    pixel's own rounding terms, and ``static_consistent``: whether the two agree within
-    :data:`LAG1_TOLERANCE`.
+    as noise; ``lag1_correlation`` = 1 − D₁/D₂ = (γ₁ − γ₂)/(γ₀ − γ₂) with D_m = E(Y_k −
+    Y_{k+m})²/2, free of each pixel's mean and so of its finite-window bias (γ₂ ≈ 0: −1/2 for
+    a tick-rounded regular pixel, module notes). With ``inv_q`` (1/Q_eff) each bin also gets
+    the value a steady pixel would show, from γ₀ = σ² + G₁, γ₁ = (G₂ − 2G₁)/2,
+    γ₂ = (G₃ − 2G₂ + G₁)/2 and each pixel's own rounding terms, and ``static_consistent``:
+    whether the lag-1 correlation about each pixel's own mean (which light that drifts
+    raises) agrees within :data:`LAG1_TOLERANCE` with a steady pixel's, its finite-window
+    bias included.
     """
     st = iv if isinstance(iv, IntervalStatistics) else statistics_of(iv)
     mu_p = st.mean_interval
@@ -584,24 +591,36 @@ def interval_table(iv, use_pixel: np.ndarray, edges, inv_q: float | None = None)
         gamma0_detrended = rss[px].sum() / (n_int[px] - 2).sum()
         n_pairs = float(st.n_pairs[px].sum())
         d1 = float(st.sum_lag1[px].sum() / n_pairs) if n_pairs else math.nan
+        n_triples = float(st.n_triples[px].sum())
+        d2 = float(st.sum_lag2[px].sum() / n_triples) if n_triples else math.nan
         mean_mu = float(np.mean(mu_p[px]))
         row = {"interval_from_ticks": float(lo), "interval_to_ticks": float(hi),
                "mean_interval_ticks": mean_mu, "pixels": int(px.sum()), "pairs": int(n_pairs),
                "rsd": float(math.sqrt(gamma0) / mean_mu),
                "rsd_detrended": float(math.sqrt(max(gamma0_detrended, 0.0)) / mean_mu),
-               "lag1_correlation": float((gamma0 - d1) / gamma0)}
+               # mean-free: 1 − D₁/D₂ = (γ₁ − γ₂)/(γ₀ − γ₂); (γ₀ − D₁)/γ₀ with γ₀ about each pixel's
+               # own mean read −0.32 for −0.45 in 200 ticks (γ₀ is overestimated by ≈ (1/6)/(n − 1))
+               "lag1_correlation": float(1.0 - d1 / d2) if d2 > 0 else math.nan,
+               "lag1_correlation_about_pixel_means": float((gamma0 - d1) / gamma0)}
         if inv_q is not None:
             m, n = mu_p[px], n_int[px]
             s2 = m * m * max(inv_q, 0.0)
             mv = (n * s2 + 1.0 / 6.0) / (n * n)
             g1 = rounding_variance(m, s2, mv)
             g2 = rounding_variance(2 * m, 2 * s2, 4 * mv)
+            g3 = rounding_variance(3 * m, 3 * s2, 9 * mv)
             w = n - 1
-            rho = float(np.sum(w * (g2 - 2 * g1) / 2) / np.sum(w * (s2 + g1)))
-            row["expected_lag1_correlation"] = rho
-            # light that changes slowly raises γ₁; light that changes within an interval can
-            # also push it below any steady pixel's
-            row["static_consistent"] = bool(abs(row["lag1_correlation"] - rho) <= LAG1_TOLERANCE)
+            gamma0, gamma1, gamma2 = s2 + g1, (g2 - 2 * g1) / 2, (g3 - 2 * g2 + g1) / 2
+            row["expected_lag1_correlation"] = float(np.sum(w * (gamma1 - gamma2)) / np.sum(w * (gamma0 - gamma2)))
+            # about each pixel's own mean, the n − 1 divisor does not make γ₀ unbiased for these
+            # anti-correlated intervals: E ss = n·γ₀ − V(n)/n, V(n) = var(T_last − T_first) = n·σ² + ⅙
+            expected_ss = np.sum(n * gamma0 - (n * s2 + 1.0 / 6.0) / n) / np.sum(w)
+            rho = float(1.0 - np.sum(w * (gamma0 - gamma1)) / np.sum(w) / expected_ss)
+            row["expected_lag1_correlation_about_pixel_means"] = rho
+            # light that changes slowly raises γ₁ about the pixels' means (the mean-free figure
+            # does not see it); light that changes within an interval can also push it below
+            # any steady pixel's
+            row["static_consistent"] = bool(abs(row["lag1_correlation_about_pixel_means"] - rho) <= LAG1_TOLERANCE)
         rows.append(row)
     return rows
 
