@@ -200,7 +200,7 @@ def _close_segment(last_spike, anchor, tau_ref, run_m, tail_m, tail_g, tail_ref)
             tail_g[p] = 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _check_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor, tau_ref, seg_start, seg_end):
     """Validate a segment's records against the decoder state; advance the state.
 
