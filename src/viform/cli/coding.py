@@ -48,6 +48,21 @@ def _json_options(f):
     return f
 
 
+def _check_tolerance(threshold, k, slack) -> None:
+    """--threshold, --k and --slack before any file is opened (the tolerance is k·τ/√Q + slack)."""
+    import math
+
+    from viform.stream.sidecar import MAX_THRESHOLD_ELECTRONS
+
+    if threshold is not None and not (math.isfinite(threshold) and 0 < threshold <= MAX_THRESHOLD_ELECTRONS):
+        raise ViformError(f"--threshold = {threshold:g} is not allowed: give the threshold Q in electrons, a number "
+                          f"in (0, {MAX_THRESHOLD_ELECTRONS:g}]")
+    if k is not None and not (math.isfinite(k) and 0 <= k <= 1e6):
+        raise ViformError(f"--k = {k:g} is not allowed: give a tolerance factor in [0, 1e6] (standard deviations)")
+    if not 0 <= slack <= 1 << 20:
+        raise ViformError(f"--slack = {slack} is not allowed: give a whole number of ticks in [0, {1 << 20}]")
+
+
 @cli.command("encode")
 @click.argument("src", type=click.Path())
 @click.argument("dst", type=click.Path())
@@ -60,7 +75,8 @@ def _json_options(f):
               help="Tolerance factor k of the lossy modes: intervals within k·τ/√Q count as a repeat "
                    "(k standard deviations of the photon noise).  [default: 2]")
 @click.option("--threshold", type=float, default=None,
-              help="Threshold Q, electrons, when the file does not record it (lossy modes).")
+              help="Threshold Q, electrons, when the file does not record it (lossy modes).  "
+                   "[allowed: > 0 to 1e12 e-]")
 @click.option("--slack", type=int, default=0, show_default=True,
               help="Extra tolerance of the lossy modes, ticks.")
 @click.option("--height", type=int, default=None, help="Height, pixels, of a .dat file without a sidecar.")
@@ -80,6 +96,7 @@ def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks
         raise ViformError(f"output {dst!r} must end in {EXTENSION}")
     if segment_ticks is not None:
         check_int("--segment-ticks", segment_ticks, 1)
+    _check_tolerance(threshold, k, slack)
     check_json_file(json_file)
     source = open_spikes(src, height, width)
     if segment_ticks is not None and mode == "strict":

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from viform._validate import ViformError, check_choice, check_int, check_non_negative
+from viform._validate import ViformError, check_choice, check_int, check_non_negative, check_positive
 
 #: Coding modes (seed 000 §5.1–§5.2).
 MODES = ("strict", "statistical", "intensity")
@@ -87,6 +87,13 @@ class CodingParameters:
         check_non_negative("k", self.k)
         check_int("slack_ticks", self.slack_ticks, 0, 1 << 20)
         check_int("segment_ticks", self.segment_ticks, 1, 1 << 30)
+        if self.threshold_electrons is not None:  # k/√Q: zero, negative or absurd Q has no tolerance
+            from viform.stream.sidecar import MAX_THRESHOLD_ELECTRONS
+
+            q = check_positive("threshold_electrons", self.threshold_electrons)
+            if q > MAX_THRESHOLD_ELECTRONS:
+                raise ViformError(f"threshold_electrons = {q:g} is not allowed: it must be in (0, "
+                                  f"{MAX_THRESHOLD_ELECTRONS:g}] electrons")
         if self.mode == "statistical" and self.k > 0 and self.threshold_electrons is None:
             raise ViformError("the statistical mode needs the threshold Q (threshold_electrons) for its "
                               "tolerance k·τ/√Q; the stream does not say it: give --threshold")
