@@ -17,6 +17,7 @@ from viform.stream.container import SpikeStream
 
 FIXTURES = Path(__file__).parent / "fixtures"
 sys.path.insert(0, str(FIXTURES))
+sys.path.insert(0, str(Path(__file__).parent))
 from make_stream import (  # noqa: E402 -- the fixtures' own generator, importable by old trees too
     CLOCK_HZ,
     MODES,
@@ -105,6 +106,10 @@ def test_version_5_chooses_per_band(tmp_path):
     assert _PAYLOAD_HEAD.size and sorted(models) == [vfc_v5.MODEL_INTERVALS, vfc_v5.MODEL_RECORDS]
     assert sizes[5] < min(sizes[3], sizes[4]), sizes
     assert np.array_equal(cf.read_ticks(0, t), out)
+    # damage in either model's band: a one-line error or the exact spikes (every CRC still checks the rest)
+    from test_aer_file import _assert_damage_is_refused_or_harmless
+
+    _assert_damage_is_refused_or_harmless(tmp_path, payload, step=97, seed=5, flips=120)
 
 
 def _reheader(data: bytes, version: int | None = None, **fields) -> bytes:

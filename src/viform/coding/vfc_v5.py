@@ -19,9 +19,9 @@ Both models' states advance with every segment, whichever was kept: the interval
 reader replays it over the decoded spikes of a records band) and the records' anchors (each
 pixel's last spike tick and last width).
 
-Strict payload: the payload head (flags 5, records 0), u32 band count, per band u8 model, u32
-coded bytes, u64 spikes, u64 records (model 1; 0 for model 0), then the bands' bytes. Lossy
-modes: version 2's payload (flag 0), as in versions 3 and 4.
+Strict payload: the payload head (flags 5, records 0), u32 band count, per band u32 coded bytes and
+u64 model · 2⁵⁶ + spikes, then the bands' bytes (a records band's start with its u32 record count).
+Lossy modes: version 2's payload (flag 0), as in versions 3 and 4.
 """
 
 from __future__ import annotations
@@ -44,8 +44,12 @@ from viform.coding.vfc_common import (
 )
 
 _FLAG_BANDS5 = 5
-#: per band: model, coded bytes, spikes, first-spike records (model 1)
-_BAND_HEAD5 = struct.Struct("<BIQQ")
+#: per band: coded bytes, then the model (top byte) and the spikes (low 56 bits) — version 4's 12 bytes, so
+#: a file whose bands all keep the interval model is exactly as large as version 4's
+_BAND_HEAD5 = struct.Struct("<IQ")
+_SPIKE_BITS = 56
+#: a records band's data starts with its first-spike record count
+_RECORDS = struct.Struct("<I")
 MODEL_INTERVALS = 0
 MODEL_RECORDS = 1
 MODEL_NAMES = ("interval prediction", "run-length records")
@@ -140,9 +144,12 @@ def encode_payload(dense: np.ndarray, start: int, state: BandState) -> tuple[byt
         p0, p1 = r0 * width, r1 * width
         _advance_anchors(counts, ticks, state.last[p0:p1], state.ref[p0:p1])
     n_spikes = sum(t.size for _, _, t, _, _ in parts)
-    table = b"".join(_BAND_HEAD5.pack(model, body.size, t.size, n_rec) for model, _, t, body, n_rec in parts)
+    bodies = [(_RECORDS.pack(n_rec) if model == MODEL_RECORDS else b"") + body.tobytes()
+              for model, _, _, body, n_rec in parts]
+    table = b"".join(_BAND_HEAD5.pack(len(body), t.size | (model << _SPIKE_BITS))
+                     for (model, _, t, _, _), body in zip(parts, bodies, strict=True))
     payload = (_PAYLOAD_HEAD.pack(start, n_ticks, 0, _FLAG_BANDS5, n_spikes)
-               + struct.pack("<I", len(parts)) + table + b"".join(p[3].tobytes() for p in parts))
+               + struct.pack("<I", len(parts)) + table + b"".join(bodies))
     return payload, n_spikes
 
 
@@ -150,7 +157,8 @@ def band_models(payload: bytes) -> list[int]:
     """The model of each band of a version-5 strict payload (for reports; no checks)."""
     head = _PAYLOAD_HEAD.size
     (n_bands,) = struct.unpack_from("<I", payload, head)
-    return [_BAND_HEAD5.unpack_from(payload, head + 4 + b * _BAND_HEAD5.size)[0] for b in range(n_bands)]
+    return [_BAND_HEAD5.unpack_from(payload, head + 4 + b * _BAND_HEAD5.size)[1] >> _SPIKE_BITS
+            for b in range(n_bands)]
 
 
 def _decode_intervals(data, counts, st, probs, last, start, end, width, sp):
@@ -222,12 +230,18 @@ def decode_payload(payload: bytes, state: BandState, expected_start: int, segmen
     spans = []
     total = 0
     for b, (r0, r1) in enumerate(bands):
-        model, nbytes, sp, recs = _BAND_HEAD5.unpack_from(payload, head + 4 + b * _BAND_HEAD5.size)
+        nbytes, field = _BAND_HEAD5.unpack_from(payload, head + 4 + b * _BAND_HEAD5.size)
+        model, sp = field >> _SPIKE_BITS, field & ((1 << _SPIKE_BITS) - 1)
         npix = (r1 - r0) * width
+        recs = 0
+        if model == MODEL_RECORDS and nbytes >= _RECORDS.size and pos + _RECORDS.size <= len(payload):
+            (recs,) = _RECORDS.unpack_from(payload, pos)
         if (model not in (MODEL_INTERVALS, MODEL_RECORDS) or sp > n_ticks * npix
-                or nbytes > _interval_data_limit(sp, npix) or recs > sp or (model == MODEL_INTERVALS and recs)):
+                or nbytes > _interval_data_limit(sp, npix) + _RECORDS.size or recs > sp
+                or (model == MODEL_RECORDS and nbytes < _RECORDS.size)):
             raise ViformError(f"band {b} is invalid (model {model}, {nbytes} bytes, {sp} spikes, {recs} records)")
-        spans.append((model, pos, nbytes, sp, recs))
+        skip = _RECORDS.size if model == MODEL_RECORDS else 0
+        spans.append((model, pos + skip, nbytes - skip, sp, recs))
         pos += nbytes
         total += sp
     if pos != len(payload):
