@@ -385,8 +385,8 @@ def corpus_row(half: str, name: str, stream: SpikeStream, tmp: Path) -> dict:
     with open(tmp / "c.vfc", "rb") as f:
         for off, length, _ in cf._index:
             f.seek(off)
-            models += vfc_v5.band_models(f.read(length))
-    row["records_bands"] = f"{models.count(vfc_v5.MODEL_RECORDS)}/{len(models)}"
+            models += vfc_v5.band_models(f.read(length), -(-cf.height // cf.header["band_rows"]))
+    row["band_models"] = "/".join(str(models.count(m)) for m in (0, 1, 2))  # interval v4 / records / interval v3
     best = min(row2["bytes"] for row2 in generic(spikes, n_spikes).values())
     prev = min(row["v3_bytes"], row["v4_bytes"])
     row.update(raw_bytes=raw, best_generic_bytes=best, previous_bytes=prev,
@@ -398,11 +398,11 @@ def corpus_row(half: str, name: str, stream: SpikeStream, tmp: Path) -> dict:
 
 def print_corpus(rows: list[dict]) -> None:
     print(f"{'half':<9}{'stream':<34}{'spikes':>9}{'×raw':>7}{'×generic':>9}{'v3 B':>9}{'v4 B':>9}{'v5 B':>9}"
-          f"{'÷prev':>7}{'bit/sp':>7}{'rec':>6}{'enc Ms/s':>9}{'dec Ms/s':>9}")
+          f"{'÷prev':>7}{'bit/sp':>7}{'models':>8}{'enc Ms/s':>9}{'dec Ms/s':>9}")
     for r in rows:
         print(f"{r['half']:<9}{r['stream'][:33]:<34}{r['spikes']:>9,}{r['ratio_vs_raw']:>7.3g}"
               f"{r['ratio_vs_best_generic']:>9.3g}{r['v3_bytes']:>9,}{r['v4_bytes']:>9,}{r['v5_bytes']:>9,}"
-              f"{r['ratio_vs_previous']:>7.4f}{r['bits_per_spike']:>7.3f}{r['records_bands']:>6}"
+              f"{r['ratio_vs_previous']:>7.4f}{r['bits_per_spike']:>7.3f}{r['band_models']:>8}"
               f"{r['encode_mspikes_per_s']:>9.3g}{r['decode_mspikes_per_s']:>9.3g}")
     for half in ("tuning", "held-out"):
         sel = [r for r in rows if r["half"] == half]

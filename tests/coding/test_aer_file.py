@@ -253,7 +253,9 @@ def test_too_many_pixels_refused(tmp_path):
         CodedWriter(tmp_path / "w.vfc", 1 << 13, (MAX_PIXELS >> 13) + 1, 1e3, CodingParameters())
 
 
-DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
+# the shared data beside the checkout (../shared), or beside a worktree's parent folder
+DATA = next((d for d in (Path(__file__).resolve().parents[k] / "shared" / "data" / "spike" for k in (3, 4))
+             if d.exists()), Path(__file__).resolve().parents[3] / "shared" / "data" / "spike")
 
 
 @pytest.mark.skipif(not (DATA / "real_uhsr_250x250.npz").exists(), reason="shared spike data not present")
@@ -635,29 +637,32 @@ def test_banded_forged_band_tables_and_header(tmp_path, version):
     head = _PAYLOAD_HEAD.size
     p = payloads[0]
     spikes = _PAYLOAD_HEAD.unpack_from(p)[4]
-    # where a band's fields lie in its table entry (version 5 starts each with its model byte)
-    band, at = (vfc_v4._BAND_HEAD, 0) if version == 4 else (vfc_v5._BAND_HEAD5, 0)
+    if version == 4:
+        band = vfc_v4._BAND_HEAD
+        forged = [p[:head] + struct.pack("<I", 3) + p[head + 4:]]  # band count
+        b = bytearray(p)
+        struct.pack_into("<Q", b, head + 4 + 4, 10 ** 12)  # a band's spikes beyond what its ticks can hold
+        forged.append(bytes(b))
+        b = bytearray(p)
+        struct.pack_into("<I", b, head + 4, struct.unpack_from("<I", p, head + 4)[0] + 1)  # a band's bytes
+        forged.append(bytes(b))
+        table_end = head + 4 + 2 * band.size
+    else:  # version 5: LEB128 varints per band (bytes, 4·spikes + model, [records])
+        forged = [p[:head + 1], p[:head] + bytes([0xFF] * 12) + p[head:]]  # cut short; a varint too long
+        nbytes, pos = vfc_v5._read_varint(p, head, "")
+        field, end = vfc_v5._read_varint(p, pos, "")
+        for new in (field - field % 4 + 3, 4 * 10 ** 12, field ^ 1, field + 4):  # unknown model; spikes; model
+            forged.append(p[:pos] + vfc_v5._varint(new) + p[end:])
+        forged.append(p[:head] + vfc_v5._varint(nbytes + 1) + p[pos:])  # a band's bytes
+        table_end = head + 12  # about where the table ends (random bytes over its end are damage too)
     flag = vfc_v4._FLAG_BANDS if version == 4 else vfc_v5._FLAG_BANDS5
-    forged = [p[:head] + struct.pack("<I", 3) + p[head + 4:]]  # band count
-    b = bytearray(p)
-    struct.pack_into("<Q", b, head + 4 + at + 4, 10 ** 12)  # a band's spikes beyond what its ticks can hold
-    forged.append(bytes(b))
-    b = bytearray(p)
-    struct.pack_into("<I", b, head + 4 + at, struct.unpack_from("<I", p, head + 4 + at)[0] + 1)  # a band's bytes
-    forged.append(bytes(b))
     b = bytearray(p)
     b[head:head + 24] = _PAYLOAD_HEAD.pack(0, 64, 5, flag, spikes)  # records stated
     forged.append(bytes(b))
-    if version == 5:
-        for model in (7, 1, 255):  # unknown models; the records model's decoder on the interval model's bytes
-            b = bytearray(p)
-            b[head + 4 + 11] = model  # the top byte of the first band's model · 2^56 + spikes
-            forged.append(bytes(b))
     rng = np.random.default_rng(3)
     for _ in range(60):  # random band data behind a valid table
         b = bytearray(p)
-        start = head + 4 + 2 * band.size
-        b[start:] = rng.integers(0, 256, len(b) - start).astype(np.uint8).tobytes()
+        b[table_end:] = rng.integers(0, 256, len(b) - table_end).astype(np.uint8).tobytes()
         forged.append(bytes(b))
     errors = 0
     for payload in forged:

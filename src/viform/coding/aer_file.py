@@ -145,7 +145,8 @@ class CodedWriter:
             self._last = np.full(self.height * self.width, -1, np.int64)  # each pixel's last spike tick
         self._cm = atomic_open(self.path, "wb")
         self.f = self._cm.__enter__()
-        head = json.dumps(self.header, sort_keys=True).encode()
+        # version 5 writes no spaces in its header (its files are never larger than version 3's)
+        head = json.dumps(self.header, sort_keys=True, separators=(",", ":") if version >= 5 else None).encode()
         self.f.write(MAGIC + struct.pack("<HII", version, len(head), zlib.crc32(head)) + head)
         self.n_segments = 0
         self.spikes = 0
