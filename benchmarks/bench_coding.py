@@ -397,11 +397,11 @@ def corpus_row(half: str, name: str, stream: SpikeStream, tmp: Path) -> dict:
 
 
 def print_corpus(rows: list[dict]) -> None:
-    print(f"{'half':<9}{'stream':<34}{'spikes':>9}{'×raw':>7}{'×generic':>9}{'v3 B':>9}{'v4 B':>9}{'v5 B':>9}"
+    print(f"{'half':<9}{'stream':<34}{'spikes':>10}{'×raw':>7}{'×generic':>9}{'v3 B':>11}{'v4 B':>11}{'v5 B':>11}"
           f"{'÷prev':>7}{'bit/sp':>7}{'models':>8}{'enc Ms/s':>9}{'dec Ms/s':>9}")
     for r in rows:
-        print(f"{r['half']:<9}{r['stream'][:33]:<34}{r['spikes']:>9,}{r['ratio_vs_raw']:>7.3g}"
-              f"{r['ratio_vs_best_generic']:>9.3g}{r['v3_bytes']:>9,}{r['v4_bytes']:>9,}{r['v5_bytes']:>9,}"
+        print(f"{r['half']:<9}{r['stream'][:33]:<34}{r['spikes']:>10,}{r['ratio_vs_raw']:>7.3g}"
+              f"{r['ratio_vs_best_generic']:>9.3g}{r['v3_bytes']:>11,}{r['v4_bytes']:>11,}{r['v5_bytes']:>11,}"
               f"{r['ratio_vs_previous']:>7.4f}{r['bits_per_spike']:>7.3f}{r['band_models']:>8}"
               f"{r['encode_mspikes_per_s']:>9.3g}{r['decode_mspikes_per_s']:>9.3g}")
     for half in ("tuning", "held-out"):
