@@ -106,6 +106,12 @@ def test_version_5_chooses_per_band(tmp_path):
     assert _PAYLOAD_HEAD.size and vfc_v5.MODEL_RECORDS in models and len(set(models)) == 2
     assert sizes[5] < min(sizes[3], sizes[4]), sizes
     assert np.array_equal(cf.read_ticks(0, t), out)
+    # --fast: the interval model on every band (version 4's work), still lossless, larger here
+    fast = encode_source(s, tmp_path / "f.vfc", segment_ticks=400, fast=True)["bytes"]
+    ff = CodedFile(tmp_path / "f.vfc")
+    fp = (tmp_path / "f.vfc").read_bytes()[ff._index[0][0]:ff._index[0][0] + ff._index[0][1]]
+    assert vfc_v5.band_models(fp, 2) == [vfc_v5.MODEL_INTERVALS] * 2 and fast > sizes[5]
+    assert np.array_equal(ff.read_ticks(0, t), out)
     # damage in either model's band: a one-line error or the exact spikes (every CRC still checks the rest)
     from test_aer_file import _assert_damage_is_refused_or_harmless
 

@@ -85,8 +85,11 @@ def _check_tolerance(threshold, k, slack) -> None:
               help="Ticks per independently decodable segment of the coded file (≥ 1).  [default: 4096, "
                    "fewer for sensors above 8,192 pixels in strict mode: a segment holds at most 2^25 "
                    "pixel-ticks by default and 2^28 if you set it]")
+@click.option("--fast", is_flag=True,
+              help="Strict mode: code every band of rows with one model instead of keeping the smallest of three "
+                   "(about 3× faster to encode; files up to 10 % larger on some streams; decoding is as fast).")
 @_json_options
-def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks, as_json, json_file):
+def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks, fast, as_json, json_file):
     """Code the spike stream SRC into the first-spike coded file DST (.vfc)."""
     from viform._validate import check_int
     from viform.coding.aer_file import EXTENSION, encode_source
@@ -110,7 +113,7 @@ def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks
     _announce_compile("encode")
     t0 = time.perf_counter()
     summary = encode_source(source, dst, mode, k=k, threshold_electrons=threshold, slack_ticks=slack,
-                            segment_ticks=segment_ticks, progress=True)
+                            segment_ticks=segment_ticks, progress=True, fast=fast)
     summary["seconds"] = time.perf_counter() - t0
     _emit(summary, as_json, json_file,
           f"{dst}: {summary['bytes']:,} bytes, {summary['ratio_vs_raw']:.3g}× smaller than the raw bits "

@@ -100,7 +100,8 @@ class CodedWriter:
 
     def __init__(self, path, height: int, width: int, clock_hz: float, params: CodingParameters,
                  threshold_electrons: float | None = None, start_time_s: float = 0.0,
-                 metadata: dict | None = None, level: int = ZSTD_LEVEL, version: int = VERSION):
+                 metadata: dict | None = None, level: int = ZSTD_LEVEL, version: int = VERSION,
+                 fast: bool = False):
         self.path = Path(path)
         if version not in SUPPORTED_VERSIONS:
             raise ViformError(f"version must be one of {SUPPORTED_VERSIONS}; got {version!r}")
@@ -138,7 +139,8 @@ class CodedWriter:
             self.header["band_rows"] = self.band_rows
             self.ivprobs = new_band_probabilities(self.height, self.band_rows)
             if version >= 5:
-                self.bands5 = vfc_v5.BandState(self.height, self.width, self.band_rows)
+                self.bands5 = vfc_v5.BandState(self.height, self.width, self.band_rows,
+                                               vfc_v5.FAST_MODELS if fast else vfc_v5.ALL_MODELS)
             self._dense = None
             self._fill = 0
             self._next_tick = 0
@@ -243,8 +245,11 @@ def _json_safe(d: dict) -> dict:
 def encode_source(source: SpikeSource, path, mode: str = "strict", *, k: float | None = None,
                   threshold_electrons: float | None = None, slack_ticks: int = 0,
                   segment_ticks: int | None = None, block_ticks: int = 1024, level: int = ZSTD_LEVEL,
-                  progress: bool = False, version: int = VERSION) -> dict:
+                  progress: bool = False, version: int = VERSION, fast: bool = False) -> dict:
     """Code a viform into a ``.vfc`` file (streaming, bounded memory). Returns a summary.
+
+    ``fast`` (version 5, strict): code every band with the interval model only — version 4's speed and
+    size (the smallest-of-three choice costs 3× the encoding time; decoding is the same either way).
 
     ``version`` 1 writes the older column layout (kept so that old readers can be served).
     """
@@ -256,7 +261,7 @@ def encode_source(source: SpikeSource, path, mode: str = "strict", *, k: float |
                          else DEFAULT_SEGMENT_TICKS)
     params = CodingParameters(mode, DEFAULT_K if k is None else k, q, slack_ticks, segment_ticks)
     writer = CodedWriter(path, source.height, source.width, source.clock_hz, params, q, source.start_time_s,
-                         {k2: v for k2, v in source.metadata.items() if k2 != "sensor"}, level, version)
+                         {k2: v for k2, v in source.metadata.items() if k2 != "sensor"}, level, version, fast)
     bar = None
     if progress:
         from tqdm import tqdm

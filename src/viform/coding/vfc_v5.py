@@ -59,6 +59,9 @@ _PREDICTOR = {MODEL_INTERVALS: 4, MODEL_INTERVALS_V3: 3}
 #: spike: below it (pixels locked on steady light) the records model never won on the tuning half.
 RECORDS_TRIAL_BITS_PER_SPIKE = 0.8
 _MAX_VARINT_BYTES = 10
+#: the models a writer tries per band: all (smallest file), or the interval model only (``fast``: version 4's speed)
+ALL_MODELS = (MODEL_INTERVALS, MODEL_INTERVALS_V3, MODEL_RECORDS)
+FAST_MODELS = (MODEL_INTERVALS,)
 
 
 def _varint(v: int) -> bytes:
@@ -91,8 +94,9 @@ class BandState:
     predictor's state and adaptive probabilities.
     """
 
-    def __init__(self, height: int, width: int, band_rows: int):
+    def __init__(self, height: int, width: int, band_rows: int, models: tuple | None = None):
         n = height * width
+        self.models = ALL_MODELS if models is None else models  # what the writer tries (the reader reads any)
         self.height, self.width, self.band_rows = height, width, band_rows
         self.bands = _bands(height, band_rows)
         self.last = np.full(n, -1, np.int64)
@@ -178,6 +182,8 @@ def encode_payload(dense: np.ndarray, start: int, state: BandState) -> tuple[byt
         st0, probs0 = st.copy(), probs.copy()
         best = None
         for model in (MODEL_INTERVALS, MODEL_INTERVALS_V3):
+            if model not in state.models:
+                continue
             st[...] = st0
             probs[...] = probs0
             size = 2 * n + (p1 - p0) // 4 + 4096
@@ -192,7 +198,7 @@ def encode_payload(dense: np.ndarray, start: int, state: BandState) -> tuple[byt
                 size = 2 * nb
             if best is None or nb < best[1].size:
                 best = (model, out[:nb], 0, st.copy(), probs.copy())
-        if 8 * best[1].size >= RECORDS_TRIAL_BITS_PER_SPIKE * n:
+        if MODEL_RECORDS in state.models and 8 * best[1].size >= RECORDS_TRIAL_BITS_PER_SPIKE * n:
             rec, n_rec = _records_bytes(counts, ticks, state.last[p0:p1], state.ref[p0:p1], start, end, width)
             if rec.size < best[1].size:  # the reader does not run the interval model over a records band
                 best = (MODEL_RECORDS, rec, n_rec, st0, probs0)
