@@ -181,3 +181,12 @@ def test_forged_height_is_bounded_before_allocating(tmp_path):
     finally:
         tracemalloc.stop()
     assert peak < 400 << 20  # the per-pixel state of 655,360 pixels (~110 MB), no tick × pixel array
+
+
+def test_writer_never_writes_what_the_reader_refuses(tmp_path):
+    """A stream whose clock (or a k) lies outside the header bounds is refused before the file is made."""
+    with pytest.raises(ViformError, match="clock_hz"):
+        encode_source(SpikeStream(np.zeros((10, 2, 2), bool), 1e13), tmp_path / "c.vfc")
+    with pytest.raises(ViformError, match="k = "):
+        encode_source(SpikeStream(np.zeros((10, 2, 2), bool), 1e3, 100.0), tmp_path / "k.vfc", "statistical", k=2e6)
+    assert not list(tmp_path.iterdir())

@@ -41,6 +41,7 @@ from viform._io import atomic_open
 from viform._validate import ViformError, check_int
 from viform.coding import interval_model, vfc_v1, vfc_v2, vfc_v3, vfc_v4, vfc_v5
 from viform.coding.first_spike import (
+    MAX_K,
     CodingParameters,
     FirstSpikeDecoder,
     FirstSpikeEncoder,
@@ -145,6 +146,11 @@ class CodedWriter:
             self._fill = 0
             self._next_tick = 0
             self._last = np.full(self.height * self.width, -1, np.int64)  # each pixel's last spike tick
+        # never write what the reader refuses: the header's values pass the reader's bounds first
+        from viform.stream.sidecar import validate_header
+
+        validate_header({key: self.header[key] for key in ("height", "width", "clock_hz", "threshold_electrons",
+                                                           "start_time_s")}, self.path)
         self._cm = atomic_open(self.path, "wb")
         self.f = self._cm.__enter__()
         # version 5 writes no spaces in its header (its files are never larger than version 3's)
@@ -381,8 +387,8 @@ class CodedFile(SpikeSource):
         if h["mode"] not in ("strict", "statistical", "intensity"):
             bad("mode", "it must be 'strict', 'statistical' or 'intensity'")
         k = h["k"]
-        if isinstance(k, bool) or not isinstance(k, (int, float)) or not 0 <= k <= 1e6:
-            bad("k", "it must be a number in [0, 1e6]")
+        if isinstance(k, bool) or not isinstance(k, (int, float)) or not 0 <= k <= MAX_K:
+            bad("k", f"it must be a number in [0, {MAX_K:g}]")
         if "slack_ticks" in h:
             whole("slack_ticks", 0, MAX_SEGMENT_TICKS)
         if not isinstance(h.get("metadata") or {}, dict):

@@ -52,6 +52,9 @@ MODES = ("strict", "statistical", "intensity")
 #: Default tolerance factor k of the statistical mode (|Δτ| ≤ k·τ/√Q).
 DEFAULT_K = 2.0
 
+#: Largest tolerance factor k (a coded file's header may not state more).
+MAX_K = 1e6
+
 #: Default segment length, ticks.
 DEFAULT_SEGMENT_TICKS = 4096
 
@@ -85,6 +88,8 @@ class CodingParameters:
     def __post_init__(self):
         check_choice("mode", self.mode, MODES)
         check_non_negative("k", self.k)
+        if self.k > MAX_K:
+            raise ViformError(f"k = {self.k:g} is not allowed: it must be in [0, {MAX_K:g}] (standard deviations)")
         check_int("slack_ticks", self.slack_ticks, 0, 1 << 20)
         check_int("segment_ticks", self.segment_ticks, 1, 1 << 30)
         if self.threshold_electrons is not None:  # k/√Q: zero, negative or absurd Q has no tolerance
