@@ -31,6 +31,8 @@ COMMAND_MODULES = [
     "viform.cli.compare",  # compare (issue 12)
     "viform.cli.chip_figures",  # chip-figures (issue 16)
     "viform.cli.calibrate",  # calibrate (issue 10)
+    "viform.cli.flow",  # flow (issue 21)
+    "viform.cli.track",  # track (issue 22)
 ]
 
 
