@@ -16,7 +16,12 @@ The time-precision row (seed 000 §5.2: "first-spike coding raises the time prec
 no more data") codes one static scene at 20, 40, 80, 160 and 320 kHz and prints the size of each
 mode relative to 20 kHz; ``--figure PATH`` draws it.
 
-Run:  python benchmarks/bench_coding.py [--quick] [--json out.json] [--figure docs/figures/x.png]
+``--corpus`` codes the evaluation corpus (the shared files and every built-in scene at three Q and two
+clocks), split once by a rule written here into a tuning and a held-out half, with versions 3, 4 and 5
+and reports per stream: size vs raw, vs the best generic coder, vs the previous version (the smaller of
+versions 3 and 4), bits per spike, how many bands chose the records model, speed.
+
+Run:  python benchmarks/bench_coding.py [--quick] [--json out.json] [--figure docs/figures/x.png] [--corpus]
 """
 
 from __future__ import annotations
@@ -36,7 +41,9 @@ import zstandard
 from viform.coding.aer_file import VERSION, CodedFile, coding_threads, encode_source
 from viform.stream.container import SpikeStream
 
-DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "spike"
+# the shared data beside the checkout (../shared), or beside a worktree's parent folder
+DATA = next((d for d in (Path(__file__).resolve().parents[k] / "shared" / "data" / "spike" for k in (2, 3))
+             if d.exists()), Path(__file__).resolve().parents[2] / "shared" / "data" / "spike")
 K_VALUES = (1.0, 2.0, 4.0)
 
 
@@ -319,6 +326,117 @@ def print_precision(rows: list[dict]) -> None:
               f"{r['statistical'] / b['statistical']:7.3g}× {r['intensity'] / b['intensity']:8.3g}×   {r['strict']}")
 
 
+# ---------------------------------------------------------------------------- corpus (issue 24)
+
+#: The corpus is split ONCE, by this rule, into a tuning half and a held-out half: the shared files
+#: (version 4 was tuned on reds_sim, version 5's choices were made looking at all three) and the scenes
+#: at even positions of the sorted built-in list are the tuning half; the other scenes are held out.
+CORPUS_SCENE_SIZE = (64, 96)
+CORPUS_TICKS = 320
+CORPUS_Q = (100.0, 1e3, 1e4)
+CORPUS_CLOCKS_HZ = (20e3, 40e3)
+
+
+def corpus_streams():
+    """(half, name, make) for every stream of the corpus; ``make()`` gives a SpikeStream."""
+    from viform.light.scenes import BUILTIN_SCENES, builtin_scene
+    from viform.sensors.spike_presets import _builtin
+    from viform.stream.io import open_spikes
+
+    out = []
+    for fname, hw in (("reds_sim_400x250.dat", (250, 400)), ("reds_sim2_400x250.dat", (250, 400)),
+                      ("real_uhsr_250x250.npz", (None, None))):
+        if (DATA / fname).exists():
+            out.append(("tuning", fname, lambda f=fname, hw=hw: open_spikes(DATA / f, *hw).to_memory()))
+        else:
+            print(f"skip {fname}: not found under {DATA}", file=sys.stderr)
+    h, w = CORPUS_SCENE_SIZE
+    for i, scene in enumerate(sorted(BUILTIN_SCENES)):
+        half = "tuning" if i % 2 == 0 else "held-out"
+        for q in CORPUS_Q:
+            for clock in CORPUS_CLOCKS_HZ:
+                def make(scene=scene, q=q, clock=clock):
+                    # the SpikeOne preset's noise model (gain spread, dark current) at this Q and clock
+                    sensor = _builtin("spikeone").sensor(threshold_electrons=q, clock_hz=clock, height=h, width=w)
+                    return sensor.capture(builtin_scene(scene, h, w), CORPUS_TICKS / clock, seed=1)
+                out.append((half, f"{scene} Q={q:g} {clock / 1e3:g} kHz", make))
+    return out
+
+
+def corpus_row(half: str, name: str, stream: SpikeStream, tmp: Path) -> dict:
+    """Strict sizes of versions 3, 4 and 5 of one stream, the best generic coder, speeds of version 5."""
+    from viform.coding import vfc_v5
+
+    spikes = stream.spikes
+    n_spikes = int(spikes.sum())
+    raw = spikes.size / 8
+    row = {"half": half, "stream": name, "shape": list(spikes.shape), "spikes": n_spikes}
+    for v in (3, 4):
+        row[f"v{v}_bytes"] = encode_source(stream, tmp / "c.vfc", version=v)["bytes"]
+    t0 = time.perf_counter()
+    row["v5_bytes"] = encode_source(stream, tmp / "c.vfc", version=VERSION)["bytes"]
+    enc_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    cf = CodedFile(tmp / "c.vfc")
+    dec = np.concatenate([b for _, b in cf.iter_blocks(1024)])
+    dec_s = time.perf_counter() - t0
+    assert np.array_equal(dec, spikes), f"{name}: version {VERSION} is not lossless"
+    models = []
+    with open(tmp / "c.vfc", "rb") as f:
+        for off, length, _ in cf._index:
+            f.seek(off)
+            models += vfc_v5.band_models(f.read(length), -(-cf.height // cf.header["band_rows"]))
+    row["band_models"] = "/".join(str(models.count(m)) for m in (0, 1, 2))  # interval v4 / records / interval v3
+    best = min(row2["bytes"] for row2 in generic(spikes, n_spikes).values())
+    prev = min(row["v3_bytes"], row["v4_bytes"])
+    row.update(raw_bytes=raw, best_generic_bytes=best, previous_bytes=prev,
+               ratio_vs_raw=raw / row["v5_bytes"], ratio_vs_best_generic=best / row["v5_bytes"],
+               ratio_vs_previous=prev / row["v5_bytes"], bits_per_spike=8 * row["v5_bytes"] / max(1, n_spikes),
+               encode_mspikes_per_s=n_spikes / enc_s / 1e6, decode_mspikes_per_s=n_spikes / dec_s / 1e6)
+    return row
+
+
+def print_corpus(rows: list[dict]) -> None:
+    print(f"{'half':<9}{'stream':<34}{'spikes':>10}{'×raw':>7}{'×generic':>9}{'v3 B':>11}{'v4 B':>11}{'v5 B':>11}"
+          f"{'÷prev':>7}{'bit/sp':>7}{'models':>8}{'enc Ms/s':>9}{'dec Ms/s':>9}")
+    for r in rows:
+        print(f"{r['half']:<9}{r['stream'][:33]:<34}{r['spikes']:>10,}{r['ratio_vs_raw']:>7.3g}"
+              f"{r['ratio_vs_best_generic']:>9.3g}{r['v3_bytes']:>11,}{r['v4_bytes']:>11,}{r['v5_bytes']:>11,}"
+              f"{r['ratio_vs_previous']:>7.4f}{r['bits_per_spike']:>7.3f}{r['band_models']:>8}"
+              f"{r['encode_mspikes_per_s']:>9.3g}{r['decode_mspikes_per_s']:>9.3g}")
+    for half in ("tuning", "held-out"):
+        sel = [r for r in rows if r["half"] == half]
+        if not sel:
+            continue
+        worse = [r["stream"] for r in sel if r["v5_bytes"] > r["previous_bytes"]]
+        print(f"{half}: {len(sel)} streams, larger than the previous version: {len(worse)} {worse if worse else ''}; "
+              f"mean ratio vs raw {np.mean([r['ratio_vs_raw'] for r in sel]):.4g}, "
+              f"mean gain vs previous {np.mean([r['ratio_vs_previous'] for r in sel]):.4f}×, "
+              f"≥ 1.5× best generic: {sum(r['ratio_vs_best_generic'] >= 1.5 for r in sel)}/{len(sel)}")
+
+
+def run_corpus(args) -> None:
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        warm = static_scene(100.0, (24, 24), 200)[0]
+        for version in (3, 4, VERSION):  # compile (or load) the coders before any timing
+            encode_source(warm, tmp / "warm.vfc", version=version)
+            CodedFile(tmp / "warm.vfc").verify()
+        for half, name, make in corpus_streams():
+            if args.only and args.only not in name:
+                continue
+            rows.append(corpus_row(half, name, make(), tmp))
+            print_corpus(rows[-1:])
+            sys.stdout.flush()
+    print()
+    print_corpus(rows)
+    if args.json:
+        from viform._io import write_json
+
+        write_json(args.json, {"corpus": rows})
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller simulated scenes")
@@ -326,7 +444,15 @@ def main(argv=None):
     ap.add_argument("--figure", type=Path, default=None, help="draw the time-precision figure (PNG) here")
     ap.add_argument("--only", default=None, help="run only streams whose name contains this")
     ap.add_argument("--no-precision", action="store_true", help="skip the time-precision row")
+    ap.add_argument("--corpus", action="store_true",
+                    help="the evaluation corpus (shared files, every built-in scene at Q = 100, 1e3, 1e4 e- and "
+                         "20/40 kHz), split into a tuning and a held-out half: versions 3, 4 and 5 per stream")
     args = ap.parse_args(argv)
+    if args.corpus:
+        print(f"load: {os.getloadavg()[0]:.1f} {os.getloadavg()[1]:.1f} {os.getloadavg()[2]:.1f} on "
+              f"{os.cpu_count()} CPUs; coding threads: {coding_threads()}")
+        run_corpus(args)
+        return
     from viform.stream.io import open_spikes
 
     print(f"load: {os.getloadavg()[0]:.1f} {os.getloadavg()[1]:.1f} {os.getloadavg()[2]:.1f} on {os.cpu_count()} CPUs "

@@ -154,14 +154,15 @@ def test_fuzz_forged_payloads_with_valid_crcs(tmp_path):
             pass
 
 
-def _resign(header: dict, payloads: list[bytes], n_ticks: int, spikes: int, version: int = 2) -> bytes:
-    """A .vfc file with the given (possibly forged) parts and every CRC recomputed."""
+def _resign(header: dict, payloads: list[bytes], n_ticks: int, spikes: int, version: int | None = None) -> bytes:
+    """A .vfc file with the given (possibly forged) parts and every CRC recomputed (version: the header's)."""
     import json
     import struct
     import zlib
 
     from viform.coding import aer_file
 
+    version = header.get("version", 2) if version is None else version
     head = json.dumps(header).encode()
     out = bytearray(MAGIC + struct.pack("<HII", version, len(head), zlib.crc32(head)) + head)
     acc = 0
@@ -252,7 +253,9 @@ def test_too_many_pixels_refused(tmp_path):
         CodedWriter(tmp_path / "w.vfc", 1 << 13, (MAX_PIXELS >> 13) + 1, 1e3, CodingParameters())
 
 
-DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
+# the shared data beside the checkout (../shared), or beside a worktree's parent folder
+DATA = next((d for d in (Path(__file__).resolve().parents[k] / "shared" / "data" / "spike" for k in (3, 4))
+             if d.exists()), Path(__file__).resolve().parents[3] / "shared" / "data" / "spike")
 
 
 @pytest.mark.skipif(not (DATA / "real_uhsr_250x250.npz").exists(),
@@ -269,23 +272,23 @@ def test_real_file_strict_ratio(tmp_path):
 
 def test_older_versions_still_read(tmp_path):
     """Files of the older layouts (version 1 columns, version 2 range-coded records, version 3
-    interval-coded segments) decode exactly; 4 is written."""
+    interval-coded segments, version 4 bands) decode exactly; 5 is written."""
     s = _stream(3, (120, 5, 6))
     for mode in ("strict", "statistical"):
         files = []
-        for version in (1, 2, 3, None):
+        for version in (1, 2, 3, 4, None):
             path = tmp_path / f"v{version}-{mode}.vfc"
             if version is None:
                 encode_source(s, path, mode, segment_ticks=32)
             else:
                 encode_source(s, path, mode, segment_ticks=32, version=version)
             files.append(CodedFile(path))
-        assert [f.version for f in files] == [1, 2, 3, 4]
+        assert [f.version for f in files] == [1, 2, 3, 4, 5]
         for f in files[1:]:
             assert np.array_equal(files[0].read_ticks(0, 120), f.read_ticks(0, 120))
     assert np.array_equal(CodedFile(tmp_path / "v1-strict.vfc").read_ticks(0, 120), s.spikes)
     with pytest.raises(ViformError, match="version"):
-        encode_source(s, tmp_path / "v5.vfc", version=5)
+        encode_source(s, tmp_path / "v6.vfc", version=6)
 
 
 @pytest.mark.parametrize("mode", ["strict", "statistical", "intensity"])
@@ -310,16 +313,17 @@ def test_forged_range_coded_records(tmp_path):
 
     import zstandard
 
-    from viform.coding import aer_file
+    from viform.coding import vfc_v2 as aer_file
     from viform.coding.first_spike import CodingParameters, FirstSpikeDecoder, encode_array
+    from viform.coding.vfc_common import _PAYLOAD_HEAD, _Zstd
 
-    zc = aer_file._Zstd(3)
+    zc = _Zstd(3)
     rng = np.random.default_rng(3)
     a = rng.random((32, 4, 5)) < 0.3
     seg = encode_array(a, CodingParameters(segment_ticks=32))[0]
     fresh = FirstSpikeDecoder(20)
     good = aer_file._encode_payload_v2(seg, fresh.anchor, fresh.tau_ref, 5, True, zc)
-    head = aer_file._PAYLOAD_HEAD.size + 4
+    head = _PAYLOAD_HEAD.size + 4
     good_body = zstandard.ZstdDecompressor().decompress(good[head:])
     outcomes = set()
     for trial in range(300):
@@ -333,7 +337,7 @@ def test_forged_range_coded_records(tmp_path):
             spikes = n_rec + int(rng.integers(0, 40))
             body = rng.integers(0, 256, int(rng.integers(0, 80))).astype(np.uint8).tobytes()
         frame = zc.compress(bytes(body))
-        payload = aer_file._PAYLOAD_HEAD.pack(0, 32, n_rec, 0, spikes) + struct.pack("<I", len(frame)) + frame
+        payload = _PAYLOAD_HEAD.pack(0, 32, n_rec, 0, spikes) + struct.pack("<I", len(frame)) + frame
         dec = FirstSpikeDecoder(20)
         try:
             got, _ = aer_file._decode_payload_v2(payload, 20, 5, dec.anchor, dec.tau_ref, True, zc, 0, 32)
@@ -385,7 +389,7 @@ def _regular_file(tmp_path, name="r.vfc", shape=(300, 6, 8), segment_ticks=64, v
 def test_v3_regular_stream_round_trip_and_interval_coding(tmp_path):
     """Steady pixels: exact at every segment length, bytes independent of the block size, and the
     interval coder (payload flag 1) is chosen and smaller than version 2."""
-    from viform.coding import aer_file
+    from viform.coding import aer_file, vfc_v3
 
     data = _regular_file(tmp_path)
     cf = CodedFile(tmp_path / "r.vfc")
@@ -398,7 +402,7 @@ def test_v3_regular_stream_round_trip_and_interval_coding(tmp_path):
         assert np.array_equal(CodedFile(tmp_path / "a.vfc").read_ticks(0, 300), ref)
     _, payloads = _parts(data)
     flags = [p[aer_file._PAYLOAD_HEAD.size - 9] for p in payloads]
-    assert aer_file._FLAG_INTERVALS in flags
+    assert vfc_v3._FLAG_INTERVALS in flags
     v2 = encode_source(SpikeStream(ref, 40_000.0, 1e4), tmp_path / "v2.vfc", segment_ticks=64, version=2)
     assert len(data) < 0.8 * v2["bytes"]
 
@@ -431,7 +435,7 @@ def test_v3_fuzz_truncations_and_flips(tmp_path):
 
 def test_v3_forged_interval_payloads(tmp_path):
     """Random bytes behind a valid interval-coded segment head (CRCs re-signed): clear errors only."""
-    from viform.coding import aer_file
+    from viform.coding import aer_file, vfc_v3
 
     header, payloads = _parts(_regular_file(tmp_path, shape=(64, 4, 5), segment_ticks=64))
     rng = np.random.default_rng(5)
@@ -443,7 +447,7 @@ def test_v3_forged_interval_payloads(tmp_path):
             body = bytearray(payloads[0][aer_file._PAYLOAD_HEAD.size:])
             body[int(rng.integers(len(body)))] = int(rng.integers(256))
             spikes = aer_file._PAYLOAD_HEAD.unpack_from(payloads[0])[4]
-        head = aer_file._PAYLOAD_HEAD.pack(0, 64, min(spikes, 20), aer_file._FLAG_INTERVALS, spikes)
+        head = aer_file._PAYLOAD_HEAD.pack(0, 64, min(spikes, 20), vfc_v3._FLAG_INTERVALS, spikes)
         data = _resign(header, [head + bytes(body)], 64, spikes, version=3)
         try:
             _decode_bytes(tmp_path, data)
@@ -520,7 +524,8 @@ def _banded_stream(shape=(160, 96, 5)) -> SpikeStream:
     return SpikeStream(a, 40_000.0, 1e4)
 
 
-def test_v4_bytes_do_not_depend_on_threads_or_blocks(tmp_path, monkeypatch):
+@pytest.mark.parametrize("version", [4, 5])
+def test_banded_bytes_do_not_depend_on_threads_or_blocks(tmp_path, monkeypatch, version):
     """Bands are fixed by the file (band_rows), so 1 or 2 coding threads and any block size give the same bytes."""
     from viform.coding import aer_file
 
@@ -528,11 +533,11 @@ def test_v4_bytes_do_not_depend_on_threads_or_blocks(tmp_path, monkeypatch):
     out = []
     for threads, block in (("1", 7), ("2", 160), ("2", 33)):
         monkeypatch.setenv("VIFORM_THREADS", threads)
-        encode_source(s, tmp_path / f"t{threads}-{block}.vfc", segment_ticks=48, block_ticks=block)
+        encode_source(s, tmp_path / f"t{threads}-{block}.vfc", segment_ticks=48, block_ticks=block, version=version)
         out.append((tmp_path / f"t{threads}-{block}.vfc").read_bytes())
     assert out[0] == out[1] == out[2]
     cf = CodedFile(tmp_path / "t1-7.vfc")
-    assert cf.version == 4 and cf.header["band_rows"] == aer_file.default_band_rows(96) == 48
+    assert cf.version == version and cf.header["band_rows"] == aer_file.default_band_rows(96) == 48
     assert [aer_file.default_band_rows(h) for h in (1, 95, 250, 1000)] == [1, 95, 63, 125]
     for threads in ("1", "2"):
         monkeypatch.setenv("VIFORM_THREADS", threads)
@@ -621,37 +626,49 @@ def test_v4_fuzz_truncations_and_flips(tmp_path):
     _assert_damage_is_refused_or_harmless(tmp_path, good, step=5, seed=98)
 
 
-def test_v4_forged_band_tables_and_header(tmp_path):
+@pytest.mark.parametrize("version", [4, 5])
+def test_banded_forged_band_tables_and_header(tmp_path, version):
     """Re-signed files (every CRC valid) with a forged band table, band data or band_rows: clear errors only."""
     import struct
 
-    from viform.coding import aer_file
+    from viform.coding import vfc_v4, vfc_v5
+    from viform.coding.vfc_common import _PAYLOAD_HEAD
 
-    encode_source(_banded_stream((64, 96, 2)), tmp_path / "g.vfc", segment_ticks=64)
+    encode_source(_banded_stream((64, 96, 2)), tmp_path / "g.vfc", segment_ticks=64, version=version)
     header, payloads = _parts((tmp_path / "g.vfc").read_bytes())
-    head = aer_file._PAYLOAD_HEAD.size
+    head = _PAYLOAD_HEAD.size
     p = payloads[0]
-    spikes = aer_file._PAYLOAD_HEAD.unpack_from(p)[4]
-    forged = []
-    forged.append(p[:head] + struct.pack("<I", 3) + p[head + 4:])  # band count
+    spikes = _PAYLOAD_HEAD.unpack_from(p)[4]
+    if version == 4:
+        band = vfc_v4._BAND_HEAD
+        forged = [p[:head] + struct.pack("<I", 3) + p[head + 4:]]  # band count
+        b = bytearray(p)
+        struct.pack_into("<Q", b, head + 4 + 4, 10 ** 12)  # a band's spikes beyond what its ticks can hold
+        forged.append(bytes(b))
+        b = bytearray(p)
+        struct.pack_into("<I", b, head + 4, struct.unpack_from("<I", p, head + 4)[0] + 1)  # a band's bytes
+        forged.append(bytes(b))
+        table_end = head + 4 + 2 * band.size
+    else:  # version 5: LEB128 varints per band (bytes, 4·spikes + model, [records])
+        forged = [p[:head + 1], p[:head] + bytes([0xFF] * 12) + p[head:]]  # cut short; a varint too long
+        nbytes, pos = vfc_v5._read_varint(p, head, "")
+        field, end = vfc_v5._read_varint(p, pos, "")
+        for new in (field - field % 4 + 3, 4 * 10 ** 12, field ^ 1, field + 4):  # unknown model; spikes; model
+            forged.append(p[:pos] + vfc_v5._varint(new) + p[end:])
+        forged.append(p[:head] + vfc_v5._varint(nbytes + 1) + p[pos:])  # a band's bytes
+        table_end = head + 12  # about where the table ends (random bytes over its end are damage too)
+    flag = vfc_v4._FLAG_BANDS if version == 4 else vfc_v5._FLAG_BANDS5
     b = bytearray(p)
-    struct.pack_into("<Q", b, head + 4 + 4, 10 ** 12)  # a band's spikes beyond what its ticks can hold
-    forged.append(bytes(b))
-    b = bytearray(p)
-    struct.pack_into("<I", b, head + 4, struct.unpack_from("<I", p, head + 4)[0] + 1)  # a band's byte count
-    forged.append(bytes(b))
-    b = bytearray(p)
-    b[head:head + 24] = aer_file._PAYLOAD_HEAD.pack(0, 64, 5, aer_file._FLAG_BANDS, spikes)  # records stated
+    b[head:head + 24] = _PAYLOAD_HEAD.pack(0, 64, 5, flag, spikes)  # records stated
     forged.append(bytes(b))
     rng = np.random.default_rng(3)
     for _ in range(60):  # random band data behind a valid table
         b = bytearray(p)
-        start = head + 4 + 2 * aer_file._BAND_HEAD.size
-        b[start:] = rng.integers(0, 256, len(b) - start).astype(np.uint8).tobytes()
+        b[table_end:] = rng.integers(0, 256, len(b) - table_end).astype(np.uint8).tobytes()
         forged.append(bytes(b))
     errors = 0
     for payload in forged:
-        data = _resign(header, [payload], 64, spikes, version=4)
+        data = _resign(header, [payload], 64, spikes)
         try:
             _decode_bytes(tmp_path, data)
         except ViformError as exc:
@@ -659,7 +676,7 @@ def test_v4_forged_band_tables_and_header(tmp_path):
             errors += 1
     assert errors >= 60
     for bad in (0, 97, "2", True, None):
-        data = _resign(dict(header, band_rows=bad), payloads, 64, spikes, version=4)
+        data = _resign(dict(header, band_rows=bad), payloads, 64, spikes)
         with pytest.raises(ViformError, match="band_rows"):
             _decode_bytes(tmp_path, data)
 

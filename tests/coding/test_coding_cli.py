@@ -49,6 +49,19 @@ def test_segment_ticks_must_be_positive(tmp_path, stream_file, capsys, value):
     assert not vfc.exists()
 
 
+@pytest.mark.parametrize("mode", ["statistical", "intensity"])
+@pytest.mark.parametrize("flag, value", [("--threshold", "0"), ("--threshold", "-5"), ("--threshold", "inf"),
+                                         ("--threshold", "1e308"), ("--k", "-1"), ("--k", "nan"), ("--slack", "-2")])
+def test_tolerance_options_are_bounded(tmp_path, stream_file, capsys, mode, flag, value):
+    """--threshold 0 once divided by zero and -5 gave "math domain error": one line naming the flag, exit 2."""
+    src, _ = stream_file
+    vfc = tmp_path / "s.vfc"
+    assert main(["encode", str(src), str(vfc), "--mode", mode, flag, value]) == 2
+    err = capsys.readouterr().err
+    assert flag in err and "allowed" in err and err.count("\n") == 1
+    assert not vfc.exists()
+
+
 @pytest.mark.parametrize("command", ["encode", "decode", "dr"])
 def test_json_file_under_a_file_is_refused(tmp_path, stream_file, capsys, command):
     """A --json-file that cannot be made (under a regular file) is refused before any work, by name."""

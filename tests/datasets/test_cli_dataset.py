@@ -73,3 +73,24 @@ def test_unwritable_json_file_refused_before_work(source_clips, tmp_path, capsys
     err = capsys.readouterr().err
     assert rc == 2 and "--json-file" in err and err.count("\n") == 1, err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("extra, flag", [
+    (["--scenes", "nonesuch", "--clips", "1", "--duration", "0.01"], "--scenes"),
+    (["--scenes", "translating", "--clips", "0", "--duration", "0.01"], "--clips"),
+    (["--scenes", "translating", "--duration", "0.01"], "--clips"),
+    (["--scenes", "translating", "--clips", "1", "--duration", "0.01", "--truth-every-ticks", "0"],
+     "--truth-every-ticks"),
+    (["--scenes", "translating,translating", "--clips", "1", "--duration", "0.01"], "--scenes"),
+    (["--scenes", "translating", "--clips", "1", "--duration", "1e-5"], "--duration"),
+    (["SRC", "--scenes", "translating", "--clips", "1", "--duration", "0.01"], "--scenes"),
+    (["SRC", "--pairs"], "--pairs"),
+])
+def test_scene_options_refused_in_one_line_before_any_work(extra, flag, source_clips, tmp_path, capsys):
+    extra = [str(source_clips) if a == "SRC" else a for a in extra]
+    out = tmp_path / "ds"
+    rc = main(["dataset", *extra, "--out", str(out), "--height", "16", "--width", "24", "--no-progress",
+               "--workers", "1"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and flag in err, err
+    assert not out.exists()

@@ -313,3 +313,76 @@ def test_texture_is_not_taken_for_hot_pixels(hot_fraction):
     assert abs(d["hot_pixel_dark_current_e_per_s"] - 1e6) < 5 * se
     assert abs(d["hot_pixel_fraction"] - truth.mean()) < 5 * d["hot_pixel_fraction_standard_error"]
     assert preset.calibration["measured"]["hot_pixel_fraction"] == d["hot_pixel_fraction"]
+
+
+def _uniform_recording(q, drift, side=16, ticks=400, seed=0, interval_ticks=12.5):
+    """Every pixel at the same mean interval (coherent tick phases, no PRNU): the light rises
+    linearly by ``drift`` (relative) over the recording."""
+    from viform.light.scenes import VideoScene
+
+    s = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0)
+    clock = s.parameters.clock_hz
+    lux = s.parameters.optics.lux_from_electrons_per_s(np.full((side, side), q / interval_ticks * clock))
+    scene = StillScene(lux) if drift == 0 else VideoScene(np.stack([lux, lux * (1 + drift)]), clock / ticks, "linear")
+    return s.capture(scene, ticks / clock, seed=seed)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_drift_of_the_light_moves_the_rounding_term(seed):
+    """2 % of linear drift over a uniform field (every pixel at 12.5 ticks, Q = 10⁴: tick phases
+    coherent, the rounding term ≫ σ²) moves each pixel's tick phase by 0.25 tick over the
+    recording; the rounding term is averaged over that drift (sinc factors, the drift fitted
+    from the intervals' trends). Before, the estimate read 27–35 % low (z ≈ 8–11); now the
+    95 % range holds Q."""
+    r = calibrate(_uniform_recording(10_000, 0.02, side=64, seed=seed))
+    th = r["threshold"]
+    assert th["median_relative_drift_over_recording"] == pytest.approx(0.02, abs=0.004)
+    lo, hi = th["q_eff_range_electrons"]
+    assert lo <= 10_000 <= hi
+
+
+@pytest.mark.slow
+def test_stated_q_eff_figures_hold_the_truth_over_seeds():
+    """20 seeds × Q = 300, 3,000, 30,000 × 0 and 2 % drift on a 16×16 uniform field (the hard
+    case: coherent tick phases): every figure stated — a 95 % range, or a bound — must hold
+    the true Q in ≥ 90 % of the 120 trials (a calibrated 95 % range misses 6 ± 2.4 times:
+    ≥ 108 holds is 2.5 binomial σ below), and an estimate must be given in ≥ half of them.
+    Before, 18 of the 20 trials at Q = 3,000 with drift stated a lower bound above the true Q
+    (the fit found no root and called the rounding "unresolved"); now 103 of 108 ranges and
+    both bounds hold, and 10 trials say the drift leaves no figure."""
+    stated = held = estimates = 0
+    for q in (300, 3000, 30000):
+        for drift in (0.0, 0.02):
+            for seed in range(20):
+                th = calibrate(_uniform_recording(q, drift, seed=500 + seed))["threshold"]
+                if th.get("q_eff_electrons"):
+                    lo, hi = th["q_eff_range_electrons"]
+                    stated, held, estimates = stated + 1, held + (lo <= q <= hi), estimates + 1
+                elif th.get("q_eff_lower_bound_electrons"):
+                    stated, held = stated + 1, held + (th["q_eff_lower_bound_electrons"] <= q)
+    assert held >= 0.9 * stated
+    assert estimates >= 60
+
+
+@pytest.mark.parametrize("ticks", [200, 2000])
+def test_lag1_correlation_is_free_of_the_window(ticks):
+    """A steady pixel's lag-1 correlation of successive intervals, −0.45 at 18 ticks and
+    Q = 16,188 e⁻ (tick rounding, module notes), read −0.32 in a 200-tick recording: about each
+    pixel's own mean, the n − 1 divisor overestimates γ₀ by ≈ (1/6)/(n − 1) for intervals that
+    are anti-correlated. The table's figure is now mean-free, 1 − D₁/D₂, and matches the
+    steady-pixel value from the model at any length: within 5 standard errors (batch means
+    over 16 column bands of pixels) plus 0.01 for the fitted Q_eff's own error."""
+    q = 16_188
+    s = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0, gain_spread_fraction=0.03)
+    clock = s.parameters.clock_hz
+    mu = np.geomspace(16, 21, 64)[None, :].repeat(64, 0)
+    rec = s.capture(StillScene(s.parameters.optics.lux_from_electrons_per_s(q / mu * clock)), ticks / clock, seed=3)
+    r = calibrate(rec)
+    row = max(r["interval_table"], key=lambda x: x["pairs"])
+    st = interval_statistics(rec)
+    band = np.arange(64 * 64) % 64 // 4  # 16 bands of 4 columns
+    d1 = np.bincount(band, st.sum_lag1) / np.bincount(band, st.n_pairs)
+    d2 = np.bincount(band, st.sum_lag2) / np.bincount(band, st.n_triples)
+    se = np.std(1 - d1 / d2, ddof=1) / 4
+    assert abs(row["lag1_correlation"] - row["expected_lag1_correlation"]) < 5 * se + 0.01
+    assert row["static_consistent"]

@@ -32,6 +32,7 @@ COMMAND_MODULES = [
     "viform.cli.chip_figures",  # chip-figures (issue 16)
     "viform.cli.calibrate",  # calibrate (issue 10)
     "viform.cli.flow",  # flow (issue 21)
+    "viform.cli.track",  # track (issue 22)
 ]
 
 

@@ -195,7 +195,7 @@ def format_figures(fig: dict) -> str:
          "60 000 cycles, 1 666 fps"),
         ("normal 1280x864 @ 133 MHz", f"{nor['fps']:.0f} fps", "3 500 fps"),
         ("reduced 1280x864 @ 166 MHz", f"{r166['fps_1280x864']:.0f} fps", "-"),
-        ("reduced 1280x864, clock for 2 500 fps",
+        ("reduced 1280x864, clock fitted to 2 500 fps",
          f"{r25['pixel_clock_hz'] / 1e6:.1f} MHz (core {r25['core_clock_hz'] / 1e6:.1f} MHz "
          f"≤ {r25['core_limit_hz'] / 1e6:.0f} MHz)", "2 500 fps"),
         ("CameraLink, 1280x720x8 bit", f"{links['cameralink']:.0f} fps", "555 fps"),

@@ -95,21 +95,42 @@ def _shift_low(st, out):
     st[0] = (low & 0x00FFFFFF) << 8
 
 
+#: version 5: a young context learns at the running frequency 1/(n + 1.5) of its first n bits, then the
+#: two estimates settle at their fixed shifts (fast after 2^_FAST bits, slow after 2^_SLOW); older versions
+#: start every count at _OLD (saturated), which gives exactly their fixed-shift estimates.
+_OLD = 255
+_RECIP = np.array([int(65536 / (n + 1.5)) for n in range(1 << _SLOW)], np.int64)
+
+
 @njit(cache=True, inline="always")
 def _adapt(probs, i, bit):
-    a = probs[2 * i]
-    b = probs[2 * i + 1]
-    if bit == 0:
-        probs[2 * i] = a + ((_QONE - a) >> _FAST)
-        probs[2 * i + 1] = b + ((_QONE - b) >> _SLOW)
+    a = probs[3 * i]
+    b = probs[3 * i + 1]
+    n = probs[3 * i + 2]
+    if n >= (1 << _SLOW):
+        if bit == 0:
+            probs[3 * i] = a + ((_QONE - a) >> _FAST)
+            probs[3 * i + 1] = b + ((_QONE - b) >> _SLOW)
+        else:
+            probs[3 * i] = a - (a >> _FAST)
+            probs[3 * i + 1] = b - (b >> _SLOW)
+        return
+    target = np.int64(0) if bit else np.int64(_QONE)
+    if n < (1 << _FAST):
+        a += ((target - a) * _RECIP[n]) >> 16
+    elif bit == 0:
+        a += (_QONE - a) >> _FAST
     else:
-        probs[2 * i] = a - (a >> _FAST)
-        probs[2 * i + 1] = b - (b >> _SLOW)
+        a -= a >> _FAST
+    b += ((target - b) * _RECIP[n]) >> 16
+    probs[3 * i] = min(max(a, np.int64(32)), np.int64(_QONE - 32))
+    probs[3 * i + 1] = min(max(b, np.int64(32)), np.int64(_QONE - 32))
+    probs[3 * i + 2] = n + 1
 
 
 @njit(cache=True, inline="always")
 def _ebit(st, out, probs, i, bit):
-    p = (probs[2 * i] + probs[2 * i + 1]) >> 5
+    p = (probs[3 * i] + probs[3 * i + 1]) >> 5
     bound = (st[1] >> _PBITS) * p
     if bit == 0:
         st[1] = bound
@@ -195,7 +216,7 @@ def _dnorm(ds, data):
 
 @njit(cache=True, inline="always")
 def _dbit(ds, data, probs, i):
-    p = (probs[2 * i] + probs[2 * i + 1]) >> 5
+    p = (probs[3 * i] + probs[3 * i + 1]) >> 5
     bound = (ds[0] >> _PBITS) * p
     if ds[1] < bound:
         ds[0] = bound
@@ -390,14 +411,25 @@ def _nb_first(p, width, rec_start, counts, rec_s, rec_o, ref0, ptr, seg_start):
     return _nb_mean(p, width, seg_start, rec_start, counts, rec_s, rec_o, ref0, ptr)
 
 
+@njit(cache=True)
+def new_probabilities(young):
+    """Every context at p = ½: young (version 5) or with the fixed-shift estimates of versions 2-4."""
+    probs = np.full(3 * _NPROB, _QONE // 2, np.int64)
+    probs[2::3] = 0 if young else _OLD
+    return probs
+
+
 # ---------------------------------------------------------------------------- encoder
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_start, seg_end, width, strict,
-                   out, rec_s):
-    """Code one segment's records into ``out``; returns the byte count (> out.size: retry bigger)."""
+                   out, rec_s, young=False):
+    """Code one segment's records into ``out``; returns the byte count (> out.size: retry bigger).
+
+    ``young`` (version 5): young contexts learn at their running frequency (see :func:`_adapt`).
+    """
     npix = counts.size
-    probs = np.full(2 * _NPROB, _QONE // 2, np.int64)
+    probs = new_probabilities(young)
     st = np.zeros(6, np.int64)
     st[1] = _MASK32
     st[3] = 1
@@ -515,14 +547,14 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
 
 # ---------------------------------------------------------------------------- decoder
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict, n_rec,
-                   counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s):
+                   counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s, young=False):
     """Inverse of :func:`encode_segment`. Returns an error code (0 ok); arrays are filled in place.
 
     ``rec_m, rec_g, rec_o, rec_s`` must hold at least ``n_rec`` records.
     """
-    probs = np.full(2 * _NPROB, _QONE // 2, np.int64)
+    probs = new_probabilities(young)
     ds = np.zeros(4, np.int64)
     _dstart(ds, data)
     big = np.int64(1) << 31

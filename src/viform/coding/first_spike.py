@@ -44,13 +44,16 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from viform._validate import ViformError, check_choice, check_int, check_non_negative
+from viform._validate import ViformError, check_choice, check_int, check_non_negative, check_positive
 
 #: Coding modes (seed 000 §5.1–§5.2).
 MODES = ("strict", "statistical", "intensity")
 
 #: Default tolerance factor k of the statistical mode (|Δτ| ≤ k·τ/√Q).
 DEFAULT_K = 2.0
+
+#: Largest tolerance factor k (a coded file's header may not state more).
+MAX_K = 1e6
 
 #: Default segment length, ticks.
 DEFAULT_SEGMENT_TICKS = 4096
@@ -85,8 +88,17 @@ class CodingParameters:
     def __post_init__(self):
         check_choice("mode", self.mode, MODES)
         check_non_negative("k", self.k)
+        if self.k > MAX_K:
+            raise ViformError(f"k = {self.k:g} is not allowed: it must be in [0, {MAX_K:g}] (standard deviations)")
         check_int("slack_ticks", self.slack_ticks, 0, 1 << 20)
         check_int("segment_ticks", self.segment_ticks, 1, 1 << 30)
+        if self.threshold_electrons is not None:  # k/√Q: zero, negative or absurd Q has no tolerance
+            from viform.stream.sidecar import MAX_THRESHOLD_ELECTRONS
+
+            q = check_positive("threshold_electrons", self.threshold_electrons)
+            if q > MAX_THRESHOLD_ELECTRONS:
+                raise ViformError(f"threshold_electrons = {q:g} is not allowed: it must be in (0, "
+                                  f"{MAX_THRESHOLD_ELECTRONS:g}] electrons")
         if self.mode == "statistical" and self.k > 0 and self.threshold_electrons is None:
             raise ViformError("the statistical mode needs the threshold Q (threshold_electrons) for its "
                               "tolerance k·τ/√Q; the stream does not say it: give --threshold")
@@ -200,7 +212,7 @@ def _close_segment(last_spike, anchor, tau_ref, run_m, tail_m, tail_g, tail_ref)
             tail_g[p] = 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _check_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor, tau_ref, seg_start, seg_end):
     """Validate a segment's records against the decoder state; advance the state.
 

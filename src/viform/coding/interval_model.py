@@ -702,7 +702,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
 
 # ---------------------------------------------------------------------------- records ↔ ticks
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def ticks_from_records(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_start, tick_counts, ticks):
     """Spike ticks per pixel (grouped, time order) of a strict segment's first-spike records."""
     r = 0
@@ -730,7 +730,7 @@ def ticks_from_records(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def records_from_ticks(tick_counts, ticks, anchor0, ref0, counts, rec_m, rec_g, rec_o, tail_m, tail_g):
     """Strict first-spike records of a segment from its spike ticks (the inverse of :func:`ticks_from_records`).
 

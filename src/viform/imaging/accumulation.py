@@ -2,7 +2,9 @@
 
 The image counts the spikes in a window [T1, T2); more spikes mean more light. Each spike
 stands for Q electrons, so the mean photo-current over the window is count·Q / (T2 − T1)
-electrons per second. T1 and T2 are free: sliding the window gives continuous imaging,
+electrons per second — far below saturation; near one spike per tick the light is the
+inverse of the readout's exact rate law (:mod:`viform.imaging.rate_law`), and pixels that
+fired every tick are flagged ``saturated``. T1 and T2 are free: sliding the window gives continuous imaging,
 widening it trades motion blur for noise.
 
 Window alignment: the seed's eq. has the window end at the instant (``align="end"``); the

@@ -119,7 +119,8 @@ def interval_image(source: SpikeSource, t_s: float, sensor_parameters=None,
     """Light at instant ``t_s`` as Q/τ of the interval containing it (seed 000 §3.3.2).
 
     Returns a :class:`~viform.imaging.units.LightImage` with the firing rate 1/τ
-    (spikes/s), e⁻/s (Q/τ) and lux when the sensor is known, and the ``censored`` mask
+    (spikes/s), e⁻/s (Q/τ far below saturation; the inverse of the readout's rate law near
+    it, τ = 1 tick flagged ``saturated``) and lux when the sensor is known, and the ``censored`` mask
     (intervals cut by an end of the stream — never by the search, which goes as far as the
     data need; ``lookahead_ticks`` only sets the first read).
     """

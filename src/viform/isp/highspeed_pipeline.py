@@ -613,6 +613,13 @@ def seed_figures(include_simulation: bool = True) -> dict:
         "equalization_shift": {**eq, "seed": "<<8, >>20 (net >>12); error 0.00003*c; + >>15; "
                                              "compensated error 'close to 0'"},
     }
+    # every published figure's status (issue 28): predicted from the paper's parameters, or
+    # fitted to the figure (the 2,500 fps clock is back-solved from it)
+    fig["status"] = {"reduced_1280x720_100MHz": "predicted", "normal_full_1280x864_133MHz": "predicted",
+                     "reduced_166MHz": "predicted",
+                     "reduced_2500fps_full_frame": "fitted: the pixel clock is solved from the 2,500 fps figure",
+                     "cameralink_seed": "predicted", "ddr": "predicted", "decimation": "predicted",
+                     "equalization_shift": "predicted"}
     if include_simulation:
         base = TranslatingScene(36, 64, velocity_px_per_s=(0.0, 0.0), min_lux=50.0, max_lux=400.0)
         scene = StepsScene(base, [(0.02, 10.0), (0.05, 0.1)])

@@ -65,7 +65,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from viform._validate import ViformError, check_int
 from viform.stream.container import SpikeSource
@@ -81,7 +81,7 @@ TILE = 8
 _FOURIER_TERMS = 12
 
 
-def rounding_variance(mean_ticks, jitter_var_ticks2, mean_var_ticks2=0.0) -> np.ndarray:
+def rounding_variance(mean_ticks, jitter_var_ticks2, mean_var_ticks2=0.0, mean_spread_ticks=0.0) -> np.ndarray:
     """G = E[frac(S)(1 − frac(S))] for S ~ Normal(mean, var): variance that tick rounding adds.
 
     Fourier series of the periodic parabola, g(x) = 1/6 − Σ_k cos(2πkx)/(π²k²); each term is
@@ -93,27 +93,50 @@ def rounding_variance(mean_ticks, jitter_var_ticks2, mean_var_ticks2=0.0) -> np.
     undamped by that factor (down to no damping at all), so that G averaged over pixels is
     unbiased. Where every pixel shares nearly the same interval (a uniform field) the
     rounding phases are coherent and this matters: without it Q_eff read 30–90 % low there.
+
+    ``mean_spread_ticks``: when the light drifts, the mean moves over the recording; G is
+    then averaged over a mean spread uniformly over this width, which multiplies term k by
+    the characteristic function of the uniform law, sinc(k·width) (sin(πx)/(πx)). Without it,
+    2 % of linear drift over a uniform field (coherent phases) read Q_eff 30 % low.
     """
     mean = np.asarray(mean_ticks, dtype=np.float64)
     var = np.asarray(jitter_var_ticks2, dtype=np.float64)
     excess = np.maximum(var - np.asarray(mean_var_ticks2, dtype=np.float64), 0.0)
-    mean, excess = np.broadcast_arrays(mean, excess)
-    g = np.full(mean.shape, 1.0 / 6.0)
-    # cos(2πkμ)·exp(−2π²k²v) by recurrences: z^k and d^(k²) = d^((k−1)²)·d^(2k−1)
-    z = np.exp(2j * np.pi * (mean - np.floor(mean)))
-    d = np.exp(-2 * np.pi**2 * excess)
-    d2 = d * d
-    zk = np.ones(mean.shape, complex)
-    dk = np.ones(mean.shape)
-    step = d.copy()  # d^(2k−1)
-    for k in range(1, _FOURIER_TERMS + 1):
-        zk *= z
-        dk *= step
-        step *= d2
-        g -= zk.real * dk / (np.pi**2 * k * k)
-        if not dk.size or float(dk.max()) < 1e-12:
-            break
-    return g
+    mean, excess, spread = np.broadcast_arrays(mean, excess, np.asarray(mean_spread_ticks, dtype=np.float64))
+    out = np.empty(mean.shape)
+    _rounding_series(np.ascontiguousarray(mean).ravel(), np.ascontiguousarray(excess).ravel(),
+                     np.ascontiguousarray(spread).ravel(), out.reshape(-1))
+    return out
+
+
+@njit(cache=True)
+def _rounding_series(mean, excess, spread, out):
+    """1/6 − Σ_k cos(2πk·frac μ)·e^(−2π²k²·v)·sinc(k·w)/(π²k²), element by element (see
+    :func:`rounding_variance`); stops where the damping falls below 1e-12."""
+    for i in range(mean.size):
+        phase = 2.0 * np.pi * (mean[i] - np.floor(mean[i]))
+        damping = np.exp(-2.0 * np.pi * np.pi * excess[i])
+        g = 1.0 / 6.0
+        dk = 1.0
+        step = damping  # damping^(2k − 1): dk runs through damping^(k²)
+        # cos(kφ) and sin(kπw) by the Chebyshev recurrence f_k = 2·cos(a)·f_(k−1) − f_(k−2)
+        c1 = np.cos(phase)
+        c_prev, c_k = 1.0, c1
+        x = np.pi * spread[i]
+        s1 = np.cos(x)
+        s_prev, s_k = 0.0, np.sin(x)
+        for k in range(1, _FOURIER_TERMS + 1):
+            dk *= step
+            step *= damping * damping
+            term = c_k * dk / (np.pi * np.pi * k * k)
+            if x > 0:
+                term *= s_k / (k * x)
+            g -= term
+            if dk < 1e-12:
+                break
+            c_prev, c_k = c_k, 2.0 * c1 * c_k - c_prev
+            s_prev, s_k = s_k, 2.0 * s1 * s_k - s_prev
+        out[i] = g
 
 
 @dataclass
@@ -207,7 +230,8 @@ class IntervalStatistics:
     ``sum_k``, ``sum_kk`` (interval indices k), ``sum_y``, ``sum_yy``, ``sum_ky``; over its
     successive pairs ``n_pairs`` and ``sum_lag1`` = Σ (Y_k − Y_{k+1})²/2; over its triples
     ``n_triples``, ``sum_second`` = Σ (Y_k − 2Y_{k+1} + Y_{k+2})², ``sum_d`` and ``sum_dd``
-    (d = ((Y_k − Y_{k+2})² − (Y_k − Y_{k+1})²)/2, the static test's statistic). Plus the spike
+    (d = ((Y_k − Y_{k+2})² − (Y_k − Y_{k+1})²)/2, the static test's statistic), ``sum_lag2``
+    = Σ (Y_k − Y_{k+2})²/2. Plus the spike
     counts, first and last spike ticks and the count in the first half of the ticks read.
     """
 
@@ -231,6 +255,8 @@ class IntervalStatistics:
     sum_second: np.ndarray
     sum_d: np.ndarray
     sum_dd: np.ndarray
+    #: Σ (Y_k − Y_{k+2})²/2 over the triples (D₂, mean-free).
+    sum_lag2: np.ndarray
 
     @property
     def mean_interval(self) -> np.ndarray:
@@ -243,18 +269,19 @@ class IntervalStatistics:
 _N_INT_SUMS, _N_FLOAT_SUMS = 8, 11  # int64: spikes, first, last, first half, prev1, prev2, intervals, pairs/triples
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _accumulate_block(bits, first, half, ints, floats):
     """Add the spikes of ticks [first, first + n) (``bits`` (n, P) uint8) to the per-pixel sums.
 
     ``ints`` rows: 0 spikes, 1 first tick, 2 last tick, 3 spikes before ``half``, 4 previous
     interval, 5 the one before, 6 intervals, 7 pairs; ``floats`` rows: 0 triples, 1 Σk,
     2 Σk², 3 Σy, 4 Σy², 5 Σky, 6 Σ lag-1 statistic, 7 Σ second-difference statistic, 8 Σd,
-    9 Σd² (10 spare). Pixels in parallel chunks, ticks inner per pixel chunk row by row.
+    9 Σd², 10 Σ lag-2 statistic. Pixels in chunks (their sums stay in cache), rows of ticks inside.
+    One thread: the work is light (a test per pixel and tick) next to reading the file.
     """
     n, p = bits.shape
     chunk = 4096
-    for c in prange((p + chunk - 1) // chunk):
+    for c in range((p + chunk - 1) // chunk):
         j0 = c * chunk
         j1 = min(j0 + chunk, p)
         for i in range(n):
@@ -288,6 +315,7 @@ def _accumulate_block(bits, first, half, ints, floats):
                             d = ((a - y) ** 2 - (a - b) ** 2) / 2
                             floats[8, j] += d
                             floats[9, j] += d * d
+                            floats[10, j] += (a - y) ** 2 / 2
                     ints[5, j] = ints[4, j]
                     ints[4, j] = tick - last
                 ints[2, j] = tick
@@ -322,7 +350,7 @@ def interval_statistics(source: SpikeSource, *, max_ticks: int | None = None, bl
         _accumulate_block(bits, first, end // 2, ints, floats)
     return IntervalStatistics(h, w, end, float(source.clock_hz), ints[0], ints[1], ints[2], ints[3], ints[6],
                               floats[1], floats[2], floats[3], floats[4], floats[5], ints[7].astype(np.float64),
-                              floats[6], floats[0], floats[7], floats[8], floats[9])
+                              floats[6], floats[0], floats[7], floats[8], floats[9], floats[10])
 
 
 def statistics_of(iv: PixelIntervals) -> IntervalStatistics:
@@ -343,7 +371,7 @@ def statistics_of(iv: PixelIntervals) -> IntervalStatistics:
         np.bincount(px_of, y * y, npx), np.bincount(px_of, k * y, npx),
         np.bincount(pp, minlength=npx).astype(np.float64), np.bincount(pp, (a - b) ** 2 / 2, npx),
         np.bincount(p3, minlength=npx).astype(np.float64), np.bincount(p3, (y0 - 2 * y1 + y2) ** 2, npx),
-        np.bincount(p3, d, npx), np.bincount(p3, d * d, npx))
+        np.bincount(p3, d, npx), np.bincount(p3, d * d, npx), np.bincount(p3, (y0 - y2) ** 2 / 2, npx))
 
 
 def _checkerboard_static(st: IntervalStatistics, tile: int) -> tuple[np.ndarray, dict]:
@@ -376,16 +404,17 @@ def _checkerboard_static(st: IntervalStatistics, tile: int) -> tuple[np.ndarray,
     return static, info
 
 
-def _rounding_term(mu, s2, statistic: str, mu_var=0.0):
+def _rounding_term(mu, s2, statistic: str, mu_var=0.0, spread=0.0):
     """Rounding part of a statistic's expectation (module notes), from G_n = G(n·μ, n·σ²).
 
-    ``mu_var``: variance of the per-pixel estimate μ (see :func:`rounding_variance`).
+    ``mu_var``: variance of the per-pixel estimate μ; ``spread``: the width over which the
+    pixel's mean interval drifts during the recording (see :func:`rounding_variance`).
     """
-    g1 = rounding_variance(mu, s2, mu_var)
-    g2 = rounding_variance(2 * mu, 2 * s2, 4 * mu_var)
+    g1 = rounding_variance(mu, s2, mu_var, spread)
+    g2 = rounding_variance(2 * mu, 2 * s2, 4 * mu_var, 2 * spread)
     if statistic == "lag1":
         return 2 * g1 - g2 / 2
-    g3 = rounding_variance(3 * mu, 3 * s2, 9 * mu_var)
+    g3 = rounding_variance(3 * mu, 3 * s2, 9 * mu_var, 3 * spread)
     return 15 * g1 - 6 * g2 + g3
 
 
@@ -393,7 +422,51 @@ def _rounding_term(mu, s2, statistic: str, mu_var=0.0):
 _SIGMA_COEFFICIENT = {"lag1": 1.0, "second": 6.0}
 
 
-def _fit_inverse_q(mu_pix, count, total, statistic: str, n_intervals):
+def _drift_spread(st: IntervalStatistics, use: np.ndarray, tile: int | None = None) -> tuple[np.ndarray, dict]:
+    """Per pixel: the width (ticks) over which its mean interval drifts during the recording.
+
+    Light that drifts changes every pixel's interval in proportion to it: Y_k ≈ μ·(1 + δ·(k −
+    k̄)) with δ the relative change per interval, shared by the whole image (a lamp, the sun,
+    the lens; ``tile``: by each tile of that many pixels a side instead, noisier — with 64
+    pixels a tile the noise of δ biases the rounding term on coherent tick phases). Light that
+    changes locally (motion) is caught by the static test instead.
+    δ is fitted by least squares over the pixels' interval trends (Σ μ·sxy / Σ μ²·sxx,
+    sxy and sxx each pixel's sums about its means); its noise variance (Σ μ²·sxx·s²/(Σ μ²·sxx)²,
+    s² the residual variance of the pixel's intervals) is removed from δ² so a steady
+    recording gets no spread on average. The width is |δ|·μ·N for N intervals.
+    """
+    h, w = st.height, st.width
+    if tile is None:
+        group = np.zeros(h * w, np.int64)
+    else:
+        y, x = np.divmod(np.arange(h * w), w)
+        group = (y // tile) * ((w + tile - 1) // tile) + x // tile
+    n = st.n_intervals.astype(np.float64)
+    mu = st.mean_interval
+    ok = use & (n >= 3)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sxx = st.sum_kk - st.sum_k ** 2 / n
+        sxy = st.sum_ky - st.sum_k * st.sum_y / n
+        ss = st.sum_yy - st.sum_y ** 2 / n
+        resid = (ss - np.where(sxx > 0, sxy * sxy / sxx, 0.0)) / (n - 2)
+    m = np.where(ok, mu, 0.0)
+    den = np.bincount(group, np.where(ok, m * m * sxx, 0.0))
+    num = np.bincount(group, np.where(ok, m * sxy, 0.0))
+    noise = np.bincount(group, np.where(ok, m * m * sxx * resid, 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        delta = np.where(den > 0, num / den, 0.0)
+        delta2 = np.where(den > 0, np.maximum(delta * delta - noise / (den * den), 0.0), 0.0)
+    spread = np.where(ok, np.sqrt(delta2[group]) * np.where(ok, mu, 0.0) * n, 0.0)
+    change = np.sqrt(delta2[group]) * n  # relative change of the light over the pixel's intervals
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sd = np.where(den > 0, np.sqrt(noise) / den, 0.0)  # standard error of δ
+        relative_se = float(np.max(np.where(delta2 > 0, sd / np.sqrt(np.where(delta2 > 0, delta2, 1.0)), 0.0)))
+    info = {"median_relative_drift_over_recording": float(np.median(change[ok])) if ok.any() else None,
+            "drift_relative_standard_error": relative_se}
+    return spread, info
+
+
+def _fit_inverse_q(mu_pix, count, total, statistic: str, n_intervals, spread=None):
     """Weighted least squares of (stat − rounding)/k = σ² on μ²: returns (1/Q, its standard error).
 
     The rounding term depends on σ itself (through the jitter that blurs the tick phase),
@@ -407,16 +480,33 @@ def _fit_inverse_q(mu_pix, count, total, statistic: str, n_intervals):
     # statistics, total ``total``)
     count = np.asarray(count, dtype=np.float64)
     has = count > 0
-    count, total, mu_pix = count[has], total[has], mu_pix[has]
+    spread = np.zeros(count.shape) if spread is None else np.asarray(spread, dtype=np.float64)
+    count, total, mu_pix, spread = count[has], total[has], mu_pix[has], spread[has]
     n_iv = np.maximum(np.asarray(n_intervals, dtype=np.float64)[has], 1.0)
     floor_term = _rounding_term(mu_pix, np.ones_like(mu_pix), statistic)  # the rounding of wide jitter
 
+    def fit_many(xs):
+        """fit(x) for each x of ``xs`` at once (rows of x × pixels, in chunks that bound memory)."""
+        xs = np.maximum(np.atleast_1d(np.asarray(xs, dtype=np.float64)), 0.0)
+        values = np.empty(xs.size)
+        rows = max(1, int(250_000 // max(mu_pix.size, 1)))
+        for r0 in range(0, xs.size, rows):
+            x = xs[r0:r0 + rows, None]
+            s2 = mu_pix * mu_pix * x
+            # μ_p = (last − first)/N: an N-interval span plus the rounding of its two ends
+            mu_var = (n_iv * s2 + 1.0 / 6.0) / (n_iv * n_iv)
+            corr = _rounding_term(mu_pix, s2, statistic, mu_var, spread)
+            wgt = 1.0 / (k * s2 + floor_term) ** 2  # var of one pair's statistic ∝ its mean²
+            num = wgt * (total - count * corr) / k * mu_pix**2
+            den = wgt * count * mu_pix**4
+            values[r0:r0 + rows] = num.sum(axis=1) / den.sum(axis=1)
+        return values
+
     def fit(x):
         s2 = mu_pix * mu_pix * max(x, 0.0)
-        # μ_p = (last − first)/N: an N-interval span plus the rounding of its two ends
         mu_var = (n_iv * s2 + 1.0 / 6.0) / (n_iv * n_iv)
-        corr = _rounding_term(mu_pix, s2, statistic, mu_var)
-        wgt = 1.0 / (k * s2 + floor_term) ** 2  # var of one pair's statistic ∝ its mean²
+        corr = _rounding_term(mu_pix, s2, statistic, mu_var, spread)
+        wgt = 1.0 / (k * s2 + floor_term) ** 2
         num = wgt * (total - count * corr) / k * mu_pix**2
         den = wgt * count * mu_pix**4
         value = float(num.sum() / den.sum())
@@ -429,12 +519,12 @@ def _fit_inverse_q(mu_pix, count, total, statistic: str, n_intervals):
     # first crossing is the one that matches the data (checked on simulated uniform fields).
     x_hi = 9.0 / float(np.min(mu_pix)) ** 2
     grid = np.geomspace(x_hi * 1e-7, x_hi, 29)
-    h = np.array([fit(x)[0] - x for x in grid])
+    h = fit_many(grid) - grid
     crossing = np.nonzero(np.sign(h[:-1]) != np.sign(h[1:]))[0]
     if crossing.size:
         i = int(crossing[0])
         lo, hi, h_lo = grid[i], grid[i + 1], h[i]
-        while hi - lo > 1e-6 * hi:  # bisection in log x (the bracket spans a factor ≈ 1.6)
+        while hi - lo > 1e-5 * hi:  # bisection in log x (the bracket spans a factor ≈ 1.6)
             mid = math.sqrt(lo * hi)
             h_mid = fit(mid)[0] - mid
             if np.sign(h_mid) == np.sign(h_lo):
@@ -451,6 +541,10 @@ def _fit_inverse_q(mu_pix, count, total, statistic: str, n_intervals):
     slope = (fit(root + step)[0] - fit(max(root - step, 0.0))[0]) / (root + step - max(root - step, 0.0))
     return root, se / max(abs(1.0 - slope), 0.1)
 
+
+#: Relative error allowed for the width of the drift of each pixel's mean interval (the drift need not
+#: be linear, and its estimate is noisy): propagated into the standard error of 1/Q_eff.
+DRIFT_MODEL_TOLERANCE = 0.10
 
 #: Largest difference between a bin's lag-1 correlation and a steady pixel's that still counts as static.
 LAG1_TOLERANCE = 0.15
@@ -470,11 +564,14 @@ def interval_table(iv, use_pixel: np.ndarray, edges, inv_q: float | None = None)
     ``rsd`` = √γ₀/μ with γ₀ the pooled within-pixel variance of the intervals (n − 1
     divisor); ``rsd_detrended`` the same after removing each pixel's linear trend of the
     intervals over the recording (n − 2 divisor), so light that drifts slowly does not count
-    as noise; ``lag1_correlation`` = γ₁/γ₀ with γ₁ = γ₀ − D₁ (−1/2 for a tick-rounded
-    regular pixel, module notes). With ``inv_q`` (1/Q_eff) each bin also gets the lag-1
-    correlation a steady pixel would show, γ₁/γ₀ = ((G₂ − 2G₁)/2)/(σ² + G₁) from each
-    pixel's own rounding terms, and ``static_consistent``: whether the two agree within
-    :data:`LAG1_TOLERANCE`.
+    as noise; ``lag1_correlation`` = 1 − D₁/D₂ = (γ₁ − γ₂)/(γ₀ − γ₂) with D_m = E(Y_k −
+    Y_{k+m})²/2, free of each pixel's mean and so of its finite-window bias (γ₂ ≈ 0: −1/2 for
+    a tick-rounded regular pixel, module notes). With ``inv_q`` (1/Q_eff) each bin also gets
+    the value a steady pixel would show, from γ₀ = σ² + G₁, γ₁ = (G₂ − 2G₁)/2,
+    γ₂ = (G₃ − 2G₂ + G₁)/2 and each pixel's own rounding terms, and ``static_consistent``:
+    whether the lag-1 correlation about each pixel's own mean (which light that drifts
+    raises) agrees within :data:`LAG1_TOLERANCE` with a steady pixel's, its finite-window
+    bias included.
     """
     st = iv if isinstance(iv, IntervalStatistics) else statistics_of(iv)
     mu_p = st.mean_interval
@@ -494,24 +591,36 @@ def interval_table(iv, use_pixel: np.ndarray, edges, inv_q: float | None = None)
         gamma0_detrended = rss[px].sum() / (n_int[px] - 2).sum()
         n_pairs = float(st.n_pairs[px].sum())
         d1 = float(st.sum_lag1[px].sum() / n_pairs) if n_pairs else math.nan
+        n_triples = float(st.n_triples[px].sum())
+        d2 = float(st.sum_lag2[px].sum() / n_triples) if n_triples else math.nan
         mean_mu = float(np.mean(mu_p[px]))
         row = {"interval_from_ticks": float(lo), "interval_to_ticks": float(hi),
                "mean_interval_ticks": mean_mu, "pixels": int(px.sum()), "pairs": int(n_pairs),
                "rsd": float(math.sqrt(gamma0) / mean_mu),
                "rsd_detrended": float(math.sqrt(max(gamma0_detrended, 0.0)) / mean_mu),
-               "lag1_correlation": float((gamma0 - d1) / gamma0)}
+               # mean-free: 1 − D₁/D₂ = (γ₁ − γ₂)/(γ₀ − γ₂); (γ₀ − D₁)/γ₀ with γ₀ about each pixel's
+               # own mean read −0.32 for −0.45 in 200 ticks (γ₀ is overestimated by ≈ (1/6)/(n − 1))
+               "lag1_correlation": float(1.0 - d1 / d2) if d2 > 0 else math.nan,
+               "lag1_correlation_about_pixel_means": float((gamma0 - d1) / gamma0)}
         if inv_q is not None:
             m, n = mu_p[px], n_int[px]
             s2 = m * m * max(inv_q, 0.0)
             mv = (n * s2 + 1.0 / 6.0) / (n * n)
             g1 = rounding_variance(m, s2, mv)
             g2 = rounding_variance(2 * m, 2 * s2, 4 * mv)
+            g3 = rounding_variance(3 * m, 3 * s2, 9 * mv)
             w = n - 1
-            rho = float(np.sum(w * (g2 - 2 * g1) / 2) / np.sum(w * (s2 + g1)))
-            row["expected_lag1_correlation"] = rho
-            # light that changes slowly raises γ₁; light that changes within an interval can
-            # also push it below any steady pixel's
-            row["static_consistent"] = bool(abs(row["lag1_correlation"] - rho) <= LAG1_TOLERANCE)
+            gamma0, gamma1, gamma2 = s2 + g1, (g2 - 2 * g1) / 2, (g3 - 2 * g2 + g1) / 2
+            row["expected_lag1_correlation"] = float(np.sum(w * (gamma1 - gamma2)) / np.sum(w * (gamma0 - gamma2)))
+            # about each pixel's own mean, the n − 1 divisor does not make γ₀ unbiased for these
+            # anti-correlated intervals: E ss = n·γ₀ − V(n)/n, V(n) = var(T_last − T_first) = n·σ² + ⅙
+            expected_ss = np.sum(n * gamma0 - (n * s2 + 1.0 / 6.0) / n) / np.sum(w)
+            rho = float(1.0 - np.sum(w * (gamma0 - gamma1)) / np.sum(w) / expected_ss)
+            row["expected_lag1_correlation_about_pixel_means"] = rho
+            # light that changes slowly raises γ₁ about the pixels' means (the mean-free figure
+            # does not see it); light that changes within an interval can also push it below
+            # any steady pixel's
+            row["static_consistent"] = bool(abs(row["lag1_correlation_about_pixel_means"] - rho) <= LAG1_TOLERANCE)
         rows.append(row)
     return rows
 
@@ -724,9 +833,27 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
                             "too short, too small, too dark or too bright, or not steady")
     else:
         # drift-robust: second differences of the intervals cancel light that changes linearly
-        inv_q, se = _fit_inverse_q(mu_use, triples, np.where(use, iv.sum_second, 0.0), "second", n_int)
+        # light that drifts moves each pixel's tick phase over the recording: the rounding term
+        # is averaged over that drift (:func:`_drift_spread`)
+        spread, drift_info = _drift_spread(iv, use)
+        q_info.update(drift_info)
+        second = (mu_use, triples, np.where(use, iv.sum_second, 0.0), "second", n_int)
+        inv_q, se = _fit_inverse_q(*second, spread)
+        rel = drift_info["drift_relative_standard_error"]
+        drift_fragile = False
+        if spread.any():
+            # the drift is estimated, and its width only approximately (the light need not drift
+            # linearly): its error moves the rounding term, and so 1/Q_eff. ±10 % at least.
+            rel = max(rel, DRIFT_MODEL_TOLERANCE)
+            shifted = [_fit_inverse_q(*second, spread * max(1 + sign * rel, 0.0))[0] for sign in (-1, 1)]
+            drift_se = abs(shifted[1] - shifted[0]) / 2
+            q_info["inverse_q_drift_standard_error"] = drift_se
+            se = math.hypot(se, drift_se)
+            # where the pixels' tick phases are coherent (a uniform field), a drift of the light
+            # moves the rounding term so much that the fit has no root within that tolerance
+            drift_fragile = min(inv_q, *shifted) <= 0
         # check: successive-interval differences, which linear drift inflates
-        inv_q1, se1 = _fit_inverse_q(mu_use, pairs, np.where(use, iv.sum_lag1, 0.0), "lag1", n_int)
+        inv_q1, se1 = _fit_inverse_q(mu_use, pairs, np.where(use, iv.sum_lag1, 0.0), "lag1", n_int, spread)
         q_info.update(inverse_q=inv_q, inverse_q_standard_error=se, inverse_q_lag1=inv_q1,
                       inverse_q_lag1_standard_error=se1)
         q_info["drift_free"] = bool(abs(inv_q1 - inv_q) <= 2 * math.hypot(se, se1))
@@ -735,7 +862,13 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
         pairs_all = sum(r["pairs"] for r in table) or 1
         q_info["static_consistent_pair_fraction"] = pairs_ok / pairs_all
         lower = 1.0 / (max(inv_q, 0.0) + 2 * se)
-        if pairs_ok / pairs_all < 0.5:
+        if drift_fragile:
+            drifted = 100 * drift_info["median_relative_drift_over_recording"]
+            q_info["reason"] = (f"the light drifted by {drifted:.2g} % over the recording while most pixels "
+                                "fired in step with the readout clock (a uniform scene): the rounding to ticks then "
+                                "depends on the drift more than the data can tell, so no figure (record a steadier "
+                                "or more varied scene)")
+        elif pairs_ok / pairs_all < 0.5:
             # light that changes only adds interval variance: the fit bounds Q_eff from below
             q_info["reason"] = ("not static enough: successive intervals are not anti-correlated as a steady "
                                 "pixel's are (see the interval table), so the light changed during the recording; "

@@ -88,8 +88,17 @@ def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed
         if bar is not None:
             bar.close()
     demand = scene.demand() if hasattr(scene, "demand") else None
-    return {"shots": shots, "instants_s": instants, "demand": demand, "scene": scene,
-            "duration_s": duration_s, "verdict": cmp.verdict(shots, demand), "timings_s": timings}
+    result = {"shots": shots, "instants_s": instants, "demand": demand, "scene": scene,
+              "duration_s": duration_s, "verdict": cmp.verdict(shots, demand), "timings_s": timings}
+    result["vision"] = _vision(result)
+    return result
+
+
+def _vision(result):
+    """The vision section's scores where the scene has object truth (measure.vision_comparison), else None."""
+    from viform.measure.vision_comparison import vision_scores
+
+    return vision_scores(result)
 
 
 # ------------------------------------------------------------------ figures
@@ -440,6 +449,11 @@ def write_report(result, out_dir, command: str = "", started_s: float | None = N
         if has_lux:
             save_figure(figs / f"errors_{i}_{t * 1e3:.2f}ms.png", figure_errors(result, i))
             paths[f"errors_{i}"] = figs / f"errors_{i}_{t * 1e3:.2f}ms.png"
+    if result.get("vision"):
+        from viform.measure.vision_comparison import figure_tracks
+
+        save_figure(figs / "tracks.png", figure_tracks(result["vision"]))
+        paths["tracks"] = figs / "tracks.png"
     gated = figure_gated(result)
     if gated is not None:
         save_figure(figs / "gated.png", gated)
@@ -459,6 +473,10 @@ def write_report(result, out_dir, command: str = "", started_s: float | None = N
         "run_time_note": RUN_TIME_NOTE, "spike_exposure": spike_note,
         "sensor_times_s": result["timings_s"],
     }
+    if result.get("vision"):
+        from viform.measure.vision_comparison import vision_json
+
+        doc["vision"] = vision_json(result["vision"])
     doc = finite_json(doc)
     write_json(out / "metrics.json", doc)
 
@@ -515,6 +533,10 @@ def write_report(result, out_dir, command: str = "", started_s: float | None = N
                  "this sensor or scene, or no single clean edge in the "
                  "image (several exposures of the moving edge overlaid, as in the overflow pixel).</p></section>")
 
+    if "tracks" in paths:
+        from viform.measure.vision_comparison import vision_html
+
+        parts.append(vision_html(result["vision"], _img(paths["tracks"], "tracks over time against the truth")))
     if "dilemma" in paths:
         parts.append("<section id='dilemma'><h2>The dilemma: time resolution against dynamic range</h2>")
         parts.append(_img(paths["dilemma"], "time resolution against dynamic range"))

@@ -72,7 +72,7 @@ from viform.stream.container import SpikeSource, SpikeStream
 
 #: The chip's 16 selectable threshold levels, e⁻. Seed 000 §6 says the threshold "supports
 #: 16 levels of adjustment" without listing them; viform assumes a linear threshold DAC,
-#: (k + 1)·1,250 e⁻, which puts the effective Q calibrated on a real recording (≥ 16,188 e⁻,
+#: (k + 1)·1,250 e⁻, which puts the effective Q calibrated on a real recording (≥ 15,903 e⁻,
 #: docs/calibration.md) at level 12. The same table as
 #: :func:`viform.sensors.spike_presets.threshold_level_electrons`. Any other positive Q is allowed.
 CHIP_THRESHOLD_LEVELS_ELECTRONS = tuple(1250.0 * (k + 1) for k in range(16))

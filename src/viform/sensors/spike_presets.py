@@ -13,7 +13,8 @@ lumped into one Gamma(Q_eff) law, :mod:`viform.measure.calibration`). Light that
 during a recording only adds interval noise, so every recording bounds Q_eff from below:
 static recordings quoted in issue 10 give ≈ 9,500 e⁻ (RSD 0.025 at 17.9 ticks), and
 ``viform calibrate`` on the shared 40 kHz clip ``real_uhsr_250x250.npz`` gives
-Q_eff ≥ 16,188 e⁻ (95 % lower bound from its steadiest tiles; fit 20,218 e⁻). The
+Q_eff ≥ 15,903 e⁻ (95 % lower bound from its steadiest tiles; fit 19,260 e⁻; 16,188 before
+the clip's 3 % drift entered the rounding term). The
 built-in presets use the chip level nearest that bound, :data:`DEFAULT_THRESHOLD_LEVEL`
 (16,250 e⁻): the noisiest sensor the real data allow.
 
