@@ -642,7 +642,7 @@ def theoretical_rate_limits(link: LightLink, modulation: str = "ook", spikes_nee
 
 def max_error_free_rate(link: LightLink, modulation: str = "ook", n_bits: int = 400, seed: int = 0,
                         steps_per_octave: int = 4, min_bps: float | None = None,
-                        max_ticks: float = 4e6) -> dict:
+                        max_ticks: float = 4e6, max_ticks_per_try: float = 1e6) -> dict:
     """Highest bit rate (on a geometric grid below the clock limit) with zero errors in ``n_bits``,
     confirmed with a second seed.
 
@@ -650,12 +650,15 @@ def max_error_free_rate(link: LightLink, modulation: str = "ook", n_bits: int = 
     from the highest rate at which an on slot still gets more than half a spike (faster is
     photon-starved, BER ≳ ¼) down to ``min_bps`` (default: the clock limit / 2^12). The search
     stops once the rates tried have cost ``max_ticks`` sensor ticks in all (a slower rate costs
-    more ticks per bit); ``searched_down_to_bps`` then says how far it went.
+    more ticks per bit); ``searched_down_to_bps`` then says how far it went. No rate is tried
+    whose one run would hold more than ``max_ticks_per_try`` ticks (about 1 kB of memory each:
+    the CLI's per-run limit).
     """
     mod = get_modulation(modulation)
     factor = 2 ** (1 / check_int("steps_per_octave", steps_per_octave, 1))
     rate = link.sensor.clock_hz / mod.slots_per_bit
     lo = check_positive("min_bps", min_bps if min_bps is not None else rate / 4096)
+    lo = max(lo, n_bits * link.sensor.clock_hz / max_ticks_per_try)  # one try holds all its ticks
     # skip the grid rates where an on slot gets under half a spike (BER > ¼ by the theory)
     starved = theoretical_rate_limits(link, modulation, spikes_needed=0.5)["photon_limited_bps"]
     while rate > starved and rate / factor >= lo * (1 - 1e-9):
