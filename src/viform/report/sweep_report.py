@@ -79,33 +79,40 @@ def pareto_front(xs, ys, x_higher: bool, y_higher: bool) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ figures
-def figure_pareto(doc, x_key: str, y_key: str):
-    """Every point on two metrics, one colour per sensor, defaults as stars, points meeting the demands
-    ringed in green, the Pareto front of all points as a grey line."""
+def figure_pareto(doc, pairs):
+    """Every point on two metrics per panel (``pairs`` of (x, y) metric keys), one colour per sensor,
+    defaults as stars, points meeting the demands ringed in green, the Pareto front of all points as a
+    grey line, the demands' bounds as dotted green lines."""
     import matplotlib.pyplot as plt
 
     records = [r for r in doc["records"] if not r.get("skipped")]
     colours = _colours(doc["sensors"])
     meeting = set(doc["answer"]["meeting"])
-    fig, ax = plt.subplots(figsize=(10.5, 5.4))
-    fig.subplots_adjust(left=0.08, right=0.7, bottom=0.12, top=0.9)
+    fig, axes = plt.subplots(1, len(pairs), figsize=(6.2 * len(pairs) + 2.6, 5.0), squeeze=False)
+    fig.subplots_adjust(left=0.06, right=1 - 2.7 / (6.2 * len(pairs) + 2.6), bottom=0.13, top=0.86, wspace=0.28)
+    for ax, (x_key, y_key) in zip(axes.flat, pairs, strict=True):
+        _pareto_panel(ax, doc, records, colours, meeting, x_key, y_key)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="center right", bbox_to_anchor=(0.995, 0.5))
+    fig.suptitle("Trade-offs: each dot is one setting of one sensor", fontsize=11)
+    return fig
+
+
+def _pareto_panel(ax, doc, records, colours, meeting, x_key, y_key):
     xs = np.array([_value(r, x_key) for r in records])
     ys = np.array([_value(r, y_key) for r in records])
     ok = np.isfinite(xs) & np.isfinite(ys)
     logx = ok.any() and np.all(xs[ok] > 0) and xs[ok].max() / max(xs[ok].min(), 1e-300) > 30
     for key in doc["sensors"]:
         idx = [i for i, r in enumerate(records) if r["sensor"] == key and ok[i]]
-        if not idx:
-            continue
         ax.scatter(xs[idx], ys[idx], s=28, color=colours[key], alpha=0.85, label=key, zorder=3)
         for i in idx:
             if records[i]["default"]:
                 ax.scatter([xs[i]], [ys[i]], marker="*", s=230, color=colours[key], edgecolor="black",
                            linewidth=0.8, zorder=4)
     ring = [i for i, r in enumerate(records) if r["point_id"] in meeting and ok[i]]
-    if ring:
-        ax.scatter(xs[ring], ys[ring], s=110, facecolor="none", edgecolor="green", linewidth=1.6, zorder=5,
-                   label="meets every demand")
+    ax.scatter(xs[ring], ys[ring], s=110, facecolor="none", edgecolor="green", linewidth=1.6, zorder=5,
+               label="meets every demand")
     ax.scatter([], [], marker="*", s=150, color="white", edgecolor="black", label="sensor's default setting")
     if ok.sum() >= 2:
         hx, hy = sw.METRIC_DIRECTIONS.get(x_key, True), sw.METRIC_DIRECTIONS.get(y_key, True)
@@ -124,11 +131,10 @@ def figure_pareto(doc, x_key: str, y_key: str):
     ax.set_ylabel(metric_label(y_key))
     better = lambda k: "higher" if sw.METRIC_DIRECTIONS.get(k, True) else "lower"  # noqa: E731
     missing = int((~ok).sum())
-    ax.set_title(f"{metric_label(y_key)} against {metric_label(x_key)}\n({better(y_key)} and {better(x_key)} are "
-                 f"better; {missing} point{'s' if missing != 1 else ''} without both metrics not shown)", fontsize=10)
+    ax.set_title(f"{better(y_key)} {cmp.METRICS.get(y_key, (y_key,))[0]} and {better(x_key)} "
+                 f"{cmp.METRICS.get(x_key, (x_key,))[0]} are better\n({missing} point{'s' if missing != 1 else ''} "
+                 "without both metrics not shown)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    fig.legend(*ax.get_legend_handles_labels(), fontsize=8, loc="center right", bbox_to_anchor=(0.995, 0.5))
-    return fig
 
 
 def _split_demand(text: str):
@@ -255,9 +261,9 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
     paths = {}
-    for j, (x_key, y_key) in enumerate(doc["pareto"]):
-        save_figure(figs / f"pareto_{j}.png", figure_pareto(doc, x_key, y_key))
-        paths[f"pareto_{j}"] = (figs / f"pareto_{j}.png", f"{y_key} against {x_key}")
+    if any(not r.get("skipped") for r in doc["records"]):
+        save_figure(figs / "pareto.png", figure_pareto(doc, doc["pareto"]))
+        paths["pareto"] = (figs / "pareto.png", "trade-offs of two metrics, every point")
     for key in doc["sensors"]:
         fig = figure_curves(doc, key)
         if fig is not None:
@@ -299,7 +305,7 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
     parts.append("<section id='pareto'><h2>Trade-offs</h2><p class='note'>Each dot is one setting of one sensor; "
                  "the star is the sensor's default setting (what <code>viform compare</code> uses); green rings "
                  "meet every demand; dotted green lines are the demands' bounds.</p>")
-    parts += [_img(*paths[k]) for k in paths if k.startswith("pareto_")]
+    parts += [_img(*paths[k]) for k in paths if k == "pareto"]
     parts.append("</section><section id='curves'><h2>Each metric over the swept settings</h2>")
     parts += [_img(*paths[k]) for k in paths if k.startswith("curves_")]
     if not any(k.startswith("curves_") for k in paths):
