@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from viform._validate import ViformError
 from viform.cli.app import cli
 
 
@@ -35,6 +36,10 @@ from viform.cli.app import cli
 @click.option("--at", "at", default=None, help="Instants to score, s, comma-separated (default: 30/50/70 %).")
 @click.option("--height", type=int, default=64, show_default=True, help="Resolution of built-in scenes.")
 @click.option("--width", type=int, default=128, show_default=True)
+@click.option("--brightness", type=float, default=None,
+              help="Factor on the light of the dilemma and night-road-fog scenes.")
+@click.option("--speed", type=float, default=None, help="Factor on the dilemma scene's speeds.")
+@click.option("--visibility-m", type=float, default=None, help="Fog visibility of night-road-fog, m.")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Sweep seed; each point's noise seed is derived from it and the point.")
 @click.option("--out", "out_dir", type=click.Path(), default="viform-sweep", show_default=True,
@@ -50,8 +55,9 @@ from viform.cli.app import cli
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
-def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at, height, width, seed, out_dir,
-          workers, scheduler, worker_memory, list_parameters, no_progress, as_json, json_file):
+def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at, height, width, brightness, speed,
+          visibility_m, seed, out_dir, workers, scheduler, worker_memory, list_parameters, no_progress, as_json,
+          json_file):
     """Shoot SCENE with each --sensor at every setting --vary gives; score each point as `viform compare`
     does; write OUT/report.html (trade-offs, Pareto fronts, best images) and OUT/sweep.zarr.
 
@@ -77,9 +83,16 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
     from viform.report.sweep_report import console_lines, run_sweep_report
 
     instants = parse_instants(at)
+    options = {k: v for k, v in (("brightness", brightness), ("speed", speed), ("visibility_m", visibility_m))
+               if v is not None}
+    for name, scenes in (("brightness", ("dilemma", "night-road-fog")), ("speed", ("dilemma",)),
+                         ("visibility_m", ("night-road-fog",))):
+        if name in options and scene not in scenes:
+            raise ViformError(f"--{name.replace('_', '-')} applies to the {' and '.join(scenes)} scene"
+                              f"{'s' if len(scenes) > 1 else ''} only, not to SCENE = {scene!r}")
     plan = sw.make_plan(scene, list(sensors) or None, list(vary), height=height, width=width, duration_s=duration_s,
                         seed=seed, instants_s=instants, require=require, objective=objective,
-                        spike_image=spike_image)
+                        spike_image=spike_image, scene_options=options)
     check_outputs(out_dir, json_file)
     check_json_file(json_file)
     if workers is not None and scheduler is not None:

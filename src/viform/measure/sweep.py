@@ -57,8 +57,10 @@ from viform.measure import comparison as cmp
 METRIC_DIRECTIONS = {
     "psnr_log_db": True, "ssim_log": True, "saturated_fraction": False, "underexposed_fraction": False,
     "edge_width_px": False, "flicker_error": False, "dr_captured_db": True, "data_rate_mb_per_s": False,
-    "latency_s": False, "time_resolution_s": False,
+    "latency_s": False, "time_resolution_s": False, "targets_seen": True,
 }
+#: Contrast-to-noise at which a target counts as seen (as compare's verdict counts it).
+SEEN_CNR = 3.0
 #: Spike reconstructions a sweep can score (compare's names).
 SPIKE_IMAGES = ("best", "interval", "accumulation")
 #: Sensor keys a sweep can vary (every comparison sensor).
@@ -541,6 +543,8 @@ def run_point(context: SweepContext, point: Point) -> dict:
         set_num_threads(threads)
     metrics = {k: (float(v) if isinstance(v, (int, float, np.floating, np.integer)) else v)
                for k, v in shot.metrics.items()}
+    if isinstance(metrics.get("target_cnr"), dict):  # scenes with targets (night-road-fog): how many are seen
+        metrics["targets_seen"] = float(sum(v >= SEEN_CNR for v in metrics["target_cnr"].values()))
     images = None
     if not shot.skipped:
         images = np.stack([np.where(e.underexposed, np.nan, np.nan_to_num(np.asarray(e.lux, np.float64)))

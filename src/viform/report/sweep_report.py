@@ -47,8 +47,12 @@ def parameter_label(name: str) -> str:
     return name.replace("_", " ")
 
 
+#: Labels of the metrics a sweep adds to compare's.
+EXTRA_LABELS = {"targets_seen": f"targets seen (contrast-to-noise ≥ {sw.SEEN_CNR:g})"}
+
+
 def metric_label(key: str) -> str:
-    name = cmp.METRICS[key][0] if key in cmp.METRICS else key.replace("_", " ")
+    name = cmp.METRICS[key][0] if key in cmp.METRICS else EXTRA_LABELS.get(key, key.replace("_", " "))
     unit = _unit(key) if key in cmp.METRICS else ""
     return f"{name} ({unit})" if unit else name
 
@@ -315,11 +319,11 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
         parts.append("<section id='best'><h2>The best setting of each sensor, beside the truth</h2>"
                      + _img(*paths["best"]) + "</section>")
     cols = sw.metric_columns(doc["records"])
-    cols = [c for c in cols if c in cmp.METRICS]
+    cols = [c for c in cols if c in cmp.METRICS or c in EXTRA_LABELS]
     params = sorted({n for r in doc["records"] for n in r["swept"]})
     parts.append("<section id='points'><h2>Every point</h2><table><tr><th>point</th>"
                  + "".join(f"<th>{e(parameter_label(p))}</th>" for p in params)
-                 + "".join(f"<th>{e(cmp.METRICS[c][0])}<br><span class='note'>{e(_unit(c))}</span></th>" for c in cols)
+                 + "".join(f"<th>{e(metric_label(c))}</th>" for c in cols)
                  + "</tr>")
     meeting = set(ans["meeting"])
     for r in doc["records"]:
