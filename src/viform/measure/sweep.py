@@ -527,7 +527,9 @@ def run_point(context: SweepContext, point: Point) -> dict:
     """
     from numba import get_num_threads, set_num_threads
 
-    started, cpu = time.perf_counter(), time.thread_time()
+    # CPU of the whole process (numba may run a kernel on its own pool thread): one point at a time per
+    # worker process, so this is the point's CPU time (an overestimate when threads share a process)
+    started, cpu = time.perf_counter(), time.process_time()
     threads = get_num_threads()
     set_num_threads(1)  # one point per worker: parallelism comes from the workers
     try:
@@ -553,7 +555,7 @@ def run_point(context: SweepContext, point: Point) -> dict:
               "swept": dict(point.swept), "default": point.is_default, "label": point.label(),
               "shot_label": shot.label, "skipped": shot.skipped, "seed": seed, "metrics": metrics,
               "context_sha256": context.fingerprint(),
-              "seconds": time.perf_counter() - started, "cpu_seconds": time.thread_time() - cpu}
+              "seconds": time.perf_counter() - started, "cpu_seconds": time.process_time() - cpu}
     return {"record": record, "images": images}
 
 
