@@ -804,7 +804,6 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
     storing that many new points, as a kill would.
     """
     out = Path(out)
-    (out / POINTS_DIR).mkdir(parents=True, exist_ok=True)
     stored = {p.point_id: load_point(out, p, context) for p in points}
     todo = [p for p in points if stored[p.point_id] is None]
     records = {pid: r for pid, r in stored.items() if r is not None}
@@ -829,15 +828,16 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
 
     n_workers = 0
     own_client = own_cluster = None
+    if todo and client is None and workers != 0:  # a scheduler that cannot be reached: nothing written yet
+        n = max(1, min(os.cpu_count() or 1, len(todo))) if workers is None else workers
+        own_client, own_cluster = _open(n, scheduler, memory_limit)
+        client = own_client
+    (out / POINTS_DIR).mkdir(parents=True, exist_ok=True)
     try:
         if todo and client is None and workers == 0:
             for p in todo:
                 take(run_point(context, p))
         elif todo:
-            if client is None:
-                n = max(1, min(os.cpu_count() or 1, len(todo))) if workers is None else workers
-                own_client, own_cluster = _open(n, scheduler, memory_limit)
-                client = own_client
             from distributed import as_completed
 
             n_workers = len(client.scheduler_info().get("workers", {}))
