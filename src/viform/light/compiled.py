@@ -373,7 +373,11 @@ def tick_buffers(light: CompiledLight, n_ticks: int):
     if light.kind == "dilemma":
         d = light.dilemma
         rows = int(d["object_row1"]) - int(d["object_row0"])
-        return np.zeros((n_ticks, N_SCALARS)), np.zeros((n_ticks, rows, int(d["box_width"]))), np.zeros((1, 1, 1))
+        # ytab is unused by this kind; Fortran order gives the kernel call its own signature, so numba
+        # compiles it from the current sources instead of loading a kernel cached before this kind existed
+        # (numba's cache checks only the kernel's own file, not the light code it inlines)
+        return (np.zeros((n_ticks, N_SCALARS)), np.zeros((n_ticks, rows, int(d["box_width"]))),
+                np.zeros((1, 2, 2), order="F"))
     tables = light.kind == "pattern" and light.pattern == "texture"
     scalars = np.zeros((n_ticks, N_SCALARS))
     xtab = np.zeros((n_ticks if tables else 1, 4, light.width if tables else 1))
