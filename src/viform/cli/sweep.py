@@ -10,8 +10,12 @@ from pathlib import Path
 
 import click
 
+from viform._io import JSON_FILE_HELP
 from viform._validate import ViformError
 from viform.cli.app import cli
+
+#: Largest --speed factor of the dilemma scene a sweep accepts.
+MAX_SPEED = 100.0
 
 
 @cli.command("sweep")
@@ -54,7 +58,7 @@ from viform.cli.app import cli
 @click.option("--list-parameters", is_flag=True, help="List each sensor's parameters and defaults, and exit.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
-@click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
+@click.option("--json-file", type=click.Path(dir_okay=False), default=None, help=JSON_FILE_HELP)
 def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at, height, width, brightness, speed,
           visibility_m, seed, out_dir, workers, scheduler, worker_memory, list_parameters, no_progress, as_json,
           json_file):
@@ -90,6 +94,8 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
         if name in options and scene not in scenes:
             raise ViformError(f"--{name.replace('_', '-')} applies to the {' and '.join(scenes)} scene"
                               f"{'s' if len(scenes) > 1 else ''} only, not to SCENE = {scene!r}")
+    if speed is not None and speed > MAX_SPEED:  # the scene samples its window means every 0.5 px of motion
+        raise ViformError(f"--speed {speed:g} is not allowed: at most {MAX_SPEED:g} (× the scene's 2 000–3 000 px/s)")
     plan = sw.make_plan(scene, list(sensors) or None, list(vary), height=height, width=width, duration_s=duration_s,
                         seed=seed, instants_s=instants, require=require, objective=objective,
                         spike_image=spike_image, scene_options=options)

@@ -67,6 +67,8 @@ SPIKE_IMAGES = ("best", "interval", "accumulation")
 SWEEP_SENSORS = cmp.DEFAULT_SENSORS
 #: Default objective: the best point per sensor is the one closest to the truth.
 DEFAULT_OBJECTIVE = "psnr_log_db"
+#: Longest clip a sweep shoots, s (each point holds its frames or spikes in memory).
+MAX_DURATION_S = 10.0
 #: Most bytes of spike clip one point holds in memory (as ``viform compare``).
 MAX_SPIKE_BYTES = 2e9
 #: Format tag of sweep.json and point records; a change of the scoring bumps the version so old
@@ -537,8 +539,12 @@ def run_point(context: SweepContext, point: Point) -> dict:
         sensor = make_point_sensor(point.sensor, dict(point.settings))
         seed = point_seed(context.seed, point)
         methods = [context.spike_image] if point.sensor == "spike" else None
-        shots = cmp.shoot(point.sensor, scene, context.duration_s, list(context.instants_s), seed=seed,
-                          sensor=sensor, spike_methods=methods)
+        try:
+            shots = cmp.shoot(point.sensor, scene, context.duration_s, list(context.instants_s), seed=seed,
+                              sensor=sensor, spike_methods=methods)
+        except (ViformError, ValueError) as exc:  # this setting cannot shoot this scene (light beyond its range …)
+            why = one_line(exc) if isinstance(exc, ViformError) else f"the model refused this light ({one_line(exc)})"
+            shots = [cmp.Shot(point.sensor, point.label(), "", skipped=why)]
         shot = shots[0]
         shot.metrics = cmp.score(shot, scene, list(context.instants_s))
     finally:
@@ -879,10 +885,13 @@ def check_context(out: Path, context: SweepContext) -> None:
 
 def validate_inputs(scene: str, height: int, width: int, duration_s: float, seed: int, instants_s,
                     spike_image: str) -> tuple:
-    height = check_int("--height", height, 32)
-    width = check_int("--width", width, 48)
+    height = check_int("--height", height, 32, 4096)
+    width = check_int("--width", width, 48, 4096)
     seed = check_int("--seed", seed, 0, (1 << 63) - 1)
     check_positive("--duration", duration_s)
+    if duration_s > MAX_DURATION_S:
+        raise ViformError(f"--duration {duration_s:g} s is not allowed: a sweep shoots the clip once per point "
+                          f"and holds it in memory; at most {MAX_DURATION_S:g} s")
     if spike_image not in SPIKE_IMAGES:
         raise ViformError(f"--spike-image: {spike_image!r} is not allowed: choose from {', '.join(SPIKE_IMAGES)}")
     # compare's default instants: 30, 50 and 70 % of the clip
