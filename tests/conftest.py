@@ -11,5 +11,5 @@ SHARED_SPIKE_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "dat
 def spike_data_dir() -> Path:
     """``<repo>/../shared/data/spike``; tests that need it are skipped when it is absent."""
     if not SHARED_SPIKE_DATA.is_dir():
-        pytest.skip(f"shared spike data not found at {SHARED_SPIKE_DATA}")
+        pytest.skip(f"shared spike data absent: {SHARED_SPIKE_DATA}")
     return SHARED_SPIKE_DATA

@@ -80,6 +80,19 @@ def clean_stale(path) -> list[Path]:
     return done
 
 
+def folder_writable(folder) -> bool:
+    """Whether a file can be created in the existing ``folder``, tried by creating (and removing) one.
+
+    ``os.access`` is not enough: for root it says yes to read-only mounts and to ``/proc``.
+    """
+    try:
+        with tempfile.TemporaryFile(dir=folder, prefix=".viform-probe-"):
+            pass
+    except OSError:
+        return False
+    return True
+
+
 def _check_target(path: Path, directory: bool) -> None:
     from viform._validate import ViformError
 
@@ -92,7 +105,7 @@ def _check_target(path: Path, directory: bool) -> None:
         existing = existing.parent
     if not existing.is_dir():
         raise ViformError(f"{str(path)!r} cannot be written: {str(existing)!r} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
+    if not folder_writable(existing):
         raise ViformError(f"{str(path)!r} cannot be written: the folder {str(existing)!r} is not writable")
 
 
@@ -188,7 +201,7 @@ def check_output_folder(option: str, folder) -> None:
         existing = existing.parent
     if not existing.is_dir():
         raise ViformError(f"{option}: {existing} is not a folder, so {folder} cannot be created")
-    if not os.access(existing, os.W_OK | os.X_OK):
+    if not folder_writable(existing):
         raise ViformError(f"{option}: the folder {existing} is not writable")
 
 

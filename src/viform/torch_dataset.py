@@ -5,6 +5,11 @@ Use it as ``viform.torch.SpikeDataset``. Each item is a Spike-Zoo-style sample::
     {"spike": float32 tensor (T, H, W) of 0/1, "gt_img": float32 tensor (1, H, W) in [0, 1],
      "rate": float, "clip": str, "tick": int}
 
+and, for datasets made from built-in scenes (``viform dataset --scenes``), the exact truth:
+``flow`` (2, H, W) px and ``flow_valid`` (H, W), ``depth`` (H, W) m, ``boxes`` (N, 4) x, y, w, h
+px, ``ids``, ``classes`` and ``visibility`` (N,). ``boxes`` and friends differ in length from
+frame to frame: batch them with :func:`collate` (lists for those, stacks for the rest).
+
 ``T`` ticks are centred on a ground-truth frame (see :mod:`viform.datasets.loaders`), and
 ``spike.mean(0) / rate`` estimates ``gt_img`` (seed 000 §3.2: the firing rate is proportional
 to the light below saturation).
@@ -49,4 +54,24 @@ class SpikeDataset(Dataset):
         item = {"spike": torch.from_numpy(sample["spike"]).to(torch.float32),
                 "gt_img": torch.from_numpy(sample["gt_img"]),
                 "rate": float(sample["rate"]), "clip": sample["clip"], "tick": int(sample["tick"])}
+        for key in TRUTH_KEYS:
+            if key in sample:
+                item[key] = torch.from_numpy(sample[key])
         return self.transform(item) if self.transform is not None else item
+
+
+#: Truth keys of scene datasets; the last four vary in length per frame.
+TRUTH_KEYS = ("flow", "flow_valid", "depth", "boxes", "ids", "classes", "visibility")
+_PER_OBJECT = ("boxes", "ids", "classes", "visibility")
+
+
+def collate(samples: list[dict]) -> dict:
+    """Batch samples for a ``DataLoader(collate_fn=collate)``: per-object truth as lists, the rest stacked."""
+    from torch.utils.data import default_collate
+
+    fixed = [{k: v for k, v in s.items() if k not in _PER_OBJECT} for s in samples]
+    batch = default_collate(fixed)
+    for key in _PER_OBJECT:
+        if key in samples[0]:
+            batch[key] = [s[key] for s in samples]
+    return batch

@@ -136,6 +136,35 @@ def test_boundary_values_fail_cleanly_or_run(tmp_path, monkeypatch, command):
     assert failures == [], failures[:10]
 
 
+def test_options_that_crashed_or_hung_are_refused_in_one_line(tmp_path):
+    """Issue 26.5: each was a traceback, a worker's traceback or minutes of silent work."""
+    from viform.stream.container import SpikeStream
+    from viform.stream.io import save_spikes
+
+    dat = save_spikes(tmp_path / "x.dat", SpikeStream(np.random.default_rng(0).random((80, 8, 16)) < 0.2,
+                                                      40_000.0, 60.0))
+    clips = tmp_path / "src" / "clip1"
+    clips.mkdir(parents=True)
+    for k in range(2):
+        np.save(clips / f"{k}.npy", np.zeros((8, 16)))  # not read: the options are refused first
+    cases = {
+        "--fps": ["reconstruct", str(dat), "--method", "accumulation", "--every", "20", "--out",
+                  str(tmp_path / "r"), "--video", str(tmp_path / "v.gif"), "--fps", "1e-300"],
+        "--max-lux": ["dataset", str(tmp_path / "src"), "--out", str(tmp_path / "ds"), "--height", "8", "--width",
+                      "16", "--workers", "1", "--frame-rate-hz", "1000", "--max-lux", "2147483648"],
+        "--frame-rate-hz": ["dataset", str(tmp_path / "src"), "--out", str(tmp_path / "ds"), "--height", "8",
+                            "--width", "16", "--workers", "1", "--frame-rate-hz", "1e-300"],
+        "--force": ["simulate", "translating", "--height", "32", "--width", "48", "--duration", "0.005",
+                    "--out", str(tmp_path / "s.dat"), "--clock-hz", "2147483648"],
+    }
+    for flag, args in cases.items():  # refused before any work (the hang was the failure)
+        rc, err = run_inprocess(args)
+        assert classify(rc, err) == "refused" and flag in err, (args, rc, err)
+    left = sorted(p.name for p in tmp_path.rglob("*") if p.name not in ("x.dat", "x.dat.json", "src", "clip1")
+                  and p.suffix != ".npy")
+    assert left == []
+
+
 # ---------------------------------------------------------------- campaign (outside the suite)
 def campaign(timeout_s: float, values=None) -> dict:
     """Every numeric option of every command, from each command's default invocation, in-process

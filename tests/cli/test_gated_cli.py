@@ -3,6 +3,8 @@ waveforms, one-line errors."""
 
 import json
 
+import pytest
+
 from viform.cli import main
 
 
@@ -53,11 +55,30 @@ def test_gated_cli_bad_input_one_line(capsys, tmp_path):
         (["--visibility-m", "-5"], "--visibility-m"),
         (["--gate-m", "-1"], "--gate-m"),
         (["--pulses", "1000"], "pulses"),
-        (["--gate-m", "20000"], "gate_range_m"),
-        (["--waveforms", "--gate-m", "20000"], "gate_range_m"),
+        (["--gate-m", "20000"], "--gate-m = 20000 m is beyond"),  # the flag, not the library's gate_range_m
+        (["--waveforms", "--gate-m", "20000"], "--gate-m = 20000 m is beyond"),  # one gate timing for both
     ):
         out, js = tmp_path / "figs", tmp_path / "r.json"
         assert main(["gated", *args, "--out", str(out), "--json-file", str(js)]) == 2
         err = capsys.readouterr().err.strip()
         assert name in err and "\n" not in err and err.startswith("viform: error:")
         assert not out.exists() and not js.exists()  # no partial output
+
+
+def test_gated_set_changes_the_ccd_and_bad_names_are_refused(capsys):
+    """--set (issue 28): with a 1 ns transfer pulse the gate collects the paper's 1.135 µs and the
+    fitted optics need 84 pulses at 800 m again; every published figure carries its status."""
+    import json as _json
+
+    from viform.cli import main
+
+    assert main(["gated", "--set", "readout_pulse_s=1e-9", "--json"]) == 0
+    res = _json.loads(capsys.readouterr().out)
+    assert res["settings"] == {"readout_pulse_s": 1e-9}
+    assert res["gate"]["width_s"] == pytest.approx(1.136e-6, rel=1e-3)
+    fit = [r for r in res["pulses_both_ways"] if r["range_m"] == 800.0 and not r["optics"].startswith("default")]
+    assert fit[0]["threshold_pulses"] == 84
+    assert {f["status"].split(":")[0].split(" ")[0] for f in res["seed_figures"]} == {"predicted", "fitted", "refuted"}
+    assert main(["gated", "--set", "bloom=true"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--set" in err[0] and "gate_jitter_s" in err[0]

@@ -40,6 +40,8 @@ ARGS = {
     "sweep": ["dilemma", "--sensor", "cmos", "--workers", "0", "--out", "{tmp}/sw"],
     "chip-figures": ["--out", "{tmp}/chip"],
     "calibrate": ["{clip}"],
+    "flow": ["{clip}", "--at", "0.0002", "--dt", "0.0002", "--out", "{tmp}/flow"],
+    "track": ["{clip}", "--every", "10", "--out", "{tmp}/trk"],
 }
 
 

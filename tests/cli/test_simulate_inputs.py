@@ -55,9 +55,25 @@ def test_short_video_warns_that_its_last_frame_is_held(tmp_path, capsys):
     assert rc == 0 and "warning" in err and "0.003 s" in err
 
 
-def test_video_without_a_frame_rate_names_the_flag(tmp_path):
+def test_video_without_a_frame_rate_names_the_flag(tmp_path, capsys):
+    """The library names its parameter, each command the flag the user types (highspeed's is --scene-fps)."""
     folder = tmp_path / "frames"
     folder.mkdir()
     iio.imwrite(folder / "000.png", np.zeros((4, 4), np.uint8))
-    with pytest.raises(ValueError, match="--frame-rate-hz"):
+    with pytest.raises(ValueError, match="give it with frame_rate_hz"):
         load_scene(str(folder), 4, 4)
+    assert main(["simulate", str(folder), "--duration", "0.001", "--out", str(tmp_path / "s.npz")]) == 2
+    assert "give it with --frame-rate-hz" in capsys.readouterr().err
+    assert main(["highspeed", str(folder), "--out", str(tmp_path / "hs")]) == 2
+    assert "give it with --scene-fps" in capsys.readouterr().err
+
+
+def test_a_video_lasts_its_own_length_without_duration(tmp_path, capsys):
+    """Issue 27 item 9: a video declares its length; --duration is needed only to change it."""
+    video = tmp_path / "v.mp4"
+    iio.imwrite(video, np.full((4, 16, 16), 90, np.uint8), extension=".mp4", fps=100, codec="libx264")
+    out = tmp_path / "s.npz"
+    assert main(["simulate", str(video), "--out", str(out), "--json"]) == 0
+    summary = __import__("json").loads(capsys.readouterr().out)
+    assert summary["duration_from"] == "the video's length"
+    assert open_spikes(out).n_ticks == round(4 / 100 * 40_000)

@@ -255,7 +255,8 @@ def test_too_many_pixels_refused(tmp_path):
 DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
 
 
-@pytest.mark.skipif(not (DATA / "real_uhsr_250x250.npz").exists(), reason="shared spike data not present")
+@pytest.mark.skipif(not (DATA / "real_uhsr_250x250.npz").exists(),
+                    reason=f"shared spike data absent: {DATA / 'real_uhsr_250x250.npz'}")
 def test_real_file_strict_ratio(tmp_path):
     """Strict coding of the real recording is lossless and ≥ 3× smaller than the packed bits."""
     from viform.stream.io import open_spikes
@@ -344,7 +345,8 @@ def test_forged_range_coded_records(tmp_path):
     assert "error" in outcomes
 
 
-@pytest.mark.skipif(not (DATA / "real_uhsr_250x250.npz").exists(), reason="shared spike data not present")
+@pytest.mark.skipif(not (DATA / "real_uhsr_250x250.npz").exists(),
+                    reason=f"shared spike data absent: {DATA / 'real_uhsr_250x250.npz'}")
 def test_real_file_strict_beats_xz_twice(tmp_path):
     """The issue's goal: strict (lossless) coding ≥ 2× the ratio of xz -9e on the same packed bits.
 

@@ -176,7 +176,8 @@ def _interval_psnr(spikes, truth_rate, first=600, last=None, step=300):
 DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
 
 
-@pytest.mark.skipif(not (DATA / "reds_sim_400x250.dat").exists(), reason="shared spike data not present")
+@pytest.mark.skipif(not (DATA / "reds_sim_400x250.dat").exists(),
+                    reason=f"shared spike data absent: {DATA / 'reds_sim_400x250.dat'}")
 def test_real_file_first_spikes_strict_round_trip():
     from viform.stream.io import open_spikes
 

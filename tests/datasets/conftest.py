@@ -113,7 +113,7 @@ def source_with_broken_clip(source_clips, tmp_path) -> Path:
 def spike_zoo_layout(tmp_path) -> Path:
     """The Spike-Zoo 'base' layout: spike/<name>.dat, gt/<name>.png, config.yaml (links to the shared files)."""
     if not (SHARED / "reds_sim_400x250.dat").is_file():
-        pytest.skip("shared spike data (../shared/data/spike) is absent")
+        pytest.skip(f"shared spike data absent: {SHARED / 'reds_sim_400x250.dat'}")
     (tmp_path / "spike").mkdir()
     (tmp_path / "gt").mkdir()
     for name in ("reds_sim", "reds_sim2"):

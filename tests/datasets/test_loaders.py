@@ -12,7 +12,7 @@ from viform.datasets.loaders import open_dataset, spikes_to_tonic
 
 SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
 pytestmark = pytest.mark.skipif(not (SHARED / "reds_sim_400x250.dat").is_file(),
-                                reason="shared spike data (../shared/data/spike) is absent")
+                                reason=f"shared spike data absent: {SHARED / 'reds_sim_400x250.dat'}")
 
 
 def test_spike_zoo_layout_sample_reconstructs_its_ground_truth(spike_zoo_layout):

@@ -183,3 +183,23 @@ def test_cli_json_flag_prints_the_report(tmp_path, capsys):
     printed = json.loads(capsys.readouterr().out)
     assert printed["frames_captured"] == 6
     assert json.loads((tmp_path / "r.json").read_text())["frames_captured"] == 6
+
+
+def test_exposure_figure_legends_cover_no_trace():
+    """Issue 27 item 15: the legend sat on the exposure trace after the light step. Legends now
+    stand beside the plots: no legend box overlaps either axes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from viform.isp.highspeed_pipeline import exposure_figure
+
+    scene = StepsScene(ScaledScene(TranslatingScene(16, 24), 60.0), [(0.01, 10.0)])
+    result = run_highspeed(scene, HighSpeedConfig(n_frames=30))
+    fig = exposure_figure(result, [0.01])
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    axes = [ax.get_window_extent(renderer) for ax in fig.axes]
+    legends = [ax.get_legend().get_window_extent(renderer) for ax in fig.axes if ax.get_legend() is not None]
+    assert len(legends) == 2
+    for box in legends:
+        assert not any(box.overlaps(a) for a in axes)

@@ -92,3 +92,25 @@ def test_fog_hides_the_signs_from_a_passive_camera_but_not_the_range():
     np.testing.assert_array_equal(clear.active.range_m, fog.active.range_m)
     assert np.all(clear.active.range_m[mask] == 60.0)
     assert fog.active.medium.extinction_per_m == pytest.approx(3.912 / 100.0)
+
+
+@pytest.mark.parametrize("t_s", [0.012, 0.02, 0.028])
+def test_every_dark_strip_is_labelled_and_the_small_object_is_pointed_at(t_s):
+    """Issue 27 item 15: the figure labelled the object where nothing showed (the label box sat on
+    it) and left the deep-shadow strip below the road unlabelled."""
+    from scipy.ndimage import label
+
+    scene = DilemmaScene(64, 128)
+    marks = scene.landmarks(t_s)
+    truth = scene.illuminance_lux(t_s)
+    strips, n = label(truth <= scene.shadow_lux * 1.01)
+    assert n == 2  # the road crosses the deep-shadow corner
+    labelled = set()
+    for where in marks.values():
+        col, row = int(min(where[0], scene.width - 1)), int(min(where[1], scene.height - 1))
+        labelled.add(strips[row, col])
+    assert {1, 2} <= labelled
+    obj = next(where for name, where in marks.items() if name.startswith("small dim object"))
+    assert len(obj) == 4  # its label stands apart, with an arrow to it
+    assert truth[int(round(obj[1])), int(round(obj[0]) % scene.width)] > 1.5 * truth[int(round(obj[1])), 0]
+    assert abs(obj[3] - obj[1]) >= 0.05 * scene.height  # the text is off the object's row

@@ -161,3 +161,17 @@ def test_quantization_limited_sensor_gain_is_not_biased():
     # and the output says why the DR falls short of the parameters' figure
     assert any("0.49 DN" in w for w in r["warnings"])
     assert r["dynamic_range_db"] < r["expected"]["dynamic_range_db"]
+
+
+@pytest.mark.parametrize("leak", [2e4, 2e5])
+def test_storage_leakage_shows_in_dark_noise_and_dsnu(leak):
+    """Issue 28: a global shutter's storage leakage over the row-by-row wait w_r = (r + 1)/H·T_read
+    does not scale with the exposure, so EMVA 1288 sees it at zero exposure: the dark noise grows
+    to √(σ_r² + leak·mean w) (Poisson) and the DSNU to √(DSNU² + leak²·var w) (the row gradient)."""
+    sensor = make_sensor("seed001-normal", storage_leakage_e_per_s=leak, readout_time_s=0.01)
+    r = characterize_frame_sensor(sensor, height=48, width=48, n_points=20, spatial_frames=8, seed=2)
+    e = expected_linear_figures(sensor, 48)
+    assert e["temporal_dark_noise_electrons"] > 3 * sensor.parameters.read_noise_electrons
+    # σ_d from a 2304-pixel dark variance intercept: ±3 %·2 ; DSNU from one pattern: ±3 %
+    assert r["temporal_dark_noise_electrons"] == pytest.approx(e["temporal_dark_noise_electrons"], rel=0.08)
+    assert r["dsnu_electrons"] == pytest.approx(e["dsnu_electrons"], rel=0.08)

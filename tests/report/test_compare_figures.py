@@ -20,7 +20,13 @@ def test_dilemma_legend_and_numbers_fit(small, check_layout):
     fig = cr.figure_dilemma(small)
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
     shots = [s for s in small["shots"] if not s.skipped and s.lux_units]
-    assert len(labels) == len(shots) + 2  # every sensor, the scene's demand and the region meeting both
+    # every sensor, the scene's demand, the region meeting both, and the dotted frame-interval line
+    # (issue 27: a 130 µs integration repeated every 16.7 ms is drawn on to its frame interval)
+    assert len(labels) == len(shots) + 3
+    assert any(label.startswith("dotted: from the integration time") for label in labels)
+    dotted = [line for line in fig.axes[0].lines if line.get_linestyle() == ":" and len(line.get_xdata()) == 2]
+    seg = next(s for s in shots if s.key == "seed001-2seg")
+    assert any(line.get_xdata()[1] == pytest.approx(1 / seg.frame_rate_hz) for line in dotted)
     check_layout(fig)
 
 

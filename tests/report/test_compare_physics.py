@@ -124,12 +124,12 @@ def test_verdict_follows_the_metrics():
     a = _shot("alpha", edge_width_px=1.0, dr_captured_db=50.0)
     b = _shot("beta", edge_width_px=9.0, dr_captured_db=110.0)
     text = " ".join(cmp.verdict([a, b], demand))
-    assert "Sharpest motion: alpha" in text and "Widest range rendered within a factor of 2: beta" in text
+    assert "Sharpest moving edge: alpha" in text and "Widest range rendered within a factor of 2: beta" in text
     assert "no sensor" in text
     a2 = _shot("alpha", edge_width_px=9.0, dr_captured_db=125.0, time_resolution_s=5e-5)
     b2 = _shot("beta", edge_width_px=1.0, dr_captured_db=50.0)
     text2 = " ".join(cmp.verdict([a2, b2], demand))
-    assert "Sharpest motion: beta" in text2 and "Widest range rendered within a factor of 2: alpha" in text2
+    assert "Sharpest moving edge: beta" in text2 and "Widest range rendered within a factor of 2: alpha" in text2
     assert "Meets both the scene's range and its speed: alpha" in text2
 
 
@@ -148,8 +148,8 @@ def test_motion_verdict_holds_when_the_speed_changes(speed):
             shot.metrics = cmp.score(shot, scene, instants)
             shots.append(shot)
     lines = cmp.verdict(shots, scene.demand())
-    motion = next(line for line in lines if line.startswith("Sharpest motion"))
-    assert motion.startswith(f"Sharpest motion: {cmp.SENSOR_LABELS['seed001-3seg']}")
+    motion = next(line for line in lines if line.startswith("Sharpest moving edge"))
+    assert motion.startswith(f"Sharpest moving edge: {cmp.SENSOR_LABELS['seed001-3seg']}")
     assert f"the most blurred is {cmp.SENSOR_LABELS['cmos']}" in motion
 
 
@@ -173,3 +173,65 @@ def test_fog_hides_targets_from_a_passive_camera_not_from_the_gated_one():
     assert cnr[150.0, "cmos"]["sign 90 m"] < 3 and cnr[150.0, "cmos"]["sign 120 m"] < 3
     assert cnr[150.0, "gated"]["sign 90 m"] > 3
     assert all(cnr[150.0, "gated"][s] > cnr[150.0, "cmos"][s] for s in signs)
+
+
+def _sensor(key, label, *, lux=True, rate_hz=30.0, **metrics):
+    s = _shot(label, **metrics)
+    s.key, s.lux_units, s.frame_rate_hz = key, lux, rate_hz
+    return s
+
+
+def test_verdict_ranks_every_sensor_on_sensor_metrics_and_names_ties():
+    """Issue 27: the gated CCD (no lux image) was left out of 'least data' and 'longest latency'
+    though the table showed it winning both, and four sensors at 33.33 ms were one 'longest'."""
+    four = [_sensor(k, k, latency_s=1 / 30, data_rate_mb_per_s=0.369) for k in ("c1", "c10", "4t", "ovf")]
+    fast = _sensor("hs", "hs", latency_s=0.0006, data_rate_mb_per_s=17.1, rate_hz=1667.0)
+    gated = _sensor("gated", "gated", lux=False, latency_s=0.0727, data_rate_mb_per_s=0.307, rate_hz=25.0)
+    for g in (gated,):
+        for k in ("psnr_log_db", "ssim_log", "edge_width_px", "flicker_error", "dr_captured_db"):
+            g.metrics[k] = math.nan
+    skipped = cmp.Shot("x", "ex", "ex", skipped="not in range")
+    lines = cmp.verdict([*four, fast, gated, skipped], None)
+    by_start = {line.split(":")[0]: line for line in lines}
+    assert by_start["Least data"].startswith("Least data: gated, 0.307 MB/s")
+    assert by_start["Shortest latency"] == "Shortest latency: hs, 0.6 ms; longest: gated, 72.7 ms."
+    # the image metrics rank only the lux sensors, and say who was left out and why
+    assert "gated" not in by_start["Closest to the truth overall (PSNR of log-lux)"]
+    assert any(line.startswith("Not ranked on the image") and "gated" in line for line in lines)
+    assert any(line.startswith("Not in this comparison: ex: not in range") for line in lines)
+    # a tie at the precision shown names every member
+    gated.metrics["latency_s"] = 1 / 30
+    lines = cmp.verdict([*four, fast, gated], None)
+    longest = next(line for line in lines if line.startswith("Shortest latency"))
+    assert "longest: 5 sensors tie: c1, c10, 4t, ovf and gated, 33.3 ms" in longest
+
+
+def test_verdict_gives_the_sharpest_edge_its_frame_interval_and_explains_spike_blur():
+    """Issue 27: a 0.13 ms segment 60 times a second read as the motion winner; the spike
+    interval image's 41 px blur beside a 3.8 ms median integration had no cause given."""
+    seg = _sensor("seed001-2seg", "seg", rate_hz=60.0, time_resolution_s=0.13e-3, edge_width_px=0.55,
+                  underexposed_fraction=0.305, latency_s=1 / 60)
+    spike = _sensor("spike-interval", "spike interval", rate_hz=40e3, time_resolution_s=3.8e-3, edge_width_px=40.8,
+                    edge_dark_integration_s=23.5e-3)
+    slow = _sensor("seed003-4t", "4t", time_resolution_s=33.3e-3, edge_width_px=61.5)
+    lines = cmp.verdict([seg, spike, slow], None)
+    motion = next(line for line in lines if line.startswith("Sharpest moving edge"))
+    assert "integration 0.13 ms, a new image every 16.7 ms" in motion and "only 60 images a second" in motion
+    assert "30% of its pixels under-exposed" in motion or "31% of its pixels under-exposed" in motion
+    assert "the most blurred is 4t at 61.5 px, because its integration time is 33.3 ms" in motion
+    blur = next(line for line in lines if line.startswith("spike interval:"))
+    assert "40.8 px" in blur and "every 23.5 ms" in blur and "3.8 ms" in blur
+
+
+def test_verdict_bounds_the_spike_range_by_the_clip():
+    """The spike camera's formula (150 dB for SpikeOne) needs 812 s intervals; a 40 ms clip shows ≤ 64 dB."""
+    from viform.measure.dynamic_range import clip_limited_dynamic_range_db, dynamic_range_db
+
+    s = _sensor("spike-interval", "spike", rate_hz=40e3)
+    longest = 16250 / 20.0
+    s.parameters = {"clip_s": 0.04, "longest_interval_s": longest, "formula_dr_db": dynamic_range_db(25e-6, longest),
+                    "clip_limited_dr_db": clip_limited_dynamic_range_db(25e-6, longest, 0.04)}
+    line = next(line for line in cmp.verdict([s], None) if line.startswith("The spike camera's range"))
+    assert "at most 64 dB" in line and "150 dB" in line and "812 s" in line
+    assert clip_limited_dynamic_range_db(25e-6, longest, 0.04) == pytest.approx(20 * math.log10(1600))
+    assert clip_limited_dynamic_range_db(25e-6, 2.0, 10.0) == pytest.approx(dynamic_range_db(25e-6, 2.0))

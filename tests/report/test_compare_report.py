@@ -54,7 +54,8 @@ def test_report_is_self_contained(report):
     text = (out / "report.html").read_text()
     assert "<script" not in text and "<link" not in text
     assert not re.search(r"""(src|href)\s*=\s*["']?(https?:)?//""", text)
-    assert text.count("data:image/png;base64,") == 2 + 2 * 2  # scene, summary + images and errors at 2 instants
+    # scene, summary + images and errors at 2 instants + the vision section's tracks (the scene has object truth)
+    assert text.count("data:image/png;base64,") == 2 + 2 * 2 + 1
 
 
 class _Sections(HTMLParser):

@@ -13,21 +13,26 @@ C = 299_792_458.0
 
 
 def test_gate_timing_arithmetic():
-    """Seed 004 Fig. 3: delay 2R/c, t_нак = τ + t_min; range window (R − cτ/2, R + c t_нак/2)."""
+    """Seed 004 Fig. 3: delay 2R/c, t_нак = τ + t_min to the readout pulse; light counts until
+    the readout pulse ends (1 µs more); range window (R − cτ/2, R + c (t_нак + t_read)/2)."""
     t = GateTiming(150.0, PulsedLaser(pulse_width_s=135e-9), 1e-6)
     assert t.open_s == pytest.approx(2 * 150.0 / C)  # 1000.7 ns
-    assert t.width_s == pytest.approx(1.135e-6)
+    assert t.accumulation_s == pytest.approx(1.135e-6)
+    assert t.transfer_start_s == pytest.approx(t.open_s + 1.135e-6)
+    assert t.width_s == pytest.approx(2.135e-6)
     lo, hi = t.range_window_m
     assert lo == pytest.approx(150.0 - C * 135e-9 / 2)
-    assert hi == pytest.approx(150.0 + C * 1.135e-6 / 2)
+    assert hi == pytest.approx(150.0 + C * 2.135e-6 / 2)  # ≈ 470 m
     assert lo > 100.0 and hi > 300.0  # seed: 100 m rejected, 300 m seen with the gate at 150 m
+    short = GateTiming(150.0, PulsedLaser(pulse_width_s=135e-9), 1e-6, readout_pulse_s=0.25e-6)
+    assert short.width_s == pytest.approx(1.385e-6)
 
 
 def test_gate_beyond_unambiguous_range_rejected():
     laser = PulsedLaser(repetition_hz=15e3)  # period 66.7 µs -> c/2f = 9993 m
     with pytest.raises(ViformError, match="gate_range_m.*unambiguous"):
         GatedInterlineCCD(gate_range_m=9990.0, laser=laser)
-    GatedInterlineCCD(gate_range_m=9800.0, laser=laser)  # fits
+    GatedInterlineCCD(gate_range_m=9600.0, laser=laser)  # fits
 
 
 def test_bad_inputs_name_the_parameter():

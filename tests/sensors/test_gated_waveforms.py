@@ -91,3 +91,40 @@ def test_waveform_figure_describes_the_run_not_the_shortened_drawing(tmp_path, m
     top = titles[0]
     assert "X = 20 pulses" in top and f"frame {full.info['frame_s'] * 1e3:.4g} ms" in top
     assert "first 4 of 20 pulses" in top
+
+
+@pytest.mark.parametrize("part", ["icx618", "icx445", "icx279", "icx659"])
+def test_drawn_gate_is_the_modelled_gate(part):
+    """One timing model (issue 28): the drive drawn for a sensor opens (SUB falls) and closes
+    (readout pulse ends, SUB rises) exactly where the sensor's physics collects light, and the
+    fraction of a return the drawing lets in (RETURN high while SUB is low) equals the fraction
+    of a reflector's electrons the model counts in its gate, from before the gate to past it."""
+    import numpy as np
+
+    from viform.light.active import ActiveScene, PointRetroreflector
+    from viform.sensors.gated_ccd import GatedInterlineCCD
+
+    ccd = GatedInterlineCCD(pulses=3, gate_range_m=150.0)
+    t = ccd.timing
+    tr = ccd.drive_waveforms(part, lines=2)
+    fires = tr.edges("LASER", ccd.laser.peak_power_w)
+    reads = tr.drive.readout_gates
+    assert tr.edges("SUB", SUB_LOW_V) - fires == pytest.approx([t.open_s] * 3, abs=1e-12)
+    assert tr.edges(reads[0], V_READ_V) - fires == pytest.approx([t.transfer_start_s] * 3, abs=1e-12)
+    ends = tr.edges(reads[0], V_MID_V)
+    ends = np.array([e for e in ends if any(0 < e - f < ccd.laser.period_s for f in fires)])[:3]
+    assert ends - fires == pytest.approx([t.close_s] * 3, abs=1e-12)
+    rises = tr.edges("SUB", SUB_HIGH_V)[-3:]
+    assert rises - fires == pytest.approx([t.close_s] * 3, abs=1e-12)   # SUB stays low through the pulse
+    tau = ccd.laser.pulse_width_s
+    for r in (120.0, 140.0, 150.0, 300.0, 460.0, 480.0):
+        tr_r = drive_waveforms(part, pulses=1, lines=1, target_range_m=r, timing=t)
+        grid = np.linspace(0.0, tr_r.stages[1][2], 400_001)
+        idx = np.searchsorted(tr_r.times_s, grid, side="right") - 1
+        inside = (tr_r.levels["RETURN"][idx] > 0) & (tr_r.levels["SUB"][idx] == SUB_LOW_V)
+        drawn = inside.sum() * (grid[1] - grid[0]) / tau
+        scene = ActiveScene(range_m=np.full((9, 9), np.inf), reflectance=0.0, ambient_lux=0.0,
+                            retroreflectors=[PointRetroreflector(r, 4.0, 4.0)])
+        g = ccd.geometry
+        model = g.retroreflector_electrons(scene, t.open_s, t.close_s).sum() / g.retroreflector_electrons(scene).sum()
+        assert drawn == pytest.approx(model, abs=0.01)

@@ -178,7 +178,9 @@ def test_frame_capture_and_metadata():
         (dict(segment_times_s=(-1e-6, 10e-6)), "segment_times_s[0]"),
         (dict(segment_times_s=(0.01, 0.01)), "frame period"),
         (dict(clamp_levels_electrons=(5000.0, 4000.0), segment_times_s=(1e-5, 1e-5, 1e-5)), "clamp_levels_electrons"),
-        (dict(clamp_levels_electrons=(20_000.0,)), "clamp_levels_electrons"),
+        (dict(clamp_levels_electrons=(20_000.0,)), "clamp_levels_electrons[0] = 20000 exceeds the full well"),
+        (dict(clamp_levels_electrons=(2000.0, 12_000.0), segment_times_s=(1e-5, 1e-5, 1e-5)),
+         "clamp_levels_electrons[1] = 12000 exceeds the full well"),
         (dict(clamp_levels_electrons=(1.0, 2.0, 3.0)), "clamp_levels_electrons"),
     ],
 )
@@ -257,6 +259,11 @@ def test_fraction_family_fig8():
     assert 20 * np.log10(sats[8] / sats[0]) == pytest.approx(10.88, abs=0.01)
     assert all(sats[kk] == pytest.approx(30, abs=0.02) for kk in range(1, 5))  # f1 ≤ b1: never binds
     assert all(sats[kk] < sats[kk + 1] for kk in range(4, 8))
+    # the knee output is b1/f1 of the full scale: 374 DN only at 8/8, then 427 / 499 / 598 DN
+    for kk, dn in ((8, 374), (7, 427), (6, 499), (5, 598)):
+        f1 = kk / 8 * f1max
+        q = segmented_charge_electrons(np.array([b1 / f1 * (1 - 1e-9)]), (f1, 1 - f1), (b1, 1.0))[0]
+        assert q * 748 == pytest.approx(dn, abs=0.5)
 
 
 def test_three_segment_fit_is_a_one_parameter_family():

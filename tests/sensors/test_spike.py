@@ -130,6 +130,24 @@ def test_threshold_spread_is_fixed_pattern():
     assert np.array_equal(q, SpikeSensor(threshold_spread_fraction=0.1).threshold_map_electrons(64, 64))
 
 
+@pytest.mark.parametrize("spread", [0.1, 0.49])
+def test_threshold_spread_is_log_normal(spread):
+    """The threshold spread stays positive without a spike at a clip: ln Q_p is normal with
+    σ² = ln(1 + spread²) and mean ln Q − σ²/2 (so E Q_p = Q, std/mean = spread). On 4,096
+    pixels: mean within 5 standard errors (Q·spread/√n, plus ½ e⁻ of rounding), std / mean
+    within 5 relative standard errors √((2 + κ)/(4n)) (κ the log-normal excess kurtosis),
+    skewness of ln Q_p within 5·√(6/n), and no pixel at the floor: P(Q_p ≤ 2) < 1e-14 at
+    Q = 100. The clipped Gaussian it replaces put 99 of 4,096 pixels at Q = 1 at spread 0.49."""
+    q0, n = 100.0, 64 * 64
+    q = SpikeSensor(threshold_electrons=q0, threshold_spread_fraction=spread).threshold_map_electrons(64, 64)
+    sigma2 = math.log1p(spread ** 2)
+    kurtosis = math.exp(4 * sigma2) + 2 * math.exp(3 * sigma2) + 3 * math.exp(2 * sigma2) - 6
+    assert q.min() > 2
+    assert abs(q.mean() - q0) < 5 * q0 * spread / math.sqrt(n) + 0.5
+    assert q.std() / q.mean() == pytest.approx(spread, rel=5 * math.sqrt((2 + kurtosis) / (4 * n)))
+    assert abs(stats.skew(np.log(q).ravel())) < 5 * math.sqrt(6 / n)
+
+
 def test_chip_threshold_levels():
     from viform.sensors.spike_presets import threshold_level_electrons
 
@@ -415,8 +433,8 @@ def test_dead_time_compresses_the_rate(per_tick, dead_ticks):
     the renewal rate is λ/(Q + λ·t_d) (per tick: r/(Q + r·d), r e⁻/tick, d ticks): 0.4 instead
     of 0.5 at r = Q/2, d = 0.5, and 1/(2 + 0.01) instead of 1 far above saturation at d = 2.
     Every interval is > 1 tick, so no crossing is lost to the readout. Tolerance: renewal count
-    variance n·rate·CV² + 1 (CV = √Q/r / (Q/r + d)), plus a start-up bias ≤ d/(Q/r + d) spike
-    per pixel (the initial state ignores the dead time)."""
+    variance n·rate·CV² + 1 (CV = √Q/r / (Q/r + d)); the start is stationary (no start-up
+    bias allowed, see :func:`test_dead_time_start_is_stationary`)."""
     q, n_ticks, side = 100, 4000, 16
     sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0, dead_time_s=dead_ticks / 40e3)
     lux = lux_for_electrons_per_tick(sensor, per_tick)
@@ -425,7 +443,62 @@ def test_dead_time_compresses_the_rate(per_tick, dead_ticks):
     expected = 1 / mean_interval
     cv2 = (q / per_tick ** 2) / mean_interval ** 2
     se = math.sqrt((n_ticks * expected * cv2 + 1) / side ** 2) / n_ticks
-    assert abs(rate - expected) < 5 * se + dead_ticks / mean_interval / n_ticks
+    assert abs(rate - expected) < 5 * se
+
+
+def _stationary_rate_per_tick(q, per_tick, dead_ticks, reset, noise):
+    """Steady firing probability per tick, from renewal theory (seed 000 §5.1 plus dead time).
+
+    Self-reset: in charge time the crossings are a renewal process with cycles G + D (G ~
+    Gamma(Q), or Q without noise; D = r·d); a tick (r of charge time) holds a crossing with
+    probability E[min(G + D, r)]/(Q + D) (the forward recurrence time below r). Reset at
+    readout: cycles of N = ⌈(G + D)/r⌉ whole ticks, rate 1/E[N].
+    """
+    dead = per_tick * dead_ticks
+    if reset == "self":
+        if not noise:
+            return min(per_tick, q + dead) / (q + dead)
+        if per_tick <= dead:
+            return per_tick / (q + dead)
+        x = per_tick - dead
+        mean_min = dead + q * stats.gamma(q + 1).cdf(x) + x * stats.gamma(q).sf(x)
+        return mean_min / (q + dead)
+    if not noise:
+        return 1 / math.ceil((q + dead) / per_tick)
+    m = np.arange(1, 400)
+    cdf = stats.gamma(q).cdf
+    probabilities = cdf(m * per_tick - dead) - cdf((m - 1) * per_tick - dead)
+    return 1 / float((m * probabilities).sum())
+
+
+@pytest.mark.parametrize("q,per_tick,dead_ticks,reset,noise", [
+    (100, 50.0, 2.4, "self", True),  # the audit's case: 0.49, 0.47, 0.04, 0.0005, 0.30 fired at first
+    (100, 50.0, 0.5, "self", True),
+    (20, 200.0, 0.3, "self", True),  # near saturation: several crossings a tick possible
+    (100, 30.0, 0.5, "self", False),
+    (100, 40.0, 0.7, "readout", True),
+    (100, 35.0, 1.5, "readout", False),
+    (100, 50.0, 0.0, "self", True),  # no dead time: unchanged
+])
+def test_dead_time_start_is_stationary(q, per_tick, dead_ticks, reset, noise):
+    """The start is the renewal process's stationary state *with* dead time: every one of the
+    first ticks fires at the steady rate r (binomial over P pixels: ± 5·√(r(1 − r)/P)), and
+    the mean count over 200 ticks is 200·r within 5 standard errors of a renewal count
+    (variance ≤ n·r·CV² + 1 per pixel; CV² ≤ 1/Q + 1/(6 μ²) with tick rounding, bounded by 1).
+    Before the fix, the audit's case fired 0.49, 0.47, 0.04, 0.0005, 0.30 of the pixels in
+    the first five ticks against 0.227, and counted 45.752 against 45.455 over 200 ticks."""
+    side, n_ticks = 64, 200
+    sensor = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=0.0, dead_time_s=dead_ticks / 40e3,
+                         reset=reset, photon_noise=noise)
+    lux = lux_for_electrons_per_tick(sensor, per_tick)
+    spikes = sensor.capture(StillScene(np.full((side, side), lux)), n_ticks / 40e3, seed=5).spikes
+    rate = _stationary_rate_per_tick(q, per_tick, dead_ticks, reset, noise)
+    pixels = side * side
+    first = spikes[:8].reshape(8, -1).mean(axis=1)
+    assert np.all(np.abs(first - rate) < 5 * math.sqrt(rate * (1 - rate) / pixels) + 1e-12), (first, rate)
+    counts = spikes.reshape(n_ticks, -1).sum(axis=0)
+    se = math.sqrt((n_ticks * rate + 1) / pixels)
+    assert abs(counts.mean() - n_ticks * rate) < 5 * se, (counts.mean(), n_ticks * rate)
 
 
 def test_dead_time_after_readout_reset():

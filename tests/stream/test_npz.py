@@ -53,7 +53,7 @@ def test_older_spikes_key_and_other_keys(tmp_path):
 def test_real_spike_zoo_file():
     path = SHARED / "real_uhsr_250x250.npz"
     if not path.exists():
-        pytest.skip("shared spike data absent")
+        pytest.skip(f"shared spike data absent: {path}")
     source = open_spikes(path)
     assert source.shape == (200, 250, 250) and source.metadata["label_name"]
     with np.load(path) as data:

@@ -32,6 +32,8 @@ COMMAND_MODULES = [
     "viform.cli.sweep",  # sweep (issue 23)
     "viform.cli.chip_figures",  # chip-figures (issue 16)
     "viform.cli.calibrate",  # calibrate (issue 10)
+    "viform.cli.flow",  # flow (issue 21)
+    "viform.cli.track",  # track (issue 22)
 ]
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import click
 
-from viform._io import JSON_FILE_HELP, check_json_file
+from viform._io import JSON_FILE_HELP, check_json_file, folder_writable
 from viform._validate import ViformError
 
 #: Largest magnitude of a float option unless the option declares ``viform_limit``.
@@ -55,7 +55,18 @@ OPTION_BOUNDS = {
                                                     "3e-6 at 95 %, and every bit is simulated tick by tick"),
     ("display", "eye_ms"): (0.025, 200.0, "ms", "at least one 25 µs tick of the 40 kHz camera; the eye integrates "
                                                 "for 10–100 ms, and 200 ms already simulates 0.32 s of the camera"),
+    ("reconstruct", "fps"): (0.1, 1000.0, "frames/s", "a GIF holds each frame at most 655 s, and no display shows "
+                                                      "more than about 1000 frames a second"),
+    ("dataset", "frame_rate_hz"): (1.0, 1e6, "Hz", "the frame rate of real videos and image sequences; a clip lasts "
+                                                   "its frames ÷ this rate, all of it simulated at the spike clock"),
 }
+#: Simulation work a command runs without ``--force``, estimated seconds (about a minute). The
+#: estimate uses the simulator's speed on one core of an idle machine (README "Speed": 1.6–3.8e8
+#: pixel-ticks/s on textured scenes; issue 26 measured ~14 µs of scene and bookkeeping per tick
+#: at 32×48): :data:`SIM_PIXEL_TICKS_PER_S` and :data:`SIM_S_PER_TICK`, on the slow side.
+FORCE_WORK_S = 60.0
+SIM_PIXEL_TICKS_PER_S = 1e8
+SIM_S_PER_TICK = 1e-5
 #: Ticks one run of the light link may simulate: it holds them all (about 1 kB each over its
 #: 8×8 pixels, ~8 µs each on one core), so 10⁶ ticks is about 1 GB and 10 s.
 MAX_LINK_TICKS = 1e6
@@ -64,8 +75,17 @@ MAX_LINK_TICKS_TOTAL = 4e6
 #: Runs and payload bits of the distance and ambient-light sweeps (``lightcomm --sweeps`` / ``--out``).
 SWEEP_RUNS, SWEEP_BITS = 23, 300
 
+#: Library parameter names that hold the value of a command's option in the same unit, by
+#: (command, option name): an error raised deep inside (``gate_range_m = 1e+09 m is beyond…``)
+#: then names the flag the user typed (``--gate-m``).
+LIBRARY_NAMES = {
+    ("gated", "gate_m"): ("gate_range_m",),
+    ("lightcomm", "led_cd"): ("luminous_intensity_cd",),
+    ("highspeed", "scene_fps"): ("frame_rate_hz",),
+}
+
 #: Option names that hold an output path.
-OUTPUT_NAMES = ("out", "out_path", "out_dir", "output", "json_file", "json_path", "preview", "dst")
+OUTPUT_NAMES = ("out", "out_path", "out_dir", "output", "json_file", "json_path", "preview", "dst", "video")
 #: Suffixes that name files (an existing folder of that name cannot be replaced by a file).
 FILE_SUFFIXES = (".dat", ".npz", ".vfc", ".png", ".json", ".gif", ".mp4", ".html", ".csv", ".txt", ".yaml")
 
@@ -188,6 +208,8 @@ def _bounded(kind: click.ParamType, param, bounds=None) -> click.ParamType:
 
 def flag_of(param: click.Parameter) -> str:
     """The flag the user types for ``param`` (its longest ``--`` form), or its metavar name."""
+    if isinstance(param, click.Argument):
+        return (param.name or "").upper()  # as the usage line shows it (DST)
     longs = [o for o in param.opts if o.startswith("--")]
     if longs:
         return max(longs, key=len)
@@ -217,6 +239,8 @@ def name_flags(message: str, command: click.Command) -> str:
         if param.name not in names_with_units:
             message = re.sub(rf"(?<![\w'\"./-]){re.escape(param.name)}_(?:{_UNIT_SUFFIXES})(?![\w'\"-])", flag,
                              message)
+        for alias in LIBRARY_NAMES.get((command.name, param.name), ()):
+            message = re.sub(rf"(?<![\w'\"./-]){re.escape(alias)}(?![\w'\"-])", flag, message)
     return message
 
 
@@ -280,6 +304,20 @@ def check_request(command: click.Command, kwargs: dict) -> None:
                               "(a FIFO, socket or device cannot be read as data)")
 
 
+def check_simulation_work(duration_s: float, clock_hz: float, pixels: int, force: bool) -> None:
+    """Refuse, unless ``--force``, a simulation estimated to take more than :data:`FORCE_WORK_S`.
+
+    The user is told the size and the estimate before minutes of work, and how to go on.
+    """
+    ticks = duration_s * clock_hz
+    seconds = ticks * SIM_S_PER_TICK + ticks * pixels / SIM_PIXEL_TICKS_PER_S
+    if seconds > FORCE_WORK_S and not force:
+        raise ViformError(f"--duration {duration_s:g} s at --clock-hz {clock_hz:g} Hz over {pixels:,} pixels is "
+                          f"{ticks:.3g} ticks ({ticks * pixels:.3g} pixel-ticks), about {seconds / 60:.0f} min of "
+                          f"simulation or more (the limit without --force is {FORCE_WORK_S:.0f} s): add --force to "
+                          "run it, or shorten --duration")
+
+
 def _check_link_work(kwargs: dict, flags: dict) -> None:
     """Refuse a light-link request whose simulation would hold or run too many ticks.
 
@@ -319,7 +357,7 @@ def _check_output(flag: str, path: Path) -> None:
         existing = existing.parent
     if not existing.is_dir():
         raise ViformError(f"{flag} = {str(path)!r} cannot be written: {str(existing)!r} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
+    if not folder_writable(existing):
         raise ViformError(f"{flag} = {str(path)!r} cannot be written: the folder {str(existing)!r} is not writable")
 
 

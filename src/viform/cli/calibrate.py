@@ -9,6 +9,7 @@ from pathlib import Path
 
 import click
 
+from viform.cli._common import spike_file_options
 from viform.cli.app import cli
 
 
@@ -67,9 +68,19 @@ def _lines(file, r: dict, out) -> list[str]:
     if levels:
         lines.append(f"  {'':<22}median tile spread by light level: " + ", ".join(
             f"{100 * v['median_spread']:.3g} % at {v['mean_interval_ticks']:.3g} ticks" for v in levels))
-    lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} ({100 * d['hot_pixel_fraction']:.3g} %)"
-                 + (f", about {d['hot_pixel_dark_current_e_per_s']:.3g} e⁻/s each"
-                    if d.get("hot_pixel_dark_current_e_per_s") else ""))
+    if d.get("hot_pixel_dark_current_e_per_s"):
+        lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} found, about "
+                     f"{d['hot_pixel_dark_current_e_per_s']:.3g} e⁻/s of dark current each; "
+                     f"{100 * d['hot_pixel_fraction']:.3g} ± "
+                     f"{100 * d['hot_pixel_fraction_standard_error']:.2g} % of the {d['hot_pixel_searchable_pixels']} "
+                     "pixels dark enough to show them")
+    elif d.get("hot_pixel_bound"):
+        hb = d["hot_pixel_bound"]
+        lines.append(f"  {'hot pixels':<22}none with ≥ {hb['dark_current_at_least_e_per_s']:.3g} e⁻/s of dark current "
+                     f"(fewer than {100 * hb['fraction_upper_bound']:.2g} % of pixels, 95 %); weaker ones hide "
+                     "under the light")
+    else:
+        lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} ({100 * d['hot_pixel_fraction']:.3g} %)")
     lines.append(f"  {'dead pixels':<22}{d['dead_pixels']} ({100 * d['dead_pixel_fraction']:.3g} %)")
     bound = dark.get("dark_current_upper_bound_e_per_s")
     lines.append(f"  {'dark current':<22}not measurable" + (f" (≤ {bound:.3g} e⁻/s)" if bound else "")
@@ -94,13 +105,10 @@ def _lines(file, r: dict, out) -> list[str]:
               help="Write the fitted spike-sensor preset here (.json).")
 @click.option("--name", default=None, help="Preset name (default: the recording's file name).")
 @click.option("--max-ticks", type=int, default=None, help="Use only the first N ticks of the recording.")
-@click.option("--height", type=int, default=None, help="Height of a .dat file without a sidecar.")
-@click.option("--width", type=int, default=None, help="Width of a .dat file without a sidecar.")
-@click.option("--clock-hz", type=float, default=None, help="Readout clock, Hz, when the file does not record it.")
-@click.option("--no-flip", is_flag=True, help=".dat rows stored upright (some simulators).")
+@spike_file_options()
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON to this file.")
-def calibrate(recording, out_path, name, max_ticks, height, width, clock_hz, no_flip, as_json, json_file):
+def calibrate(recording, out_path, name, max_ticks, height, width, no_flip, clock_hz, key, axes, as_json, json_file):
     """Fit a spike-sensor preset to RECORDING, a spike stream of a (mostly) steady scene.
 
     Estimates the effective threshold (from how regular each pixel's intervals are, after
@@ -121,7 +129,7 @@ def calibrate(recording, out_path, name, max_ticks, height, width, clock_hz, no_
     check_json_file(json_file)
     if max_ticks is not None:
         check_int("--max-ticks", max_ticks, 20)
-    source = open_source(recording, height, width, clock_hz, flip=not no_flip)
+    source = open_source(recording, height, width, clock_hz, flip=not no_flip, key=key, axes=axes)
     result = run(source, max_ticks=max_ticks)
     result["source"] = str(recording)
     if out_path is not None:

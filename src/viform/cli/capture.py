@@ -55,6 +55,29 @@ def _spike_sensor(name: str):
     return make_sensor(name)
 
 
+#: Resolution of built-in scenes for frame sensors (whose presets have none): the size ``compare`` uses.
+FRAME_DEFAULT_SHAPE = (64, 128)
+
+
+def default_resolution(sensor_name: str) -> tuple[int, int]:
+    """(rows, columns) of a built-in scene shot by ``sensor_name`` when the user gives none.
+
+    One rule with ``simulate --preset``: a spike preset's own resolution (spikeone 250×400),
+    the spike camera without a preset 250×400 (``simulate``'s default); frame sensors, whose
+    presets carry no resolution, :data:`FRAME_DEFAULT_SHAPE`.
+    """
+    if not is_spike(sensor_name):
+        return FRAME_DEFAULT_SHAPE
+    try:
+        from viform.sensors.spike_presets import SPIKE_PRESET_NAMES, load_spike_preset
+    except ImportError:
+        SPIKE_PRESET_NAMES = ()
+    if sensor_name in SPIKE_PRESET_NAMES:
+        preset = load_spike_preset(sensor_name)
+        return preset.height, preset.width
+    return 250, 400
+
+
 def is_spike(name: str) -> bool:
     try:
         from viform.sensors.spike_presets import SPIKE_PRESET_NAMES
@@ -115,7 +138,11 @@ def load_frame_stack(path) -> dict:
 
 
 def _log_tone(images, floor=None):
-    """8-bit log tone mapping shared by all frames of a preview (one scale for the clip)."""
+    """8-bit log tone mapping shared by all frames of a preview (one scale for the clip).
+
+    Black is ``floor`` (default: the 1st percentile of the positive values). Spike counts pass
+    half a spike per window as the floor, so that a pixel with a single spike is grey, not black.
+    """
     a = np.asarray(images, dtype=np.float64)
     pos = a[a > 0]
     lo = floor if floor is not None else (float(np.percentile(pos, 1)) if pos.size else 1.0)
@@ -124,13 +151,13 @@ def _log_tone(images, floor=None):
     return np.clip(np.rint(out * 255), 0, 255).astype(np.uint8)
 
 
-def write_preview(path, images) -> None:
-    """PNG of the middle image, or an MP4/GIF of all (each pixel doubled for visibility)."""
+def write_preview(path, images, floor=None) -> None:
+    """PNG of the middle image, or an MP4/GIF of all (pixels doubled for visibility); ``floor``: :func:`_log_tone`."""
     import imageio.v3 as iio
 
     from viform._io import atomic_path, save_image
 
-    gray = _log_tone(images)
+    gray = _log_tone(images, floor)
     if gray.shape[1] < 200:
         gray = np.repeat(np.repeat(gray, 2, axis=1), 2, axis=2)
     suffix = Path(path).suffix.lower()
@@ -159,6 +186,37 @@ def check_frame_budget(n_frames: float, height: int, width: int, flag: str = "--
                           f"more than the {MAX_FRAME_BYTES / 1e9:g} GB limit; shorten {flag} or lower the resolution")
 
 
+#: Mean spikes per pixel a PNG preview of a spike stream counts (its window grows until it does, up to the clip).
+PREVIEW_SPIKES_PER_PIXEL = 8
+
+
+def _spike_preview(path, stream, rate_per_tick: float) -> float:
+    """Write the preview of a spike stream; returns its window, seconds (a PNG) or each frame's (a video).
+
+    A PNG counts spikes over a window centred on the clip, long enough for
+    :data:`PREVIEW_SPIKES_PER_PIXEL` spikes per pixel on average (the whole clip at most): a
+    dim or short clip is not a black picture of sparse single spikes. A video shows 40
+    windows across the clip. The log tone map's black is half a spike per window.
+    """
+    from viform.imaging import accumulation_image
+
+    n_ticks, clock = stream.n_ticks, stream.clock_hz
+    duration_s = n_ticks / clock
+    if Path(path).suffix.lower() == ".png":
+        needed = PREVIEW_SPIKES_PER_PIXEL / rate_per_tick if rate_per_tick > 0 else n_ticks
+        window_ticks = int(min(n_ticks, max(1, math.ceil(needed))))
+        window = window_ticks / clock
+        image = accumulation_image(stream, stream.start_time_s + duration_s / 2, window).spikes_per_s
+        write_preview(path, [image], floor=0.5 / window)
+        return window
+    n = min(40, n_ticks)
+    window = max(1.0 / clock, duration_s / n)
+    images = [accumulation_image(stream, stream.start_time_s + (k + 1) * duration_s / n - 0.5 / clock,
+                                 window).spikes_per_s for k in range(n)]
+    write_preview(path, images, floor=0.5 / window)
+    return window
+
+
 def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int = 0, preview=None) -> dict:
     """Shoot ``scene`` with ``sensor_name`` and save the output (see the module notes); returns a summary.
 
@@ -168,7 +226,6 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
 
     suffix = Path(out_path).suffix.lower()
     if is_spike(sensor_name):
-        from viform.imaging import accumulation_image
         from viform.stream.io import FORMATS, save_spikes
 
         if suffix not in FORMATS:
@@ -184,11 +241,7 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
                    "height": stream.height, "width": stream.width, "clock_hz": stream.clock_hz,
                    "threshold_electrons": stream.threshold_electrons, **stream.summary()}
         if preview:
-            n = min(40, stream.n_ticks)
-            window = max(1.0 / stream.clock_hz, duration_s / n)
-            images = [accumulation_image(stream, (k + 1) * duration_s / n - 0.5 / stream.clock_hz, window).spikes_per_s
-                      for k in range(n)]
-            write_preview(preview, images)
+            summary["preview_window_s"] = _spike_preview(preview, stream, summary["mean_firing_rate_per_tick"])
         return summary
     if suffix not in FRAME_FORMATS:
         raise ViformError(f"--out = {str(out_path)!r}: frames are saved as one of {', '.join(FRAME_FORMATS)}")
@@ -264,8 +317,12 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
               help="Frames: .npz or .zarr. Spike stream: .dat, .npz or .zarr.")
 @click.option("--preview", type=click.Path(dir_okay=False), default=None,
               help="Also write a preview: .png (one image) or .mp4/.gif (every frame), log tone-mapped.")
-@click.option("--height", type=int, default=64, show_default=True, help="Resolution of built-in scenes.")
-@click.option("--width", type=int, default=128, show_default=True)
+@click.option("--height", type=int, default=None,
+              help="Rows of built-in scenes [default: a spike preset's own (spikeone 250, spiketwo 1000; 250 for "
+                   "spike, as simulate), 64 for frame sensors].")
+@click.option("--width", type=int, default=None,
+              help="Columns of built-in scenes [default: a spike preset's own (spikeone 400, spiketwo 1000; 400 "
+                   "for spike), 128 for frame sensors].")
 @click.option("--seed", type=int, default=0, show_default=True, help="Noise seed.")
 @click.option("--max-lux", type=float, default=4.0, show_default=True,
               help="Illuminance on the sensor of full-scale image/video pixels, lux.")
@@ -289,8 +346,9 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     if sensor not in names:
         raise ViformError(f"SENSOR = {sensor!r} is not allowed: choose one of {', '.join(names)}")
     check_positive("--duration", duration_s)
-    check_int("--height", height, 1)
-    check_int("--width", width, 1)
+    default_height, default_width = default_resolution(sensor)
+    height = check_int("--height", default_height if height is None else height, 1)
+    width = check_int("--width", default_width if width is None else width, 1)
     check_int("--seed", seed, 0)
     suffix = Path(out_path).suffix.lower()
     allowed = FORMATS if is_spike(sensor) else FRAME_FORMATS
@@ -326,4 +384,7 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
         click.echo(f"wrote {out_path}: {frames} × {summary['height']}×{summary['width']}, "
                    f"exposure {summary['exposure_s'][0] * 1e3:.4g} ms, {summary['units']}")
     if preview:
-        click.echo(f"preview: {preview}")
+        window = summary.get("preview_window_s")
+        counted = "" if window is None else \
+            f" (spikes counted over {window * 1e3:.3g} ms{' per frame' if Path(preview).suffix != '.png' else ''})"
+        click.echo(f"preview: {preview}{counted}")

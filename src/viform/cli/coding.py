@@ -16,6 +16,7 @@ import click
 # one rule for every command's --json-file (missing folders are created, as for --out)
 from viform._io import check_json_file
 from viform._validate import ViformError
+from viform.cli._common import spike_file_options
 from viform.cli.app import cli
 
 
@@ -63,25 +64,25 @@ def _json_options(f):
               help="Threshold Q, electrons, when the file does not record it (lossy modes).")
 @click.option("--slack", type=int, default=0, show_default=True,
               help="Extra tolerance of the lossy modes, ticks.")
-@click.option("--height", type=int, default=None, help="Height, pixels, of a .dat file without a sidecar.")
-@click.option("--width", type=int, default=None, help="Width, pixels, of a .dat file without a sidecar.")
+@spike_file_options()
 @click.option("--segment-ticks", type=int, default=None,
               help="Ticks per independently decodable segment of the coded file (≥ 1).  [default: 4096, "
                    "fewer for sensors above 8,192 pixels in strict mode: a segment holds at most 2^25 "
                    "pixel-ticks by default and 2^28 if you set it]")
 @_json_options
-def encode_cmd(src, dst, mode, k, threshold, slack, height, width, segment_ticks, as_json, json_file):
+def encode_cmd(src, dst, mode, k, threshold, slack, height, width, no_flip, clock_hz, key, axes, segment_ticks, as_json,
+               json_file):
     """Code the spike stream SRC into the first-spike coded file DST (.vfc)."""
     from viform._validate import check_int
+    from viform.cli._common import open_source
     from viform.coding.aer_file import EXTENSION, encode_source
-    from viform.stream.io import open_spikes
 
     if Path(dst).suffix.lower() != EXTENSION:
         raise ViformError(f"output {dst!r} must end in {EXTENSION}")
     if segment_ticks is not None:
         check_int("--segment-ticks", segment_ticks, 1)
     check_json_file(json_file)
-    source = open_spikes(src, height, width)
+    source = open_source(src, height, width, clock_hz, flip=not no_flip, key=key, axes=axes)
     if segment_ticks is not None and mode == "strict":
         from viform.coding.aer_file import MAX_SEGMENT_PIXEL_TICKS
 
@@ -182,6 +183,8 @@ def dr_cmd(as_json, json_file, threshold_electrons, clock_hz, dark_current_e_per
             raise ViformError(f"--longest = {longest:g} s is not allowed: it must exceed --shortest = {shortest:g} s")
         out["shortest_interval_s"], out["longest_interval_s"] = shortest, longest
         out["dr_db"] = dr.dynamic_range_db(shortest, longest)
+        out["clip_limited_dr_db"] = {f"{t:g} s": dr.clip_limited_dynamic_range_db(shortest, longest, t)
+                                     for t in dr.CLIP_LENGTHS_S}
         if sensitivity is not None:
             out["subthreshold_dr_db"] = dr.subthreshold_dynamic_range_db(shortest, sensitivity, levels)
     elif sensitivity is not None:
@@ -205,6 +208,8 @@ def dr_cmd(as_json, json_file, threshold_electrons, clock_hz, dark_current_e_per
     if "dr_db" in out:
         click.echo(f"your sensor: shortest interval {shortest:.4g} s, longest {longest:.4g} s → "
                    f"dynamic range {out['dr_db']:.1f} dB")
+        for line in dr.clip_limited_lines(shortest, longest, out["dr_db"]):
+            click.echo(f"  {line}")
     if "subthreshold_dr_db" in out:
         click.echo(f"with sub-threshold readout ({levels} levels every {sensitivity:.4g} s): "
                    f"{out['subthreshold_dr_db']:.1f} dB")

@@ -100,6 +100,8 @@ def finish(doc: dict, out_dir, elapsed_s: float, as_json: bool, json_file, extra
                "elapsed_s": elapsed_s, "sensors": {k: {"label": v["label"], "skipped": v["skipped"],
                                                         **v["metrics"]} for k, v in doc["sensors"].items()},
                "verdict": doc["verdict"], "elapsed_note": RUN_TIME_NOTE, **(extra or {})}
+    if doc.get("vision"):
+        summary["vision"] = doc["vision"]
     summary = finite_json(summary)  # NaN (a metric not defined here) becomes null: valid JSON
     if json_file:
         write_json(json_file, summary)
@@ -110,8 +112,27 @@ def finish(doc: dict, out_dir, elapsed_s: float, as_json: bool, json_file, extra
     click.echo("")
     for line in doc["verdict"]:
         click.echo(f"- {line}")
+    _echo_vision(doc)
     click.echo(f"\nwrote {summary['report']} and {summary['metrics']} in {elapsed_s:.1f} s "
                "(wall time from the command's start, compiling included on a first run)")
+
+
+def _echo_vision(doc: dict) -> None:
+    """The vision table and its verdict lines, where the scene has object truth."""
+    vision = doc.get("vision")
+    if not vision:
+        return
+    click.echo("")
+    for row in vision["table"]:
+        if "skipped" in row:
+            click.echo(f"{row['label']}: not tracked ({row['skipped']})")
+            continue
+        lat = "never" if row["median_latency_ms"] is None else f"{row['median_latency_ms']:.2f} ms"
+        click.echo(f"tracking · {row['label']}: HOTA {row['hota']:.3f}, MOTA {row['mota']:.3f}, IDF1 "
+                   f"{row['idf1']:.3f}, {row['id_switches']} ID switches, median latency {lat}, never found: "
+                   f"{', '.join(map(str, row['never_found'])) or 'none'}")
+    for line in vision["verdict"]:
+        click.echo(f"- {line}")
 
 
 @cli.command()

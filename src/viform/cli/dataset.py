@@ -6,6 +6,7 @@ import json
 
 import click
 
+from viform._validate import ViformError
 from viform.cli.app import cli
 
 
@@ -14,7 +15,17 @@ def _sig(value: float) -> str:
 
 
 @cli.command("dataset")
-@click.argument("src", type=click.Path(file_okay=False))
+@click.argument("src", type=click.Path(file_okay=False), required=False)
+@click.option("--scenes", default=None, metavar="NAME[,NAME…]",
+              help="Instead of SRC: make clips from built-in scenes with parameters drawn per clip (speeds, "
+                   "directions, brightness, texture), with exact truth: flow, depth, object tracks.")
+@click.option("--clips", "clips_per_scene", type=int, default=None, help="With --scenes: clips of each scene.")
+@click.option("--duration", "duration_s", type=float, default=None, help="With --scenes: length of each clip, s.")
+@click.option("--truth-every-ticks", type=int, default=40, show_default=True,
+              help="With --scenes: one truth frame (image, flow to the next, depth, boxes) every N ticks.")
+@click.option("--pairs", is_flag=True,
+              help="With --scenes: also write each clip's clean twin (<clip>-clean: same light and seed, "
+                   "no photon noise, no fixed-pattern noise) for denoising.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), required=True,
               help="Dataset folder to write (an unfinished one made with the same options is resumed).")
 @click.option("--preset", default=None, help="Spike camera: a preset name (default spikeone) or a preset .json file.")
@@ -44,23 +55,44 @@ def _sig(value: float) -> str:
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
-def dataset(src, out_dir, preset, height, width, workers, scheduler, worker_memory, gt_every, seed, frame_rate_hz,
-            max_lux, interpolation, light_sample_ticks, block_ticks, no_progress, as_json, json_file):
-    """Convert SRC, a folder of videos or of frame folders, into a spike dataset in --out.
+def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, out_dir, preset, height, width,
+            workers, scheduler, worker_memory, gt_every, seed, frame_rate_hz, max_lux, interpolation,
+            light_sample_ticks, block_ticks, no_progress, as_json, json_file):
+    """Convert SRC, a folder of videos or of frame folders, into a spike dataset in --out;
+    or, with --scenes, make one from built-in scenes with exact truth.
 
     Writes spike/<clip>.dat (the spike cameras' packed-bit layout) with a JSON description
     beside each, gt/<clip>_<frame>.png ground truth, config.yaml (spike_h, spike_w) and
-    manifest.json (ticks, spikes and SHA-256 of every clip). Clips run in parallel on local
+    manifest.json (ticks, spikes and SHA-256 of every clip). Scene clips add flow/<clip>_<k>.flo
+    (forward flow to the next truth frame, px), depth/<clip>_<k>.npy (m, scenes with range) and
+    mot/<clip>/gt/gt.txt + seqinfo.ini (MOTChallenge object tracks). Clips run in parallel on local
     worker processes or on a dask cluster; finished clips are checked and skipped when the
     command is run again. Exit status 1 when a clip failed (the others are still written).
     """
     from viform._io import check_json_file, write_json
-    from viform.datasets.build import build_dataset, make_settings
+    from viform.datasets.build import build_dataset, make_settings, scene_clips
 
     check_json_file(json_file)
+    if (src is None) == (scenes is None):
+        raise ViformError("give either SRC (a folder of videos or frame folders) or --scenes NAME[,NAME…], "
+                          "not " + ("both" if src is not None else "neither"))
+    if scenes is None:
+        for flag, value in (("--clips", clips_per_scene), ("--duration", duration_s)):
+            if value is not None:
+                raise ViformError(f"{flag} applies to --scenes datasets only; SRC's clips keep their own length")
+        if pairs:
+            raise ViformError("--pairs applies to --scenes datasets only")
+    else:
+        for flag, value in (("--clips", clips_per_scene), ("--duration", duration_s)):
+            if value is None:
+                raise ViformError(f"--scenes needs {flag}")
     settings = make_settings(preset, height=height, width=width, seed=seed, gt_every=gt_every,
                              frame_rate_hz=frame_rate_hz, max_lux=max_lux, interpolation=interpolation,
-                             light_sample_ticks=light_sample_ticks)
+                             light_sample_ticks=light_sample_ticks,
+                             truth_every_ticks=truth_every_ticks if scenes is not None else None)
+    _check_max_lux(settings)
+    if scenes is not None:
+        src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs)
     summary = build_dataset(src, out_dir, settings, workers=workers, scheduler=scheduler,
                             memory_limit=worker_memory, block_ticks=block_ticks, progress=not no_progress)
     if json_file is not None:
@@ -73,7 +105,9 @@ def dataset(src, out_dir, preset, height, width, workers, scheduler, worker_memo
             ("sensor", f"{settings.width}×{settings.height} px, {_sig(settings.parameters.clock_hz / 1e3)} kHz, "
                        f"full scale {_sig(settings.max_lux)} lux"),
             ("clips", f"{summary['clips']} (converted {summary['converted']}, skipped {summary['skipped']} "
-                      f"already done, failed {len(summary['failed'])})"),
+                      f"already done, failed {len(summary['failed'])}"
+                      + (f": {', '.join(f['clip'] for f in summary['failed'])}" if summary["failed"] else "") + ")"),
+            *(("frames", fit) for fit in summary.get("fits", [])),
             ("ticks", f"{summary['ticks']:,}"),
             ("spikes", f"{summary['spikes']:,}"),
             ("spike data", f"{_sig(summary['bytes'] / 1e6)} MB"),
@@ -88,6 +122,20 @@ def dataset(src, out_dir, preset, height, width, workers, scheduler, worker_memo
     if summary["failed"]:
         raise ClipsFailed(f"{len(summary['failed'])} of {summary['clips']} clips failed (listed above); "
                           "the others are written, and running the command again retries only the failed ones")
+
+
+def _check_max_lux(settings) -> None:
+    """A full-scale pixel brighter than the simulator can represent would fail every clip on its
+    worker: refuse --max-lux here, before any work, with the line ``simulate`` prints."""
+    import numpy as np
+
+    from viform._validate import ViformError
+    from viform.sensors.spike import SpikeSensor
+
+    try:
+        SpikeSensor(settings.parameters, 1, 1)._fixed_point_rates(np.array([[settings.max_lux]]), 1, 1)
+    except ViformError as exc:
+        raise ViformError(f"--max-lux = {settings.max_lux:g}: {exc}") from None
 
 
 class ClipsFailed(click.ClickException):

@@ -50,6 +50,7 @@ def run_lightcomm(bitrate_bps: float = 10e3, modulation: str = "ook", distance_m
 
     lc.get_modulation(modulation)
     check_positive("bitrate_bps", bitrate_bps)
+    check_positive("led_cd", led_cd)
     check_non_negative("ambient_lux", ambient_lux)
     n_bits = check_int("n_bits", n_bits, 1)
     link = lc.LightLink(transmitter=lc.LEDTransmitter(luminous_intensity_cd=led_cd), distance_m=distance_m,

@@ -7,6 +7,7 @@ import json
 import click
 
 from viform.cli._common import open_source as _open
+from viform.cli._common import spike_file_options
 from viform.cli.app import cli
 
 #: Units shown after the values of ``info`` (by the summary's key).
@@ -14,18 +15,6 @@ _UNITS = {"clock_hz": "Hz", "duration_s": "s", "start_time_s": "s", "threshold_e
           "spikes_per_s": "spikes/s", "mean_firing_rate_hz": "Hz", "raw_data_rate_bit_per_s": "bit/s",
           "raw_data_rate_mb_per_s": "MB/s", "mean_firing_rate_per_tick": "per tick",
           "dark_current_e_per_s": "e⁻/s", "bytes": "bytes"}
-
-_file_options = [
-    click.option("--height", type=int, default=None, help="Height of a .dat file without a sidecar."),
-    click.option("--width", type=int, default=None, help="Width of a .dat file without a sidecar."),
-    click.option("--clock-hz", type=float, default=None,
-                 help="Readout clock, Hz, when the file does not record it (default 40 kHz)."),
-    click.option("--allow-partial", is_flag=True, help="Keep the whole frames of a .dat with trailing bytes."),
-    click.option("--key", default=None, help="Array name in a .npz (default: spk, then spikes)."),
-    click.option("--axes", default=None,
-                 help="Axis order of a .npz array that does not declare it: thw (ticks, rows, columns) or hwt."),
-]
-
 
 _json_options = [
     click.option("--json", "as_json", is_flag=True, help="Print the result as JSON instead of the table."),
@@ -62,11 +51,25 @@ def _coded_module():
     return aer_file
 
 
+def _not_coded(file, is_coded) -> None:
+    """A ``.vfc`` that does not start with the coded-file magic number: say so (not "unknown type")."""
+    from pathlib import Path
+
+    from viform._validate import ViformError
+
+    if Path(file).suffix.lower() == ".vfc" and (is_coded is None or not is_coded(file)):
+        size = Path(file).stat().st_size if Path(file).is_file() else None
+        what = "is empty" if size == 0 else "is a folder" if size is None else \
+            "does not start with the coded-file marker (damaged, or another format named .vfc)"
+        raise ViformError(f"FILE {str(file)!r} is not a readable coded spike file: it {what}")
+
+
 def _coded_file_summary(file):
     """The first-spike coding module's description of a coded file, if FILE is one."""
     aer_file = _coded_module()
     if aer_file is None:
         return None
+    _not_coded(file, getattr(aer_file, "is_coded_file", None))
     describe = getattr(aer_file, "describe_coded_file", None)
     is_coded = getattr(aer_file, "is_coded_file", None)
     if describe is None or is_coded is None or not is_coded(file):
@@ -80,6 +83,7 @@ def _verify_coded(file) -> dict | None:
     if aer_file is None:
         return None
     is_coded = getattr(aer_file, "is_coded_file", None)
+    _not_coded(file, is_coded)
     if is_coded is None or not is_coded(file):
         return None
     verify = getattr(aer_file, "verify_coded_file", None)
@@ -116,20 +120,43 @@ def _label(key: str) -> str:
     return key.replace("_", " ")
 
 
-def _table(summary: dict) -> None:
-    width = max(len(k) for k in summary)
+#: Quantities given in two units: one row each, named once, the second unit in brackets
+#: (``mean firing rate: 0.15 per tick (6027 Hz)``), and their own names (not "spikes rate").
+_PAIRS = {"mean_firing_rate_per_tick": "mean_firing_rate_hz", "raw_data_rate_mb_per_s": "raw_data_rate_bit_per_s"}
+_NAMES = {"spikes_per_s": "spikes per second", "spike_count": "spikes",
+          "mean_firing_rate_per_tick": "mean firing rate, per pixel",
+          "raw_data_rate_mb_per_s": "raw data rate"}
+
+
+def _table_rows(summary: dict) -> list[tuple[str, str]]:
+    """(label, value with unit) of every field, each quantity once."""
+    rows = []
+    seconds = set(_PAIRS.values())
     for key, value in summary.items():
+        if key in seconds and any(k in summary for k, v in _PAIRS.items() if v == key):
+            continue  # shown in brackets beside its pair
         if isinstance(value, (dict, list)):
             value = json.dumps(value, default=str)
             value = value if len(value) <= 100 else value[:99] + "…"
-        click.echo(f"{_label(key):>{width}}: {_fmt(key, value)}")
+        text = _fmt(key, value)
+        if key in _PAIRS and _PAIRS[key] in summary:
+            text += f" ({_fmt(_PAIRS[key], summary[_PAIRS[key]])})"
+        rows.append((_NAMES.get(key, _label(key)), text))
+    return rows
+
+
+def _table(summary: dict) -> None:
+    rows = _table_rows(summary)
+    width = max(len(label) for label, _ in rows)
+    for label, text in rows:
+        click.echo(f"{label:>{width}}: {text}")
 
 
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
 @_apply(_json_options)
-@_apply(_file_options)
-def info(file, as_json, json_file, height, width, clock_hz, allow_partial, key, axes):
+@spike_file_options(partial=True)
+def info(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, allow_partial):
     """Resolution, duration, ticks, spike count, firing and data rates of a spike stream (or a coded file).
 
     Reading the stream checks it: zarr chunk checksums, the .npz zip checksums, a .dat
@@ -137,7 +164,8 @@ def info(file, as_json, json_file, height, width, clock_hz, allow_partial, key, 
     """
     summary = _coded_file_summary(file)
     if summary is None:
-        source = _open(file, height, width, clock_hz, allow_partial=allow_partial, axes=axes, key=key)
+        source = _open(file, height, width, clock_hz, flip=not no_flip, allow_partial=allow_partial, axes=axes,
+                       key=key)
         summary = {"file": str(file), "format": source.metadata.get("format"), **source.summary()}
         meta = source.metadata
         for field in ("scene", "seed", "viform_version", "utc_date"):
@@ -161,7 +189,11 @@ def _verification(source) -> dict:
             return {"verified": True, "verification": "header and every chunk's CRC-32 checked"}
         return {"verified": False, "verification": "store written without checksums (older viform)"}
     if fmt == "npz":
-        return {"verified": True, "verification": "zip CRC-32 of the spike array checked; values are 0/1"}
+        if getattr(source, "_blocks", None) is not None:
+            return {"verified": True, "verification": "header checksum, block CRC-32s and zip CRC-32 of the spike "
+                                                      "array checked; values are 0/1"}
+        return {"verified": True, "verification": "zip CRC-32 of the spike array checked (no block checksums: "
+                                                  "not written by this viform); values are 0/1"}
     if fmt == "dat":
         if getattr(source, "sidecar", None) is None:
             return {"verified": False, "verification": "no sidecar: nothing to check the file against"}
@@ -173,8 +205,8 @@ def _verification(source) -> dict:
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
 @_apply(_json_options)
-@_apply(_file_options)
-def verify(file, as_json, json_file, height, width, clock_hz, allow_partial, key, axes):
+@spike_file_options(partial=True)
+def verify(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, allow_partial):
     """Check that FILE (.dat with its sidecar, .npz, .zarr or .vfc) is whole and consistent.
 
     Reads everything: a .dat against the size and checksum in its sidecar, every member of a
@@ -187,7 +219,7 @@ def verify(file, as_json, json_file, height, width, clock_hz, allow_partial, key
     result = _verify_coded(file)
     if result is None:
         result = verify_spikes(file, height=height, width=width, clock_hz=clock_hz, allow_partial=allow_partial,
-                               key=key, axes=axes)
+                               key=key, axes=axes, flip=None if not no_flip else False)
     if _emit_json(result, as_json, json_file):
         return
     if not result["verified"]:

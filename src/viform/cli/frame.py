@@ -60,6 +60,13 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
             .tolist(),
         }
         seed_vals["snr_dip_db"] = "no loss"
+        fit = "fitted to fig. 8" if two else "fitted to fig. 9"
+        status = {"normal_saturation": f"{fit} (sets the intensity unit)", "hdr_saturation": fit,
+                  "extension_db": fit, "knee_intensity": fit, "knee_dn": fit,
+                  "snr_dip_db": "refuted: SNR drops by 10 lg(T_before/T_after) at each knee",
+                  "rpd_voltage_v": "predicted from an assumed linear mapping"}
+        if not two:
+            status["knee_intensity"] = "predicted (depends on the chosen family member)"
         if not two:
             fam = three_segment_family(np.linspace(0.0005, 0.08, 800))
             model["family_f3_range"] = [fam[0]["fractions"][2], fam[-1]["fractions"][2]]
@@ -70,6 +77,7 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
             "intensity_unit_lux": unit,
             "seed": seed_vals,
             "model": model,
+            "status": status,
         }
     if name == "seed003-overflow":
         from viform.light.radiometry import ELEMENTARY_CHARGE_C
@@ -114,6 +122,11 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
                 **{f"dr_{k}_db": v["dynamic_range_db"] for k, v in zip(("a_4t", "b_lofic", "c_overflow"),
                                                                        fig5.values(), strict=True)},
             },
+            "status": {"4t_saturation_a": "fitted (C_PD is solved from the paper's 8 pA)",
+                       "D_a": "predicted", "max_usable_a": "refuted (paper 10 nA; eqs. 1-6 end at E)",
+                       "dr_gain_db": "refuted: at most 57.4 dB by the paper's own eqs. 1-6",
+                       "dr_gain_equations_db": "predicted", "row_share_time_s": "predicted",
+                       "reset_ktc_e": "predicted (the paper gives no kTC figure)"},
             "note": "not reproduced: eqs. 1-6 give E/I_4T = (T/t3)(VF - V_sat)/(V_res - V_sat)"
             "·C_F/(C_F + C_PD) = 55.5 dB, below 20 lg((T/t3)·VF/V_res) = 57.4 dB for any "
             "C_PD, C_F, V_sat; see docs/frame-sensors.md",
@@ -164,9 +177,9 @@ _ROWS = {
     "reset_ktc_e": ("reset (kTC) noise per reset", "e- rms"),
     "readout_reset_noise_e": ("noise of the signal before reset", "e- rms"),
     "share_ktc_e": ("kTC noise per charge sharing", "e- rms"),
-    "dr_a_4t_db": ("DR, plain 4T", "dB"),
-    "dr_b_lofic_db": ("DR, lateral overflow capacitor", "dB"),
-    "dr_c_overflow_db": ("DR, conditional overflow", "dB"),
+    "dr_a_4t_db": ("DR, plain 4T, Fig. 5 sweep", "dB"),
+    "dr_b_lofic_db": ("DR, lateral overflow, Fig. 5 sweep", "dB"),
+    "dr_c_overflow_db": ("DR, cond. overflow, Fig. 5 sweep", "dB"),
 }
 
 
@@ -201,6 +214,39 @@ def _jsonable(obj):
     return obj
 
 
+def parse_settings(sensor: str, settings) -> dict:
+    """``--set NAME=VALUE`` pairs → keyword arguments of :func:`viform.sensors.presets.make_sensor`."""
+    from viform._validate import ViformError
+    from viform.sensors import presets
+
+    if not settings:
+        return {}
+    if sensor not in presets.PRESETS:
+        raise ViformError(f"--set is not allowed for {sensor!r}: it changes frame presets only "
+                          f"({', '.join(presets.PRESETS)})")
+    allowed = [f for f in presets.preset_fields(sensor) if f not in ("height", "width")]
+    out = {}
+    for item in settings:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or name not in allowed:
+            raise ViformError(f"--set {item!r} is not allowed: give NAME=VALUE with NAME one of "
+                              f"{', '.join(allowed)}")
+        text = text.strip()
+        low = text.lower()
+        if low in ("true", "false"):
+            value = low == "true"
+        else:
+            try:
+                value = int(text) if text.lstrip("+-").isdigit() else float(text)
+            except ValueError:
+                raise ViformError(f"--set {item!r} is not allowed: {text!r} is not a number "
+                                  "(or true/false)") from None
+        out[name] = value
+    presets.make_sensor(sensor, **out)  # validates the values, naming the field
+    return out
+
+
 @cli.command("characterize")
 @click.argument("sensor")
 @click.option(
@@ -226,7 +272,11 @@ def _jsonable(obj):
     help="Flat-field size in pixels (square) for the EMVA 1288 sweep.",
 )
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
-def characterize(sensor, out_dir, as_json, json_path, size, seed):
+@click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
+              help="Change one parameter of a frame preset by name, e.g. --set read_noise_electrons=10 "
+                   "--set parasitic_light_sensitivity=0.01 --set comparator_noise_v=0.005 (repeatable; "
+                   "the published-figure comparison keeps the preset's own values).")
+def characterize(sensor, out_dir, as_json, json_path, size, seed, settings):
     """Characterize a preset SENSOR (EMVA 1288 R4.0 for frame sensors; interval dynamic range for spike sensors).
 
     SENSOR is one of: cmos, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
@@ -245,7 +295,10 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
         check_output_folder("--out", Path(out_dir))
     check_json_file(json_path)
     presets.describe_preset(sensor)  # clear error for an unknown name
+    overrides = parse_settings(sensor, settings)
     result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
+    if overrides:
+        result["settings"] = overrides
     figures = {}
     if sensor == "spike" or sensor.startswith("spike"):  # chip presets too
         from viform.measure.spike_characterization import characterize_spike_sensor
@@ -272,9 +325,16 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
             f"{r['expected']['dynamic_range_db']:.4g} dB: longest interval = threshold / dark current = "
             f"{r['longest_interval_s']:.3g} s, shortest = one tick = {r['shortest_interval_s'] * 1e6:.3g} µs)"
         ]
+        from viform.measure.dynamic_range import CLIP_LENGTHS_S, clip_limited_dynamic_range_db, clip_limited_lines
+
+        r["clip_limited_dr_db"] = {f"{t:g} s": clip_limited_dynamic_range_db(r["shortest_interval_s"],
+                                                                            r["longest_interval_s"], t)
+                                   for t in CLIP_LENGTHS_S}
+        lines += [f"  {line}" for line in clip_limited_lines(r["shortest_interval_s"], r["longest_interval_s"],
+                                                             r["dynamic_range_db"])]
     else:
-        kw = {"height": min(size, 64), "width": min(size, 64)} if sensor == "seed003-overflow" else {}
-        dev = presets.make_sensor(sensor, **kw)
+        kw = {"height": min(size, 64), "width": min(size, 64)} if sensor.startswith("seed003-overflow") else {}
+        dev = presets.make_sensor(sensor, **kw, **overrides)
         lines = []
         if type(dev) is FrameSensor:
             r = emva.characterize_frame_sensor(dev, height=size, width=size, seed=seed)
@@ -301,9 +361,11 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
         own = plots.frame_response_curve(dev, lux, size=min(size, 32), seed=seed)
         dr = emva.dynamic_range_from_response(own["raw"])
         result["response_dynamic_range"] = dr
+        px = min(size, 32)
+        dr["sweep"] = f"{lux.size} illuminances 1e-5 to 1e6 lux on {px}x{px} pixels"
         lines.append(
             f"{'response DR':<22} {dr['dynamic_range_db']:>9.4g} dB  (SNR = 1 at "
-            f"{dr['lux_min']:.3g} lux to the plateau at {dr['lux_sat']:.3g} lux)"
+            f"{dr['lux_min']:.3g} lux to the plateau at {dr['lux_sat']:.3g} lux; {dr['sweep']})"
         )
         figures["snr.png"] = plots.snr_figure({sensor: own})
         seed_fig = _seed_figures(sensor, min(size, 32), seed)
@@ -315,12 +377,18 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
             unit_lux = seed_fig.get("intensity_unit_lux")
             lines.append("the model next to the published figures"
                          + (f" (1 intensity unit = {unit_lux:.4g} lux)" if unit_lux else "") + ":")
-            lines.append(f"  {'quantity':<37} {'model':>22}  {'published':>10}  unit")
+            lines.append(f"  {'quantity':<37} {'model':>22}  {'published':>10}  {'unit':<16} status")
+            status = seed_fig.get("status", {})
             for k, v in seed_fig["model"].items():
                 ref = seed_fig["seed"].get(k)
                 name, unit = _ROWS.get(k, (k.replace("_", " "), ""))
                 val = " to ".join(_fmt(x) for x in v) if k.endswith("_range") else _fmt(v)
-                lines.append(f"  {name:<37} {val:>22}  {_fmt(ref) if ref is not None else '-':>10}  {unit}")
+                st = status.get(k, "")
+                lines.append(f"  {name:<37} {val:>22}  {_fmt(ref) if ref is not None else '-':>10}  {unit:<16} {st}")
+            if "dr_c_overflow_db" in seed_fig["model"]:
+                lines.append(f"  the response DR above and the Fig. 5 DRs use one definition (SNR = 1 to the plateau) "
+                             f"on two sweeps ({dr['sweep']}; Fig. 5: 150 photocurrents 1e-16 to 3e-8 A on "
+                             f"{min(size, 32, 16)}x{min(size, 32, 16)} pixels): they differ only by that sampling")
     if out_dir is not None:
         # The "spike" preset is the reference spike curve itself: draw it once.
         curves = _comparison_curves(16, seed, skip_spike=sensor == "spike")
@@ -375,6 +443,7 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed):
                 result[key] = {k: v for k, v in result[key].items() if k not in ("curves",)}
         click.echo(json.dumps(_jsonable(result), indent=2))
         return
-    click.echo(f"{sensor}: {result['description']}")
+    click.echo(f"{sensor}: {result['description']}"
+               + (f" (changed: {', '.join(f'{k} = {v}' for k, v in overrides.items())})" if overrides else ""))
     for line in lines:
         click.echo("  " + line)

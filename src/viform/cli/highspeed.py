@@ -131,7 +131,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
                           exposure_s=check_positive("exposure_us", exposure_us) * 1e-6, n_frames=n_frames,
                           seed=seed)
     # Check everything before the progress bar starts, so an error is a single clean line.
-    check_range("target", target_gray, 0, 255)
+    check_range("--target", target_gray, 0, 255)
     if ae_saturated_cut is not None:
         check_range("ae_saturated_cut", ae_saturated_cut, 0, 1, low_open=True, high_open=True)
     timing.exposure_cycles(cfg.exposure_s, window)
@@ -195,7 +195,7 @@ def format_figures(fig: dict) -> str:
          "60 000 cycles, 1 666 fps"),
         ("normal 1280x864 @ 133 MHz", f"{nor['fps']:.0f} fps", "3 500 fps"),
         ("reduced 1280x864 @ 166 MHz", f"{r166['fps_1280x864']:.0f} fps", "-"),
-        ("reduced 1280x864, clock for 2 500 fps",
+        ("reduced 1280x864, clock fitted to 2 500 fps",
          f"{r25['pixel_clock_hz'] / 1e6:.1f} MHz (core {r25['core_clock_hz'] / 1e6:.1f} MHz "
          f"≤ {r25['core_limit_hz'] / 1e6:.0f} MHz)", "2 500 fps"),
         ("CameraLink, 1280x720x8 bit", f"{links['cameralink']:.0f} fps", "555 fps"),

@@ -11,9 +11,15 @@ import numpy as np
 from viform._validate import ViformError
 from viform.cli._common import open_source as _open
 from viform.cli._common import parse_times as _parse_times
+from viform.cli._common import spike_file_options
 from viform.cli.app import cli
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
+#: The method used when --method is not given: sharp and low-noise on still and moving scenes at any
+#: light level, at the speed of the simple methods (``motion`` is better on motion, ~200× slower).
+DEFAULT_METHOD = "multi-interval"
+#: How to get the 8-bit picture of published spike-camera numbers (rate × 255 / 0.6).
+PUBLISHED_DISPLAY = "--display 8bit --scale 0.6"
 
 
 class _DisplayChoice(click.Choice):
@@ -36,13 +42,43 @@ def _png(method, display, scale, image, rate_per_tick, peak):
     return np.clip(np.rint(rate_per_tick * 255.0 / full), 0, 255).astype(np.uint8)
 
 
+def _display_note(display: str, method: str, scale: float) -> str:
+    """Which grey-level mapping the PNGs/video use, and how to get the published one."""
+    if display == "8bit" and scale == 0.6:
+        return "display: 8bit, rate × 255 / 0.6 (the convention of published spike-camera numbers)"
+    what = {"linear": "linear (white = the first image's 99.9th percentile)", "255-tau": "255-tau",
+            "inverse": "inverse (1/τ)", "8bit": f"8bit with --scale {scale:g}"}[display]
+    return (f"display: {what}; to compare with published spike-camera numbers (8-bit, rate × 255 / 0.6"
+            + ("; PSNRs of this linear display come out 4–10 dB lower" if display == "linear" else "")
+            + f") add {PUBLISHED_DISPLAY}")
+
+
+def _no_measurement(source) -> str:
+    """Why an image has no measured pixel, and how long a clip would need to be (from the stream's firing rate)."""
+    stats = source.summary()
+    rate = stats["mean_firing_rate_per_tick"]
+    length = f"the stream lasts {source.n_ticks} ticks ({source.n_ticks / source.clock_hz * 1e3:.3g} ms)"
+    if not rate > 0:
+        return f"no pixel has a measurement: the stream holds no spike at all ({length})"
+    interval = 1.0 / rate
+    every_ms = interval / source.clock_hz * 1e3
+    return (f"no pixel has a measurement at an instant marked 0.0 %: none spikes both before and after it. A pixel "
+            f"fires on average every {interval:,.0f} ticks ({every_ms:.3g} ms) and {length}; a clip "
+            f"of at least {2 * interval:,.0f} ticks ({2 * interval / source.clock_hz * 1e3:.3g} ms) with the instant "
+            "in its middle gives a typical pixel an interval, or use --method accumulation (a spike count, no "
+            "interval needed)")
+
+
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
-@click.option("--method", type=click.Choice(["accumulation", "interval", "multi-interval", "motion"]), required=True,
-              help="accumulation: spike count over a window; interval: Q/τ of the interval holding the instant; "
-                   "multi-interval: the K spikes on each side (adaptive K); motion: accumulation along the "
-                   "estimated motion over ±60 ticks (short windows where that fails), averaged with "
-                   "multi-interval.")
+@click.option("--method", type=click.Choice(["multi-interval", "motion", "interval", "accumulation"]),
+              default=DEFAULT_METHOD, show_default=True,
+              help="multi-interval (default): the K spikes on each side of the instant (adaptive K), sharp and "
+                   "low-noise at every light level; motion: accumulation along the estimated motion over "
+                   "±60 ticks (short windows where that fails), averaged with multi-interval, the best on moving "
+                   "scenes but about 200× slower; interval: Q/τ of the one interval holding the instant, the "
+                   "sharpest and noisiest; accumulation: spike count over a window (the usual 8-bit spike-count "
+                   "picture).")
 @click.option("--at", "at", default=None, help="Instant(s) in seconds, comma-separated: --at 0.01,0.02")
 @click.option("--every", "every", type=int, default=None,
               help="Whole stream: one image every N ticks (instead of --at).")
@@ -61,14 +97,12 @@ def _png(method, display, scale, image, rate_per_tick, peak):
               help="Also write the images as a video (.mp4 or .gif).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of --video.")
 @click.option("--no-png", is_flag=True, help="Folder output without the per-instant PNGs (light.npz only).")
-@click.option("--height", type=int, default=None, help="Height of a .dat file.")
-@click.option("--width", type=int, default=None, help="Width of a .dat file.")
-@click.option("--clock-hz", type=float, default=None, help="Clock of a .dat/.npz file (default 40 kHz).")
-@click.option("--no-flip", is_flag=True, help=".dat rows stored upright (some simulators).")
+@spike_file_options()
 @click.option("--display", type=_DisplayChoice(["linear", "255-tau", "inverse", "8bit"]), default="linear",
               show_default=True,
               help="PNG/video mapping: linear light (the first image's 99.9th percentile is white, for every "
-                   "image); with --method interval, 255-tau (grey level 255 − τ, τ the interval in ticks: "
+                   "image; 4–10 dB brighter than the published convention, which is --display 8bit --scale 0.6); "
+                   "with --method interval, 255-tau (grey level 255 − τ, τ the interval in ticks: "
                    "short intervals = bright) or inverse (1/τ); or 8bit, the usual 8-bit spike-camera "
                    "picture: spike count over the window (or 1/τ) scaled so --scale spikes a tick is white.")
 @click.option("--scale", type=float, default=1.0, show_default=True,
@@ -78,7 +112,7 @@ def _png(method, display, scale, image, rate_per_tick, peak):
 @click.option("--json-file", "json_file", type=click.Path(dir_okay=False), default=None,
               help="Also write the JSON summary to this file.")
 def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed_k, out_path, video, fps, no_png,
-                height, width, clock_hz, no_flip, display, scale, as_json, json_file):
+                height, width, no_flip, clock_hz, key, axes, display, scale, as_json, json_file):
     """Images of the spike stream in FILE at chosen instants (--at) or over the whole stream (--every).
 
     Accumulation windows are centred on each instant by default (--align), as in published
@@ -118,7 +152,7 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
     if video is not None:
         check_output_folder("--video", Path(video).resolve().parent)
     check_json_file(json_file)
-    source = _open(file, height, width, clock_hz, flip=not no_flip)
+    source = _open(file, height, width, clock_hz, flip=not no_flip, key=key, axes=axes)
     if at is not None:
         times = _parse_times(at)
         ticks = [source.tick_of(t, "--at") for t in times]
@@ -129,6 +163,9 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         raise ViformError(f"--at = {at!r} is not allowed: give instants in increasing order, one per tick")
     if out is not None and out.suffix.lower() == ".png" and len(ticks) != 1:
         raise ViformError(f"--out = {out_path!r} is one PNG but there are {len(ticks)} instants: give a folder")
+    if window_s is not None and window_s * source.clock_hz > source.n_ticks:
+        raise ViformError(f"--window = {window_s:g} s is not allowed: it is longer than the stream "
+                          f"({source.n_ticks / source.clock_hz:g} s, {source.n_ticks} ticks)")
     window_ticks = 41 if window_s is None else max(1, int(round(window_s * source.clock_hz)))
 
     # ---- reconstruct and write frame by frame
@@ -139,6 +176,7 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
     peak = None
     lux_per_rate = None  # lux per spike a tick of the first image (light ∝ firing rate)
     summary_rows = []
+    made_folder = folder is not None and not folder.exists()
     try:
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
@@ -190,7 +228,13 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
                 files.append(str(out))
             if video_writer is not None:
                 video_writer.append_data(png)
-            summary_rows.append((k, t, float(np.mean(rate)), None if image.lux is None else float(np.mean(image.lux))))
+            # a censored pixel's interval is cut by an end of the stream: its light is only an upper
+            # bound, so it is left out of the means (and counted)
+            measured = np.ones(rate.shape, bool) if image.censored is None else ~np.asarray(image.censored)
+            n_measured = int(measured.sum())
+            summary_rows.append((k, t, float(np.mean(rate[measured])) if n_measured else None,
+                                 None if image.lux is None or not n_measured else float(np.mean(image.lux[measured])),
+                                 n_measured / measured.size))
         if writer is not None:
             writer.close()
             writer = None
@@ -206,14 +250,23 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         if video_writer is not None:
             video_writer.close()
             video_context.__exit__(type(exc), exc, exc.__traceback__)
+        if writer is not None:
+            writer.abort()
         if npz_context is not None:
             npz_context.__exit__(type(exc), exc, exc.__traceback__)
+        for written in files:  # e.g. damage found at a later instant: no partial set of images is left
+            Path(written).unlink(missing_ok=True)
+        if made_folder and folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
         raise
     summary = {"method": method, "align": align if method == "accumulation" else None,
                "window_ticks": window_ticks if method == "accumulation" else None,
                "frames": len(ticks), "times_s": times, "ticks": ticks,
                "mean_firing_rate_per_tick": [r[2] for r in summary_rows],
-               "mean_lux": [r[3] for r in summary_rows], "files": files, "display": display}
+               "mean_lux": [r[3] for r in summary_rows], "measured_fraction": [r[4] for r in summary_rows],
+               "files": files, "display": display, "display_note": _display_note(display, method, scale)}
+    if any(r[4] == 0 for r in summary_rows):
+        summary["no_measurement"] = _no_measurement(source)
     if display in ("linear", "8bit") and not (method == "interval" and display == "8bit"):
         white = peak if display == "linear" else scale
         summary["white_firing_rate_per_tick"] = white
@@ -224,18 +277,28 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         click.echo(json.dumps(summary, indent=2))
         return
     click.echo(f"{method} images of {file}: {len(ticks)} frame(s)")
-    click.echo(f"{'tick':>8} {'time (s)':>11} {'rate (/tick)':>13} {'mean (lux)':>11}")
+    censoring = any(r[4] < 1 for r in summary_rows)
+    click.echo(f"{'tick':>8} {'time (s)':>11} {'rate (/tick)':>13} {'mean (lux)':>11}"
+               + (f" {'measured px':>12}" if censoring else ""))
     shown = summary_rows if len(summary_rows) <= 12 else summary_rows[:5] + [None] + summary_rows[-5:]
     for row in shown:
         if row is None:
             click.echo(f"{'…':>8}")
             continue
-        k, t, r, lux = row
-        click.echo(f"{k:>8d} {t:>11.6f} {r:>13.4g} {'—' if lux is None else format(lux, '.4g'):>11}")
+        k, t, r, lux, frac = row
+        measured = f" {100 * frac:>11.1f}%" if censoring else ""
+        click.echo(f"{k:>8d} {t:>11.6f} {'—' if r is None else format(r, '.4g'):>13} "
+                   f"{'—' if lux is None else format(lux, '.4g'):>11}{measured}")
+    if censoring:
+        click.echo("measured px: pixels with a complete interval around the instant; the others' intervals are cut "
+                   "by an end of the stream, so their light is only an upper bound and is left out of the means")
+    if "no_measurement" in summary:
+        click.echo(summary["no_measurement"])
     if summary.get("white_firing_rate_per_tick") is not None:
         lux_text = "" if summary["white_lux"] is None else f" ≈ {summary['white_lux']:.3g} lux"
         click.echo(f"grey scale: black = no spikes, white = {summary['white_firing_rate_per_tick']:.3g} spikes a "
                    f"tick{lux_text}")
     elif display == "255-tau":
         click.echo("grey scale: 255 − the interval in ticks (short interval = bright)")
+    click.echo(summary["display_note"])
     click.echo(f"wrote {len(files)} file(s)" + (f" to {folder}" if folder is not None else f": {', '.join(files)}"))

@@ -51,6 +51,8 @@ def _sensor_from_options(preset, threshold_level, quantum_efficiency, pixel_pitc
             raise ViformError(f"--threshold-level = {threshold_level!r} is not allowed: it must be a whole "
                               "number in [0, 15] (the chip's 16 levels)") from None
     changes = {_FIELDS[k]: v for k, v in given.items() if v is not None}
+    if pixel_pitch_um is not None and not pixel_pitch_um > 0:  # checked here: the optics hold metres
+        raise ViformError(f"--pixel-pitch-um = {pixel_pitch_um!r} is not allowed: it must be > 0 µm")
     optics = {"quantum_efficiency": quantum_efficiency, "fill_factor": fill_factor,
               "pixel_pitch_m": None if pixel_pitch_um is None else pixel_pitch_um * 1e-6}
     optics = {k: v for k, v in optics.items() if v is not None}
@@ -106,6 +108,21 @@ sensor_options = [
 ]
 
 
+def check_request_duration(duration_s: float, sensor, light) -> None:
+    """The size checks the CLI makes on --duration (ticks, pixel-ticks), for a duration taken from the video."""
+    from viform.cli._types import MAX_TICKS, max_pixel_ticks
+
+    ticks = duration_s * sensor.parameters.clock_hz
+    pixels = light.height * light.width if hasattr(light, "height") else 0
+    if ticks > MAX_TICKS:
+        raise ViformError(f"the video lasts {duration_s:g} s, {ticks:.4g} ticks at {sensor.parameters.clock_hz:g} Hz, "
+                          f"more than the {MAX_TICKS:.4g} a stream may hold: give a shorter --duration")
+    if ticks * pixels > max_pixel_ticks():
+        raise ViformError(f"the video lasts {duration_s:g} s: {ticks * pixels:.4g} pixel-ticks, more than the limit "
+                          f"of {max_pixel_ticks():.4g}; give a shorter --duration, or raise the environment "
+                          "variable VIFORM_MAX_PIXEL_TICKS")
+
+
 def _apply(options):
     def decorator(f):
         for option in reversed(options):
@@ -117,7 +134,9 @@ def _apply(options):
 
 @cli.command()
 @click.argument("scene")
-@click.option("--duration", "duration_s", type=float, required=True, help="Length of the stream, seconds.")
+@click.option("--duration", "duration_s", type=float, default=None,
+              help="Length of the stream, seconds [default: a video's or image folder's own length; required for "
+                   "built-in scenes and still images].")
 @click.option("--out", "out_path", type=click.Path(dir_okay=True), required=True,
               help="Output file: .dat (spike-camera layout), .zarr (chunked, with metadata) or .npz.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Photon-noise seed.")
@@ -135,17 +154,26 @@ def _apply(options):
               help="Light between video frames.")
 @click.option("--light-sample-ticks", type=int, default=1, show_default=True,
               help="Evaluate the scene every N ticks (held in between).")
+@click.option("--truth", "truth_dir", type=click.Path(file_okay=False), default=None,
+              help="Built-in scenes: also write their exact truth to this folder, one frame every "
+                   "--truth-every-ticks: the light (gt/), forward flow to the next frame (flow/, .flo, px), "
+                   "range (depth/, m) and object tracks (mot/: MOTChallenge gt.txt, seqinfo.ini).")
+@click.option("--truth-every-ticks", type=int, default=40, show_default=True,
+              help="Ticks per truth frame (40 ticks = 1 ms at 40 kHz).")
+@click.option("--force", is_flag=True,
+              help="Run a simulation estimated to take more than a minute (refused without it, with the estimate).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 @_apply(sensor_options)
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
-             light_sample_ticks, as_json, json_file, **sensor_kw):
+             light_sample_ticks, truth_dir, truth_every_ticks, force, as_json, json_file, **sensor_kw):
     """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the spike stream.
 
     Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
     Memory stays bounded (blocks of about 50 MB) whatever the resolution and duration.
     """
     from viform._io import check_json_file, check_output_folder, write_json
+    from viform.cli._types import check_simulation_work
     from viform.light.scenes import VideoScene, load_scene
     from viform.stream.io import FORMATS, save_spikes
 
@@ -162,9 +190,31 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     fit = (height, width)  # files: resized only when the user asked
     height = height if height is not None else (preset.height if preset is not None else 250)
     width = width if width is not None else (preset.width if preset is not None else 400)
+    if duration_s is None and not Path(scene).exists():
+        raise ViformError(f"--duration is required: SCENE = {scene!r} is a built-in scene, which has no length of "
+                          "its own (a video or image folder gives its own)")
+    # the size is known before the scene loads
+    if duration_s is not None and (all(v is not None for v in fit) or not Path(scene).exists()):
+        check_simulation_work(duration_s, sensor.parameters.clock_hz, height * width, force)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
                        interpolation=interpolation, fit=fit)
+    if truth_dir is not None:
+        from viform._validate import check_int
+
+        check_int("--truth-every-ticks", truth_every_ticks, 1, 1 << 24)
+        if not light.truth_kinds():
+            raise ViformError(f"--truth: scene {scene!r} has no truth: image and video files carry only light; "
+                              "use a built-in scene (translating, rotating, dilemma, multi-object, …)")
+        check_output_folder("--truth", Path(truth_dir))
     scene_s = light.duration_s if isinstance(light, VideoScene) else None
+    duration_from = "given"
+    if duration_s is None:
+        if scene_s is None:
+            raise ViformError(f"--duration is required: SCENE = {scene!r} is a still image, which has no length "
+                              "of its own (a video or image folder gives its own)")
+        duration_s, duration_from = scene_s, "the video's length"
+        check_request_duration(duration_s, sensor, light)
+    check_simulation_work(duration_s, sensor.parameters.clock_hz, light.height * light.width, force)
     if scene_s is not None and duration_s > scene_s * (1 + 1e-9) and not as_json:
         click.echo(f"viform: warning: the video lasts {scene_s:.4g} s; its last frame is held for the other "
                    f"{duration_s - scene_s:.4g} s of --duration {duration_s:g}", err=True)
@@ -178,24 +228,53 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     # the simulator caps each block at its memory budget (SpikeSensor.default_block_ticks)
     save_spikes(out_path, stream, block_ticks=1 << 20)
     elapsed = time.perf_counter() - started
+    truth = None
+    if truth_dir is not None:
+        truth = _write_truth(truth_dir, Path(out_path).stem, light, stream, sensor, truth_every_ticks)
     pixel_ticks = stream.n_ticks * stream.height * stream.width
     p = sensor.parameters
     summary = {"file": str(out_path), "n_ticks": stream.n_ticks, "height": stream.height,
                "width": stream.width, "clock_hz": stream.clock_hz,
                "threshold_electrons": stream.threshold_electrons, "seed": seed,
                "preset": None if preset is None else preset.name,
+               "duration_s": stream.n_ticks / stream.clock_hz, "duration_from": duration_from,
                "gain_spread_fraction": p.gain_spread_fraction, "dead_time_s": p.dead_time_s,
-               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed}
+               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed, "truth": truth}
     if json_file:
         write_json(json_file, summary)
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
     rows = [("file", str(out_path)), ("ticks", f"{stream.n_ticks}"),
+            ("duration", f"{stream.n_ticks / stream.clock_hz:.6g} s"
+                         + (f" ({duration_from}: no --duration given)" if duration_from != "given" else "")),
             ("size", f"{stream.height} × {stream.width} pixels"), ("clock", f"{stream.clock_hz:,.0f} Hz"),
             ("threshold Q", f"{stream.threshold_electrons:.4g} e-"),
             ("preset", "none" if preset is None else preset.name),
             ("speed", f"{pixel_ticks / elapsed:.3g} pixel-ticks/s")]
+    if truth is not None:
+        rows.append(("truth", f"{truth['frames']} frames every {truth_every_ticks} ticks in {truth_dir}/ "
+                              f"({', '.join(truth['kinds'])})"))
     width_ = max(len(k) for k, _ in rows)
     for k, v in rows:
         click.echo(f"{k:<{width_}}  {v}")
+
+
+def _write_truth(folder, clip: str, scene, stream, sensor, step_ticks: int) -> dict:
+    """The scene's truth beside the spikes (layout of :mod:`viform.datasets.scene_clips`); gt images are
+    8-bit with full scale at the light that saturates the sensor (one spike per tick)."""
+    from viform._io import atomic_path, write_json
+    from viform.datasets.build import full_scale_lux
+    from viform.datasets.scene_clips import write_truth
+
+    full_scale = full_scale_lux(sensor.parameters, 1.0)
+    with atomic_path(folder, directory=True) as tmp:
+        Path(tmp).mkdir()
+        written = write_truth(tmp, clip, scene, stream.n_ticks, step_ticks, stream.clock_hz, full_scale)
+        meta = {"scene": scene.describe(), "step_ticks": step_ticks, "clock_hz": stream.clock_hz,
+                "gt_full_scale_lux": full_scale, **written,
+                "frame_time": "frame k: the end of step k, t = k·step_ticks / clock_hz (s)",
+                "flow": "forward flow from frame k to frame k + 1, px, Middlebury .flo (unknown = 1e10)",
+                "depth": "range along the line of sight, m, float32 .npy (inf: no surface)"}
+        write_json(Path(tmp) / "truth.json", meta)
+    return {"folder": str(folder), "frames": len(written["frames"]), "kinds": written["kinds"]}

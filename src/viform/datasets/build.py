@@ -46,7 +46,7 @@ from viform.datasets.layout import (
     sha256_file,
     write_config,
 )
-from viform.datasets.sources import SourceClip, find_clips, lux_to_gt_image, read_clip
+from viform.datasets.sources import SourceClip, describe_fit, find_clips, lux_to_gt_image, read_clip
 
 #: Preset used when none is given: the 400×250, 40 kHz chip of seed 000 §6.
 DEFAULT_PRESET = "spikeone"
@@ -68,10 +68,13 @@ class DatasetSettings:
     frame_rate_hz: float | None = None
     interpolation: str = "linear"
     light_sample_ticks: int = 1
+    truth_every_ticks: int | None = None  # scene clips: ticks per truth step (None: video datasets)
 
     def describe(self) -> dict:
         """JSON-able description (sensor parameters in full)."""
         d = {k: v for k, v in asdict(self).items() if k != "parameters"}
+        if d["truth_every_ticks"] is None:  # video datasets keep the fingerprint they had before
+            del d["truth_every_ticks"]
         d["sensor"] = json.loads(json.dumps(self.parameters.to_dict(), default=_jsonable))
         return d
 
@@ -149,7 +152,7 @@ def full_scale_lux(parameters, rate_per_tick: float = FULL_SCALE_RATE) -> float:
 def make_settings(preset: str | None = None, *, height: int | None = None, width: int | None = None,
                   seed: int = 0, gt_every: int = 1, frame_rate_hz: float | None = None,
                   max_lux: float | None = None, interpolation: str = "linear", light_sample_ticks: int = 1,
-                  **overrides) -> DatasetSettings:
+                  truth_every_ticks: int | None = None, **overrides) -> DatasetSettings:
     """Validated :class:`DatasetSettings` (errors name the command-line option).
 
     ``max_lux`` (the illuminance of a full-scale source pixel) defaults to the light at which
@@ -164,7 +167,39 @@ def make_settings(preset: str | None = None, *, height: int | None = None, width
         frame_rate_hz=None if frame_rate_hz is None else check_positive("--frame-rate-hz", frame_rate_hz),
         max_lux=check_positive("--max-lux", max_lux),
         interpolation=check_choice("--interpolation", interpolation, ("hold", "linear")),
-        light_sample_ticks=check_int("--light-sample-ticks", light_sample_ticks, 1))
+        light_sample_ticks=check_int("--light-sample-ticks", light_sample_ticks, 1),
+        truth_every_ticks=None if truth_every_ticks is None else check_int("--truth-every-ticks", truth_every_ticks,
+                                                                           1, 1 << 24))
+
+
+def scene_clips(scenes, clips_per_scene: int, duration_s: float, settings: DatasetSettings,
+                pairs: bool = False) -> list:
+    """Clips drawn from built-in scenes (:mod:`viform.datasets.scene_clips`): ``clips_per_scene`` of
+    each, named ``<scene>-<k>``, and with ``pairs`` each one's clean twin ``<scene>-<k>-clean``."""
+    from viform.datasets.scene_clips import CLEAN_SUFFIX, parse_scene_list, scene_parameters
+    from viform.datasets.sources import SourceClip
+
+    names = parse_scene_list(scenes) if isinstance(scenes, str) else list(scenes)
+    clips_per_scene = check_int("--clips", clips_per_scene, 1, 100_000)
+    duration_s = check_positive("--duration", duration_s)
+    if settings.truth_every_ticks is None:
+        raise ViformError("scene clips need a truth step: give truth_every_ticks (--truth-every-ticks)")
+    if duration_s * settings.parameters.clock_hz < settings.truth_every_ticks:
+        raise ViformError(f"--duration {duration_s:g} s is shorter than one truth step "
+                          f"({settings.truth_every_ticks} ticks at {settings.parameters.clock_hz:g} Hz)")
+    out = []
+    for scene in names:
+        for k in range(clips_per_scene):
+            name = f"{scene}-{k:04d}"
+            spec = {"scene": scene, "height": settings.height, "width": settings.width,
+                    "parameters": scene_parameters(scene, name, settings.seed, settings.max_lux),
+                    "duration_s": duration_s, "clean": False}
+            out.append(SourceClip(name, json.dumps(spec, sort_keys=True), "scene"))
+            if pairs:
+                # the twin draws the same light and photon seed: its spec differs only in "clean"
+                twin = {**spec, "clean": True, "twin_of": name}
+                out.append(SourceClip(name + CLEAN_SUFFIX, json.dumps(twin, sort_keys=True), "scene"))
+    return out
 
 
 # ---------------------------------------------------------------------- one clip
@@ -208,16 +243,29 @@ def _finished(task: ClipTask, dat: Path) -> dict | None:
         path = gt_dir / gt["file"]
         if not path.is_file() or sha256_file(path) != gt.get("sha256"):
             return None
+    if task.clip.kind == "scene":
+        from viform.datasets.scene_clips import truth_intact
+
+        if not truth_intact(task.out, record):
+            return None
     return {**record, "status": "skipped"}
 
 
 def _remove_stale(out: Path, clip: str) -> None:
     """Temporary files a killed attempt left behind (atomic writes name them ``.<target>.*``)."""
-    for folder, prefix in ((out / SPIKE_DIR, f".{clip}.dat"), (out / GT_DIR, f".{clip}_")):
+    from viform.datasets.scene_clips import DEPTH_DIR, FLOW_DIR, MOT_DIR
+
+    for folder, prefix in ((out / SPIKE_DIR, f".{clip}.dat"), (out / GT_DIR, f".{clip}_"),
+                           (out / FLOW_DIR, f".{clip}_"), (out / DEPTH_DIR, f".{clip}_")):
         if folder.is_dir():
             for p in folder.iterdir():
                 if p.name.startswith(prefix):
                     p.unlink(missing_ok=True)
+    mot = out / MOT_DIR / clip
+    if mot.is_dir():
+        for p in mot.rglob(".*"):
+            if p.is_file():
+                p.unlink(missing_ok=True)
 
 
 def convert_clip(task: ClipTask) -> dict:
@@ -246,15 +294,96 @@ def convert_clip(task: ClipTask) -> dict:
         set_num_threads(threads)
 
 
+def _convert_or_report(task: ClipTask) -> dict:
+    """:func:`convert_clip` on a worker, a clip's bad input returned as ``{"status": "failed", "error"}``.
+
+    Returned rather than raised, so that the worker does not log a "Compute Failed" block with a
+    traceback for what is the user's data (the summary names the clip, the file and the fault).
+    """
+    try:
+        return convert_clip(task)
+    except ViformError as exc:
+        return {"status": "failed", "error": str(exc)}
+
+
+def _clean_parameters(parameters):
+    """The clean twin's sensor: photon noise and every fixed pattern off (same light, same seed)."""
+    from dataclasses import replace
+
+    return replace(parameters, photon_noise=False, threshold_spread_fraction=0.0, gain_spread_fraction=0.0,
+                   dark_current_spread_fraction=0.0, hot_pixel_fraction=0.0)
+
+
+def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
+    """A scene clip: the drawn scene, its spikes and its exact truth (flow, depth, objects)."""
+    from viform.datasets.scene_clips import make_scene, write_truth
+    from viform.sensors.spike import SpikeSensor
+
+    s, clip, out = task.settings, task.clip, Path(task.out)
+    _sidecar_tools()[1](dat).unlink(missing_ok=True)
+    spec = json.loads(clip.path)
+    scene = make_scene(clip)
+    parameters = _clean_parameters(s.parameters) if spec["clean"] else s.parameters
+    sensor = SpikeSensor(parameters, s.height, s.width)
+    # a clean twin uses its noisy clip's seed, so the two differ by the noise alone
+    seed = clip_seed(s.seed, spec.get("twin_of", clip.name))
+    source = sensor.stream(scene, spec["duration_s"], seed=seed, light_sample_ticks=s.light_sample_ticks,
+                           reuse_buffer=True)
+    truth = write_truth(out, clip.name, scene, source.n_ticks, s.truth_every_ticks, source.clock_hz, s.max_lux)
+    spikes, digest = _write_dat(task, dat, source)
+    full_scale_rate = float(sensor.expected_firing_rate_per_tick(np.array(s.max_lux)))
+    record = {
+        "clip": clip.name, "source": clip.path, "seed": seed, "ticks": source.n_ticks,
+        "spikes": spikes, "sha256": digest, "bytes": dat.stat().st_size,
+        "height": s.height, "width": s.width, "clock_hz": source.clock_hz, "n_frames": len(truth["frames"]),
+        "frame_rate_hz": source.clock_hz / s.truth_every_ticks, "rate": full_scale_rate,
+        "gt_frames": truth["frames"], "settings_sha256": s.fingerprint(),
+        "scene": spec["scene"], "scene_parameters": spec["parameters"], "clean": spec["clean"],
+        "truth": {"kinds": truth["kinds"], "step_ticks": s.truth_every_ticks, "mot": truth["mot"],
+                  "frame_time": "frame k: the end of step k, t = k·step_ticks / clock_hz (s)",
+                  "flow": "forward flow from frame k to frame k + 1, px, Middlebury .flo (unknown = 1e10)",
+                  "depth": "range along the line of sight, m, float32 .npy (inf: no surface)"},
+    }
+    if truth["mot"]:
+        record["mot"] = truth["mot"]
+    _write_clip_sidecar(dat, source, sensor, task, record)
+    return {**record, "status": "converted", "seconds": time.perf_counter() - started}
+
+
+def _write_dat(task: ClipTask, dat: Path, source) -> tuple[int, str]:
+    """Pack and write the stream block by block (bounded memory); returns (spikes, SHA-256)."""
+    from viform.stream.dat import pack_frames
+
+    out, clip = Path(task.out), task.clip
+    digest = hashlib.sha256()
+    spikes = 0
+    crash_marker = out / f".crash-{clip.name}"
+    crash = task.crash_after_blocks is not None and not crash_marker.exists()
+    with atomic_open(dat, "wb") as f:
+        for i, (_, block) in enumerate(source.iter_blocks(task.block_ticks)):
+            packed = pack_frames(block, flip=True)  # bottom-up rows, as the cameras write
+            f.write(packed)
+            digest.update(packed)
+            spikes += int(np.count_nonzero(block))
+            if crash and i + 1 >= task.crash_after_blocks:
+                crash_marker.touch()
+                f.flush()
+                os._exit(70)
+        f.flush()
+        os.fsync(f.fileno())
+    return spikes, digest.hexdigest()
+
+
 def _convert(task: ClipTask, dat: Path, started: float) -> dict:
     from viform.light.scenes import VideoScene
     from viform.sensors.spike import SpikeSensor
-    from viform.stream.dat import pack_frames
 
     s, clip, out = task.settings, task.clip, Path(task.out)
+    if clip.kind == "scene":
+        return _convert_scene(task, dat, started)
     _sidecar_tools()[1](dat).unlink(missing_ok=True)  # a redone clip is unfinished until its new sidecar
 
-    frames, declared_hz = read_clip(clip, s.height, s.width, s.max_lux)
+    frames, declared_hz, fit = read_clip(clip, s.height, s.width, s.max_lux)
     frame_rate_hz = s.frame_rate_hz or declared_hz
     if frame_rate_hz is None:
         raise ViformError(f"clip {clip.name!r} declares no frame rate: give --frame-rate-hz")
@@ -277,30 +406,14 @@ def _convert(task: ClipTask, dat: Path, started: float) -> dict:
                           "sha256": sha256_file(out / GT_DIR / name)})
     del frames  # the scene keeps its own copy
 
-    digest = hashlib.sha256()
-    spikes = 0
-    crash_marker = out / f".crash-{clip.name}"
-    crash = task.crash_after_blocks is not None and not crash_marker.exists()
-    with atomic_open(dat, "wb") as f:
-        for i, (_, block) in enumerate(source.iter_blocks(task.block_ticks)):
-            packed = pack_frames(block, flip=True)  # bottom-up rows, as the cameras write
-            f.write(packed)
-            digest.update(packed)
-            spikes += int(np.count_nonzero(block))
-            if crash and i + 1 >= task.crash_after_blocks:
-                crash_marker.touch()
-                f.flush()
-                os._exit(70)
-        f.flush()
-        os.fsync(f.fileno())
-
+    spikes, digest = _write_dat(task, dat, source)
     full_scale_rate = float(sensor.expected_firing_rate_per_tick(np.array(s.max_lux)))
     record = {
         "clip": clip.name, "source": clip.path, "seed": seed, "ticks": source.n_ticks,
-        "spikes": spikes, "sha256": digest.hexdigest(), "bytes": dat.stat().st_size,
+        "spikes": spikes, "sha256": digest, "bytes": dat.stat().st_size,
         "height": s.height, "width": s.width, "clock_hz": clock_hz, "n_frames": n_frames,
         "frame_rate_hz": frame_rate_hz, "rate": full_scale_rate, "gt_frames": gt_frames,
-        "settings_sha256": s.fingerprint(),
+        "settings_sha256": s.fingerprint(), "fit": fit,
     }
     _write_clip_sidecar(dat, source, sensor, task, record)
     return {**record, "status": "converted", "seconds": time.perf_counter() - started}
@@ -337,14 +450,28 @@ def _provenance() -> dict:
                 "utc_date": dt.datetime.now(dt.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")}
 
 
-def _config(out: Path, settings: DatasetSettings) -> dict:
+def _label_types(clips) -> list:
+    """SpikeCV's label-type ids present: 1 reconstruction, 2 optical flow, 3.1 depth, 5 tracking."""
+    types = [1]
+    scenes = [c for c in clips if c.kind == "scene"]
+    if scenes:
+        from viform.light.scenes import builtin_scene
+
+        kinds = set()
+        for name in {json.loads(c.path)["scene"] for c in scenes}:
+            kinds.update(builtin_scene(name, 64, 96).truth_kinds())
+        types += [t for kind, t in (("motion", 2), ("depth", 3.1), ("objects", 5)) if kind in kinds]
+    return types
+
+
+def _config(out: Path, settings: DatasetSettings, clips=()) -> dict:
     p = settings.parameters
     return {
         "filename": out.resolve().name,
         "spike_h": settings.height,
         "spike_w": settings.width,
         "is_labeled": True,
-        "labeled_data_type": [1],  # SpikeCV's label type 1: reconstruction (ground-truth images)
+        "labeled_data_type": _label_types(clips),  # SpikeCV's ids; 1: ground-truth images
         "labeled_data_suffix": "png",
         "clock_hz": float(p.clock_hz),
         "threshold_electrons": float(p.threshold_electrons),
@@ -431,7 +558,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
         ``pixel_ticks_per_s``, ``workers``, ``manifest``.
     """
     out = Path(out)
-    clips = find_clips(src)
+    clips = list(src) if isinstance(src, (list, tuple)) else find_clips(src)
     if settings.frame_rate_hz is None:
         folders = [c.name for c in clips if c.kind == "frames"]
         if folders:
@@ -447,11 +574,24 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     check_output_folder("--out", out)
     if out.exists() and not out.is_dir():
         raise ViformError(f"--out {str(out)!r} is a file, not a folder")
-    config = _config(out, settings)
+    config = _config(out, settings, clips)
     _check_existing_config(out, config)
-    (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
-    (out / GT_DIR).mkdir(parents=True, exist_ok=True)
-    write_config(out / CONFIG_NAME, config)
+    # reach the scheduler (or start the workers) before anything is written: a wrong
+    # --scheduler must leave no half-made dataset behind
+    own_client = client is None
+    own_cluster = None
+    if own_client:
+        client, own_cluster = _open_client(workers, scheduler, memory_limit)
+    try:
+        (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
+        (out / GT_DIR).mkdir(parents=True, exist_ok=True)
+        write_config(out / CONFIG_NAME, config)
+    except BaseException:
+        if own_client:
+            client.close()
+        if own_cluster is not None:
+            own_cluster.close()
+        raise
 
     prov = _provenance()
     tasks = [ClipTask(c, str(out), settings, prov, block_ticks,
@@ -467,10 +607,6 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
             failed[task.clip.name] = error
         _write_manifest(out, settings, rows, failed)
 
-    own_client = client is None
-    own_cluster = None
-    if own_client:
-        client, own_cluster = _open_client(workers, scheduler, memory_limit)
     bar = None
     try:
         n_workers = len(client.scheduler_info().get("workers", {}))
@@ -480,12 +616,16 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
 
         bar = tqdm(total=len(tasks), unit="clip", desc="dataset", disable=not progress, leave=True)
         token = uuid.uuid4().hex[:8]
-        futures = {client.submit(convert_clip, t, key=f"viform-clip-{t.clip.name}-{token}", pure=False): t
+        futures = {client.submit(_convert_or_report, t, key=f"viform-clip-{t.clip.name}-{token}", pure=False): t
                    for t in tasks}
         for fut in as_completed(futures):
             task = futures[fut]
             try:
-                record(task, fut.result(), None)
+                result = fut.result()
+                if result.get("status") == "failed":
+                    record(task, None, result["error"])
+                else:
+                    record(task, result, None)
             except ViformError as exc:
                 record(task, None, str(exc))
             except Exception as exc:  # a worker lost too often, an unexpected failure: report, go on
@@ -505,14 +645,18 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     return summary
 
 
+#: Manifest keys of scene clips: what was drawn, and where the truth is.
+_SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth")
+
+
 def _write_manifest(out: Path, settings: DatasetSettings, rows: dict, failed: dict) -> None:
     """manifest.json: clips sorted by name, without timings (same bits, same manifest)."""
     keep = ("clip", "source", "seed", "ticks", "spikes", "sha256", "bytes", "n_frames", "frame_rate_hz",
-            "rate", "gt_frames")
+            "rate", "gt_frames", "fit")
     write_json(out / MANIFEST_NAME, {
         "format": LAYOUT_FORMAT, "spike_h": settings.height, "spike_w": settings.width,
         "clock_hz": float(settings.parameters.clock_hz), "settings_sha256": settings.fingerprint(),
-        "clips": [{k: rows[c][k] for k in keep} for c in sorted(rows)],
+        "clips": [{k: rows[c][k] for k in keep + _SCENE_KEYS if k in rows[c]} for c in sorted(rows)],
         "failed": [{"clip": c, "error": failed[c]} for c in sorted(failed)],
     })
 
@@ -536,6 +680,8 @@ def _summary(out, clips, rows, failed, seconds, workers) -> dict:
         "pixel_ticks_per_s": pixel_ticks / seconds if seconds > 0 else 0.0,
         "workers": workers,
         "manifest": str(Path(out) / MANIFEST_NAME),
+        # how the source frames were fitted to the sensor (scaled, centre-cropped: never stretched)
+        "fits": sorted({describe_fit(r["fit"]) for r in rows.values() if r.get("fit")}),
     }
 
 
@@ -546,7 +692,7 @@ def convert_serially(src, out, settings: DatasetSettings, block_ticks: int = 409
     ``crash`` (testing aid, as in :func:`build_dataset`) ends this whole process mid-clip.
     """
     out = Path(out)
-    clips = find_clips(src)
+    clips = list(src) if isinstance(src, (list, tuple)) else find_clips(src)
     (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
     (out / GT_DIR).mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()

@@ -43,6 +43,8 @@ class GroundTruth:
     frame: int
     tick: int
     path: Path
+    flow: Path | None = None  # .flo: forward flow to the next truth frame (scene clips)
+    depth: Path | None = None  # .npy: range, m (scenes with range)
 
 
 @dataclass
@@ -56,6 +58,8 @@ class ClipRecord:
     rate: float
     gt: list[GroundTruth] = field(default_factory=list)
     n_ticks: int | None = None
+    mot: Path | None = None  # MOTChallenge gt.txt of the clip's objects (scene clips)
+    truth_kinds: tuple = ()
 
 
 class SpikeFolder:
@@ -88,6 +92,8 @@ class SpikeFolder:
         if not root.is_dir():
             raise ViformError(f"dataset folder {str(root)!r} does not exist")
         self.root = root
+        self.truth_kinds: tuple = ()
+        self._mot_rows: dict[int, np.ndarray] = {}
         self.window_ticks = check_int("window_ticks", window_ticks, 1)
         self.flip = flip
         self._npz = {k: v for k, v in (("key", npz_key), ("axes", npz_axes)) if v is not None}
@@ -118,15 +124,24 @@ class SpikeFolder:
             raise ViformError(f"{str(path)!r} is not a readable manifest: {exc}") from None
         if not isinstance(manifest, dict) or manifest.get("format") != LAYOUT_FORMAT:
             raise ViformError(f"{str(path)!r} is not a viform dataset manifest (format {LAYOUT_FORMAT!r})")
+        from viform.datasets.scene_clips import DEPTH_DIR, FLOW_DIR
+
         h, w = manifest.get("spike_h"), manifest.get("spike_w")
         clips = []
         for row in manifest.get("clips", []):
             name = str(row["clip"])
-            gts = [GroundTruth(int(g["frame"]), int(g["tick"]), self.root / GT_DIR / g["file"])
+            gts = [GroundTruth(int(g["frame"]), int(g["tick"]), self.root / GT_DIR / g["file"],
+                               self.root / FLOW_DIR / g["flow"] if g.get("flow") else None,
+                               self.root / DEPTH_DIR / g["depth"] if g.get("depth") else None)
                    for g in row.get("gt_frames", [])]
+            truth = row.get("truth") or {}
+            mot = (truth.get("mot") or {}).get("gt")
             clips.append(ClipRecord(name, self.root / SPIKE_DIR / f"{name}.dat", h, w,
                                     float(row.get("rate", SPIKE_ZOO_RATE)) if rate is None else rate,
-                                    gts, int(row["ticks"])))
+                                    gts, int(row["ticks"]), self.root / mot if mot else None,
+                                    tuple(truth.get("kinds", ()))))
+        # every sample carries the same keys: the truth kinds any clip of the set has
+        self.truth_kinds = tuple(k for k in ("motion", "depth", "objects") if any(k in c.truth_kinds for c in clips))
         return clips
 
     def _from_folder(self, root: Path, height, width, rate: float) -> list[ClipRecord]:
@@ -202,15 +217,53 @@ class SpikeFolder:
         return ci, start, start + self.window_ticks
 
     def __getitem__(self, index: int) -> dict:
-        """``{spike: uint8 (T, H, W), gt_img: float32 (1, H, W) in [0, 1], rate, clip, frame, tick, start_tick}``."""
+        """``{spike: uint8 (T, H, W), gt_img: float32 (1, H, W) in [0, 1], rate, clip, frame, tick, start_tick}``,
+        plus the truth of scene datasets (the same keys for every sample of a set):
+
+        * ``flow`` float32 (2, H, W), px, forward to the next truth frame (0 where unknown) and
+          ``flow_valid`` bool (H, W) — False where occluded, leaving, or the clip has no flow;
+        * ``depth`` float32 (H, W), m (NaN where the clip has no range; inf: no surface);
+        * ``boxes`` float32 (N, 4) x, y, w, h in px (0-based), ``ids`` int64 (N,), ``classes``
+          int64 (N,), ``visibility`` float32 (N,): the objects of this frame (MOTChallenge truth).
+        """
         if isinstance(index, (int, np.integer)) and not -len(self) <= index < len(self):
             raise IndexError(f"sample {index} of {len(self)}")
         ci, start, stop = self.window(int(index))
         ci_, gi = self.samples[int(index)]
         clip, gt = self.clips[ci], self.clips[ci].gt[gi]
         spike = np.asarray(self.source(ci).read_ticks(start, stop), dtype=np.uint8)
-        return {"spike": spike, "gt_img": read_gt(gt.path)[None], "rate": clip.rate, "clip": clip.name,
-                "frame": gt.frame, "tick": gt.tick, "start_tick": start}
+        sample = {"spike": spike, "gt_img": read_gt(gt.path)[None], "rate": clip.rate, "clip": clip.name,
+                  "frame": gt.frame, "tick": gt.tick, "start_tick": start}
+        sample.update(self._truth(ci, gt, spike.shape[1:]))
+        return sample
+
+    def _truth(self, ci: int, gt: GroundTruth, shape) -> dict:
+        out = {}
+        if "motion" in self.truth_kinds:
+            from viform.vision.flow import read_flo
+
+            if gt.flow is not None:
+                flow, valid = read_flo(gt.flow)
+                out["flow"], out["flow_valid"] = np.nan_to_num(flow, nan=0.0), valid
+            else:
+                out["flow"], out["flow_valid"] = np.zeros((2, *shape), np.float32), np.zeros(shape, bool)
+        if "depth" in self.truth_kinds:
+            out["depth"] = np.load(gt.depth) if gt.depth is not None else np.full(shape, np.nan, np.float32)
+        if "objects" in self.truth_kinds:
+            rows = self._objects(ci)
+            rows = rows[rows[:, 0] == gt.frame]
+            out.update(boxes=rows[:, 2:6].astype(np.float32), ids=rows[:, 1].astype(np.int64),
+                       classes=rows[:, 7].astype(np.int64), visibility=rows[:, 8].astype(np.float32))
+        return out
+
+    def _objects(self, ci: int) -> np.ndarray:
+        """A clip's MOTChallenge rows (read once), 0-based boxes; empty when it has no objects."""
+        if ci not in self._mot_rows:
+            from viform.vision.motchallenge import read_gt as read_mot_gt
+
+            path = self.clips[ci].mot
+            self._mot_rows[ci] = read_mot_gt(path) if path is not None else np.zeros((0, 9))
+        return self._mot_rows[ci]
 
     def events(self, index: int) -> tuple[np.ndarray, tuple[int, int, int]]:
         """Spikes of sample ``index`` as tonic expects them, and its ``sensor_size``.

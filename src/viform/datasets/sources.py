@@ -60,11 +60,15 @@ def find_clips(src) -> list[SourceClip]:
     return clips
 
 
-def read_clip(clip: SourceClip, height: int, width: int, max_lux: float) -> tuple[np.ndarray, float | None]:
-    """Frames of a clip as lux at the sensor's size, shape (N, H, W) float64, and its declared frame rate.
+def read_clip(clip: SourceClip, height: int, width: int,
+              max_lux: float) -> tuple[np.ndarray, float | None, dict]:
+    """Frames of a clip as lux at the sensor's size, shape (N, H, W) float64, its declared frame rate and its fit.
 
-    Frames are resized (bilinear, anti-aliased) to ``height`` × ``width`` as they are read, so
-    only the sensor-sized frames are held.
+    Frames are scaled by one factor (bilinear, anti-aliased) until they cover ``height`` ×
+    ``width``, then centre-cropped to it, as they are read: the aspect ratio is kept (a disc
+    stays a disc in the spikes and the ground truth) and only sensor-sized frames are held.
+    The third value describes that fit (:func:`fit_to_sensor`). A frame file that cannot be
+    read is named in the error.
     """
     import imageio.v3 as iio
 
@@ -73,25 +77,78 @@ def read_clip(clip: SourceClip, height: int, width: int, max_lux: float) -> tupl
     path = Path(clip.path)
     frames = []
     declared = None
+    fit = None
     try:
         if clip.kind == "frames":
             files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
             for f in files:
-                frames.append(_resize(image_to_lux(iio.imread(f), max_lux), (height, width)))
+                try:
+                    image = iio.imread(f)
+                except Exception as exc:
+                    raise ViformError(f"frame file {str(f)!r} is not a readable image ({_read_error(exc)})") from None
+                lux = image_to_lux(image, max_lux)
+                fit = fit if fit is not None else fit_to_sensor(lux.shape, (height, width))
+                frames.append(_fit(lux, fit))
         else:
             try:
                 declared = iio.immeta(path).get("fps")
             except Exception:
                 declared = None
             for frame in iio.imiter(path):
-                frames.append(_resize(image_to_lux(frame, max_lux), (height, width)))
+                lux = image_to_lux(frame, max_lux)
+                fit = fit if fit is not None else fit_to_sensor(lux.shape, (height, width))
+                frames.append(_fit(lux, fit))
     except ViformError as exc:
-        raise ViformError(f"clip {clip.name!r} ({str(path)!r}): {exc}") from None
+        raise ViformError(f"clip {clip.name!r}: {exc}") from None
     except Exception as exc:
-        raise ViformError(f"clip {clip.name!r}: {str(path)!r} could not be read: {one_line(exc)}") from None
+        raise ViformError(f"clip {clip.name!r}: {str(path)!r} could not be read: {_read_error(exc)}") from None
     if not frames:
         raise ViformError(f"clip {clip.name!r}: {str(path)!r} holds no frames")
-    return np.stack(frames), (float(declared) if declared else None)
+    if any(f.shape != frames[0].shape for f in frames):
+        raise ViformError(f"clip {clip.name!r}: its frames do not all have the same size")
+    return np.stack(frames), (float(declared) if declared else None), fit
+
+
+def _read_error(exc: Exception) -> str:
+    """What a reader's failure means, in one line (imageio lists plugins to install when no reader knows the bytes)."""
+    text = str(exc)
+    if "backend" in text.lower() or "plugin" in text.lower():
+        return "no image or video reader recognises its contents: damaged, or not the format its suffix says"
+    return one_line(exc)
+
+
+def fit_to_sensor(native: tuple[int, int], shape: tuple[int, int]) -> dict:
+    """How a ``native`` (rows, columns) frame is fitted to the sensor ``shape`` without stretching.
+
+    One scale factor, the smallest that covers the sensor in both directions, then a centred
+    crop of the excess rows or columns. Returns ``source_shape``, ``scale``, ``scaled_shape``
+    and ``crop`` (``(row0, col0)``, the first kept row and column of the scaled frame).
+    """
+    h0, w0 = (int(n) for n in native[:2])
+    h, w = (int(n) for n in shape)
+    scale = max(h / h0, w / w0)
+    scaled = (max(h, int(round(h0 * scale))), max(w, int(round(w0 * scale))))
+    crop = ((scaled[0] - h) // 2, (scaled[1] - w) // 2)
+    return {"source_shape": [h0, w0], "scale": float(scale), "scaled_shape": list(scaled), "crop": list(crop),
+            "sensor_shape": [h, w]}
+
+
+def describe_fit(fit: dict) -> str:
+    """One line for a user: how the source frames became sensor frames."""
+    (h0, w0), (hs, ws), (h, w) = fit["source_shape"], fit["scaled_shape"], fit["sensor_shape"]
+    text = f"{w0}×{h0} source frames scaled ×{fit['scale']:.3g} to {ws}×{hs}"
+    if (hs, ws) == (h, w):
+        return text + " (aspect ratio kept, nothing cropped)"
+    cut = f"{hs - h} rows" if hs != h else f"{ws - w} columns"
+    return text + f", {cut} cropped (centred) to the sensor's {w}×{h}; aspect ratio kept"
+
+
+def _fit(image: np.ndarray, fit: dict) -> np.ndarray:
+    if list(image.shape) != fit["source_shape"]:
+        raise ViformError(f"a frame is {image.shape[1]}×{image.shape[0]}, the clip's first "
+                          f"{fit['source_shape'][1]}×{fit['source_shape'][0]}: frames of one clip must share a size")
+    (hs, ws), (r0, c0), (h, w) = fit["scaled_shape"], fit["crop"], fit["sensor_shape"]
+    return _resize(image, (hs, ws))[r0:r0 + h, c0:c0 + w]
 
 
 def _resize(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

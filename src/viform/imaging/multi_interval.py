@@ -21,9 +21,27 @@ therefore the sum of n − 1 ordinary intervals and one length-biased one:
 
 and the estimator λ̂ = n·Q / X is exactly unbiased, with relative variance 1/(n·Q − 1).
 (Using n intervals that do *not* hold the instant, X ~ Gamma(n·Q, λ) and n·Q/X would read
-n·Q/(n·Q − 1) too bright: the hold-the-instant interval is what removes the bias.) In ticks
-the same argument holds after rounding: an interval of m ticks holds the instant with
-probability ∝ m. So the rate is n / span (spikes per tick) with no correction.
+n·Q/(n·Q − 1) too bright: the hold-the-instant interval is what removes the bias.)
+
+In ticks that is no longer exact. Tick rounding makes successive intervals negatively
+correlated (lag-1 correlation → −½ near one tick per spike), so they are not exchangeable,
+and n / span read high near saturation: +0.69 % at a mean interval of 1.2 ticks (Q = 100),
++0.43 % at 1.5, +0.06 % at 2.5, +1.1 % at Q = 1,000 and 1.2 ticks. The rate used instead is
+exact for *any* stationary sequence of tick intervals. By Palm calculus (the instant falls
+in an interval with probability ∝ its length), E f = r·E⁰[Y_c·f], with r the firing rate
+per tick and E⁰ the expectation given a spike, Y_c the interval holding the instant. For
+a window W of m consecutive intervals, Σ_{j∈W} Y_j/S_W = 1; by stationarity each term
+equals E⁰[Y_c/S_{W'}] for the window W' that puts j on c, so Σ over the m windows W' of m
+intervals that hold c of E⁰[Y_c/S_{W'}] = 1, and
+
+    r̂ = Σ_{W' ∋ c, |W'| = m} 1 / S_{W'}     (spikes per tick)
+
+has E r̂ = r exactly. With K spikes a side, m = K: the windows run from the i-th spike
+before the instant to the (K − 1 − i)-th after it. It weights the 2K − 1 intervals
+triangularly (its variance is 0.5–1.3 times that of n / span: lower near saturation, where
+the correlations are strongest, up to 27 % higher at Q = 1); K = 1 is interval imaging.
+The adaptive span uses it when it grew equally on both sides (always, for steady light
+but for a rare stop by chance), and n / span where it stopped on one side first.
 
 Adaptive K (``adaptive=True``): starting from the interval that holds the instant, the
 intervals next to the span are added one side at a time while each is consistent with the
@@ -119,7 +137,8 @@ def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
 
 @njit(cache=True, parallel=True)
 def _span_rate(prev, nxt, n_total, adaptive, noise_q, tolerance, rate, used, censored):
-    """Rate (spikes per tick) = intervals / span, per pixel; adaptive growth when asked."""
+    """Rate (spikes per tick) per pixel: Σ 1/span over the windows that hold the instant (module
+    notes; intervals / span where an adaptive span grew unequally); adaptive growth when asked."""
     kb = prev.shape[0]
     ka = nxt.shape[0]
     p = prev.shape[1]
@@ -171,7 +190,15 @@ def _span_rate(prev, nxt, n_total, adaptive, noise_q, tolerance, rate, used, cen
                     hi = nxt[i_a, j]
                     i_a += 1
                 n += 1
-        rate[j] = n / (hi - lo)
+        if i_b == i_a:
+            # m windows of m intervals hold the instant's interval: Σ 1/span over them is
+            # unbiased for any stationary tick sequence (module notes)
+            total = 0.0
+            for w in range(i_b):
+                total += 1.0 / (nxt[i_b - 1 - w, j] - prev[w, j])
+            rate[j] = total
+        else:
+            rate[j] = n / (hi - lo)
         used[j] = n
         censored[j] = cut
 
@@ -200,9 +227,11 @@ def multi_interval_image(source: SpikeSource, t_s: float, spikes_per_side: int =
                          adaptive: bool = False, tolerance: float = 3.0, sensor_parameters=None,
                          noise_threshold_electrons: float | None = None,
                          lookahead_ticks: int | None = None) -> LightImage:
-    """Light at instant ``t_s`` from the K spikes on each side of it: (2K − 1)·Q / span.
+    """Light at instant ``t_s`` from the K spikes on each side of it: the rate Σ 1/span over
+    the K windows of K intervals that hold the instant, inverted by the readout's rate law.
 
-    Unbiased for steady light (see the module text for the length-bias derivation).
+    The rate is unbiased for steady light, after tick rounding too (see the module text for
+    the length-bias derivation).
 
     Parameters
     ----------

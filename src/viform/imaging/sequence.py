@@ -193,6 +193,13 @@ class NpzFrameWriter:
         """A small whole array (times, ticks)."""
         self._small[name] = np.asarray(array)
 
+    def abort(self) -> None:
+        """Give up: close and remove the temporary frame files (nothing is written to ``path``)."""
+        for handle, _, _ in self._files.values():
+            handle.close()
+        self._files.clear()
+        self._folder.cleanup()
+
     def close(self) -> None:
         from pathlib import Path
 

@@ -484,30 +484,13 @@ def equalizer_step_flash(source: str, levels=(60.0, 600.0), shape=(36, 64), seed
 
 # ----------------------------------------------------------------------------- outputs
 
-def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", step_times_s=(),
-                  playback_fps: float = 25.0) -> dict:
-    """Write ``video.<fmt>``, ``exposure.png`` and ``report.json`` atomically; return the report."""
-    from pathlib import Path
-
-    import imageio.v3 as iio
-    import matplotlib
-
-    matplotlib.use("Agg")
+def exposure_figure(result, step_times_s=()):
+    """Exposure and gray level of every sensor frame, with the light steps; legends beside the plots."""
     import matplotlib.pyplot as plt
 
-    from viform._io import atomic_path, save_figure, write_json
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    video = out / f"video.{video_format}"
-    frames = result.output_frames if len(result.output_frames) else result.gray8[:1]
-    with atomic_path(video) as tmp:
-        if video_format == "gif":
-            iio.imwrite(tmp, frames, extension=".gif", duration=1000.0 / playback_fps, loop=0)
-        else:
-            iio.imwrite(tmp, frames, extension=".mp4", fps=playback_fps, macro_block_size=1)
-
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10.5, 5.5), sharex=True)
+    # legends go right of the plots: inside they covered the trace after a light step
+    fig.subplots_adjust(left=0.08, right=0.68, top=0.92, bottom=0.1)
     k = np.arange(len(result.exposure_s))
     ax1.plot(k, result.exposure_s * 1e6, drawstyle="steps-post", color="C0", label="exposure")
     longest_s = result.timing.get("max_exposure_s")
@@ -517,7 +500,7 @@ def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", s
         ax1.axhline(longest_s * 1e6, color="0.4", ls="--", lw=1,
                     label=f"longest possible: the frame time ({longest_s * 1e6:.0f} µs)")
         ax1.set_ylim(0, longest_s * 1e6 * 1.15)
-        ax1.legend(loc="lower right", fontsize=8)
+        ax1.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0)
     ax1.set_ylabel("exposure (µs)")
     ax1.set_title(f"{result.timing['frame_rate_hz']:.1f} fps, meter={result.config['meter']}, "
                   f"AE {'on' if result.config['ae'] else 'off'}")
@@ -540,7 +523,34 @@ def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", s
     ax2.set_ylim(0, 260)
     ax2.set_xlabel("sensor frame")
     ax2.set_ylabel("gray (0–255)")
-    ax2.legend(loc="best", fontsize=8)
+    ax2.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0)
+    return fig
+
+
+def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", step_times_s=(),
+                  playback_fps: float = 25.0) -> dict:
+    """Write ``video.<fmt>``, ``exposure.png`` and ``report.json`` atomically; return the report."""
+    from pathlib import Path
+
+    import imageio.v3 as iio
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+    from viform._io import atomic_path, save_figure, write_json
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    video = out / f"video.{video_format}"
+    frames = result.output_frames if len(result.output_frames) else result.gray8[:1]
+    with atomic_path(video) as tmp:
+        if video_format == "gif":
+            iio.imwrite(tmp, frames, extension=".gif", duration=1000.0 / playback_fps, loop=0)
+        else:
+            iio.imwrite(tmp, frames, extension=".mp4", fps=playback_fps, macro_block_size=1)
+
+    fig = exposure_figure(result, step_times_s)
+    cfg = result.config
     save_figure(out / "exposure.png", fig)
 
     report = {
@@ -603,6 +613,13 @@ def seed_figures(include_simulation: bool = True) -> dict:
         "equalization_shift": {**eq, "seed": "<<8, >>20 (net >>12); error 0.00003*c; + >>15; "
                                              "compensated error 'close to 0'"},
     }
+    # every published figure's status (issue 28): predicted from the paper's parameters, or
+    # fitted to the figure (the 2,500 fps clock is back-solved from it)
+    fig["status"] = {"reduced_1280x720_100MHz": "predicted", "normal_full_1280x864_133MHz": "predicted",
+                     "reduced_166MHz": "predicted",
+                     "reduced_2500fps_full_frame": "fitted: the pixel clock is solved from the 2,500 fps figure",
+                     "cameralink_seed": "predicted", "ddr": "predicted", "decimation": "predicted",
+                     "equalization_shift": "predicted"}
     if include_simulation:
         base = TranslatingScene(36, 64, velocity_px_per_s=(0.0, 0.0), min_lux=50.0, max_lux=400.0)
         scene = StepsScene(base, [(0.02, 10.0), (0.05, 0.1)])

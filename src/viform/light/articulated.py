@@ -15,6 +15,11 @@ import numpy as np
 
 from viform._validate import check_int, check_non_negative, check_positive
 from viform.light.scenes import Scene
+from viform.light.truth import FlowTruth, ObjectTruth, flow_from_layers
+
+#: Object ids of the arm's parts in the truth (the body and head are still background).
+UPPER_ARM_ID, FOREARM_ID, HAND_ID = 1, 2, 3
+_PART_NAMES = {UPPER_ARM_ID: "upper arm", FOREARM_ID: "forearm", HAND_ID: "hand"}
 
 
 def _capsule(yy, xx, p0, p1, radius):
@@ -78,6 +83,120 @@ class WavingHandScene(Scene):
         ey, ex = sy - self.upper_len * math.cos(up), sx - self.upper_len * math.sin(up)
         wy, wx = ey - self.fore_len * math.cos(fore), ex - self.fore_len * math.sin(fore)
         return (sy, sx), (ey, ex), (wy, wx)
+
+    def _angles(self, t_s: float):
+        """Upper-arm and forearm angles (rad, from vertical) and their rates (rad/s) at ``t_s``."""
+        rate = 2 * math.pi * self.wave_hz
+        ph = rate * t_s + self.phase_rad
+        up = math.radians(-30) + self.upper_arm_amplitude_rad * math.sin(ph)
+        fore = up + self.forearm_amplitude_rad * math.sin(ph + 0.4)
+        up_rate = self.upper_arm_amplitude_rad * math.cos(ph) * rate
+        fore_rate = up_rate + self.forearm_amplitude_rad * math.cos(ph + 0.4) * rate
+        return up, fore, up_rate, fore_rate
+
+    def _parts(self, t_s: float) -> dict:
+        """Each arm part as (start, end, radius) capsules in (row, col), at ``t_s``."""
+        s = self.s
+        sh, el, wr = self.joints(float(t_s))
+        tip = (wr[0] + 0.35 * (wr[0] - el[0]), wr[1] + 0.35 * (wr[1] - el[1]))
+        return {UPPER_ARM_ID: (sh, el, 0.045 * s), FOREARM_ID: (el, wr, 0.04 * s), HAND_ID: (wr, tip, 0.055 * s)}
+
+    def _coverage(self, t_s: float) -> dict:
+        return {k: _capsule(self._yy, self._xx, p0, p1, r) for k, (p0, p1, r) in self._parts(t_s).items()}
+
+    def _labels_and_mixed(self, t_s: float):
+        """Visible part per pixel (the hand over the sleeve, as drawn) and the pixels whose motion is
+        undefined: anti-aliased edges (partial coverage) and the elbow, where both arm segments overlap."""
+        cover = self._coverage(t_s)
+        full = {k: c >= 1.0 for k, c in cover.items()}
+        labels = np.zeros(self.shape, np.int32)
+        labels[cover[UPPER_ARM_ID] >= 0.5] = UPPER_ARM_ID
+        labels[cover[FOREARM_ID] >= 0.5] = FOREARM_ID
+        labels[cover[HAND_ID] >= 0.5] = HAND_ID
+        partial = np.zeros(self.shape, bool)
+        hand_full = full[HAND_ID]
+        for k, c in cover.items():
+            edge = (c > 0) & (c < 1)
+            partial |= edge if k == HAND_ID else edge & ~hand_full  # a full hand hides the sleeve's edge
+        elbow = full[UPPER_ARM_ID] & full[FOREARM_ID] & ~hand_full
+        return labels, partial | elbow
+
+    def _frames(self, t_s: float) -> dict:
+        """Each part's rigid frame: origin (x, y), unit axis (x, y), and their rates, at ``t_s``."""
+        up, fore, up_rate, fore_rate = self._angles(t_s)
+        (sy, sx), (ey, ex), (wy, wx) = self.joints(t_s)
+        # elbow = shoulder − L_up·(sin up, cos up) in (x, y): the axis points from shoulder to elbow
+        axis_up = (-math.sin(up), -math.cos(up))
+        axis_up_rate = (-math.cos(up) * up_rate, math.sin(up) * up_rate)
+        axis_fore = (-math.sin(fore), -math.cos(fore))
+        axis_fore_rate = (-math.cos(fore) * fore_rate, math.sin(fore) * fore_rate)
+        elbow_rate = (self.upper_len * axis_up_rate[0], self.upper_len * axis_up_rate[1])
+        wrist_rate = (elbow_rate[0] + self.fore_len * axis_fore_rate[0],
+                      elbow_rate[1] + self.fore_len * axis_fore_rate[1])
+        return {UPPER_ARM_ID: ((sx, sy), axis_up, (0.0, 0.0), axis_up_rate),
+                FOREARM_ID: ((ex, ey), axis_fore, elbow_rate, axis_fore_rate),
+                HAND_ID: ((wx, wy), axis_fore, wrist_rate, axis_fore_rate)}
+
+    # ------------------------------------------------------------------ vision truth
+    def truth_kinds(self) -> tuple[str, ...]:
+        return ("motion", "objects")
+
+    def object_labels(self, t_s: float) -> np.ndarray:
+        """Visible arm part per pixel: upper arm 1, forearm 2, hand 3; body, head and wall 0."""
+        return self._labels_and_mixed(t_s)[0]
+
+    def motion_px_per_s(self, t_s: float) -> np.ndarray:
+        """Velocity (px/s) of the rigid part each pixel shows; NaN at anti-aliased edges and the elbow."""
+        labels, mixed = self._labels_and_mixed(t_s)
+        motion = np.zeros((2, *self.shape))
+        for part, ((ox, oy), (ax, ay), (vx, vy), (arx, ary)) in self._frames(t_s).items():
+            where = labels == part
+            # a point at (a, b) in the part's frame: p = o + a·e + b·n, n = (−e_y, e_x); dp/dt = ȯ + a·ė + b·ṅ
+            dx, dy = self._xx[where] - ox, self._yy[where] - oy
+            a, b = dx * ax + dy * ay, -dx * ay + dy * ax
+            motion[0][where] = vx + a * arx - b * ary
+            motion[1][where] = vy + a * ary + b * arx
+        motion[:, mixed] = np.nan
+        return motion
+
+    def optical_flow_px(self, t0_s: float, t1_s: float) -> FlowTruth:
+        """Forward flow t0 → t1 of every part's points; the hand hides the sleeve where it passes over it."""
+        labels0, mixed0 = self._labels_and_mixed(t0_s)
+        labels1, _ = self._labels_and_mixed(t1_s)
+        f0, f1 = self._frames(t0_s), self._frames(t1_s)
+
+        def mover(part):
+            (ox, oy), (ax, ay) = f0[part][:2]
+            (qx, qy), (bx, by) = f1[part][:2]
+
+            def move(x, y):
+                dx, dy = x - ox, y - oy
+                a, b = dx * ax + dy * ay, -dx * ay + dy * ax
+                return qx + a * bx - b * by, qy + a * by + b * bx
+
+            return move
+
+        order = {HAND_ID: 0, FOREARM_ID: 1, UPPER_ARM_ID: 1}
+        return flow_from_layers(labels0, labels1, mixed0, {p: mover(p) for p in _PART_NAMES}, order, t0_s, t1_s)
+
+    def objects(self, t_s: float) -> list[ObjectTruth]:
+        """Upper arm, forearm and hand: capsule boxes, visible share on the pixel grid, centroid velocity."""
+        labels, _ = self._labels_and_mixed(t_s)
+        cover = self._coverage(t_s)
+        out = []
+        for part, (p0, p1, r) in self._parts(t_s).items():
+            ys, xs = (p0[0], p1[0]), (p0[1], p1[1])
+            area = int((cover[part] >= 0.5).sum())
+            visible = float((labels == part).sum()) / area if area else 0.0
+            # centroid of a capsule is its segment's midpoint; a rigid part's velocity is affine in position
+            (ox, oy), (ax, ay), (vx, vy), (arx, ary) = self._frames(t_s)[part]
+            mx, my = (xs[0] + xs[1]) / 2, (ys[0] + ys[1]) / 2
+            a, b = (mx - ox) * ax + (my - oy) * ay, -(mx - ox) * ay + (my - oy) * ax
+            velocity = (vx + a * arx - b * ary, vy + a * ary + b * arx)
+            out.append(ObjectTruth(part, _PART_NAMES[part], min(xs) - r + 0.5, min(ys) - r + 0.5,
+                                   abs(xs[1] - xs[0]) + 2 * r, abs(ys[1] - ys[0]) + 2 * r, min(1.0, visible),
+                                   velocity))
+        return out
 
     def hand_speed_px_per_s(self, t_s: float, dt_s: float = 1e-5) -> float:
         """Speed of the hand (wrist) on the sensor, px/s (central difference)."""

@@ -32,6 +32,19 @@ import numpy as np
 
 from viform._validate import ViformError, check_int, check_non_negative, check_positive, check_range
 from viform.light.scenes import Scene
+from viform.light.truth import (
+    FlowTruth,
+    ObjectTruth,
+    disc_fraction_inside,
+    flow_from_layers,
+    rotate_about,
+    translate_by,
+)
+
+# Object ids of the dilemma scene's truth (stable for every instant and size).
+VEHICLE_ID, BLADE_IDS, SMALL_OBJECT_ID, LED_ID = 1, (2, 3, 4), 5, 6
+_BLADE_HALF_WIDTH_RAD = math.radians(14.0)
+_BLADE_INNER_FRACTION = 0.12
 
 
 def pwm_on_time_s(t_s: float, frequency_hz: float, duty: float) -> float:
@@ -227,6 +240,112 @@ class DilemmaScene(Scene):
             frame = self._cache[key] = self._moving((k + 0.5) * step, self._background.copy())
         return frame
 
+    # ------------------------------------------------------------------ vision truth
+    # Conventions: viform.light.truth. Scene coordinates put pixel centres at integers; the
+    # truth's boxes count from pixel edges, hence the + 0.5 where a box is made.
+
+    def truth_kinds(self) -> tuple[str, ...]:
+        return ("motion", "objects")
+
+    def small_object_centre_px(self, t_s: float) -> tuple[float, float]:
+        """(x, y) of the small object's centre at ``t_s``, scene coordinates (pixel centres at integers)."""
+        return (self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width, self.object_row_px
+
+    def small_object_radius_px(self) -> float:
+        """Radius taken as the small object's extent: 2 σ, where its light falls to 13.5 % of the peak."""
+        return 2.0 * self.object_sigma_px
+
+    def _blade_index(self, t_s: float) -> np.ndarray:
+        """Blade (0, 1, 2) covering each disc pixel at ``t_s``, or -1 between blades."""
+        phase = self._disc_theta - self.prop_omega_rad_per_s * t_s
+        k = np.round(phase / (2 * math.pi / 3))
+        off = phase - k * (2 * math.pi / 3)
+        on = np.cos(3.0 * phase) > math.cos(3.0 * _BLADE_HALF_WIDTH_RAD)  # the rendering's own test
+        return np.where(on & (np.abs(off) < math.pi / 3), np.mod(k, 3), -1).astype(np.int64)
+
+    def object_labels(self, t_s: float) -> np.ndarray:
+        """Visible object id per pixel: LED 6, blades 2–4, vehicle 1, small object 5 (drawn over the rest)."""
+        t_s = float(t_s)
+        labels = np.zeros(self.shape, np.int32)
+        labels[self.led] = LED_ID
+        blade = self._blade_index(t_s)
+        on = blade >= 0
+        labels.ravel()[self._disc_index[on]] = np.asarray(BLADE_IDS)[blade[on]]
+        front = self.vehicle_front_px(t_s)
+        v0, v1 = self.vehicle_rows
+        labels[v0:v1, (self._x[0] <= front) & (self._x[0] > front - self.vehicle_length_px)] = VEHICLE_ID
+        ox, oy = self.small_object_centre_px(t_s)
+        labels[(self._x - ox) ** 2 + (self._y - oy) ** 2 <= self.small_object_radius_px() ** 2] = SMALL_OBJECT_ID
+        return labels
+
+    def motion_px_per_s(self, t_s: float) -> np.ndarray:
+        """Velocity per pixel (px/s): blades ω × r about the hub, vehicle and small object their speeds, the rest 0."""
+        labels = self.object_labels(t_s)
+        motion = np.zeros((2, *self.shape))
+        w = self.prop_omega_rad_per_s
+        cx, cy = self.prop_centre
+        blades = np.isin(labels, BLADE_IDS)
+        motion[0][blades] = -w * (self._y[blades] - cy)
+        motion[1][blades] = w * (self._x[blades] - cx)
+        motion[0][labels == VEHICLE_ID] = self.vehicle_speed_px_per_s
+        motion[0][labels == SMALL_OBJECT_ID] = self.object_speed_px_per_s
+        return motion
+
+    def optical_flow_px(self, t0_s: float, t1_s: float) -> FlowTruth:
+        """Forward flow t0 → t1; points that leave the field (the vehicle and the small object wrap
+        around) or are covered by a moving part at t1 are invalid."""
+        dt = t1_s - t0_s
+        spin = rotate_about(*self.prop_centre, self.prop_omega_rad_per_s * dt)
+        moves = {VEHICLE_ID: translate_by(self.vehicle_speed_px_per_s * dt, 0.0),
+                 SMALL_OBJECT_ID: translate_by(self.object_speed_px_per_s * dt, 0.0),
+                 **{blade: spin for blade in BLADE_IDS}}
+        order = {SMALL_OBJECT_ID: 0, VEHICLE_ID: 1, LED_ID: 1, **{blade: 1 for blade in BLADE_IDS}}
+        return flow_from_layers(self.object_labels(t0_s), self.object_labels(t1_s), None, moves, order, t0_s, t1_s)
+
+    def _blade_box(self, k: int, t_s: float) -> tuple[float, float, float, float]:
+        """Tight box (scene coordinates x0, y0, x1, y1) of blade k, an annular sector."""
+        cx, cy = self.prop_centre
+        r0, r1 = _BLADE_INNER_FRACTION * self.prop_radius_px, self.prop_radius_px
+        centre = self.prop_omega_rad_per_s * t_s + 2 * math.pi * k / 3
+        lo, hi = centre - _BLADE_HALF_WIDTH_RAD, centre + _BLADE_HALF_WIDTH_RAD
+        angles = [lo, hi] + [q * math.pi / 2 for q in range(math.ceil(lo / (math.pi / 2)),
+                                                          math.floor(hi / (math.pi / 2)) + 1)]
+        xs = [cx + r1 * math.cos(a) for a in angles] + [cx + r0 * math.cos(a) for a in (lo, hi)]
+        ys = [cy + r1 * math.sin(a) for a in angles] + [cy + r0 * math.sin(a) for a in (lo, hi)]
+        return min(xs), min(ys), max(xs), max(ys)
+
+    def objects(self, t_s: float) -> list[ObjectTruth]:
+        """Vehicle, three propeller blades, the small object and the LED, with boxes and velocities."""
+        t_s = float(t_s)
+        h, w = self.height, self.width
+        out = []
+        front = self.vehicle_front_px(t_s)
+        v0, v1 = self.vehicle_rows
+        x0 = front - self.vehicle_length_px + 0.5
+        inside = max(0.0, min(front + 0.5, w) - max(x0, 0.0)) / self.vehicle_length_px
+        out.append(ObjectTruth(VEHICLE_ID, "vehicle", x0, float(v0), self.vehicle_length_px, float(v1 - v0),
+                               inside, (self.vehicle_speed_px_per_s, 0.0)))
+        cx, cy = self.prop_centre
+        r0, r1 = _BLADE_INNER_FRACTION * self.prop_radius_px, self.prop_radius_px
+        a = _BLADE_HALF_WIDTH_RAD
+        centroid_r = 2 / 3 * (r1 ** 3 - r0 ** 3) / (r1 ** 2 - r0 ** 2) * math.sin(a) / a  # annular sector
+        for k, blade in enumerate(BLADE_IDS):
+            bx0, by0, bx1, by1 = self._blade_box(k, t_s)
+            angle = self.prop_omega_rad_per_s * t_s + 2 * math.pi * k / 3
+            gx, gy = centroid_r * math.cos(angle), centroid_r * math.sin(angle)
+            om = self.prop_omega_rad_per_s
+            out.append(ObjectTruth(blade, "propeller blade", bx0 + 0.5, by0 + 0.5, bx1 - bx0, by1 - by0, 1.0,
+                                   (-om * gy, om * gx)))
+        ox, oy = self.small_object_centre_px(t_s)
+        r = self.small_object_radius_px()
+        out.append(ObjectTruth(SMALL_OBJECT_ID, "small object", ox - r + 0.5, oy - r + 0.5, 2 * r, 2 * r,
+                               disc_fraction_inside(ox, oy, r, -0.5, w - 0.5, -0.5, h - 0.5),
+                               (self.object_speed_px_per_s, 0.0)))
+        led = max(1.0, 0.04 * h)
+        out.append(ObjectTruth(LED_ID, "led", 0.93 * w - led + 0.5, 0.55 * h - led + 0.5, 2 * led, 2 * led, 1.0,
+                               (0.0, 0.0)))
+        return out
+
     # ------------------------------------------------------------------ what the scene demands
     def demand(self) -> dict:
         """What a camera needs to see this scene: its dynamic range and time resolution."""
@@ -248,17 +367,26 @@ class DilemmaScene(Scene):
         ey, ex = np.nonzero(self.led)
         v0, v1 = self.vehicle_rows
         front = self.vehicle_front_px(t_s)
+        ox = (self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width
         return {
             f"sunlit window {_lux(self.window_lux)}–{_lux(3 * self.window_lux)} lux": (xs.mean(), ys.max() + 1),
             f"lamp {_lux(self.lamp_lux)} lux": (lx.mean(), ly.max() + 1),
+            # labels of the parts above the object's row stand above them (with an arrow), so that
+            # none covers the small object as it crosses beneath
             f"propeller {self.prop_lux:.3g} lux, tip {self.prop_tip_speed_px_per_s:.0f} px/s":
-                (self.prop_centre[0], self.prop_centre[1] + self.prop_radius_px),
-            f"LED {self.led_frequency_hz:g} Hz PWM": (ex.mean(), ey.max() + 1),
+                (self.prop_centre[0], self.prop_centre[1] - 0.5 * self.prop_radius_px, self.prop_centre[0],
+                 0.05 * self.height),
+            f"LED {self.led_frequency_hz:g} Hz PWM": (ex.min(), ey.mean(), 0.70 * self.width, 0.40 * self.height),
             f"vehicle {self.vehicle_speed_px_per_s:.0f} px/s": (min(front, self.width - 1) - 0.1 * self.width,
                                                                (v0 + v1) / 2),
-            f"small dim object {self.object_speed_px_per_s:.0f} px/s":
-                ((self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width, self.object_row_px),
+            # the object is a faint blob a couple of pixels wide: its label stands apart, with an arrow
+            f"small dim object, {_lux(self.object_lux)} lux, {self.object_speed_px_per_s:.0f} px/s":
+                (ox, self.object_row_px, min(ox, 0.62 * self.width) + 0.04 * self.width, 0.56 * self.height),
             f"deep shadow {self.shadow_lux:.3g} lux": (0.02 * self.width, 0.68 * self.height),
+            # the road crosses the deep-shadow corner: its lower part is the second dark strip
+            f"deep shadow {self.shadow_lux:.3g} lux (below the road)":
+                (0.2 * self.width, 0.5 * (self.road_rows[1] + self.height) - 0.5, 0.26 * self.width,
+                 0.5 * (self.road_rows[1] + self.height) - 0.5),
         }
 
     def compiled_light(self):
@@ -349,6 +477,8 @@ class NightRoadFogScene(Scene):
         retro = np.zeros((h, w))
         self.targets: dict[str, np.ndarray] = {}
 
+        self._target_boxes: dict[str, tuple[float, float, float, float]] = {}
+
         def box(label, range_, centre_x_m, bottom_m, width_m, height_m, refl, ra):
             cx = w / 2 + centre_x_m / range_ / ifov
             yb = horizon + (1.2 - bottom_m) / range_ / ifov
@@ -358,6 +488,7 @@ class NightRoadFogScene(Scene):
             reflectance[mask] = refl
             retro[mask] = ra
             self.targets[label] = mask
+            self._target_boxes[label] = (cx - hw + 0.5, yb - hh + 0.5, 2 * hw, hh)  # truth box, pixel edges
 
         for r in (120.0, 90.0, 60.0):
             box(f"sign {r:g} m", r, 6.0, 1.5, 0.9, 0.9, 0.6, 50.0)  # on the right shoulder
@@ -419,6 +550,40 @@ class NightRoadFogScene(Scene):
 
     def regions(self) -> dict:
         return {"targets": {k: v for k, v in self.targets.items() if v.any()}}
+
+    # ------------------------------------------------------------------ vision truth (a still scene)
+    def truth_kinds(self) -> tuple[str, ...]:
+        return ("motion", "depth", "objects")
+
+    def depth_m(self, t_s: float) -> np.ndarray:
+        """Range (m) along each pixel's line of sight to the surface it sees; inf for the sky (no surface)."""
+        return self.active.range_m.astype(np.float64, copy=True)
+
+    def motion_px_per_s(self, t_s: float) -> np.ndarray:
+        return np.zeros((2, *self.shape))
+
+    def optical_flow_px(self, t0_s: float, t1_s: float) -> FlowTruth:
+        return FlowTruth(np.zeros((2, *self.shape)), np.ones(self.shape, bool), float(t0_s), float(t1_s))
+
+    def _labelled_targets(self):
+        return [(label, mask) for label, mask in self.targets.items() if label in self._target_boxes]
+
+    def object_labels(self, t_s: float) -> np.ndarray:
+        """Visible target per pixel: signs and the car, ids 1… in the order they were placed (far first)."""
+        labels = np.zeros(self.shape, np.int32)
+        for k, (_, mask) in enumerate(self._labelled_targets(), start=1):
+            labels[mask] = k  # a nearer target, placed later, covers a farther one
+        return labels
+
+    def objects(self, t_s: float) -> list[ObjectTruth]:
+        """The road signs and the unlit car: still boxes, visible fraction counted on the pixel grid."""
+        labels = self.object_labels(t_s)
+        out = []
+        for k, (label, mask) in enumerate(self._labelled_targets(), start=1):
+            area = int(mask.sum())
+            visible = float((labels == k).sum()) / area if area else 0.0
+            out.append(ObjectTruth(k, label.split(" ")[0], *self._target_boxes[label], visible, (0.0, 0.0)))
+        return out
 
     def describe(self) -> dict:
         d = super().describe()

@@ -31,7 +31,15 @@ from viform._validate import (
     one_line,
 )
 from viform.light.radiometry import check_lux
-from viform.light.truth import FlowTruth, ObjectTruth, TruthUnavailable
+from viform.light.truth import (
+    FlowTruth,
+    ObjectTruth,
+    TruthUnavailable,
+    flow_from_layers,
+    rotate_about,
+    static_motion,
+    translate_by,
+)
 
 
 class Scene(ABC):
@@ -94,9 +102,13 @@ class Scene(ABC):
             type(self).illuminance_lux_many is Scene.illuminance_lux_many
 
     def describe(self) -> dict:
-        """Metadata saved with captures."""
-        return {"name": self.name, "height": self.height, "width": self.width,
-                "duration_s": self.duration_s}
+        """Metadata saved with captures (with ``builtin``: how to remake a built-in scene, see
+        :func:`scene_from_description`)."""
+        d = {"name": self.name, "height": self.height, "width": self.width, "duration_s": self.duration_s}
+        spec = getattr(self, "builtin_spec", None)
+        if spec is not None:
+            d["builtin"] = spec
+        return d
 
     # ------------------------------------------------------------------ ground truth
     # Conventions (coordinates, flow direction, boxes): viform.light.truth. Scenes that know
@@ -132,6 +144,25 @@ class Scene(ABC):
     def object_labels(self, t_s: float) -> np.ndarray:
         """Visible object id per pixel at ``t_s`` (int32, 0 = background), shape (H, W)."""
         self._no_truth("objects")
+
+
+class StaticTruth:
+    """Truth of a synthetic scene that does not move: zero motion everywhere, no objects, no range."""
+
+    def truth_kinds(self) -> tuple[str, ...]:
+        return ("motion", "objects")
+
+    def motion_px_per_s(self, t_s: float) -> np.ndarray:
+        return static_motion(self.shape)
+
+    def optical_flow_px(self, t0_s: float, t1_s: float) -> FlowTruth:
+        return FlowTruth(np.zeros((2, *self.shape)), np.ones(self.shape, bool), float(t0_s), float(t1_s))
+
+    def objects(self, t_s: float) -> list[ObjectTruth]:
+        return []
+
+    def object_labels(self, t_s: float) -> np.ndarray:
+        return np.zeros(self.shape, np.int32)
 
 
 # --------------------------------------------------------------------------- images
@@ -268,8 +299,8 @@ class VideoScene(Scene):
             declared = None  # some files declare 0 or garbage: treat as not declared
         rate = frame_rate_hz if frame_rate_hz is not None else declared
         if rate is None:
-            raise ViformError(f"{str(path)!r} declares no usable frame rate: give it with --frame-rate-hz "
-                              "(frame_rate_hz in Python)")
+            # the command line turns frame_rate_hz into its flag (--frame-rate-hz, highspeed's --scene-fps)
+            raise ViformError(f"{str(path)!r} declares no usable frame rate: give it with frame_rate_hz")
         return cls(np.stack(frames), rate, interpolation)
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
@@ -361,6 +392,21 @@ class _PatternScene(Scene):
     def compiled_light(self):
         return self._pattern_light()
 
+    # truth: the whole field is one rigid surface (no objects, no range)
+    def truth_kinds(self) -> tuple[str, ...]:
+        return ("motion", "objects")
+
+    def objects(self, t_s: float) -> list[ObjectTruth]:
+        return []
+
+    def object_labels(self, t_s: float) -> np.ndarray:
+        return np.zeros(self.shape, np.int32)
+
+    def optical_flow_px(self, t0_s: float, t1_s: float) -> FlowTruth:
+        # each moving subclass defines _field_move: where a surface point seen at t0 is at t1
+        labels = np.zeros(self.shape, np.int32)
+        return flow_from_layers(labels, labels, None, {0: self._field_move(t0_s, t1_s)}, {}, t0_s, t1_s)
+
 
 class TranslatingScene(_PatternScene):
     """A pattern translating at a constant velocity (pixels per second).
@@ -390,6 +436,14 @@ class TranslatingScene(_PatternScene):
     def _motion(self) -> tuple:
         return ("translate", *self.origin_px, *self.velocity_px_per_s)
 
+    def motion_px_per_s(self, t_s: float) -> np.ndarray:
+        """Constant velocity (vx, vy) at every pixel, px/s."""
+        return np.broadcast_to(np.asarray(self.velocity_px_per_s)[:, None, None], (2, *self.shape)).copy()
+
+    def _field_move(self, t0_s, t1_s):
+        vx, vy = self.velocity_px_per_s
+        return translate_by(vx * (t1_s - t0_s), vy * (t1_s - t0_s))
+
 
 class RotatingScene(_PatternScene):
     """A pattern rotating about the image centre at ``angular_speed_rad_per_s``."""
@@ -412,12 +466,20 @@ class RotatingScene(_PatternScene):
     def _motion(self) -> tuple:
         return ("rotate", self._cx, self._cy, self.angular_speed_rad_per_s)
 
+    def motion_px_per_s(self, t_s: float) -> np.ndarray:
+        """ω × r about the image centre: (vx, vy) = ω·(−(y − cy), x − cx), px/s (y down, ω > 0 turns x towards y)."""
+        w = self.angular_speed_rad_per_s
+        return np.stack([-w * (self._y - self._cy), w * (self._x - self._cx)])
+
+    def _field_move(self, t0_s, t1_s):
+        return rotate_about(self._cx, self._cy, self.angular_speed_rad_per_s * (t1_s - t0_s))
+
 
 TranslatingScene._light_class = TranslatingScene
 RotatingScene._light_class = RotatingScene
 
 
-class HDRScene(StillScene):
+class HDRScene(StaticTruth, StillScene):
     """A static scene spanning ``decades`` decades of illuminance.
 
     A horizontal logarithmic ramp from ``min_lux`` to ``min_lux·10^decades`` in the upper
@@ -441,6 +503,23 @@ class HDRScene(StillScene):
         self.min_lux, self.decades = float(min_lux), decades
 
 
+class _UniformScene(StaticTruth, StillScene):
+    """A uniform, still light (the default base of the step and flicker scenes)."""
+
+
+def _delegate_truth(cls):
+    """Truth of a scene that only modulates its base's light: the base's motion and objects."""
+    for method in ("truth_kinds", "motion_px_per_s", "optical_flow_px", "depth_m", "objects", "object_labels"):
+        def call(self, *args, _method=method):
+            return getattr(self.base, _method)(*args)
+
+        call.__name__ = method
+        call.__doc__ = f"The base scene's {method} (modulating light moves nothing)."
+        setattr(cls, method, call)
+    return cls
+
+
+@_delegate_truth
 class StepScene(Scene):
     """A base image whose illuminance jumps by ``factor`` at ``step_time_s``.
 
@@ -452,7 +531,7 @@ class StepScene(Scene):
     def __init__(self, base: Scene | None = None, step_time_s=0.01, factor=10.0, height=64, width=64,
                  lux=1.0):
         if base is None:
-            base = StillScene(np.full((height, width), check_non_negative("lux", lux)))
+            base = _UniformScene(np.full((height, width), check_non_negative("lux", lux)))
         super().__init__(base.height, base.width, base.duration_s)
         self.base = base
         self.step_time_s = float(step_time_s)
@@ -485,6 +564,7 @@ class StepScene(Scene):
                 * (before + (1 - before) * self.factor))
 
 
+@_delegate_truth
 class FlickerScene(Scene):
     """A source modulated periodically: L(t) = base·(1 + depth·w(2π f t)).
 
@@ -497,7 +577,7 @@ class FlickerScene(Scene):
     def __init__(self, base: Scene | None = None, frequency_hz=100.0, depth=1.0, waveform="sine",
                  height=64, width=64, lux=1.0):
         if base is None:
-            base = StillScene(np.full((height, width), check_non_negative("lux", lux)))
+            base = _UniformScene(np.full((height, width), check_non_negative("lux", lux)))
         super().__init__(base.height, base.width, base.duration_s)
         self.base = base
         self.frequency_hz = check_positive("frequency_hz", frequency_hz)
@@ -556,7 +636,38 @@ def builtin_scene(name: str, height: int = 250, width: int = 400, **kw) -> Scene
     check_choice("scene", name, tuple(BUILTIN_SCENES))
     scene = BUILTIN_SCENES[name](height=height, width=width, **kw)
     scene.name = name  # metadata records the name the user gave ("moving-edge", not its class's "translating")
+    # enough to remake the scene, and so its exact truth, from a file's metadata
+    scene.builtin_spec = {"name": name, "height": int(height), "width": int(width), "parameters": _plain(kw)}
     return scene
+
+
+def _plain(parameters: dict) -> dict:
+    """Keyword arguments as JSON values (tuples → lists); refuses what JSON cannot carry."""
+    import json
+
+    try:
+        return json.loads(json.dumps(parameters))
+    except TypeError:
+        return {"unrecordable": True}
+
+
+def scene_from_description(described: dict | None) -> Scene:
+    """Remake a built-in scene from the ``scene`` metadata a capture recorded (its truth included).
+
+    Raises :class:`~viform.light.truth.TruthUnavailable` for scenes that were not built-in
+    (an image or a video) or whose parameters were not recorded.
+    """
+    spec = (described or {}).get("builtin") if isinstance(described, dict) else None
+    name = (described or {}).get("name", "unknown") if isinstance(described, dict) else "unknown"
+    if not isinstance(spec, dict) or spec.get("name") not in BUILTIN_SCENES or \
+            not isinstance(spec.get("parameters"), dict) or spec["parameters"].get("unrecordable"):
+        raise TruthUnavailable(f"the stream's scene {name!r} is not a built-in scene viform can remake, so it "
+                               "carries no truth (image and video files have none)")
+    try:
+        parameters = {k: tuple(v) if isinstance(v, list) else v for k, v in spec["parameters"].items()}
+        return builtin_scene(spec["name"], int(spec["height"]), int(spec["width"]), **parameters)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise TruthUnavailable(f"the stream's scene description cannot be remade: {one_line(exc)}") from None
 
 
 BUILTIN_SCENES = {
@@ -579,6 +690,24 @@ def _dilemma_scene(name):  # lazy: viform.light.dilemma imports this module
 
 
 BUILTIN_SCENES.update({name: _dilemma_scene(name) for name in ("dilemma", "night-road-fog")})
+
+
+def _waving_hand(height, width, **kw):  # lazy: viform.light.articulated imports this module
+    from viform.light.articulated import WavingHandScene
+
+    return WavingHandScene(height, width, **kw)
+
+
+BUILTIN_SCENES["waving-hand"] = _waving_hand
+
+
+def _multi_object_scene(height, width, **kw):  # lazy: viform.light.multi_object imports this module
+    from viform.light.multi_object import MultiObjectScene
+
+    return MultiObjectScene(height=height, width=width, **kw)
+
+
+BUILTIN_SCENES["multi-object"] = _multi_object_scene
 
 _VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".gif", ".webm")
 
@@ -612,7 +741,15 @@ def load_scene(spec: str, height: int = 250, width: int = 400, max_lux: float = 
     are lux already. Built-in scenes are made at ``height`` × ``width``; files keep their own
     size unless ``resize`` (to exactly ``height`` × ``width``) or ``fit`` = (height or None,
     width or None), which resizes keeping the aspect ratio (see :func:`fit_shape`).
+    ``max_lux`` and ``frame_rate_hz`` are checked for every scene (a built-in one ignores them,
+    but a negative full scale or frame rate is a mistake worth saying).
     """
+    from viform._validate import check_positive
+
+    if max_lux is not None:
+        check_positive("max_lux", max_lux)
+    if frame_rate_hz is not None:
+        check_positive("frame_rate_hz", frame_rate_hz)
     if spec in BUILTIN_SCENES:
         return builtin_scene(spec, height, width)
     path = Path(spec)

@@ -65,6 +65,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit, prange
 
 from viform._validate import ViformError, check_int
 from viform.stream.container import SpikeSource
@@ -198,27 +199,170 @@ def pixel_intervals(source: SpikeSource, *, max_ticks: int | None = None, block_
                           p[1:][same], first_half)
 
 
-def _checkerboard_static(iv: PixelIntervals, tile: int) -> tuple[np.ndarray, dict]:
+@dataclass
+class IntervalStatistics:
+    """Per-pixel sums of a recording's spike intervals: all that calibration uses (bounded memory).
+
+    For pixel p with intervals Y_0 … Y_{n−1} (ticks, in time order): ``n_intervals``,
+    ``sum_k``, ``sum_kk`` (interval indices k), ``sum_y``, ``sum_yy``, ``sum_ky``; over its
+    successive pairs ``n_pairs`` and ``sum_lag1`` = Σ (Y_k − Y_{k+1})²/2; over its triples
+    ``n_triples``, ``sum_second`` = Σ (Y_k − 2Y_{k+1} + Y_{k+2})², ``sum_d`` and ``sum_dd``
+    (d = ((Y_k − Y_{k+2})² − (Y_k − Y_{k+1})²)/2, the static test's statistic). Plus the spike
+    counts, first and last spike ticks and the count in the first half of the ticks read.
+    """
+
+    height: int
+    width: int
+    n_ticks: int
+    clock_hz: float
+    n_spikes: np.ndarray
+    first_tick: np.ndarray
+    last_tick: np.ndarray
+    n_spikes_first_half: np.ndarray
+    n_intervals: np.ndarray
+    sum_k: np.ndarray
+    sum_kk: np.ndarray
+    sum_y: np.ndarray
+    sum_yy: np.ndarray
+    sum_ky: np.ndarray
+    n_pairs: np.ndarray
+    sum_lag1: np.ndarray
+    n_triples: np.ndarray
+    sum_second: np.ndarray
+    sum_d: np.ndarray
+    sum_dd: np.ndarray
+
+    @property
+    def mean_interval(self) -> np.ndarray:
+        """Per-pixel mean interval (last − first)/(n − 1), ticks; NaN below two spikes."""
+        n = self.n_spikes
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(n >= 2, (self.last_tick - self.first_tick) / np.maximum(n - 1, 1), np.nan)
+
+
+_N_INT_SUMS, _N_FLOAT_SUMS = 8, 11  # int64: spikes, first, last, first half, prev1, prev2, intervals, pairs/triples
+
+
+@njit(cache=True, parallel=True)
+def _accumulate_block(bits, first, half, ints, floats):
+    """Add the spikes of ticks [first, first + n) (``bits`` (n, P) uint8) to the per-pixel sums.
+
+    ``ints`` rows: 0 spikes, 1 first tick, 2 last tick, 3 spikes before ``half``, 4 previous
+    interval, 5 the one before, 6 intervals, 7 pairs; ``floats`` rows: 0 triples, 1 Σk,
+    2 Σk², 3 Σy, 4 Σy², 5 Σky, 6 Σ lag-1 statistic, 7 Σ second-difference statistic, 8 Σd,
+    9 Σd² (10 spare). Pixels in parallel chunks, ticks inner per pixel chunk row by row.
+    """
+    n, p = bits.shape
+    chunk = 4096
+    for c in prange((p + chunk - 1) // chunk):
+        j0 = c * chunk
+        j1 = min(j0 + chunk, p)
+        for i in range(n):
+            tick = first + i
+            for j in range(j0, j1):
+                if not bits[i, j]:
+                    continue
+                ints[0, j] += 1
+                if tick < half:
+                    ints[3, j] += 1
+                last = ints[2, j]
+                if last < 0:
+                    ints[1, j] = tick
+                else:
+                    y = float(tick - last)
+                    k = float(ints[6, j])
+                    floats[1, j] += k
+                    floats[2, j] += k * k
+                    floats[3, j] += y
+                    floats[4, j] += y * y
+                    floats[5, j] += k * y
+                    ints[6, j] += 1
+                    b = float(ints[4, j])
+                    if ints[4, j] > 0:
+                        ints[7, j] += 1
+                        floats[6, j] += (b - y) * (b - y) / 2
+                        if ints[5, j] > 0:
+                            a = float(ints[5, j])
+                            floats[0, j] += 1.0
+                            floats[7, j] += (a - 2 * b + y) ** 2
+                            d = ((a - y) ** 2 - (a - b) ** 2) / 2
+                            floats[8, j] += d
+                            floats[9, j] += d * d
+                    ints[5, j] = ints[4, j]
+                    ints[4, j] = tick - last
+                ints[2, j] = tick
+
+
+def interval_statistics(source: SpikeSource, *, max_ticks: int | None = None, block_ticks: int | None = None,
+                        max_spikes: int = MAX_SPIKES) -> IntervalStatistics:
+    """Read a spike stream block by block into per-pixel interval sums (:class:`IntervalStatistics`).
+
+    Memory: one block of bits (about 8 MB) and 19 numbers per pixel, whatever the
+    recording's length. Reading stops at ``max_ticks`` or at the block where ``max_spikes``
+    spikes have been read (``n_ticks`` says how far it got; the same ticks as
+    :func:`pixel_intervals`), found by a first counting pass so that the first half of the
+    ticks read is known while the sums are made.
+    """
+    h, w = source.height, source.width
+    n_ticks = source.n_ticks if max_ticks is None else min(source.n_ticks, check_int("max_ticks", max_ticks, 2))
+    npx = h * w
+    if block_ticks is None:
+        block_ticks = max(1, min(256, (8 << 20) // max(1, npx)))  # ≈ 8 MB of bits a block
+    end, read = n_ticks, 0
+    for first, block in source.iter_blocks(block_ticks, 0, n_ticks):
+        read += int(np.count_nonzero(block))
+        if read >= max_spikes:
+            end = first + block.shape[0]
+            break
+    ints = np.zeros((_N_INT_SUMS, npx), np.int64)
+    ints[1:3] = -1
+    floats = np.zeros((_N_FLOAT_SUMS, npx), np.float64)
+    for first, block in source.iter_blocks(block_ticks, 0, end):
+        bits = np.ascontiguousarray(block.reshape(block.shape[0], npx)).view(np.uint8)
+        _accumulate_block(bits, first, end // 2, ints, floats)
+    return IntervalStatistics(h, w, end, float(source.clock_hz), ints[0], ints[1], ints[2], ints[3], ints[6],
+                              floats[1], floats[2], floats[3], floats[4], floats[5], ints[7].astype(np.float64),
+                              floats[6], floats[0], floats[7], floats[8], floats[9])
+
+
+def statistics_of(iv: PixelIntervals) -> IntervalStatistics:
+    """The same per-pixel sums as :func:`interval_statistics`, from collected intervals."""
+    npx = iv.height * iv.width
+    y, px_of = iv.intervals, iv.pixel
+    n_int = np.bincount(px_of, minlength=npx)
+    start = np.concatenate([[0], np.cumsum(n_int)[:-1]]).astype(np.int64)
+    k = (np.arange(y.size) - start[px_of]).astype(np.float64)
+    a, b, pp = iv.lagged(1)
+    ok3 = iv.pixel[2:] == iv.pixel[:-2]
+    y0, y1, y2, p3 = iv.intervals[:-2][ok3], iv.intervals[1:-1][ok3], iv.intervals[2:][ok3], iv.pixel[2:][ok3]
+    d = ((y0 - y2) ** 2 - (y0 - y1) ** 2) / 2
+    first_half = iv.n_spikes_first_half if iv.n_spikes_first_half is not None else iv.n_spikes // 2
+    return IntervalStatistics(
+        iv.height, iv.width, iv.n_ticks, iv.clock_hz, iv.n_spikes, iv.first_tick, iv.last_tick, first_half, n_int,
+        np.bincount(px_of, k, npx), np.bincount(px_of, k * k, npx), np.bincount(px_of, y, npx),
+        np.bincount(px_of, y * y, npx), np.bincount(px_of, k * y, npx),
+        np.bincount(pp, minlength=npx).astype(np.float64), np.bincount(pp, (a - b) ** 2 / 2, npx),
+        np.bincount(p3, minlength=npx).astype(np.float64), np.bincount(p3, (y0 - 2 * y1 + y2) ** 2, npx),
+        np.bincount(p3, d, npx), np.bincount(p3, d * d, npx))
+
+
+def _checkerboard_static(st: IntervalStatistics, tile: int) -> tuple[np.ndarray, dict]:
     """Per pixel: is its tile static, judged by the other checkerboard colour (module notes)?
 
     Statistic per (tile, colour): mean of d = ((Y_k − Y_{k+2})² − (Y_k − Y_{k+1})²)/2 over
     the colour's interval triples; static when mean(d) < its standard error (a stationary
     pixel has E d = γ₁ − γ₂ ≈ −1/12 < 0).
     """
-    h, w = iv.height, iv.width
+    h, w = st.height, st.width
     y, x = np.divmod(np.arange(h * w), w)
     ty, tx = y // tile, x // tile
     n_tx = (w + tile - 1) // tile
     colour = (y + x) % 2
     group = (ty * n_tx + tx) * 2 + colour
     n_groups = 2 * ((h + tile - 1) // tile) * n_tx  # both colours of every tile
-    ok = (iv.pixel[2:] == iv.pixel[:-2])
-    a, b, c = iv.intervals[:-2][ok], iv.intervals[1:-1][ok], iv.intervals[2:][ok]
-    g = group[iv.pixel[2:][ok]]
-    d = ((a - c) ** 2 - (a - b) ** 2) / 2
-    cnt = np.bincount(g, minlength=n_groups)
-    s1 = np.bincount(g, d, n_groups)
-    s2 = np.bincount(g, d * d, n_groups)
+    cnt = np.bincount(group, st.n_triples, n_groups)
+    s1 = np.bincount(group, st.sum_d, n_groups)
+    s2 = np.bincount(group, st.sum_dd, n_groups)
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = s1 / cnt
         se = np.sqrt(np.maximum(s2 / cnt - mean**2, 0) / np.maximum(cnt - 1, 1))
@@ -249,21 +393,19 @@ def _rounding_term(mu, s2, statistic: str, mu_var=0.0):
 _SIGMA_COEFFICIENT = {"lag1": 1.0, "second": 6.0}
 
 
-def _fit_inverse_q(mu, stat, pix, n_pix, statistic: str, n_intervals):
+def _fit_inverse_q(mu_pix, count, total, statistic: str, n_intervals):
     """Weighted least squares of (stat − rounding)/k = σ² on μ²: returns (1/Q, its standard error).
 
     The rounding term depends on σ itself (through the jitter that blurs the tick phase),
     so 1/Q is the root x of fit(x) = x, found by bracketing (a plain fixed-point iteration
     diverges near half-tick phases, where the rounding term falls faster than σ² grows).
-    Pairs are summed per pixel first so the standard error (ratio estimator over pixels)
+    Pairs come summed per pixel so the standard error (ratio estimator over pixels)
     allows for the pairs of one pixel sharing intervals; it is divided by |1 − fit'(x)|.
     """
     k = _SIGMA_COEFFICIENT[statistic]
-    # μ, the weight and the rounding term are per pixel: sum each pixel's pairs first
-    count = np.bincount(pix, minlength=n_pix).astype(np.float64)
-    total = np.bincount(pix, stat, n_pix)
-    mu_pix = np.zeros(n_pix)
-    mu_pix[pix] = mu
+    # μ, the weight and the rounding term are per pixel: each pixel's pairs are summed (``count``
+    # statistics, total ``total``)
+    count = np.asarray(count, dtype=np.float64)
     has = count > 0
     count, total, mu_pix = count[has], total[has], mu_pix[has]
     n_iv = np.maximum(np.asarray(n_intervals, dtype=np.float64)[has], 1.0)
@@ -322,7 +464,7 @@ def _bins(lo: float, hi: float) -> np.ndarray:
     return np.array(edges)
 
 
-def interval_table(iv: PixelIntervals, use_pixel: np.ndarray, edges, inv_q: float | None = None) -> list[dict]:
+def interval_table(iv, use_pixel: np.ndarray, edges, inv_q: float | None = None) -> list[dict]:
     """Per mean-interval bin: pixels, pairs, RSD of the intervals (rounding included), lag-1 correlation.
 
     ``rsd`` = √γ₀/μ with γ₀ the pooled within-pixel variance of the intervals (n − 1
@@ -334,24 +476,15 @@ def interval_table(iv: PixelIntervals, use_pixel: np.ndarray, edges, inv_q: floa
     pixel's own rounding terms, and ``static_consistent``: whether the two agree within
     :data:`LAG1_TOLERANCE`.
     """
-    npx = iv.height * iv.width
-    mu_p = iv.mean_interval
-    y = iv.intervals
-    px_of = iv.pixel
-    n_int = np.bincount(px_of, minlength=npx).astype(np.float64)
-    start = np.concatenate([[0], np.cumsum(n_int)[:-1]]).astype(np.int64)
-    k = np.arange(y.size) - start[px_of]
-    s1 = np.bincount(px_of, k, npx)
-    s2 = np.bincount(px_of, k * k, npx)
-    sy = np.bincount(px_of, y, npx)
-    sky = np.bincount(px_of, k * y, npx)
-    syy = np.bincount(px_of, y * y, npx)
+    st = iv if isinstance(iv, IntervalStatistics) else statistics_of(iv)
+    mu_p = st.mean_interval
+    n_int = st.n_intervals.astype(np.float64)
+    s1, s2, sy, sky, syy = st.sum_k, st.sum_kk, st.sum_y, st.sum_ky, st.sum_yy
     with np.errstate(invalid="ignore", divide="ignore"):
         ss = syy - sy * sy / n_int  # within-pixel sum of squares about the mean
         sxx = s2 - s1 * s1 / n_int
         sxy = sky - s1 * sy / n_int
         rss = ss - np.where(sxx > 0, sxy * sxy / sxx, 0.0)  # about the pixel's linear trend
-    a, b, pp = iv.lagged(1)
     rows = []
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         px = use_pixel & (mu_p >= lo) & (mu_p < hi) & (n_int >= MIN_INTERVALS_PER_PIXEL - 1)
@@ -359,11 +492,11 @@ def interval_table(iv: PixelIntervals, use_pixel: np.ndarray, edges, inv_q: floa
             continue
         gamma0 = ss[px].sum() / (n_int[px] - 1).sum()
         gamma0_detrended = rss[px].sum() / (n_int[px] - 2).sum()
-        sel = px[pp]
-        d1 = float(np.mean((a[sel] - b[sel]) ** 2) / 2) if sel.any() else math.nan
+        n_pairs = float(st.n_pairs[px].sum())
+        d1 = float(st.sum_lag1[px].sum() / n_pairs) if n_pairs else math.nan
         mean_mu = float(np.mean(mu_p[px]))
         row = {"interval_from_ticks": float(lo), "interval_to_ticks": float(hi),
-               "mean_interval_ticks": mean_mu, "pixels": int(px.sum()), "pairs": int(sel.sum()),
+               "mean_interval_ticks": mean_mu, "pixels": int(px.sum()), "pairs": int(n_pairs),
                "rsd": float(math.sqrt(gamma0) / mean_mu),
                "rsd_detrended": float(math.sqrt(max(gamma0_detrended, 0.0)) / mean_mu),
                "lag1_correlation": float((gamma0 - d1) / gamma0)}
@@ -438,47 +571,110 @@ def _gain_spread(iv: PixelIntervals, sigma2_per_mu2: float, tile: int, min_spike
     return (math.sqrt(var) if var > 0 else 0.0), info
 
 
-def _hot_in(counts: np.ndarray, local: np.ndarray,
-            q_electrons: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(hot, excess, σ) of one stretch of the recording: far above the local median m.
+#: A pixel is hot only where its excess exceeds this many robust standard deviations of the
+#: scene's relative pixel-to-pixel contrast (texture is multiplicative, a dark current additive).
+HOT_TEXTURE_SIGMAS = 8.0
+#: Hot-pixel positions listed in the result at most.
+MAX_LISTED_HOT_PIXELS = 1000
 
-    A pixel that is not hot counts about m spikes; its photo-electrons are Poisson, so its
-    count varies by σ = √(m/Q + 1) (the 1: where the first and last spikes fall). Without
-    a Q, Q = 1 (plain Poisson counts, conservative). Hot: excess c − m ≥ 5σ, ≥ 5 spikes,
-    and ≥ 8 robust standard deviations of the excess over the image (PRNU, scene texture).
+
+def _relative_contrast(counts: np.ndarray, local: np.ndarray) -> float:
+    """Robust std of (count − local median)/local median: the scene's texture at the pixel scale
+    (plus count noise), over pixels with ≥ 20 spikes locally (all lit pixels if too few)."""
+    lit = local >= 20
+    if lit.sum() < 100:
+        lit = local > 0
+    if not lit.any():
+        return 0.0
+    z = (counts[lit] - local[lit]) / local[lit]
+    # mean absolute deviation (× √(π/2): a normal's std) of the central 98 %: robust to the few
+    # hot pixels, and unlike the median absolute deviation it does not collapse to 0 on the
+    # whole-number counts of a short recording
+    lo, hi = np.percentile(z, [1.0, 99.0])
+    central = z[(z >= lo) & (z <= hi)]
+    return 1.2533 * float(np.mean(np.abs(central - np.median(central))))
+
+
+def _hot_threshold(local: np.ndarray, q_electrons: float | None, contrast: float) -> np.ndarray:
+    """Excess (spikes) a pixel needs over its local median to be called hot in one stretch.
+
+    Photon noise: a pixel that is not hot counts about m spikes, varying by σ = √(m/Q + 1)
+    (the 1: where the first and last spikes fall; Q = 1 when unknown, conservative), so ≥ 5σ
+    and ≥ 5 spikes. Texture: the light of a textured scene varies from pixel to pixel in
+    proportion to the light (reflectance × illumination), by the relative ``contrast``
+    measured over the image, so ≥ :data:`HOT_TEXTURE_SIGMAS`·contrast·m as well: a dark
+    current, which adds the same charge whatever the light, stands out where the scene is
+    dark and cannot be told from texture where it is bright.
     """
-    excess = counts - local
-    scale = 1.4826 * float(np.median(np.abs(excess - np.median(excess))))
     sigma = np.sqrt(np.maximum(local, 0.0) / max(q_electrons or 1.0, 1.0) + 1.0)
-    hot = excess >= np.maximum(5.0 * sigma, max(5.0, 8.0 * scale))
-    return hot, excess, sigma
+    return np.maximum(np.maximum(5.0 * sigma, 5.0), HOT_TEXTURE_SIGMAS * contrast * np.maximum(local, 0.0))
 
 
-def _hot_dead(iv: PixelIntervals, q_electrons: float | None):
+def _hot_dead(iv, q_electrons: float | None):
+    """Hot pixels (by dark current), dead pixels and the darkest pixels' counts (module notes).
+
+    Hot: a dark current is steady, so the pixel must stand out in BOTH halves of the
+    recording, by the same excess within the noise (moving light lifts a pixel only while a
+    bright feature passes it), and above the scene's texture at its light level
+    (:func:`_hot_threshold`). A pixel's detection limit, in e⁻/s, is the larger of its two
+    halves' thresholds × Q / (half the duration); the hot fraction is estimated among the
+    pixels whose limit lies below the dark current of the hot pixels found (elsewhere a hot
+    pixel would hide under the light), and when none is found only a bound is given.
+    """
     from scipy import ndimage
 
     h, w = iv.height, iv.width
     counts = iv.n_spikes.reshape(h, w).astype(np.float64)
     local = ndimage.median_filter(counts, size=5, mode="nearest")
     excess = counts - local
-    # hot: a dark current is steady, so the pixel must stand out in BOTH halves of the
-    # recording, by the same excess within the noise; moving light makes a pixel outshine
-    # its neighbours only while a bright feature passes it.
     first = (iv.n_spikes_first_half if iv.n_spikes_first_half is not None else iv.n_spikes // 2)
     first = first.reshape(h, w).astype(np.float64)
     second = counts - first
-    hot1, e1, s1 = _hot_in(first, ndimage.median_filter(first, size=5, mode="nearest"), q_electrons)
-    hot2, e2, s2 = _hot_in(second, ndimage.median_filter(second, size=5, mode="nearest"), q_electrons)
+    duration_s = iv.n_ticks / iv.clock_hz
+    q_for_rate = q_electrons or 1.0
+    halves = []
+    for part, part_s in ((first, (iv.n_ticks // 2) / iv.clock_hz), (second, (iv.n_ticks - iv.n_ticks // 2)
+                                                                     / iv.clock_hz)):
+        part_local = ndimage.median_filter(part, size=5, mode="nearest")
+        contrast = _relative_contrast(part, part_local)
+        need = _hot_threshold(part_local, q_electrons, contrast)
+        part_excess = part - part_local
+        sigma = np.sqrt(np.maximum(part_local, 0.0) / max(q_electrons or 1.0, 1.0) + 1.0)
+        halves.append((part_excess >= need, part_excess, sigma, need * q_for_rate / max(part_s, 1e-300), contrast))
+    (hot1, e1, s1, lim1, c1), (hot2, e2, s2, lim2, c2) = halves
     # same excess in both halves: within 5 σ of the difference, and 20 % (slack for the light)
     steady = np.abs(e1 - e2) <= 5.0 * np.hypot(s1, s2) + 0.2 * np.maximum(e1, e2)
     hot = hot1 & hot2 & steady
+    limit_e_per_s = np.maximum(lim1, lim2)  # the dark current a pixel needs to be found
     # dead: silent where the neighbourhood gives ≥ 10 spikes (P(0) < e^-10 for a live pixel)
     dead = (counts == 0) & (local >= 10)
-    duration_s = iv.n_ticks / iv.clock_hz
-    out = {"hot_pixels": int(hot.sum()), "hot_pixel_fraction": float(hot.mean()),
-           "dead_pixels": int(dead.sum()), "dead_pixel_fraction": float(dead.mean())}
-    if hot.any() and q_electrons is not None:
-        out["hot_pixel_dark_current_e_per_s"] = float(np.median(excess[hot]) / duration_s * q_electrons)
+    n_hot = int(hot.sum())
+    out = {"hot_pixels": n_hot, "hot_pixel_fraction_of_all": float(hot.mean()),
+           "dead_pixels": int(dead.sum()), "dead_pixel_fraction": float(dead.mean()),
+           "scene_relative_contrast": float(max(c1, c2)),
+           "hot_pixel_detection_limit_median_e_per_s": float(np.median(limit_e_per_s)) if q_electrons else None}
+    ys, xs = np.nonzero(hot)
+    out["hot_pixel_positions"] = [[int(y), int(x)] for y, x in zip(ys[:MAX_LISTED_HOT_PIXELS],
+                                                                     xs[:MAX_LISTED_HOT_PIXELS], strict=True)]
+    if n_hot and q_electrons is not None:
+        currents = excess[hot] / duration_s * q_electrons
+        level = float(np.median(currents))
+        searchable = int(np.count_nonzero(limit_e_per_s <= level))
+        out["hot_pixel_dark_current_e_per_s"] = level
+        out["hot_pixel_dark_current_standard_error_e_per_s"] = (float(1.2533 * np.std(currents) / math.sqrt(n_hot))
+                                                                if n_hot > 1 else None)
+        out["hot_pixel_searchable_pixels"] = searchable
+        fraction = n_hot / max(searchable, n_hot)
+        out["hot_pixel_fraction"] = fraction
+        out["hot_pixel_fraction_standard_error"] = math.sqrt(fraction * (1 - fraction) / max(searchable, n_hot))
+    else:
+        out["hot_pixel_fraction"] = float(hot.mean())
+    if not n_hot and q_electrons is not None:
+        limit = float(np.median(limit_e_per_s))
+        searchable = int(np.count_nonzero(limit_e_per_s <= limit))
+        # none in n pixels: the fraction is below 3/n at 95 % (the rule of three)
+        out["hot_pixel_bound"] = {"dark_current_at_least_e_per_s": limit, "searchable_pixels": searchable,
+                                  "fraction_upper_bound": 3.0 / max(searchable, 1)}
     # dark current: only the darkest pixels bound it (they may still see light)
     live = counts[~dead]
     darkest = float(np.percentile(live, 1)) if live.size else 0.0
@@ -493,12 +689,12 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
     with a ``reason`` (and a bound where one exists) — never a made-up value.
     """
     tile = check_int("tile", tile, 2, 64)
-    iv = pixel_intervals(source, max_ticks=max_ticks)
+    iv = interval_statistics(source, max_ticks=max_ticks)
     if iv.n_ticks < 20:
         raise ViformError(f"the recording has {iv.n_ticks} ticks; calibration needs at least 20")
     npx = iv.height * iv.width
     mu_p = iv.mean_interval
-    n_int = np.bincount(iv.pixel, minlength=npx)
+    n_int = iv.n_intervals
     duration_s = iv.n_ticks / iv.clock_hz
     result: dict = {"height": iv.height, "width": iv.width, "n_ticks": iv.n_ticks,
                     "recording_ticks": int(source.n_ticks), "clock_hz": iv.clock_hz,
@@ -510,13 +706,10 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
     # ---- Q_eff
     mu_hi = iv.n_ticks / (MIN_INTERVALS_PER_PIXEL + 1)
     use = static & (n_int >= MIN_INTERVALS_PER_PIXEL) & (mu_p >= MIN_INTERVAL_TICKS) & (mu_p <= mu_hi)
-    a, b, pp = iv.lagged(1)
-    sel = use[pp]
-    ok3 = iv.pixel[2:] == iv.pixel[:-2]
-    y0, y1, y2 = iv.intervals[:-2][ok3], iv.intervals[1:-1][ok3], iv.intervals[2:][ok3]
-    p3 = iv.pixel[2:][ok3]
-    sel3 = use[p3]
-    q_info: dict = {"pairs": int(sel.sum()), "triples": int(sel3.sum()), "pixels": int(use.sum()),
+    pairs = np.where(use, iv.n_pairs, 0.0)
+    triples = np.where(use, iv.n_triples, 0.0)
+    mu_use = np.where(use, mu_p, 1.0)
+    q_info: dict = {"pairs": int(pairs.sum()), "triples": int(triples.sum()), "pixels": int(use.sum()),
                     "mean_interval_range_ticks": [MIN_INTERVAL_TICKS, float(mu_hi)]}
     q_eff = None
     edges = _bins(2.0, max(3.0, mu_hi))
@@ -525,16 +718,15 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
     if mu_hi <= MIN_INTERVAL_TICKS:
         q_info["reason"] = (f"recording too short: {iv.n_ticks} ticks hold fewer than {MIN_INTERVALS_PER_PIXEL} "
                             f"intervals of ≥ {MIN_INTERVAL_TICKS:g} ticks")
-    elif sel3.sum() < MIN_PAIRS_FOR_Q:
-        q_info["reason"] = (f"too few steady interval triples ({int(sel3.sum())} < {MIN_PAIRS_FOR_Q}) in pixels whose "
-                            f"mean interval lies in {MIN_INTERVAL_TICKS:g}–{mu_hi:.3g} ticks: the recording is too "
-                            "short, too small, too dark or too bright, or not steady")
+    elif triples.sum() < MIN_PAIRS_FOR_Q:
+        q_info["reason"] = (f"too few steady interval triples ({int(triples.sum())} < {MIN_PAIRS_FOR_Q}) in pixels "
+                            f"whose mean interval lies in {MIN_INTERVAL_TICKS:g}–{mu_hi:.3g} ticks: the recording is "
+                            "too short, too small, too dark or too bright, or not steady")
     else:
         # drift-robust: second differences of the intervals cancel light that changes linearly
-        inv_q, se = _fit_inverse_q(mu_p[p3[sel3]], (y0[sel3] - 2 * y1[sel3] + y2[sel3]) ** 2, p3[sel3], npx,
-                                   "second", n_int)
+        inv_q, se = _fit_inverse_q(mu_use, triples, np.where(use, iv.sum_second, 0.0), "second", n_int)
         # check: successive-interval differences, which linear drift inflates
-        inv_q1, se1 = _fit_inverse_q(mu_p[pp[sel]], (a[sel] - b[sel]) ** 2 / 2, pp[sel], npx, "lag1", n_int)
+        inv_q1, se1 = _fit_inverse_q(mu_use, pairs, np.where(use, iv.sum_lag1, 0.0), "lag1", n_int)
         q_info.update(inverse_q=inv_q, inverse_q_standard_error=se, inverse_q_lag1=inv_q1,
                       inverse_q_lag1_standard_error=se1)
         q_info["drift_free"] = bool(abs(inv_q1 - inv_q) <= 2 * math.hypot(se, se1))
@@ -601,35 +793,56 @@ def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_
         threshold_level_electrons,
     )
 
+    # measured: an estimate with its error in the result; bounds: {field: {"value", "kind", "why"}},
+    # the value the preset simulates with; assumed: the chip preset's value
     measured, assumed, bounds = {}, {}, {}
+
+    def bound(name, value, kind, why):
+        bounds[name] = {"value": float(value), "kind": kind, "why": why}
+
     q = result["threshold"].get("q_eff_electrons")
     q_low = result["threshold"].get("q_eff_lower_bound_electrons")
     if q:
         measured["threshold_electrons"] = float(round(q))
     elif q_low:
         # the recording bounds Q_eff from below: the least regular sensor it allows
-        measured["threshold_electrons"] = float(round(q_low))
-        bounds["threshold_electrons"] = "lower bound (the recording is not steady enough for an estimate)"
+        bound("threshold_electrons", round(q_low), "lower bound", "the recording is not steady enough for an estimate")
     else:
         q_fb = fallback_threshold_electrons or threshold_level_electrons(DEFAULT_THRESHOLD_LEVEL)
         assumed["threshold_electrons"] = float(q_fb)
     g = result["gain_spread"].get("gain_spread_fraction")
     if g is not None:
-        measured["gain_spread_fraction"] = float(g)
+        bound("gain_spread_fraction", g, "upper bound", "scene texture at the pixel scale cannot be told from the "
+              "pixels' gain spread in one static recording")
     d = result["defects"]
     if d.get("hot_pixels") and d.get("hot_pixel_dark_current_e_per_s"):
         measured["hot_pixel_fraction"] = d["hot_pixel_fraction"]
-        measured["hot_pixel_dark_current_e_per_s"] = d["hot_pixel_dark_current_e_per_s"]
+        if q:
+            measured["hot_pixel_dark_current_e_per_s"] = d["hot_pixel_dark_current_e_per_s"]
+        else:
+            bound("hot_pixel_dark_current_e_per_s", d["hot_pixel_dark_current_e_per_s"], "lower bound",
+                  "from the lower bound of the threshold")
     elif d.get("hot_pixels") == 0:
-        measured["hot_pixel_fraction"] = 0.0
+        hb = d.get("hot_pixel_bound")
+        why = "none found"
+        if hb:
+            why += (f" with a dark current ≥ {hb['dark_current_at_least_e_per_s']:.3g} e⁻/s in "
+                    f"{hb['searchable_pixels']} pixels dark enough to show one (95 %)")
+        bound("hot_pixel_fraction", hb["fraction_upper_bound"] if hb else 0.0, "upper bound",
+              why + "; hot pixels with less dark current hide under the light")
     params = _chip_parameters(result["clock_hz"])
     import dataclasses
 
     fields = {f.name for f in dataclasses.fields(params)}
-    params = dataclasses.replace(params, **{k: v for k, v in {**measured, **assumed}.items() if k in fields})
-    what = ", ".join(f"{k} = {v:.4g}" + (" (lower bound)" if k in bounds else "")
-                     for k, v in measured.items()) or "nothing"
+    values = {**measured, **assumed, **{k: v["value"] for k, v in bounds.items()}}
+    if "hot_pixel_fraction" in bounds and "hot_pixel_fraction" not in measured:
+        values["hot_pixel_fraction"] = 0.0  # simulate none: the bound only says how many could hide
+    params = dataclasses.replace(params, **{k: v for k, v in values.items() if k in fields})
+    what = ", ".join(f"{k} = {v:.4g}" for k, v in measured.items()) or "nothing"
     description = f"calibrated from a {result['height']}×{result['width']} recording: measured {what}"
+    if bounds:
+        description += "; bounds " + ", ".join(f"{k} {'≥' if v['kind'] == 'lower bound' else '≤'} {v['value']:.4g}"
+                                               for k, v in bounds.items())
     if assumed:
         description += "; assumed " + ", ".join(f"{k} = {v:.4g}" for k, v in assumed.items())
     calibration = {"measured": measured, "assumed": assumed, "bounds": bounds,

@@ -80,6 +80,7 @@ METRICS = {
     "data_rate_mb_per_s": ("data rate", "MB/s"),
     "latency_s": ("latency", "s"),
     "time_resolution_s": ("integration time", "s"),
+    "frame_interval_s": ("frame interval", "s"),
 }
 
 
@@ -399,6 +400,13 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sens
         methods = [m for m in (spike_methods or SPIKE_METHODS) if m != "best" or best_spike_method_name() is not None]
         head = spike_label(sensor, preset)
         note = spike_exposure_note(sensor, preset, duration_s)
+        from viform.measure.dynamic_range import clip_limited_dynamic_range_db, dynamic_range_db
+
+        # the range this clip can show (no interval longer than the clip) beside the formula's (Q / dark current)
+        longest = par.threshold_electrons / par.dark_current_e_per_s if par.dark_current_e_per_s > 0 else math.inf
+        range_limits = {"clip_s": duration_s, "longest_interval_s": longest,
+                        "formula_dr_db": dynamic_range_db(1 / par.clock_hz, longest),
+                        "clip_limited_dr_db": clip_limited_dynamic_range_db(1 / par.clock_hz, longest, duration_s)}
         for method in methods:
             label = {"accumulation": f"{head} · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
                      "interval": f"{head} · interval", "best": f"{head} · {best_spike_method_name()}"}[method]
@@ -416,13 +424,14 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sens
                     tau = est.integration_s
                     if tau is None:
                         tau = interval_image(stream, t).info["tau_ticks"] / par.clock_hz
+                        est.integration_s = tau  # the intervals its light is measured over
                     mask = scene.moving_mask(t) if hasattr(scene, "moving_mask") else np.ones(tau.shape, bool)
                     taus.append(np.median(tau[mask] if mask.any() else tau))
                 tres = float(np.median(taus))
                 lat = tres + 1 / par.clock_hz
             shots.append(Shot(f"spike-{method}", label, f"{desc}, {preset}", ests,
                               {**sensor.describe(), "preset": preset, "reconstruction": method,
-                               "exposure_note": note},
+                               "exposure_note": note, **range_limits},
                               time_resolution_s=tres, latency_s=lat, data_rate_mb_per_s=rate,
                               frame_rate_hz=par.clock_hz, raw=stream))
         return shots
@@ -517,7 +526,8 @@ def score(shot: Shot, scene, instants_s) -> dict:
     lo = demand["min_lux"] / 2 if demand else max(float(min(t.min() for t in truths)), 1e-4)
     hi = demand["max_lux"] * 2 if demand else float(max(t.max() for t in truths))
     regions = scene.regions() if hasattr(scene, "regions") else {}
-    m = {"time_resolution_s": shot.time_resolution_s, "latency_s": shot.latency_s,
+    m = {"time_resolution_s": shot.time_resolution_s, "frame_interval_s": frame_interval_s(shot),
+         "latency_s": shot.latency_s,
          "data_rate_mb_per_s": shot.data_rate_mb_per_s, "frame_rate_hz": shot.frame_rate_hz}
     sat = float(np.mean([e.saturated.mean() for e in shot.estimates]))
     under = float(np.mean([e.underexposed.mean() for e in shot.estimates]))
@@ -535,6 +545,7 @@ def score(shot: Shot, scene, instants_s) -> dict:
         widths = [edge_width_px(e.lux, regions["edge_rows"], regions["edge_dark_lux"], regions["edge_bright_lux"])
                   for e in shot.estimates]
         m["edge_width_px"] = float(np.nanmedian(widths)) if np.isfinite(widths).any() else math.nan
+        m["edge_dark_integration_s"] = _edge_dark_integration_s(shot, truths, regions)
     else:
         m["edge_width_px"] = math.nan
     if "led" in regions:
@@ -559,6 +570,25 @@ def score(shot: Shot, scene, instants_s) -> dict:
     return m
 
 
+def _edge_dark_integration_s(shot, truths, regions) -> float:
+    """Median integration time, s, of the pixels on the dark side of the measured edge.
+
+    A spike pixel integrates its own interval, long where the light is dim: on the dark side
+    of a moving edge one interval spans much motion, which is what blurs the edge. Frame
+    sensors integrate the same time everywhere (their ``time_resolution_s``).
+    """
+    r0, r1 = regions["edge_rows"]
+    middle = math.sqrt(regions["edge_dark_lux"] * regions["edge_bright_lux"])
+    medians = []
+    for est, truth in zip(shot.estimates, truths, strict=True):
+        if est.integration_s is None:
+            continue
+        dark = np.asarray(truth)[r0:r1] < middle
+        if dark.any():
+            medians.append(float(np.median(np.asarray(est.integration_s)[r0:r1][dark])))
+    return float(np.median(medians)) if medians else shot.time_resolution_s
+
+
 def target_cnr(image, targets: dict) -> dict:
     """Contrast-to-noise of each target against a ring of pixels around it (for the fog scene)."""
     from scipy.ndimage import binary_dilation
@@ -578,60 +608,142 @@ def target_cnr(image, targets: dict) -> dict:
 
 
 # ------------------------------------------------------------------ who wins on what
+#: How each verdict line shows a metric; sensors whose values look the same at that precision tie.
+VERDICT_FORMATS = {
+    "edge_width_px": lambda v: f"{v:.3g} px",
+    "dr_captured_db": lambda v: f"{v:.0f} dB",
+    "saturated_fraction": lambda v: f"{v:.1%}",
+    "underexposed_fraction": lambda v: f"{v:.1%}",
+    "flicker_error": lambda v: f"{v:.2f} of the on/off swing",
+    "psnr_log_db": lambda v: f"{v:.1f} dB",
+    "data_rate_mb_per_s": lambda v: f"{v:.3g} MB/s",
+    "latency_s": lambda v: f"{v * 1e3:.3g} ms",
+}
+#: Metrics of the image in lux (ranked among sensors that give one) and of the sensor itself (ranked among all).
+IMAGE_METRICS = ("edge_width_px", "dr_captured_db", "flicker_error", "psnr_log_db")
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.3g} ms"
+
+
+def extremes(rows, key: str, higher: bool):
+    """(best shots, best value, worst shots, worst value) of ``key`` over ``rows``, ties kept together.
+
+    Sensors tie when :data:`VERDICT_FORMATS` shows their values the same. ``worst`` is empty
+    when every ranked sensor ties. None when no row has a finite value.
+    """
+    fmt = VERDICT_FORMATS[key]
+    vals = [(float(s.metrics[key]), s) for s in rows
+            if isinstance(s.metrics.get(key), (int, float)) and math.isfinite(s.metrics[key])]
+    if not vals:
+        return None
+    pick = max if higher else min
+    best_v = pick(v for v, _ in vals)
+    worst_v = (min if higher else max)(v for v, _ in vals)
+    best = [s for v, s in vals if fmt(v) == fmt(best_v)]
+    worst = [s for v, s in vals if fmt(v) == fmt(worst_v)] if fmt(worst_v) != fmt(best_v) else []
+    return best, best_v, worst, worst_v
+
+
+def names(shots) -> str:
+    """Labels joined for a sentence; several are a tie and said so."""
+    labels = [s.label for s in shots]
+    if len(labels) == 1:
+        return labels[0]
+    return f"{len(labels)} sensors tie: " + ", ".join(labels[:-1]) + f" and {labels[-1]}"
+
+
+def frame_interval_s(shot) -> float:
+    """Time from one image to the next (1 / frame rate); for the spike camera one readout tick."""
+    rate = shot.frame_rate_hz
+    return 1.0 / rate if rate and math.isfinite(rate) and rate > 0 else math.nan
+
+
+def _timing(shot) -> str:
+    interval = frame_interval_s(shot)
+    return f"integration {_ms(shot.time_resolution_s)}" + (
+        f", a new image every {_ms(interval)}" if math.isfinite(interval) else "")
+
+
+def _blur_cause(shot) -> str:
+    dark = shot.metrics.get("edge_dark_integration_s")
+    if shot.key.startswith("spike-") and isinstance(dark, float) and math.isfinite(dark):
+        return (f"its pixels on the dark side of the edge fire only every {_ms(dark)} (dim light, long intervals) "
+                f"and each image spans a whole interval, although the median integration where the scene moves "
+                f"is {_ms(shot.time_resolution_s)}")
+    return f"its integration time is {_ms(shot.time_resolution_s)}"
+
+
 def verdict(shots, demand: dict | None) -> list[str]:
-    """Sentences saying which sensor wins on what, derived from the metrics alone."""
-    rows = [s for s in shots if not s.skipped and s.lux_units]
+    """Sentences saying which sensor wins on what, derived from the metrics alone.
+
+    Every line is computed from the same rows as the table: image metrics (edge, range,
+    flicker, PSNR) rank the sensors that give an image in lux; sensor metrics (saturated,
+    under-exposed, data rate, latency) rank every sensor that ran. Sensors tied at the
+    precision shown are all named; those left out of a ranking are named, with the reason.
+    """
+    ran = [s for s in shots if not s.skipped]
+    image_rows = [s for s in ran if s.lux_units]
     lines = []
 
-    def best(key, higher=True):
-        vals = [(s.metrics.get(key, math.nan), s) for s in rows]
-        vals = [(v, s) for v, s in vals if isinstance(v, float) and math.isfinite(v)]
-        if not vals:
-            return None, None, None
-        vals.sort(key=lambda vs: -vs[0] if higher else vs[0])
-        # the other end is worth naming only when it differs from the winner
-        worst = vals[-1] if len(vals) > 1 and vals[-1][0] != vals[0][0] else None
-        return vals[0][1], vals[0][0], worst
+    def line(key, higher, text_best, text_worst=""):
+        found = extremes(image_rows if key in IMAGE_METRICS else ran, key, higher)
+        if found is None:
+            return None
+        best, v, worst, wv = found
+        fmt = VERDICT_FORMATS[key]
+        out = text_best.format(who=names(best), value=fmt(v), first=best[0])
+        if worst and text_worst:
+            out += text_worst.format(who=names(worst), value=fmt(wv), first=worst[0])
+        lines.append(out + ".")
+        return found
 
-    def tail(worst, text):
-        return text.format(label=worst[1].label, value=worst[0]) if worst else ""
-
-    s, v, worst = best("edge_width_px", higher=False)
-    if s is not None:
-        lines.append(f"Sharpest motion: {s.label}, with a {v:.3g} px edge "
-                     f"(integration {s.time_resolution_s * 1e3:.3g} ms)"
-                     + (f"; the most blurred is {worst[1].label} at {worst[0]:.3g} px, because its integration time "
-                        f"is {worst[1].time_resolution_s * 1e3:.3g} ms" if worst else "") + ".")
-    s, v, worst = best("dr_captured_db")
-    if s is not None:
-        need = f" of the {demand['dynamic_range_db']:.0f} dB the scene holds" if demand else ""
-        lines.append(f"Widest range rendered within a factor of 2: {s.label}, {v:.0f} dB{need} "
-                     f"(saturated {s.metrics['saturated_fraction']:.1%}, under-exposed "
-                     f"{s.metrics['underexposed_fraction']:.1%})" + tail(worst, "; narrowest: {label}, {value:.0f} dB")
-                     + ".")
-    s, v, worst = best("saturated_fraction", higher=False)
-    if s is not None:
-        lines.append(f"Fewest saturated pixels: {s.label} ({v:.1%})" + tail(worst, "; most: {label} ({value:.1%})")
-                     + ".")
-    s, v, worst = best("underexposed_fraction", higher=False)
-    if s is not None:
-        lines.append(f"Fewest pixels lost in the dark: {s.label} ({v:.1%})"
-                     + tail(worst, "; most: {label} ({value:.1%})") + ".")
-    s, v, worst = best("flicker_error", higher=False)
-    if s is not None:
-        lines.append(f"Flickering LED seen in its true state: {s.label} (error {v:.2f} of the on/off swing)"
-                     + tail(worst, "; worst {label} ({value:.2f})") + ".")
-    s, v, worst = best("psnr_log_db")
-    if s is not None:
-        lines.append(f"Closest to the truth overall (PSNR of log-lux): {s.label}, {v:.1f} dB "
-                     f"(SSIM {s.metrics['ssim_log']:.2f})" + tail(worst, "; last: {label}, {value:.1f} dB") + ".")
-    s, v, worst = best("data_rate_mb_per_s", higher=False)
-    if s is not None:
-        lines.append(f"Least data: {s.label}, {v:.3g} MB/s" + tail(worst, "; most: {label}, {value:.3g} MB/s") + ".")
-    s, v, worst = best("latency_s", higher=False)
-    if s is not None:
-        lines.append(f"Shortest latency: {s.label}, {v * 1e3:.3g} ms"
-                     + (f"; longest: {worst[1].label}, {worst[0] * 1e3:.3g} ms" if worst else "") + ".")
+    found = extremes(image_rows, "edge_width_px", higher=False)
+    if found is not None:
+        best, v, worst, wv = found
+        text = f"Sharpest moving edge: {names(best)}, {VERDICT_FORMATS['edge_width_px'](v)} ({_timing(best[0])}"
+        caveats = []
+        if frame_interval_s(best[0]) > 10 * best[0].time_resolution_s:
+            caveats.append(f"only {best[0].frame_rate_hz:.3g} images a second, latency {_ms(best[0].latency_s)}")
+        if best[0].metrics.get("underexposed_fraction", 0) > 0.05:
+            caveats.append(f"{best[0].metrics['underexposed_fraction']:.0%} of its pixels under-exposed")
+        text += ")" + (f", but {' and '.join(caveats)}" if caveats else "")
+        if worst:
+            text += (f"; the most blurred is {names(worst)} at {VERDICT_FORMATS['edge_width_px'](wv)}, because "
+                     f"{_blur_cause(worst[0])}")
+        lines.append(text + ".")
+    for s in image_rows:  # a spike image's blur comes from its dimmest pixels' long intervals: say so
+        dark = s.metrics.get("edge_dark_integration_s")
+        if s.key.startswith("spike-") and isinstance(dark, float) and math.isfinite(s.metrics.get("edge_width_px",
+                                                                                                  math.nan)) \
+                and dark > 2 * s.time_resolution_s and s not in (found[2] if found else []):
+            lines.append(f"{s.label}: {VERDICT_FORMATS['edge_width_px'](s.metrics['edge_width_px'])} of edge blur, "
+                         f"because {_blur_cause(s)}.")
+    need = f" of the {demand['dynamic_range_db']:.0f} dB the scene holds" if demand else ""
+    found = line("dr_captured_db", True, "Widest range rendered within a factor of 2: {who}, {value}" + need,
+                 "; narrowest: {who}, {value}")
+    spike_limit = next((s.parameters["clip_limited_dr_db"] for s in ran if "clip_limited_dr_db" in s.parameters),
+                       None)
+    if found is not None and spike_limit is not None:
+        p = next(s.parameters for s in ran if "clip_limited_dr_db" in s.parameters)
+        lines.append(f"The spike camera's range here is bounded by the clip: no interval longer than the "
+                     f"{_ms(p['clip_s'])} clip can be measured in it, so at most {spike_limit:.0f} dB; the "
+                     f"{p['formula_dr_db']:.0f} dB of its formula (viform dr) needs intervals of "
+                     f"{p['longest_interval_s']:.3g} s (threshold / dark current).")
+    line("saturated_fraction", False, "Fewest saturated pixels: {who} ({value})", "; most: {who} ({value})")
+    line("underexposed_fraction", False, "Fewest pixels lost in the dark: {who} ({value})",
+         "; most: {who} ({value})")
+    line("flicker_error", False, "Flickering LED seen in its true state: {who} (error {value})",
+         "; worst: {who} ({value})")
+    found = extremes(image_rows, "psnr_log_db", True)
+    if found is not None:
+        best, v, worst, wv = found
+        lines.append(f"Closest to the truth overall (PSNR of log-lux): {names(best)}, {v:.1f} dB "
+                     f"(SSIM {best[0].metrics['ssim_log']:.2f})"
+                     + (f"; last: {names(worst)}, {wv:.1f} dB" if worst else "") + ".")
+    line("data_rate_mb_per_s", False, "Least data: {who}, {value}", "; most: {who}, {value}")
+    line("latency_s", False, "Shortest latency: {who}, {value}", "; longest: {who}, {value}")
     cnr = [(s, s.metrics["target_cnr"]) for s in shots if not s.skipped and s.metrics.get("target_cnr")]
     if cnr:
         seen = {s.label: [k for k, v in c.items() if v >= 3] for s, c in cnr}
@@ -641,10 +753,18 @@ def verdict(shots, demand: dict | None) -> list[str]:
                      f"{', '.join(seen[best_s.label]) or 'none'} (best contrast-to-noise "
                      f"{max(best_c.values()):.1f}); "
                      + (f"{len(others)} of {len(cnr)} sensors see none." if others else "every sensor sees some."))
-    if demand and rows:
-        meets = [r.label for r in rows
+    if demand and image_rows:
+        meets = [r.label for r in image_rows
                  if r.metrics.get("dr_captured_db", 0) >= demand["dynamic_range_db"] - 6
                  and r.time_resolution_s <= demand["time_resolution_s"]]
-        lines.append("Meets both the scene's range and its speed: " + (", ".join(meets) if meets else
+        lines.append("Meets both the scene's range and its speed: " + (", ".join(meets) + "." if meets else
                      "no sensor compared here, at these settings."))
+    not_lux = [s for s in ran if not s.lux_units]
+    if not_lux:
+        lines.append(f"Not ranked on the image (edge, range, flicker, PSNR): {', '.join(s.label for s in not_lux)}, "
+                     "whose output is not an image of the scene's light in lux (gated laser returns in DN); "
+                     "ranked on the rest.")
+    for s in shots:
+        if s.skipped:
+            lines.append(f"Not in this comparison: {s.label}: {s.skipped}.")
     return lines

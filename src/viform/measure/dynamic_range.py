@@ -39,6 +39,40 @@ def dynamic_range_db(shortest_s: float, longest_s: float) -> float:
     return 20.0 * math.log10(longest / shortest)
 
 
+#: Clip lengths, seconds, at which the CLI shows the clip-limited range next to the formula's:
+#: ``viform demo``'s 40 ms, one second, ten seconds.
+CLIP_LENGTHS_S = (0.04, 1.0, 10.0)
+
+
+def clip_limited_dynamic_range_db(shortest_s: float, longest_s: float, clip_s: float) -> float:
+    """DR that a clip of ``clip_s`` seconds can show: 20·lg(min(τ̂, T)/τ̌) dB.
+
+    The formula of seed 000 §4.4 assumes intervals as long as τ̂ = Q/I_d are measured; in a
+    clip of length T no interval longer than T lies wholly inside it, so the darkest light a
+    clip can measure is the one with an interval of T (one spike at each end). A SpikeOne-class
+    sensor (one 25 µs tick, τ̂ = 812 s, 150 dB) shows at most 64 dB in 40 ms.
+
+    Examples
+    --------
+    >>> round(clip_limited_dynamic_range_db(25e-6, 812.0, 0.04), 1)
+    64.1
+    """
+    clip = check_positive("clip_s", clip_s)
+    longest = check_positive("longest_s", longest_s, allow_inf=True)
+    return dynamic_range_db(shortest_s, min(longest, max(clip, shortest_s)))
+
+
+def clip_limited_lines(shortest_s: float, longest_s: float, formula_db: float) -> list[str]:
+    """Lines for a user: the range a clip of each length in :data:`CLIP_LENGTHS_S` can show, beside the formula's."""
+    parts = [f"{clip_limited_dynamic_range_db(shortest_s, longest_s, t):.1f} dB in "
+             + (f"{t * 1e3:g} ms" if t < 1 else f"{t:g} s") for t in CLIP_LENGTHS_S if t < longest_s]
+    if not parts:
+        return []
+    return [f"within a clip: {', '.join(parts)} (no interval longer than the clip can be measured in it); the "
+            f"{formula_db:.1f} dB of the formula needs intervals of {longest_s:.3g} s, a still scene recorded "
+            "that long"]
+
+
 def longest_signal_interval_s(threshold_electrons: float, dark_current_e_per_s: float) -> float:
     """τ̂ = Q / I_d: longer intervals are dark current, not signal (seed 000 §4.4)."""
     q = check_positive("threshold_electrons", threshold_electrons)

@@ -272,28 +272,38 @@ def spatial_nonuniformity(series: FlatFieldSeries, k: float, spatial: dict) -> d
     return out
 
 
-def expected_linear_figures(sensor: FrameSensor) -> dict:
+def expected_linear_figures(sensor: FrameSensor, height: int | None = None) -> dict:
     """What the pixel's parameters imply for the EMVA 1288 figures (no measurement).
 
     σ²_y.dark at zero exposure = K²σ²_read + 1/12 (DN²); μ_e.sat = full well;
     μ_p.min from the R4.0 SNR = 1 formula; η = QE × fill factor.
+
+    A global shutter's storage leakage (``storage_leakage_e_per_s`` over the row-by-row wait
+    w_r = (r + 1)/H · readout_time_s, ``height`` = H rows) does not depend on the exposure, so
+    it stays in the zero-exposure dark noise, σ² += leak·mean(w) (Poisson), and its row gradient
+    is a fixed pattern, DSNU² += leak²·var(w).
     """
     p = sensor.parameters
     k = p.system_gain_dn_per_e
     eta = p.optics.quantum_efficiency * p.optics.fill_factor
-    s2_dark = k**2 * p.read_noise_electrons**2 + SIGMA2_Q_DN2
+    read2, dsnu2 = p.read_noise_electrons**2, p.dsnu_electrons**2
+    if height and p.storage_leakage_e_per_s > 0 and p.readout_time_s > 0:
+        wait = np.arange(1, height + 1) / height * p.readout_time_s
+        read2 += p.storage_leakage_e_per_s * wait.mean()
+        dsnu2 += p.storage_leakage_e_per_s**2 * wait.var()
+    s2_dark = k**2 * read2 + SIGMA2_Q_DN2
     mu_p_min = (np.sqrt(s2_dark / k**2 + 0.25) + 0.5) / eta
     mu_p_sat = p.full_well_electrons / eta
     dr = mu_p_sat / mu_p_min
     return {
         "system_gain_dn_per_e": k,
         "quantum_efficiency": eta,
-        "temporal_dark_noise_electrons": float(p.read_noise_electrons),
+        "temporal_dark_noise_electrons": float(np.sqrt(read2)),
         "saturation_capacity_electrons": float(p.full_well_electrons),
         "absolute_sensitivity_threshold_photons": float(mu_p_min),
         "dynamic_range": float(dr),
         "dynamic_range_db": float(20 * np.log10(dr)),
-        "dsnu_electrons": float(p.dsnu_electrons),
+        "dsnu_electrons": float(np.sqrt(dsnu2)),
         "prnu_percent": 100 * float(p.prnu_fraction),
     }
 
@@ -319,7 +329,7 @@ def characterize_frame_sensor(
         seed=seed,
     )
     result = analyze_linear(series)
-    result["expected"] = expected_linear_figures(sensor)
+    result["expected"] = expected_linear_figures(sensor, height)
     return result
 
 

@@ -88,8 +88,17 @@ def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed
         if bar is not None:
             bar.close()
     demand = scene.demand() if hasattr(scene, "demand") else None
-    return {"shots": shots, "instants_s": instants, "demand": demand, "scene": scene,
-            "duration_s": duration_s, "verdict": cmp.verdict(shots, demand), "timings_s": timings}
+    result = {"shots": shots, "instants_s": instants, "demand": demand, "scene": scene,
+              "duration_s": duration_s, "verdict": cmp.verdict(shots, demand), "timings_s": timings}
+    result["vision"] = _vision(result)
+    return result
+
+
+def _vision(result):
+    """The vision section's scores where the scene has object truth (measure.vision_comparison), else None."""
+    from viform.measure.vision_comparison import vision_scores
+
+    return vision_scores(result)
 
 
 # ------------------------------------------------------------------ figures
@@ -270,6 +279,7 @@ def figure_dilemma(result):
     markers = "osD^v<>phXP"
     colours = plt.get_cmap("tab10").colors
     placed: list[tuple[float, float]] = []
+    dotted = False
     for i, s in enumerate(shots):
         x = s.time_resolution_s
         y = s.metrics.get("dr_captured_db", math.nan)
@@ -277,6 +287,11 @@ def figure_dilemma(result):
             continue
         ax.scatter([x], [y], s=70, marker=markers[i % len(markers)], color=colours[i % len(colours)],
                    label=f"{i + 1}  {s.label}", zorder=3, edgecolor="black", linewidth=0.5)
+        # a dotted line on to the frame interval: a short integration repeated seldom still misses motion
+        interval = cmp.frame_interval_s(s)
+        if math.isfinite(interval) and interval > 1.5 * x:
+            ax.plot([x, interval], [y, y], ls=":", lw=1.6, color=colours[i % len(colours)], zorder=2)
+            dotted = True
         # the point's number beside it (the legend names it); nudged when another sits close by
         # above it when it is the higher of the two, below when lower, so no marker hides a number
         near = [py for (px, py) in placed if abs(math.log10(px / x)) < 0.2 and abs(py - y) < 5]
@@ -284,6 +299,9 @@ def figure_dilemma(result):
         ax.annotate(str(i + 1), (x, y), xytext=(7, dy), textcoords="offset points", fontsize=8,
                     fontweight="bold", color=colours[i % len(colours)], zorder=5)
         placed.append((x, y))
+    if dotted:  # one legend entry for every sensor's dotted line
+        ax.plot([], [], ls=":", lw=1.6, color="0.3", label="dotted: from the integration time on to the frame "
+                                                           "interval (the time between two images)")
     d = result["demand"]
     if d and math.isfinite(d["time_resolution_s"]):
         ax.scatter([d["time_resolution_s"]], [d["dynamic_range_db"]], marker="*", s=320, color="gold",
@@ -294,6 +312,7 @@ def figure_dilemma(result):
                         color="gold", alpha=0.15, zorder=0, label="region meeting both demands")
     ax.set_xscale("log")
     xs = [s.time_resolution_s for s in shots if math.isfinite(s.time_resolution_s)]
+    xs += [cmp.frame_interval_s(s) for s in shots if math.isfinite(cmp.frame_interval_s(s))]
     if d and math.isfinite(d["time_resolution_s"]):
         xs.append(d["time_resolution_s"])
     if xs:
@@ -430,6 +449,11 @@ def write_report(result, out_dir, command: str = "", started_s: float | None = N
         if has_lux:
             save_figure(figs / f"errors_{i}_{t * 1e3:.2f}ms.png", figure_errors(result, i))
             paths[f"errors_{i}"] = figs / f"errors_{i}_{t * 1e3:.2f}ms.png"
+    if result.get("vision"):
+        from viform.measure.vision_comparison import figure_tracks
+
+        save_figure(figs / "tracks.png", figure_tracks(result["vision"]))
+        paths["tracks"] = figs / "tracks.png"
     gated = figure_gated(result)
     if gated is not None:
         save_figure(figs / "gated.png", gated)
@@ -449,6 +473,10 @@ def write_report(result, out_dir, command: str = "", started_s: float | None = N
         "run_time_note": RUN_TIME_NOTE, "spike_exposure": spike_note,
         "sensor_times_s": result["timings_s"],
     }
+    if result.get("vision"):
+        from viform.measure.vision_comparison import vision_json
+
+        doc["vision"] = vision_json(result["vision"])
     doc = finite_json(doc)
     write_json(out / "metrics.json", doc)
 
@@ -498,10 +526,17 @@ def write_report(result, out_dir, command: str = "", started_s: float | None = N
                  "10–90 % of the moving vehicle's leading edge; flicker error = |estimate − truth| of the PWM "
                  "LED over its on/off swing; DR captured = 20·lg(max/min) of the true light rendered within a "
                  "factor of 2; latency = worst-case time from a light change to an image showing it; "
-                 "integration time = the light each image integrates (median interval for the spike "
-                 "camera's interval image). n/a: not defined for this sensor or scene, or no single clean edge in the "
+                 "integration time = the light each image integrates (median interval, where the scene moves, "
+                 "for the spike camera's interval images: a dim pixel's interval is longer, which is what blurs "
+                 "their edges); frame interval = time from one image to the next (a sensor with a short "
+                 "integration but a long frame interval sees motion sharply, but seldom). n/a: not defined for "
+                 "this sensor or scene, or no single clean edge in the "
                  "image (several exposures of the moving edge overlaid, as in the overflow pixel).</p></section>")
 
+    if "tracks" in paths:
+        from viform.measure.vision_comparison import vision_html
+
+        parts.append(vision_html(result["vision"], _img(paths["tracks"], "tracks over time against the truth")))
     if "dilemma" in paths:
         parts.append("<section id='dilemma'><h2>The dilemma: time resolution against dynamic range</h2>")
         parts.append(_img(paths["dilemma"], "time resolution against dynamic range"))
@@ -540,7 +575,7 @@ def write_report(result, out_dir, command: str = "", started_s: float | None = N
 
 #: Metrics shown to people in other units than metrics.json keeps (factor, unit).
 DISPLAY_UNITS = {"saturated_fraction": (100.0, "%"), "underexposed_fraction": (100.0, "%"),
-                 "latency_s": (1e3, "ms"), "time_resolution_s": (1e3, "ms")}
+                 "latency_s": (1e3, "ms"), "time_resolution_s": (1e3, "ms"), "frame_interval_s": (1e3, "ms")}
 #: What the reported wall time covers.
 RUN_TIME_NOTE = ("from the command's start to the report written: simulation, scoring and figures, and on a "
                  "first run the compiling of the simulation kernels")
@@ -587,7 +622,8 @@ def metrics_table(doc: dict) -> str:
     """A small console table: one row per sensor, key metrics with units, 3–4 significant figures."""
     cols = [("psnr_log_db", "PSNR dB"), ("ssim_log", "SSIM"), ("saturated_fraction", "sat %"),
             ("underexposed_fraction", "under %"), ("edge_width_px", "edge px"), ("flicker_error", "flicker"),
-            ("dr_captured_db", "DR dB"), ("data_rate_mb_per_s", "MB/s"), ("latency_s", "latency ms")]
+            ("dr_captured_db", "DR dB"), ("data_rate_mb_per_s", "MB/s"), ("latency_s", "latency ms"),
+            ("time_resolution_s", "integr. ms"), ("frame_interval_s", "frame ms")]
     width = max([len(v["label"]) for v in doc["sensors"].values()] + [6])
     lines = [f"{'sensor':<{width}}  " + "  ".join(f"{h:>9}" for _, h in cols)]
     for v in doc["sensors"].values():

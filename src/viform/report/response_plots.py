@@ -254,11 +254,23 @@ def fraction_family_figure(barrier_fw: float = 5 / 12, f1_max: float = 5 / 6, no
         else:
             q = np.minimum(segmented_charge_electrons(rate, (f1, 1 - f1), (barrier_fw, 1.0)), 1.0)
         sat = x[np.argmax(q >= 1.0)] if (q >= 1.0).any() else float("nan")
+        binds = 0 < k and f1 > barrier_fw
+        # the barrier binds at r = b/f1 full wells per exposure, where the output (nothing lost
+        # yet) is b/f1 of the full scale: 374 DN only for the fitted 8/8
+        knee_dn = barrier_fw / f1 * full_scale_dn if binds else None
         ax.plot(x, q * full_scale_dn, color=cmap(k / 9), label=f"{k}/8 (f1 = {f1:.3f}): saturates at {sat:.0f}"
-                + (" (barrier never binds)" if 0 < k and f1 <= barrier_fw else ""))
+                + (f", knee {knee_dn:.0f} DN" if binds else "") + (" (barrier never binds)" if 0 < k and not binds
+                                                                    else ""))
+        if binds:
+            ax.plot([barrier_fw / f1 * normal_saturation], [knee_dn], "o", ms=4, color=cmap(k / 9))
     ax.axhline(barrier_fw / f1_max * full_scale_dn, color="0.5", ls=":", lw=0.8)
+    ax.text(1, barrier_fw / f1_max * full_scale_dn + 8, "374 DN: the 8/8 knee (the barrier was fitted there)",
+            fontsize=7, color="0.4")
     ax.set(xlabel="light intensity (paper's units; normal mode saturates at 30)", ylabel="output (DN above black)",
-           title=f"Segment-fraction family, barrier {barrier_fw:.3f} FW (paper Fig. 8: 30 → 105 at 8/8)")
+           title=f"Segment-fraction family, barrier {barrier_fw:.3f} FW (paper Fig. 8: 30 → 105 at 8/8)\n"
+                 "one barrier for all: a shorter first segment f1 reaches it at a higher light, so the knee "
+                 "(output b/f1) rises", )
+    ax.title.set_fontsize(9)
     ax.legend(fontsize=7)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()

@@ -27,6 +27,7 @@ from viform._validate import (
     check_int,
     check_non_negative,
     check_positive,
+    check_range,
 )
 from viform.light.radiometry import PixelOptics, check_lux
 from viform.light.scenes import Scene
@@ -61,6 +62,25 @@ class FramePixelParameters:
         Black level added before quantization, DN.
     adc_range_v : float or None
         ADC input range, V; None maps the full well to full scale.
+    readout_time_s : float
+        Time to read the array row by row after a global-shutter exposure, s: row r (of H)
+        waits (r + 1)/H × this in its storage node. Default 0 (read at once: the storage
+        effects below then do nothing).
+    parasitic_light_sensitivity : float
+        Fraction of the photodiode's photo-rate that still reaches the storage node while it
+        holds the frame (1 − shutter efficiency; seed 002 Table 1: the LUX13HS's 99 % → 0.01).
+        Light arriving during the wait adds PLS × rate × wait (Poisson). Default 0.
+    storage_leakage_e_per_s : float
+        Dark leakage into the storage node while it holds the frame, e⁻/s (Poisson). Default 0.
+    black_sun_fraction : float
+        Fraction β of the photo-rate that reaches the sense node between its reset and the
+        reset sample of the correlated double sampling ("black sun", seed 001 §3.3 mentions it).
+        Under extreme light the reset sample already holds n_r = β·rate·t_rs electrons, so the
+        CDS output min(Q + n_r, FW) − min(n_r, FW) falls once Q + n_r passes the full well and
+        reaches 0 (a black sun) when n_r ≥ FW. Default 0.
+    reset_sample_time_s : float
+        t_rs, the time from the sense node's reset to its reset sample, s. Default 1 µs (used
+        only when ``black_sun_fraction`` > 0).
     """
 
     optics: PixelOptics = field(default_factory=lambda: PixelOptics(pixel_pitch_m=5.86e-6,
@@ -75,6 +95,11 @@ class FramePixelParameters:
     adc_bits: int = 12
     black_offset_dn: float = 16.0
     adc_range_v: float | None = None
+    readout_time_s: float = 0.0
+    parasitic_light_sensitivity: float = 0.0
+    storage_leakage_e_per_s: float = 0.0
+    black_sun_fraction: float = 0.0
+    reset_sample_time_s: float = 1e-6
 
     def __post_init__(self):
         check_positive("full_well_electrons", self.full_well_electrons)
@@ -91,6 +116,16 @@ class FramePixelParameters:
                               f"full scale {self.max_dn} DN")
         if self.adc_range_v is not None:
             check_positive("adc_range_v", self.adc_range_v)
+        check_non_negative("readout_time_s", self.readout_time_s)
+        check_range("parasitic_light_sensitivity", self.parasitic_light_sensitivity, 0.0, 1.0)
+        check_non_negative("storage_leakage_e_per_s", self.storage_leakage_e_per_s)
+        check_range("black_sun_fraction", self.black_sun_fraction, 0.0, 1.0)
+        check_non_negative("reset_sample_time_s", self.reset_sample_time_s)
+
+    @property
+    def shutter_efficiency(self) -> float:
+        """1 − parasitic light sensitivity (seed 002 Table 1 quotes 99 % for the LUX13HS)."""
+        return 1.0 - self.parasitic_light_sensitivity
 
     @property
     def max_dn(self) -> int:
@@ -153,6 +188,46 @@ class FramePixelArray:
             return rng.poisson(signal + dark).astype(np.float64)
         return signal + dark
 
+    def storage_wait_s(self) -> np.ndarray:
+        """Time each row's charge waits in its storage node before it is read, (H, 1), s."""
+        rows = np.arange(1, self.height + 1, dtype=np.float64)[:, None]
+        return rows / self.height * self.parameters.readout_time_s
+
+    def storage_electrons(self, scene: Scene, end_s: float, rng: np.random.Generator,
+                          noise: bool = True) -> np.ndarray | float:
+        """Charge a global shutter's storage nodes gather while they wait to be read (H, W).
+
+        Row r waits w_r = (r + 1)/H · readout_time_s after the exposure ends at ``end_s``; it
+        gathers PLS × the photo-rate of the light during [end_s, end_s + w_r] plus the storage
+        leakage, both Poisson: mean = PLS·η·Φ(lux)·w_r·(1 + PRNU) + leak·w_r. Returns 0.0 when
+        the effects are off.
+        """
+        p = self.parameters
+        if p.readout_time_s == 0 or (p.parasitic_light_sensitivity == 0 and p.storage_leakage_e_per_s == 0):
+            return 0.0
+        wait = self.storage_wait_s()
+        mean = p.storage_leakage_e_per_s * wait * np.ones((self.height, self.width))
+        if p.parasitic_light_sensitivity > 0:
+            rows = np.empty((self.height, self.width))
+            for r in range(self.height):  # each row waits its own time under the scene's light
+                w = float(wait[r, 0])
+                rows[r] = scene.mean_illuminance_lux(end_s, end_s + w)[r]
+            mean = mean + p.parasitic_light_sensitivity * self.mean_signal_electrons(rows, 1.0) * wait
+        return rng.poisson(mean).astype(np.float64) if noise else mean
+
+    def black_sun_electrons(self, electrons, mean_lux) -> np.ndarray:
+        """CDS output with the reset sample eaten by the light (black sun), e⁻.
+
+        n_r = β·η·Φ(lux)·t_rs reaches the sense node before its reset sample; the signal sample
+        holds Q + n_r, both clipped at the full well: output min(Q + n_r, FW) − min(n_r, FW).
+        The light at the reset sample is taken as ``mean_lux`` (the exposure's mean light).
+        """
+        p = self.parameters
+        fw = p.full_well_electrons
+        q = np.minimum(np.asarray(electrons, dtype=np.float64), fw)
+        n_r = p.black_sun_fraction * p.optics.electrons_per_s(check_lux(mean_lux, "mean_lux")) * p.reset_sample_time_s
+        return np.minimum(q + n_r, fw) - np.minimum(n_r, fw)
+
     def digitize(self, electrons, rng: np.random.Generator, noise: bool = True) -> np.ndarray:
         """Full-well clip, DSNU, read noise, gain, black offset and ADC: electrons → DN (uint16)."""
         p = self.parameters
@@ -213,6 +288,10 @@ class FrameSensor(Sensor):
         rng = pixels.rng(seed, frame_index)
         lux = scene.mean_illuminance_lux(start_s, start_s + exposure_s)
         electrons = pixels.collect_electrons(lux, exposure_s, rng, self.noise)
+        # global shutter: the frame waits in the storage nodes while rows are read
+        electrons = electrons + pixels.storage_electrons(scene, start_s + exposure_s, rng, self.noise)
+        if self.parameters.black_sun_fraction > 0:
+            electrons = pixels.black_sun_electrons(electrons, lux)
         return pixels.digitize(electrons, rng, self.noise)
 
     def capture(self, scene: Scene, duration_s: float, *, seed: int = 0) -> FrameStack:

@@ -14,8 +14,11 @@ Gate timing (seed 004, Fig. 3):
 * delay t_откл = 2R/c, R the gate's near range (the "minimum illumination distance");
 * t_нак = τ_pulse + t_min, t_min the sensor's minimum time between the SUB falling edge
   and the V2/V3 transfer pulse (a datasheet figure; 1 µs assumed for the ICX618 here);
+* the V2/V3 readout pulse (t_read, assumed 1 µs) follows; the photodiodes keep passing
+  charge to the register while it is high, so light counts from SUB's fall to the pulse's
+  end, t_нак + t_read (:class:`GateTiming`; the drawn waveforms use the same instants);
 * a return from range r lasts [2r/c, 2r/c + τ]; it is (partly) recorded for
-  R − cτ/2 < r < R + c·t_нак/2.
+  R − cτ/2 < r < R + c·(t_нак + t_read)/2.
 
 Three ways of using X pulses are compared (seed 004, "Requirements"):
 
@@ -97,32 +100,128 @@ class InterlineCCDParameters:
         Full format (ICX618: 494 × 659).
     min_transfer_time_s : float
         Shortest SUB-fall → V2/V3 transfer interval, s (seed: t_нак = pulse + this).
+    readout_pulse_s : float
+        Width of the +15 V V2/V3 readout pulse, s (assumed 1 µs; Sony ICX parts 1–3 µs). The
+        photodiodes keep collecting while it is high (see :class:`GateTiming`).
     readout_time_s : float
         Time to shift the whole frame out, s (ICX618: 60 frames/s progressive → 1/60 s).
     shutter_leak_ratio : float
-        Fraction of the light arriving outside the gate that still reaches the buffer.
+        Fraction of the light arriving outside the gate that still reaches the buffer (the
+        smear ratio: light reaching the vertical register relative to the photodiode).
+    gate_jitter_s : float
+        Rms timing jitter between the laser pulse and the drive edges (Gaussian; SUB and the
+        transfer pulse move together), s. The expected gate is the nominal one averaged over
+        the jitter. Default 0 (typical trigger jitter of an FPGA-timed diode laser: 1–5 ns).
+    sub_fall_time_s : float
+        Duration of SUB's falling edge, s: the photodiodes start collecting progressively, as
+        a linear ramp centred on ``open_s`` (equivalently, the opening instant averaged
+        uniformly over the edge). Default 0 (ideal edge; typical 20–100 ns for a +20 V swing).
+    laser_rise_time_s : float
+        Rise (= fall) time of the laser pulse, s: the pulse becomes a trapezoid of the same
+        energy and FWHM τ, i.e. the rectangle convolved with a t_r-wide box, which is the same as
+        averaging both gate edges uniformly over ±t_r/2. Default 0 (rectangle; typical 5–20 ns
+        for a pulsed laser diode).
+    transfer_smear : bool
+        Add the smear of the vertical transfer: each packet crosses the rows between it and the
+        horizontal register, one line time each, and gathers ``shutter_leak_ratio`` × their
+        light (ambient; the laser is off during readout): a vertical streak under bright
+        ambient light (sunlit surfaces, the sun). Default False.
+    bloom : bool
+        Charge above ``register_capacity_electrons`` in a vertical-register packet spills into
+        its neighbours along the column (half up, half down) until every packet fits: a
+        blooming streak. Default False (the excess is clipped, as by the readout).
+    register_capacity_electrons : float or None
+        Vertical-register packet capacity, e⁻ (default: the pixel's full well).
+    interlaced : bool
+        An interlaced part (ICX279, ICX659) read in field-integration mode: each output row is
+        the sum of two adjacent photodiode rows (the readout pulse on V1 and V3 puts both into
+        one field), so the output has half the rows and twice the signal per row. Default False.
+    part : str
+        The drive this CCD takes (:data:`viform.sensors.gated_waveforms.DRIVES`): which phases
+        carry the readout pulse, extra signals; :func:`interline_ccd_parameters` builds a part's
+        CCD with its format, interlacing and field time.
     """
 
     pixel: FramePixelParameters = field(default_factory=icx618_pixel_parameters)
     sensor_height_px: int = 494
     sensor_width_px: int = 659
     min_transfer_time_s: float = 1.0e-6
+    readout_pulse_s: float = 1.0e-6
     readout_time_s: float = 1.0 / 60.0
     shutter_leak_ratio: float = 1e-5
+    gate_jitter_s: float = 0.0
+    sub_fall_time_s: float = 0.0
+    laser_rise_time_s: float = 0.0
+    transfer_smear: bool = False
+    bloom: bool = False
+    register_capacity_electrons: float | None = None
+    interlaced: bool = False
+    part: str = "icx618"
 
     def __post_init__(self):
         check_int("sensor_height_px", self.sensor_height_px, 1)
         check_int("sensor_width_px", self.sensor_width_px, 1)
         check_positive("min_transfer_time_s", self.min_transfer_time_s)
+        check_positive("readout_pulse_s", self.readout_pulse_s)
         check_positive("readout_time_s", self.readout_time_s)
         check_non_negative("shutter_leak_ratio", self.shutter_leak_ratio)
         if self.shutter_leak_ratio > 1:
             raise ViformError(f"shutter_leak_ratio = {self.shutter_leak_ratio!r} must be ≤ 1")
+        check_non_negative("gate_jitter_s", self.gate_jitter_s)
+        check_non_negative("sub_fall_time_s", self.sub_fall_time_s)
+        check_non_negative("laser_rise_time_s", self.laser_rise_time_s)
+        if self.register_capacity_electrons is not None:
+            check_positive("register_capacity_electrons", self.register_capacity_electrons)
+        check_choice("part", self.part, ("icx618", "icx445", "icx279", "icx659"))
+
+    @property
+    def capacity_electrons(self) -> float:
+        """Vertical-register packet capacity, e⁻."""
+        return (self.pixel.full_well_electrons if self.register_capacity_electrons is None
+                else float(self.register_capacity_electrons))
+
+
+def interline_ccd_parameters(part: str = "icx618", **overrides) -> InterlineCCDParameters:
+    """The CCD of one of seed 004's parts, as a sensor model (not only a drive).
+
+    Format, interlacing, readout-pulse width, t_min and field (frame) readout time come from the
+    part's drive (:data:`viform.sensors.gated_waveforms.DRIVES`): the interlaced ICX279 (PAL,
+    2 × 291 lines, 64 µs per line) and ICX659 (2 × 247 lines, 63.5 µs) read one field of summed
+    row pairs; the ICX445 runs its 1280 × 600 centre window. The pixel (QE, full well, noise) is
+    the ICX618-like one of :func:`icx618_pixel_parameters` for every part (assumed: the seed gives
+    no pixel data), so the parts differ here in format, field integration and timing only.
+    """
+    from viform.sensors.gated_waveforms import DRIVES
+
+    key = check_choice("part", str(part).lower(), tuple(DRIVES))
+    d = DRIVES[key]
+    kw = dict(part=key, interlaced=d.interlaced, sensor_height_px=d.rows * (2 if d.interlaced else 1),
+              sensor_width_px=d.cols, min_transfer_time_s=d.min_transfer_time_s, readout_pulse_s=d.readout_pulse_s,
+              readout_time_s=d.rows * d.line_time_s)
+    kw.update(overrides)
+    return InterlineCCDParameters(**kw)
 
 
 @dataclass(frozen=True)
 class GateTiming:
-    """Gate of one laser pulse (seed 004, Fig. 3): opens 2R/c after the pulse, lasts τ + t_min.
+    """The one timing model of a gate (seed 004, Fig. 3), from which both the physics
+    (:class:`GatedInterlineCCD`) and the drawn drive (:func:`~viform.sensors.gated_waveforms.drive_waveforms`)
+    are derived.
+
+    Instants after the laser pulse starts:
+
+    * ``open_s`` = 2R/c: SUB falls, the photodiodes start to integrate;
+    * ``transfer_start_s`` = open + τ + t_min: V2/V3 rise to +15 V (the seed's t_нак = τ + t_min
+      ends here, and its t_экспозиции = X·t_нак counts only this);
+    * ``close_s`` = transfer_start + ``readout_pulse_s``: V2/V3 fall and SUB rises again.
+
+    While the readout pulse is high the photodiode is connected to the vertical register, so
+    the charge it collects during the pulse is moved too (the seed itself says charge
+    accumulates again only "as soon as the positive potential stops being applied"); SUB
+    cannot rise earlier without draining the packet being transferred. The light is therefore
+    collected over [open_s, close_s] = τ + t_min + t_readout — 2.135 µs with the assumed 1 µs
+    pulse, not the seed's 1.135 µs. The seed's figure (only its caption survives in the text)
+    gives no pulse width; its text supports t_нак = τ + t_min as the *drawn* SUB→V2/V3 interval.
 
     Raises :class:`ViformError` if the gate is not inside one pulse period (range beyond
     the unambiguous range c/(2 f_rep)).
@@ -131,6 +230,7 @@ class GateTiming:
     gate_range_m: float
     laser: PulsedLaser
     min_transfer_time_s: float
+    readout_pulse_s: float = 1.0e-6
 
     def __post_init__(self):
         r = self.gate_range_m
@@ -138,17 +238,19 @@ class GateTiming:
             raise ViformError(f"gate_range_m = {r!r} is not allowed: the gate range must be ≥ 0 m")
         check_non_negative("gate_range_m", r)
         check_positive("min_transfer_time_s", self.min_transfer_time_s)
+        check_positive("readout_pulse_s", self.readout_pulse_s)
         if self.close_s >= self.laser.period_s:
             raise ViformError(
                 f"gate_range_m = {r:g} m is beyond the unambiguous range: the gate would close "
                 f"{self.close_s * 1e6:.2f} µs after the pulse, after the next pulse "
                 f"({self.laser.period_s * 1e6:.1f} µs at {self.laser.repetition_hz:g} Hz); the largest "
-                f"gate range is {self.max_gate_range_m(self.laser, self.min_transfer_time_s):.0f} m"
+                f"gate range is "
+                f"{self.max_gate_range_m(self.laser, self.min_transfer_time_s, self.readout_pulse_s):.0f} m"
             )
 
     @staticmethod
-    def max_gate_range_m(laser: PulsedLaser, min_transfer_time_s: float) -> float:
-        return range_from_delay_m(laser.period_s - laser.pulse_width_s - min_transfer_time_s)
+    def max_gate_range_m(laser: PulsedLaser, min_transfer_time_s: float, readout_pulse_s: float = 1.0e-6) -> float:
+        return range_from_delay_m(laser.period_s - laser.pulse_width_s - min_transfer_time_s - readout_pulse_s)
 
     @property
     def open_s(self) -> float:
@@ -156,18 +258,28 @@ class GateTiming:
         return round_trip_time_s(self.gate_range_m)
 
     @property
-    def width_s(self) -> float:
-        """t_нак = pulse width + minimum transfer time, s."""
+    def accumulation_s(self) -> float:
+        """The seed's t_нак = pulse width + minimum SUB → V2/V3 time, s (drawn, not collected)."""
         return self.laser.pulse_width_s + self.min_transfer_time_s
 
     @property
+    def transfer_start_s(self) -> float:
+        """Rising edge of the V2/V3 readout pulse, s after the pulse start."""
+        return self.open_s + self.accumulation_s
+
+    @property
     def close_s(self) -> float:
-        """Transfer (V2/V3) instant, s after the pulse start."""
-        return self.open_s + self.width_s
+        """End of the readout pulse (SUB rises), s after the pulse start: light stops counting here."""
+        return self.transfer_start_s + self.readout_pulse_s
+
+    @property
+    def width_s(self) -> float:
+        """Collection window per pulse, s: t_нак + the readout pulse."""
+        return self.close_s - self.open_s
 
     @property
     def range_window_m(self) -> tuple[float, float]:
-        """Ranges with some return inside the gate: (R − cτ/2, R + c·t_нак/2)."""
+        """Ranges with some return inside the gate: (R − cτ/2, R + c·width/2)."""
         c_half = range_from_delay_m(1.0)
         return (
             max(0.0, self.gate_range_m - c_half * self.laser.pulse_width_s),
@@ -176,13 +288,16 @@ class GateTiming:
 
     @property
     def full_range_window_m(self) -> tuple[float, float]:
-        """Ranges whose whole return lies inside the gate: [R, R + c·t_min/2]."""
-        return (self.gate_range_m, self.gate_range_m + range_from_delay_m(self.min_transfer_time_s))
+        """Ranges whose whole return lies inside the gate: [R, R + c·(width − τ)/2]."""
+        return (self.gate_range_m, self.gate_range_m + range_from_delay_m(self.width_s - self.laser.pulse_width_s))
 
     def to_dict(self) -> dict:
         return {
             "gate_range_m": self.gate_range_m,
             "open_s": self.open_s,
+            "accumulation_s": self.accumulation_s,
+            "transfer_start_s": self.transfer_start_s,
+            "readout_pulse_s": self.readout_pulse_s,
             "width_s": self.width_s,
             "close_s": self.close_s,
             "range_window_m": list(self.range_window_m),
@@ -262,7 +377,8 @@ class GatedInterlineCCD(Sensor):
         self.mode = check_choice("mode", mode, MODES)
         self.pulses = check_int("pulses", pulses, 1)
         self.frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
-        self.timing = GateTiming(gate_range_m, self.laser, self.parameters.min_transfer_time_s)
+        self.timing = GateTiming(gate_range_m, self.laser, self.parameters.min_transfer_time_s,
+                                 self.parameters.readout_pulse_s)
         px = self.parameters.pixel
         self.geometry = ActiveImagingGeometry(
             self.laser,
@@ -303,6 +419,15 @@ class GatedInterlineCCD(Sensor):
             return int(math.floor(period / max(t_read, self.laser.period_s) + 1e-9))
         return max(0, int(math.floor((period - t_read) * self.laser.repetition_hz + 1e-9)))
 
+    def drive_waveforms(self, part: str | None = None, pulses: int | None = None, lines: int | None = None):
+        """The drive (laser, SUB, V1–V4) of this sensor's gate, drawn from the same
+        :class:`GateTiming` the physics uses (:func:`~viform.sensors.gated_waveforms.drive_waveforms`);
+        ``part`` defaults to the CCD's own."""
+        from viform.sensors.gated_waveforms import drive_waveforms
+
+        return drive_waveforms(part or self.parameters.part, pulses=self.pulses if pulses is None else pulses,
+                               lines=lines, timing=self.timing)
+
     # ------------------------------------------------------------------ physics
     def pixel_array(self, height: int, width: int) -> FramePixelArray:
         key = (height, width)
@@ -313,12 +438,48 @@ class GatedInterlineCCD(Sensor):
     def per_pulse_electrons(self, scene: ActiveScene) -> dict:
         """Expected electrons of one pulse: ``gated`` and ``all`` laser parts (dicts by source) and
         the ambient rate ``ambient_per_s`` (e⁻/s); independent of X and of the mode."""
-        g, t = self.geometry, self.timing
+        g = self.geometry
         return {
-            "gated": g.laser_electrons(scene, t.open_s, t.close_s),
+            "gated": self.gated_laser_electrons(scene),
             "all": g.laser_electrons(scene),
             "ambient_per_s": g.ambient_electrons_per_s(scene),
         }
+
+    def gate_edge_offsets_s(self, jitter_nodes: int = 48, ramp_nodes: int = 8) -> list[tuple[float, float]]:
+        """(opening shift, common shift) pairs of equal weight that sample the real edges: the
+        SUB ramp (uniform over ±t_f/2, opening only), the jitter (Gaussian, both edges) and the
+        laser pulse's rise (uniform over ±t_r/2, both edges), by their quantile midpoints."""
+        from scipy.stats import norm
+
+        par = self.parameters
+        jit = ([par.gate_jitter_s * float(norm.ppf((i + 0.5) / jitter_nodes)) for i in range(jitter_nodes)]
+               if par.gate_jitter_s > 0 else [0.0])
+        ramp = ([par.sub_fall_time_s * ((j + 0.5) / ramp_nodes - 0.5) for j in range(ramp_nodes)]
+                if par.sub_fall_time_s > 0 else [0.0])
+        # a trapezoidal pulse = the rectangle smoothed by a t_r box: both edges shift uniformly
+        rise = ([par.laser_rise_time_s * ((j + 0.5) / ramp_nodes - 0.5) for j in range(ramp_nodes)]
+                if par.laser_rise_time_s > 0 else [0.0])
+        return [(u, d + w) for u in ramp for d in jit for w in rise]
+
+    def gated_laser_electrons(self, scene: ActiveScene) -> dict:
+        """Laser electrons of one pulse inside the real gate (edges from :meth:`gate_edge_offsets_s`)."""
+        g, t = self.geometry, self.timing
+        offsets = self.gate_edge_offsets_s()
+        if len(offsets) == 1:
+            return g.laser_electrons(scene, t.open_s, t.close_s)
+        parts = [g.laser_electrons(scene, t.open_s + u + d, t.close_s + d) for u, d in offsets]
+        return {k: sum(p[k] for p in parts) / len(parts) for k in parts[0]}
+
+    def transfer_smear_electrons(self, scene: ActiveScene, ambient_per_s=None) -> np.ndarray:
+        """Smear of one vertical transfer, e⁻ (H, W): packet r crosses rows 0 … r − 1 (row 0 next
+        to the horizontal register) for one line time each, gathering s × their ambient rate:
+        s·t_line·Σ_{j<r} A_j, with t_line = readout_time_s / sensor_height_px."""
+        par = self.parameters
+        amb = self.geometry.ambient_electrons_per_s(scene) if ambient_per_s is None else ambient_per_s
+        amb = np.broadcast_to(np.asarray(amb, dtype=np.float64), scene.shape)
+        t_line = par.readout_time_s / par.sensor_height_px
+        above = np.cumsum(amb, axis=0) - amb
+        return par.shutter_leak_ratio * t_line * above
 
     def electron_budget(
         self, scene: ActiveScene, per_pulse: dict | None = None, pulses: int | None = None, mode: str | None = None
@@ -351,6 +512,8 @@ class GatedInterlineCCD(Sensor):
             photo = gated + (x - 1) * all_ + amb * exposure
             dark = dark_rate * exposure
             readouts = 1
+        if self.parameters.transfer_smear:  # every readout shifts the register out once
+            photo = photo + readouts * self.transfer_smear_electrons(scene, amb)
         return {
             "per_pulse": pp,
             "photo": photo,
@@ -372,15 +535,23 @@ class GatedInterlineCCD(Sensor):
         b = budget or self.electron_budget(scene)
         rng = pixels.rng(seed, frame_index)
         mean_per_readout = b["per_readout_photo"] * pixels.prnu_gain + b["per_readout_dark"]
-        total = np.zeros((h, w))
+        par = self.parameters
+        out_h = h // 2 if par.interlaced else h
+        total = np.zeros((out_h, w))
         for _ in range(b["readouts"]):
             e = rng.poisson(mean_per_readout).astype(np.float64) if self.noise else mean_per_readout
-            total += pixels.digitize(e, rng, self.noise)
+            if par.interlaced:  # field integration: rows 2k and 2k + 1 share one register packet
+                e = e[: 2 * out_h: 2] + e[1: 2 * out_h: 2]
+            if par.bloom:
+                e = bloom_columns(e, par.capacity_electrons)
+            else:
+                e = np.minimum(e, par.capacity_electrons)
+            total += self.pixel_array(out_h, w).digitize(e, rng, self.noise)
         return GatedFrame(
             dn=total,
             black_dn=p.black_offset_dn * b["readouts"],
             system_gain_dn_per_e=p.system_gain_dn_per_e,
-            mean_electrons=b["photo"] + b["dark"],
+            mean_electrons=b["photo"] + b["dark"],  # per photodiode (before field summing)
             mode=b["mode"],
             pulses=b["pulses"],
             frame_time_s=self.frame_time_s(b["pulses"], b["mode"]),
@@ -397,6 +568,9 @@ class GatedInterlineCCD(Sensor):
         """
         if budget is None and scene is None:
             raise ViformError("expected_frame_stats needs a scene or a budget")
+        if self.parameters.interlaced or self.parameters.bloom:
+            raise ViformError("expected_frame_stats gives per-photodiode statistics of a progressive part "
+                              "without blooming; simulate frames (capture_frame) for interlaced=True or bloom=True")
         b = budget or self.electron_budget(scene)
         p = self.parameters.pixel
         n = b["readouts"]
@@ -421,6 +595,9 @@ class GatedInterlineCCD(Sensor):
 
     def describe(self) -> dict:
         par = self.parameters
+        extra = {k: getattr(par, k) for k in ("part", "readout_pulse_s", "gate_jitter_s", "sub_fall_time_s",
+                                               "laser_rise_time_s", "transfer_smear", "bloom",
+                                               "register_capacity_electrons", "interlaced")}
         return {
             "model": self.name,
             "mode": self.mode,
@@ -433,6 +610,33 @@ class GatedInterlineCCD(Sensor):
             "min_transfer_time_s": par.min_transfer_time_s,
             "readout_time_s": par.readout_time_s,
             "shutter_leak_ratio": par.shutter_leak_ratio,
+            **extra,
             "noise": self.noise,
             "pixel": par.pixel.to_dict(),
         }
+
+
+def bloom_columns(electrons, capacity_electrons: float) -> np.ndarray:
+    """Spill charge above ``capacity_electrons`` along each column (axis 0): each overfilled
+    packet, in turn, keeps C and sends half its excess up and half down the column, each half
+    filling the free room of the packets it meets; what reaches a column's end is lost (drained
+    by the horizontal register / the dump). Charge is conserved otherwise, so a packet of
+    Q ≫ C becomes a streak of ≈ Q/C full packets centred on it (a blooming streak)."""
+    e = np.array(electrons, dtype=np.float64)
+    cap = float(capacity_electrons)
+    n = e.shape[0]
+    for c in np.flatnonzero((e > cap).any(axis=0)):
+        col = e[:, c]  # a view: filled in place
+        for i in np.flatnonzero(col > cap):
+            excess = col[i] - cap
+            if excess <= 0:
+                continue
+            col[i] = cap
+            for step in (-1, 1):
+                rest, j = excess / 2, i + step
+                while rest > 0 and 0 <= j < n:
+                    take = min(max(cap - col[j], 0.0), rest)
+                    col[j] += take
+                    rest -= take
+                    j += step
+    return e

@@ -185,8 +185,14 @@ _FOUR_PHASE = ((1, 2), (1, 2, 3), (2, 3), (2, 3, 4), (3, 4), (3, 4, 1), (4, 1), 
 
 def drive_waveforms(part: str = "icx618", gate_range_m: float = 150.0, pulses: int = 4,
                     laser: PulsedLaser | None = None, lines: int | None = None,
-                    target_range_m: float | None = None) -> DriveTrace:
+                    target_range_m: float | None = None, timing=None) -> DriveTrace:
     """The four-stage drive of one gated frame (seed 004, Fig. 3).
+
+    Every gate instant comes from one :class:`~viform.sensors.gated_ccd.GateTiming` — the
+    same object the sensor model integrates light with: SUB falls at ``open_s``, V2/V3 (V1/V3
+    on the interlaced parts) rise at ``transfer_start_s`` and fall at ``close_s``, where SUB
+    rises again. SUB stays low through the readout pulse (raising it would drain the packet
+    being transferred), so the light is collected from ``open_s`` to ``close_s``.
 
     Parameters
     ----------
@@ -202,27 +208,32 @@ def drive_waveforms(part: str = "icx618", gate_range_m: float = 150.0, pulses: i
         uses a few).
     target_range_m : float or None
         Range of the reflector whose return is drawn (default: ``gate_range_m``).
+    timing : GateTiming or None
+        The gate to draw (e.g. ``GatedInterlineCCD(...).timing``); default: built from
+        ``gate_range_m``, ``laser`` and the part's t_min and readout-pulse width.
 
     Returns
     -------
     DriveTrace
     """
+    from viform.sensors.gated_ccd import GateTiming
+
     key = check_choice("part", str(part).lower(), tuple(DRIVES))
     drive = DRIVES[key]
-    laser = laser or PulsedLaser()
     x = check_int("pulses", pulses, 1)
     n_lines = drive.rows if lines is None else check_int("lines", lines, 1, drive.rows)
-    if gate_range_m is None or not np.isfinite(gate_range_m) or gate_range_m < 0:
-        raise ViformError(f"gate_range_m = {gate_range_m!r} is not allowed: the gate range must be ≥ 0 m")
-    t_open = round_trip_time_s(gate_range_m)
+    if timing is None:
+        laser = laser or PulsedLaser()
+        if gate_range_m is None or not np.isfinite(gate_range_m) or gate_range_m < 0:
+            raise ViformError(f"gate_range_m = {gate_range_m!r} is not allowed: the gate range must be ≥ 0 m")
+        timing = GateTiming(float(gate_range_m), laser, drive.min_transfer_time_s, drive.readout_pulse_s)
+    laser = timing.laser
+    gate_range_m = timing.gate_range_m
+    t_open = timing.open_s
     tau = laser.pulse_width_s
-    t_acc = tau + drive.min_transfer_time_s                      # t_нак
-    t_close = t_open + t_acc
+    t_acc = timing.accumulation_s                                 # t_нак (drawn SUB → V2/V3)
+    t_read_on, t_read_off = timing.transfer_start_s, timing.close_s
     period = laser.period_s                                       # t_изл
-    if t_close + drive.readout_pulse_s >= period:
-        raise ViformError(f"gate_range_m = {gate_range_m:g} m is not allowed: the readout pulse would end "
-                          f"{(t_close + drive.readout_pulse_s) * 1e6:.2f} µs after the laser pulse, after "
-                          f"the next pulse ({period * 1e6:.1f} µs at {laser.repetition_hz:g} Hz)")
     r_target = gate_range_m if target_range_m is None else float(target_range_m)
     t_ret = round_trip_time_s(r_target)
     reads = set(drive.readout_gates)
@@ -249,10 +260,8 @@ def drive_waveforms(part: str = "icx618", gate_range_m: float = 150.0, pulses: i
         b.set(tp, LASER=laser.peak_power_w)
         b.set(tp + tau, LASER=0.0)
         events = sorted([(tp + t_ret, "ret_on"), (tp + t_ret + tau, "ret_off"), (tp + t_open, "sub_off"),
-                         (tp + t_close, "read_on"), (tp + t_close + drive.readout_pulse_s, "read_off")])
+                         (tp + t_read_on, "read_on"), (tp + t_read_off, "read_off")])
         for te, what in events:
-            if te < tp + tau and what.startswith("ret"):
-                pass
             if what == "ret_on":
                 b.set(te, RETURN=1.0)
             elif what == "ret_off":
@@ -263,7 +272,7 @@ def drive_waveforms(part: str = "icx618", gate_range_m: float = 150.0, pulses: i
                 b.set(te, **{g: V_READ_V for g in reads})
             else:  # charge moved into the register; SUB empties the photodiodes again
                 b.set(te, **{g: V_MID_V for g in reads}, SUB=SUB_HIGH_V)
-    t_acc_end = t0 + (x - 1) * period + t_close + drive.readout_pulse_s + step
+    t_acc_end = t0 + (x - 1) * period + t_read_off + step
     stages.append(("2 accumulation x" + str(x), t_prep, t_acc_end))
 
     # 3. completion: back to the line-transfer start pattern (wells under V1, V2)
@@ -288,8 +297,9 @@ def drive_waveforms(part: str = "icx618", gate_range_m: float = 150.0, pulses: i
     info = {"part": drive.name, "interlaced": drive.interlaced, "readout_gates": list(drive.readout_gates),
             "extra_signals": list(drive.extra_signals), "pulses": x, "gate_range_m": float(gate_range_m),
             "delay_s": t_open, "accumulation_window_s": t_acc, "pulse_period_s": period,
-            "pulse_width_s": tau, "readout_pulse_s": drive.readout_pulse_s,
-            "exposure_s": x * t_acc, "lines": n_lines, "frame_s": t + step,
+            "pulse_width_s": tau, "readout_pulse_s": timing.readout_pulse_s,
+            "collection_window_s": timing.width_s, "exposure_s": x * t_acc,
+            "collected_exposure_s": x * timing.width_s, "lines": n_lines, "frame_s": t + step,
             "levels_v": {"vertical_low": V_LOW_V, "vertical_mid": V_MID_V, "readout": V_READ_V,
                          "sub_low": SUB_LOW_V, "sub_high": SUB_HIGH_V},
             "drive": asdict(drive)}
@@ -388,20 +398,26 @@ def plot_waveforms(path, trace: DriveTrace, cycle: DriveTrace | None = None) -> 
                  label=n)
         bax.text(-0.33, y0 + 0.3, n, ha="right", va="center", fontsize=9, color=_colour(n))
     d, w = ci["delay_s"] * 1e6, ci["accumulation_window_s"] * 1e6
-    for xv in (0.0, d, d + w):
+    rp = ci["readout_pulse_s"] * 1e6
+    for xv in (0.0, d, d + w, d + w + rp):
         bax.axvline(xv, color="0.6", ls=":", lw=0.8)
+    ylow = -(len(show) - 1) * spacing - 0.15
+    bax.annotate("", xy=(d + w + rp, ylow), xytext=(d, ylow), arrowprops=dict(arrowstyle="<->", lw=0.8, color="C0"))
+    bax.text(d + (w + rp) / 2, ylow + 0.08, f"light collected = t_acc + readout pulse = {(w + rp) * 1e3:.0f} ns",
+             ha="center", fontsize=8, color="C0")
     ytop = 1.35
     bax.annotate("", xy=(d, ytop), xytext=(0, ytop), arrowprops=dict(arrowstyle="<->", lw=0.8))
     bax.text(d / 2, ytop + 0.08, f"t_delay = 2R/c = {d * 1e3:.0f} ns", ha="center", fontsize=8)
     bax.annotate("", xy=(d + w, ytop), xytext=(d, ytop), arrowprops=dict(arrowstyle="<->", lw=0.8))
     bax.text(d + w / 2, ytop + 0.08, f"t_acc = τ + t_min = {w * 1e3:.0f} ns", ha="center", fontsize=8)
     bax.set_xlim(-0.35, (t_end - tp) * 1e6)
-    bax.set_ylim(-(len(show) - 1) * spacing - 0.3, ytop + 0.4)
+    bax.set_ylim(-(len(show) - 1) * spacing - 0.4, ytop + 0.4)
     bax.set_yticks([])
     bax.set_xlabel("time after the laser pulse (µs), to scale")
     bax.set_title(f"one accumulation cycle (repeats every t_period = {ci['pulse_period_s'] * 1e6:.0f} µs; "
-                  f"readout pulse {ci['readout_pulse_s'] * 1e6:g} µs on {' and '.join(ci['readout_gates'])})",
-                  fontsize=10)
+                  f"readout pulse {ci['readout_pulse_s'] * 1e6:g} µs on {' and '.join(ci['readout_gates'])});\n"
+                  f"light is collected from SUB's fall to the readout pulse's end: "
+                  f"{ci['collection_window_s'] * 1e9:.0f} ns per pulse", fontsize=10)
     fig.tight_layout()
     save_figure(path, fig)
 

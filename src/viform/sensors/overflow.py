@@ -70,7 +70,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from viform._validate import ViformError, check_int, check_positive, check_range
+from viform._validate import ViformError, check_int, check_non_negative, check_positive, check_range
 from viform.light.radiometry import ELEMENTARY_CHARGE_C
 from viform.light.scenes import Scene, StillScene
 from viform.sensors.frame import FramePixelParameters, FrameSensor
@@ -113,6 +113,82 @@ def share_charge_v(v_pd_v, v_cf_v: float, c_pd_f: float, c_f_f: float):
     v = np.asarray(v_pd_v, dtype=np.float64)
     shared = (v * c_pd_f + v_cf_v * c_f_f) / (c_f_f + c_pd_f)
     return np.where(v < v_cf_v, shared, v)
+
+
+class PhotodiodeJunction:
+    """The photodiode's charge–voltage law, linear or a reverse-biased junction (issue 28).
+
+    A junction's capacitance grows as its reverse bias falls, C(V) = C_res·((1 + V_res/φ)/(1 + V/φ))^m
+    (m = 0.5 abrupt, 1/3 linearly graded; φ the built-in potential), equal to C_res at the reset
+    voltage. The charge removed from reset down to V is then, in closed form,
+
+        Q(V) = C_res·(1 + V_res/φ)^m · φ/(1 − m) · [(1 + V_res/φ)^{1−m} − (1 + V/φ)^{1−m}]
+
+    and m = 0 gives the linear C_res·(V_res − V). The well to a given V_sat holds more charge
+    than the linear law says, and the gain q/C(V) falls as the photodiode discharges.
+    """
+
+    def __init__(self, c_reset_f: float, v_reset_v: float, grading_m: float = 0.0, built_in_v: float = 0.7):
+        self.c_reset_f = check_positive("c_reset_f", c_reset_f)
+        self.v_reset_v = float(v_reset_v)
+        self.grading_m = check_range("junction_grading_m", grading_m, 0.0, 0.9)
+        self.built_in_v = check_positive("junction_built_in_v", built_in_v)
+        m, phi = self.grading_m, self.built_in_v
+        self._k = self.c_reset_f * (1 + self.v_reset_v / phi) ** m * phi / (1 - m)
+        self._top = (1 + self.v_reset_v / phi) ** (1 - m)
+
+    @property
+    def linear(self) -> bool:
+        return self.grading_m == 0
+
+    def capacitance_f(self, v_v):
+        """C(V), F."""
+        v = np.asarray(v_v, dtype=np.float64)
+        return self.c_reset_f * ((1 + self.v_reset_v / self.built_in_v) / (1 + v / self.built_in_v)) ** self.grading_m
+
+    def discharge_c(self, v_v):
+        """Charge removed from reset to reach V, C."""
+        v = np.asarray(v_v, dtype=np.float64)
+        if self.linear:
+            return self.c_reset_f * (self.v_reset_v - v)
+        return self._k * (self._top - (1 + v / self.built_in_v) ** (1 - self.grading_m))
+
+    def voltage_v(self, q_c):
+        """Photodiode voltage after removing charge ``q_c`` from reset, V."""
+        q = np.asarray(q_c, dtype=np.float64)
+        if self.linear:
+            return self.v_reset_v - q / self.c_reset_f
+        base = np.maximum(self._top - q / self._k, 0.0)
+        return self.built_in_v * (base ** (1 / (1 - self.grading_m)) - 1)
+
+    def share_v(self, v_v, v_f_v: float, c_f_f):
+        """Eq. 1 with this junction: V' with Q(V') + C_F·(VF − V') = Q(V) (charge conserved), for
+        V < VF; the linear law gives (V·C_PD + VF·C_F)/(C_F + C_PD)."""
+        v = np.asarray(v_v, dtype=np.float64)
+        c_f = np.asarray(c_f_f, dtype=np.float64)
+        if self.linear:
+            return (v * self.c_reset_f + v_f_v * c_f) / (c_f + self.c_reset_f)
+        target = self.discharge_c(v)
+        lo, hi = np.minimum(v, v_f_v), np.full(np.broadcast(v, c_f).shape, float(v_f_v))
+        lo = np.broadcast_to(lo, hi.shape).copy()
+        for _ in range(60):  # f(V') = Q(V') + C_F (VF − V') − Q(V) falls from > 0 at V to < 0 at VF
+            mid = 0.5 * (lo + hi)
+            f = self.discharge_c(mid) + c_f * (v_f_v - mid) - target
+            lo, hi = np.where(f > 0, mid, lo), np.where(f > 0, hi, mid)
+        return 0.5 * (lo + hi)
+
+
+def junction_segment_boundaries_a(junction: PhotodiodeJunction, c_f_f: float = 500e-15, v_f_v: float = 2.2,
+                                  v_sat_v: float = 0.3, integration_times_s=SEED003_INTEGRATIONS_S) -> dict:
+    """Points B, C, D, E (A) for any junction law: B = Q(VF)/(t1 + t2), C = Q(V_sat)/t1,
+    D and E = (Q(V_sat) − Q(V20))/t2 and /t3 with V20 the sharing of V_sat (eq. 1); the 4T's
+    saturation I_4T = Q(V_sat)/T. Equal to :func:`segment_boundaries_a` for a linear junction."""
+    t1, t2, t3 = integration_times_s
+    q = junction.discharge_c
+    v20 = float(junction.share_v(v_sat_v, v_f_v, c_f_f))
+    swing = float(q(v_sat_v) - q(v20))
+    return {"B": float(q(v_f_v)) / (t1 + t2), "C": float(q(v_sat_v)) / t1, "D": swing / t2, "E": swing / t3,
+            "v20_after_saturation_v": v20, "I_4T": float(q(v_sat_v)) / sum(integration_times_s)}
 
 
 def overflow_voltages_v(
@@ -213,6 +289,31 @@ class OverflowSensor(FrameSensor):
         False (the seed's own analysis ignores it).
     temperature_k : float
         Temperature of the kTC noise, K.
+    comparator_offset_v : float
+        Column-to-column spread (std, V) of the overflow comparator's offset: column c shares
+        when V_PD < VF + δ_c (fixed pattern, seeded by ``fixed_pattern_seed``). Default 0.
+        A positive δ_c makes a photodiode slightly *above* VF share, pulling it down towards VF
+        by (V_PD − VF)·C_F/(C_F + C_PD): a kink in the response whose place varies by column.
+    comparator_noise_v : float
+        Temporal noise (std, V) of each overflow decision: a decision within a few σ of the
+        threshold flips at random, P(share) = Φ((VF + δ_c − V_PD)/σ). Default 0.
+    overflow_capacitance_spread : float
+        Column-to-column relative spread (std / mean) of C_F (fixed pattern): the sharing
+        ratio, and so the response above the first overflow, varies by column (column FPN).
+        Default 0.
+    charge_injection_electrons : float
+        Charge the share switch injects into the photodiode when it opens, e⁻ of discharge
+        per sharing (signed; half the channel charge of a minimum switch is a few hundred e⁻
+        at 0.35 µm). Default 0.
+    column_bus_capacitance_f : float
+        Capacitance of the column bus that connects the column-shared C_F to the pixel, F;
+        it is reset to VF with C_F and shares with it, so C_F acts as C_F + C_bus. Default 0
+        (a 32-row column of 0.35 µm metal is ≈ 50–100 fF).
+    junction_grading_m, junction_built_in_v : float
+        The photodiode's capacitance–voltage law (:class:`PhotodiodeJunction`): C_PD is the
+        value at the reset voltage and grows as the photodiode discharges. Default m = 0 (the
+        seed's linear C_PD); an abrupt junction has m = 0.5, φ ≈ 0.7 V. The output is the CDS
+        voltage V_res − V3, reported in electrons of the nominal gain q/C_PD.
     """
 
     name = "overflow"
@@ -232,8 +333,23 @@ class OverflowSensor(FrameSensor):
         fixed_pattern_seed: int = 1288,
         ktc_noise: bool = False,
         temperature_k: float = 300.0,
+        comparator_offset_v: float = 0.0,
+        comparator_noise_v: float = 0.0,
+        overflow_capacitance_spread: float = 0.0,
+        charge_injection_electrons: float = 0.0,
+        column_bus_capacitance_f: float = 0.0,
+        junction_grading_m: float = 0.0,
+        junction_built_in_v: float = 0.7,
     ):
         parameters = parameters or seed003_pixel_parameters()
+        self.comparator_offset_v = check_non_negative("comparator_offset_v", comparator_offset_v)
+        self.comparator_noise_v = check_non_negative("comparator_noise_v", comparator_noise_v)
+        self.overflow_capacitance_spread = check_range("overflow_capacitance_spread", overflow_capacitance_spread,
+                                                       0.0, 0.3)
+        self.charge_injection_electrons = check_range("charge_injection_electrons", charge_injection_electrons,
+                                                      -1e7, 1e7)
+        self.column_bus_capacitance_f = check_non_negative("column_bus_capacitance_f", column_bus_capacitance_f)
+        self._column_maps: dict = {}
         self.ktc_noise = bool(ktc_noise)
         self.temperature_k = check_positive("temperature_k", temperature_k)
         frame_rate_hz = check_positive("frame_rate_hz", frame_rate_hz)
@@ -259,6 +375,7 @@ class OverflowSensor(FrameSensor):
         self.v_f_v = check_range("v_f_v", v_f_v, 0.0, self.v_reset_v, low_open=True, high_open=True)
         self.share_use_time_s = check_positive("share_use_time_s", share_use_time_s)
         self.c_pd_f = ELEMENTARY_CHARGE_C / parameters.conversion_gain_v_per_e
+        self.junction = PhotodiodeJunction(self.c_pd_f, self.v_reset_v, junction_grading_m, junction_built_in_v)
         self.v_sat_v = (
             self.v_reset_v - parameters.full_well_electrons * parameters.conversion_gain_v_per_e
         )
@@ -311,12 +428,40 @@ class OverflowSensor(FrameSensor):
             )
 
     # ------------------------------------------------------------------ pixel physics
-    def _share_electrons(self, n):
-        """Eq. 1 in electrons of photodiode discharge: n = (V_res − V)·C_PD/q."""
-        cg = self.parameters.conversion_gain_v_per_e
-        v = self.v_reset_v - n * cg
-        v = share_charge_v(v, self.v_f_v, self.c_pd_f, self.overflow_capacitance_f)
-        return (self.v_reset_v - v) / cg
+    @property
+    def effective_overflow_capacitance_f(self) -> float:
+        """C_F + the column bus that shares with it, F."""
+        return self.overflow_capacitance_f + self.column_bus_capacitance_f
+
+    def column_maps(self, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per-column comparator offset δ_c (V) and effective C_F (F), fixed pattern (W,) each."""
+        if width not in self._column_maps:
+            rng = np.random.default_rng([self.fixed_pattern_seed, 0xC0F])
+            offset = self.comparator_offset_v * rng.standard_normal(width)
+            c_f = self.effective_overflow_capacitance_f * np.clip(
+                1.0 + self.overflow_capacitance_spread * rng.standard_normal(width), 0.05, None)
+            self._column_maps[width] = (offset, c_f)
+        return self._column_maps[width]
+
+    def _share_electrons(self, n, c_f_f=None, decide=None):
+        """Eq. 1 in electrons of photodiode discharge: n = (V_res − V)·C_PD/q.
+
+        ``decide`` (bool array) overrides the ideal comparator V_PD < VF; ``c_f_f`` may be a
+        per-column array. Sharing pixels also take the switch's injected charge."""
+        c_f = self.effective_overflow_capacitance_f if c_f_f is None else c_f_f
+        j = self.junction
+        v = j.voltage_v(np.asarray(n, dtype=np.float64) * ELEMENTARY_CHARGE_C)
+        share = v < self.v_f_v if decide is None else decide
+        v = np.where(share, j.share_v(np.minimum(v, self.v_f_v), self.v_f_v, c_f), v)
+        return j.discharge_c(v) / ELEMENTARY_CHARGE_C + np.where(share, self.charge_injection_electrons, 0.0)
+
+    def share_decisions(self, n, rng: np.random.Generator | None, width: int) -> np.ndarray:
+        """Which pixels the comparator lets share: V_PD < VF + δ_c (+ σ·N(0, 1) per decision)."""
+        v = self.junction.voltage_v(np.asarray(n, dtype=np.float64) * ELEMENTARY_CHARGE_C)
+        threshold = self.v_f_v + self.column_maps(width)[0]
+        if self.comparator_noise_v > 0 and self.noise and rng is not None:
+            threshold = threshold + self.comparator_noise_v * rng.standard_normal(np.shape(n))
+        return v < threshold
 
     def capture_frame(
         self,
@@ -342,7 +487,7 @@ class OverflowSensor(FrameSensor):
             else check_positive("exposure_s", exposure_s) / self.exposure_s
         )
         times = [t * scale for t in self.integration_times_s]
-        fw = self.parameters.full_well_electrons
+        fw = self.well_electrons  # charge down to V_sat (the nominal full well if C_PD is linear)
         row_offset_s = (1.0 / self.frame_rate_hz) / height
         static = isinstance(scene, StillScene)
         n = np.zeros((height, width))
@@ -356,15 +501,26 @@ class OverflowSensor(FrameSensor):
                 n + pixels.collect_electrons(lux, t, rng, self.noise), fw
             )  # eq. 3, V ≥ V_sat
             if k < 2:
-                shared = self.v_reset_v - n * self.parameters.conversion_gain_v_per_e < self.v_f_v
-                n = self._share_electrons(n)  # eqs. 1, 5, 6
+                shared = self.share_decisions(n, rng, width)
+                n = self._share_electrons(n, self.column_maps(width)[1], shared)  # eqs. 1, 5, 6
                 if ktc:  # C_F's reset noise and the switch's partition noise, where it shared
                     n = n + np.where(shared, self.share_ktc_electrons * rng.standard_normal(n.shape), 0.0)
             t0 += t
         if ktc:  # the reference sample is taken after a new, independent reset
             n = n - self.reset_ktc_electrons * rng.standard_normal(n.shape)
-        # CDS: V_res − V3 is the signal; offsets cancel (seed 003, §3).
+        # CDS: V_res − V3 is the signal; offsets cancel (seed 003, §3). It is read as a voltage:
+        # in electrons of the nominal gain q/C_PD (the same as n for a linear photodiode).
+        if not self.junction.linear:
+            v3 = self.junction.voltage_v(n * ELEMENTARY_CHARGE_C)
+            n = (self.v_reset_v - v3) / self.parameters.conversion_gain_v_per_e
         return pixels.digitize(n, rng, self.noise)
+
+    @property
+    def well_electrons(self) -> float:
+        """Charge the photodiode holds from reset down to V_sat, e⁻ (= full_well_electrons when linear)."""
+        if self.junction.linear:
+            return self.parameters.full_well_electrons
+        return float(self.junction.discharge_c(self.v_sat_v)) / ELEMENTARY_CHARGE_C
 
     @staticmethod
     def _window_lux(scene: Scene, t0: float, t: float, row_offset_s: float, static: bool):
@@ -408,7 +564,7 @@ class OverflowSensor(FrameSensor):
         return overflow_voltages_v(
             photocurrent_a,
             self.c_pd_f,
-            self.overflow_capacitance_f,
+            self.effective_overflow_capacitance_f,
             self.v_reset_v,
             self.v_f_v,
             self.v_sat_v,
@@ -422,17 +578,25 @@ class OverflowSensor(FrameSensor):
         return (self.v_reset_v - v3) / self.parameters.conversion_gain_v_per_e
 
     def _circuit(self) -> tuple:
-        """(C_PD, C_F, V_res, V_F, V_sat, integration times): the arguments of the closed forms."""
-        return (self.c_pd_f, self.overflow_capacitance_f, self.v_reset_v, self.v_f_v, self.v_sat_v,
+        """(C_PD, C_F, V_res, V_F, V_sat, integration times): the arguments of the closed forms
+        (C_F includes the column bus)."""
+        return (self.c_pd_f, self.effective_overflow_capacitance_f, self.v_reset_v, self.v_f_v, self.v_sat_v,
                 self.integration_times_s)
 
     def dynamic_range_gain_db(self) -> float:
-        """Noise-free DR gain over the plain 4T APS (see :func:`dynamic_range_gain_db`)."""
-        return dynamic_range_gain_db(*self._circuit())
+        """Noise-free DR gain over the plain 4T APS with the same photodiode (see
+        :func:`dynamic_range_gain_db`; :func:`junction_segment_boundaries_a` when C_PD is nonlinear)."""
+        if self.junction.linear:
+            return dynamic_range_gain_db(*self._circuit())
+        b = self.segment_boundaries_a()
+        return float(20 * np.log10(b["E"] / b["I_4T"]))
 
     def segment_boundaries_a(self) -> dict:
         """Photocurrents at the seed's points B, C, D, E (see :func:`segment_boundaries_a`)."""
-        return segment_boundaries_a(*self._circuit())
+        if self.junction.linear:
+            return segment_boundaries_a(*self._circuit())
+        return junction_segment_boundaries_a(self.junction, self.effective_overflow_capacitance_f, self.v_f_v,
+                                             self.v_sat_v, self.integration_times_s)
 
     def describe(self) -> dict:
         d = super().describe()
@@ -447,6 +611,13 @@ class OverflowSensor(FrameSensor):
             share_use_time_s=self.share_use_time_s,
             row_share_time_s=self.row_share_time_s,
             ktc_noise=self.ktc_noise,
+            comparator_offset_v=self.comparator_offset_v,
+            comparator_noise_v=self.comparator_noise_v,
+            overflow_capacitance_spread=self.overflow_capacitance_spread,
+            charge_injection_electrons=self.charge_injection_electrons,
+            column_bus_capacitance_f=self.column_bus_capacitance_f,
+            junction_grading_m=self.junction.grading_m,
+            junction_built_in_v=self.junction.built_in_v,
             reset_ktc_electrons=self.reset_ktc_electrons,
             share_ktc_electrons=self.share_ktc_electrons,
         )

@@ -37,6 +37,7 @@ gives 374 DN at intensity 15 (fig. 8), so the full well spans 748 DN (10-bit ADC
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import fields
 
 from viform._validate import ViformError, check_choice
 from viform.light.radiometry import PixelOptics
@@ -95,10 +96,10 @@ SEED001_FIG8_UNIT_LUX = seed001_unit_lux(30.0)
 SEED001_FIG9_UNIT_LUX = seed001_unit_lux(35.0)
 
 
-def _seed001_segmented(fractions, barriers_fw, **kw) -> SegmentedExposureSensor:
+def _seed001_segmented(fractions, barriers_fw, pixel=None, **kw) -> SegmentedExposureSensor:
     fw = SEED001_FULL_WELL_E
     return SegmentedExposureSensor(
-        seed001_pixel_parameters(),
+        seed001_pixel_parameters(**(pixel or {})),
         [f * SEED001_EXPOSURE_S for f in fractions],
         [b * fw for b in barriers_fw],
         frame_rate_hz=60.0,
@@ -117,14 +118,14 @@ def _spike(**kw):
 PRESETS: dict[str, tuple[str, Callable]] = {
     "cmos": (
         "conventional global-shutter CMOS, 10 ms exposure at 30 fps",
-        lambda **kw: FrameSensor(
-            FramePixelParameters(), exposure_s=10e-3, frame_rate_hz=30.0, **kw
+        lambda pixel=None, **kw: FrameSensor(
+            FramePixelParameters(**(pixel or {})), exposure_s=10e-3, frame_rate_hz=30.0, **kw
         ),
     ),
     "seed001-normal": (
         "5T global-shutter pixel, normal mode, 130 µs exposure",
-        lambda **kw: FrameSensor(
-            seed001_pixel_parameters(), exposure_s=SEED001_EXPOSURE_S, frame_rate_hz=60.0, **kw
+        lambda pixel=None, **kw: FrameSensor(
+            seed001_pixel_parameters(**(pixel or {})), exposure_s=SEED001_EXPOSURE_S, frame_rate_hz=60.0, **kw
         ),
     ),
     "seed001-2seg": (
@@ -137,8 +138,8 @@ PRESETS: dict[str, tuple[str, Callable]] = {
     ),
     "seed003-4t": (
         "plain 4T APS, 33.33 ms integration at 30 fps",
-        lambda **kw: FrameSensor(
-            seed003_pixel_parameters(),
+        lambda pixel=None, **kw: FrameSensor(
+            seed003_pixel_parameters(**(pixel or {})),
             exposure_s=sum((32.8e-3, 0.5e-3, 0.03e-3)),
             frame_rate_hz=30.0,
             **kw,
@@ -146,17 +147,17 @@ PRESETS: dict[str, tuple[str, Callable]] = {
     ),
     "seed003-overflow": (
         "conditional-overflow pixel, C_F = 500 fF, integration 32.8/0.5/0.03 ms at 30 fps",
-        lambda **kw: OverflowSensor(seed003_pixel_parameters(), **kw),
+        lambda pixel=None, **kw: OverflowSensor(seed003_pixel_parameters(**(pixel or {})), **kw),
     ),
     "seed003-overflow-ktc": (
         "conditional-overflow pixel with the readout's reset (kTC) noise (120 e- per reset)",
-        lambda **kw: OverflowSensor(seed003_pixel_parameters(), ktc_noise=True, **kw),
+        lambda pixel=None, **kw: OverflowSensor(seed003_pixel_parameters(**(pixel or {})), ktc_noise=True, **kw),
     ),
     "seed003-lofic": (
         "lateral-overflow capacitor pixel, C_S = 500 fF read with the photodiode "
         "at low gain, 33.33 ms at 30 fps",
-        lambda **kw: FrameSensor(
-            lofic_pixel_parameters(),
+        lambda pixel=None, **kw: FrameSensor(
+            lofic_pixel_parameters(**(pixel or {})),
             exposure_s=sum((32.8e-3, 0.5e-3, 0.03e-3)),
             frame_rate_hz=30.0,
             **kw,
@@ -186,8 +187,19 @@ def _spike_chip_names() -> list[str]:
     return list(SPIKE_PRESET_NAMES)
 
 
+#: Pixel fields any frame preset takes by name (``make_sensor("seed001-2seg", readout_time_s=…)``).
+PIXEL_FIELDS = tuple(f.name for f in fields(FramePixelParameters))
+
+
 def make_sensor(name: str, **kwargs):
-    """Build the preset sensor ``name`` (keyword arguments go to the sensor's constructor)."""
+    """Build the preset sensor ``name``.
+
+    Keyword arguments are fields by name: a :class:`FramePixelParameters` field (e.g.
+    ``read_noise_electrons``, ``parasitic_light_sensitivity``, ``black_sun_fraction``) replaces
+    the preset pixel's value; anything else goes to the sensor's constructor (e.g.
+    ``comparator_noise_v`` of the overflow pixel, ``clamp_noise_electrons`` of the segmented
+    one). So a design sweep can vary any parameter by its name.
+    """
     check_choice("sensor", name, preset_names())
     if name == "spike":
         return _spike(**kwargs)
@@ -195,10 +207,21 @@ def make_sensor(name: str, **kwargs):
         from viform.sensors.spike_presets import load_spike_preset
 
         return load_spike_preset(name).sensor(**kwargs)
+    pixel = {k: kwargs.pop(k) for k in list(kwargs) if k in PIXEL_FIELDS}
     try:
-        return PRESETS[name][1](**kwargs)
+        return PRESETS[name][1](pixel=pixel or None, **kwargs)
     except TypeError as exc:
         raise ViformError(f"preset {name!r} does not accept these options: {exc}") from None
+
+
+def preset_fields(name: str) -> list[str]:
+    """Every parameter name :func:`make_sensor` accepts for the frame preset ``name``."""
+    import inspect
+
+    check_choice("sensor", name, list(PRESETS))
+    sensor = PRESETS[name][1]()
+    ctor = [p for p in inspect.signature(type(sensor).__init__).parameters if p not in ("self", "parameters")]
+    return sorted(set(PIXEL_FIELDS) - {"optics"}) + sorted(ctor)
 
 
 def describe_preset(name: str) -> str:

@@ -68,15 +68,16 @@ def check_segments(
         )
     for i, b in enumerate(levels):
         check_positive(f"clamp_levels_electrons[{i}]", b)
+        # checked before the order, so a barrier above the well is named as such (issue 28)
+        if b > full_well_electrons * (1 + 1e-12):
+            raise ViformError(
+                f"clamp_levels_electrons[{i}] = {b:g} exceeds the full well {full_well_electrons:g} e⁻; "
+                "a barrier can be at most the full well"
+            )
     if n > 1 and not np.all(np.diff(levels) > 0):
         raise ViformError(
             f"clamp_levels_electrons = {levels.tolist()} must increase strictly from "
             "segment to segment (seed 001: the Rpd barrier rises, V2 > V3 > V4)"
-        )
-    if levels[-1] > full_well_electrons * (1 + 1e-12):
-        raise ViformError(
-            f"clamp_levels_electrons[-1] = {levels[-1]:g} exceeds the full well "
-            f"{full_well_electrons:g} e⁻"
         )
     return tuple(float(t) for t in times), tuple(float(b) for b in levels)
 
@@ -90,6 +91,35 @@ def segmented_charge_electrons(rate_e_per_s, segment_times_s, clamp_levels_elect
     for t, b in zip(segment_times_s, clamp_levels_electrons, strict=True):
         q = np.minimum(q + np.asarray(rate_e_per_s, dtype=np.float64) * t, b)
     return q
+
+
+def soft_clamp_electrons(q_start, rate_e_per_s, duration_s: float, barrier_electrons, softness_electrons: float,
+                         reference_e_per_s: float) -> np.ndarray:
+    """Charge left after a segment behind a *soft* (sub-threshold) Rpd barrier (seed 001 §3.1).
+
+    Below threshold the Rpd drain carries I(Q) = I_0·exp((Q − B)/Q_T): I_0 at the nominal
+    barrier B, growing e-fold every Q_T = n·(kT/q)·C_PD/q electrons (≈ 560 e⁻ for n = 1.3 at
+    60 µV/e⁻, 300 K). With photo-rate r the charge obeys dQ/dt = r − I(Q); in u = e^{−(Q−B)/Q_T}
+    this is linear, du/dt = (I_0 − r·u)/Q_T, so exactly (a = r·t/Q_T)::
+
+        u(t) = u_0·e^{−a} + (I_0·t/Q_T)·(1 − e^{−a})/a,    Q(t) = B − Q_T·ln u(t)
+
+    The clamp therefore depends on the light and the time: in equilibrium (a ≫ 1) it sits at
+    B + Q_T·ln(r/I_0), above B for r > I_0 and below it for dim light held long enough.
+    ``softness_electrons = 0`` is the hard clamp min(Q_0 + r·t, B).
+    """
+    q0 = np.asarray(q_start, dtype=np.float64)
+    r = np.broadcast_to(np.asarray(rate_e_per_s, dtype=np.float64), np.broadcast_shapes(q0.shape,
+                                                                                          np.shape(rate_e_per_s)))
+    b = np.asarray(barrier_electrons, dtype=np.float64)
+    if softness_electrons == 0:
+        return np.minimum(q0 + r * duration_s, b)
+    qt = float(softness_electrons)
+    a = r * duration_s / qt
+    # (1 − e^{−a})/a → 1 as a → 0; all in logs: u_0 = e^{(B − Q_0)/Q_T} may be astronomically large
+    frac = np.where(a > 1e-12, -np.expm1(-a) / np.where(a > 1e-12, a, 1.0), 1.0)
+    log_u = np.logaddexp((b - q0) / qt - a, np.log(reference_e_per_s * duration_s / qt * frac))
+    return np.maximum(b - qt * log_u, 0.0)  # the drain cannot take more than the photodiode holds
 
 
 def knee_rates_e_per_s(segment_times_s, clamp_levels_electrons) -> np.ndarray:
@@ -137,6 +167,17 @@ class SegmentedExposureSensor(FrameSensor):
         Pixel-to-pixel spread (std / mean, Gaussian, fixed pattern) of every barrier: the Rpd
         threshold varies across the array, so above a knee the clamped charge — and the output
         — differs from pixel to pixel (fixed-pattern noise above the knees). Default 0.
+    barrier_softness_electrons : float
+        Q_T of a sub-threshold (soft) Rpd barrier, e⁻ (:func:`soft_clamp_electrons`): the clamp
+        level then depends on the photocurrent and the time. Default 0 (hard clamp); typical
+        n·(kT/q)·C_PD/q ≈ 560 e⁻ for this pixel.
+    barrier_reference_e_per_s : float
+        I_0, the Rpd drain current (e⁻/s) at which the charge sits at the nominal barrier.
+        Default 1e7 e⁻/s (1.6 pA); used only when the barrier is soft.
+    clamp_noise_electrons : float
+        Temporal noise of the charge a binding barrier leaves, e⁻ rms (Gaussian, drawn at the
+        end of each segment whose barrier binds): the drain is a sub-threshold transistor,
+        whose equilibrium spread is of order √(n·kT·C_PD)/q ≈ 24 e⁻ here. Default 0.
 
     Notes
     -----
@@ -160,9 +201,16 @@ class SegmentedExposureSensor(FrameSensor):
         noise: bool = True,
         fixed_pattern_seed: int = 1288,
         barrier_spread_fraction: float = 0.0,
+        barrier_softness_electrons: float = 0.0,
+        barrier_reference_e_per_s: float = 1e7,
+        clamp_noise_electrons: float = 0.0,
     ):
         parameters = parameters or FramePixelParameters(full_well_electrons=10_000.0)
         self.barrier_spread_fraction = check_non_negative("barrier_spread_fraction", barrier_spread_fraction)
+        self.barrier_softness_electrons = check_non_negative("barrier_softness_electrons",
+                                                             barrier_softness_electrons)
+        self.barrier_reference_e_per_s = check_positive("barrier_reference_e_per_s", barrier_reference_e_per_s)
+        self.clamp_noise_electrons = check_non_negative("clamp_noise_electrons", clamp_noise_electrons)
         check_positive("frame_rate_hz", frame_rate_hz)
         times, levels = check_segments(
             segment_times_s,
@@ -197,7 +245,6 @@ class SegmentedExposureSensor(FrameSensor):
                 m = np.broadcast_to(base, (len(base), height, width))
             self._barrier_maps[key] = m
         return self._barrier_maps[key]
-        return len(self.segment_times_s)
 
     def scaled_segments_s(self, exposure_s: float) -> np.ndarray:
         """Segment durations scaled to a total of ``exposure_s``."""
@@ -218,12 +265,26 @@ class SegmentedExposureSensor(FrameSensor):
         pixels = self.pixel_array(height, width)
         q = np.zeros((height, width))
         t0 = float(start_s)
-        for t, b in zip(
+        n_seg = len(self.segment_times_s)
+        for i, (t, b) in enumerate(zip(
             self.scaled_segments_s(exposure_s), self.barrier_map_electrons(height, width), strict=True
-        ):
+        )):
             lux = scene.mean_illuminance_lux(t0, t0 + t)
-            # Excess above the barrier is drained over Rpd (seed 001, §3.1).
-            q = np.minimum(q + pixels.collect_electrons(lux, float(t), rng, self.noise), b)
+            collected = pixels.collect_electrons(lux, float(t), rng, self.noise)
+            if self.barrier_softness_electrons > 0 and i < n_seg - 1:
+                # Sub-threshold drain: the kept charge follows the exact soft-clamp law with the
+                # segment's collected charge as its mean rate (Poisson count kept below the clamp).
+                soft = soft_clamp_electrons(q, collected / float(t), float(t), b, self.barrier_softness_electrons,
+                                            self.barrier_reference_e_per_s)
+                free = q + collected
+                new_q = np.minimum(free, soft)
+            else:
+                # Excess above the barrier is drained over Rpd (seed 001, §3.1).
+                new_q = np.minimum(q + collected, b)
+            if self.clamp_noise_electrons > 0 and self.noise:
+                bound = new_q < q + collected - 0.5  # the barrier drained something: the drain sets Q
+                new_q = new_q + np.where(bound, self.clamp_noise_electrons * rng.standard_normal(q.shape), 0.0)
+            q = np.maximum(new_q, 0.0)
             t0 += float(t)
         return q
 
@@ -242,16 +303,28 @@ class SegmentedExposureSensor(FrameSensor):
         pixels = self.pixel_array(height, width)
         rng = pixels.rng(seed, frame_index)
         q = self.charge_electrons(scene, start_s, exposure_s, rng, height, width)
+        # the 5T global shutter's storage node waits for its row to be read (PLS, leakage)
+        q = q + pixels.storage_electrons(scene, start_s + exposure_s, rng, self.noise)
+        if self.parameters.black_sun_fraction > 0:
+            q = pixels.black_sun_electrons(q, scene.mean_illuminance_lux(start_s, start_s + exposure_s))
         return pixels.digitize(q, rng, self.noise)
 
     def expected_charge_electrons(self, lux, exposure_s: float | None = None) -> np.ndarray:
-        """Noise-free kept charge for a constant illuminance (no PRNU), e⁻."""
+        """Noise-free kept charge for a constant illuminance (no PRNU), e⁻ (soft barriers included)."""
         exposure_s = self.exposure_s if exposure_s is None else exposure_s
         p = self.parameters
         rate = p.optics.electrons_per_s(lux) + p.dark_current_e_per_s
-        return segmented_charge_electrons(
-            rate, self.scaled_segments_s(exposure_s), self.clamp_levels_electrons
-        )
+        times = self.scaled_segments_s(exposure_s)
+        if self.barrier_softness_electrons == 0:
+            return segmented_charge_electrons(rate, times, self.clamp_levels_electrons)
+        q = np.zeros_like(np.asarray(rate, dtype=np.float64))
+        for i, (t, b) in enumerate(zip(times, self.clamp_levels_electrons, strict=True)):
+            if i < len(times) - 1:
+                q = soft_clamp_electrons(q, rate, float(t), b, self.barrier_softness_electrons,
+                                         self.barrier_reference_e_per_s)
+            else:
+                q = np.minimum(q + rate * t, b)
+        return q
 
     def knee_lux(self) -> np.ndarray:
         """Illuminances (lux) of the response's knees; the last is the saturating illuminance."""
@@ -266,6 +339,9 @@ class SegmentedExposureSensor(FrameSensor):
             segment_times_s=list(self.segment_times_s),
             clamp_levels_electrons=list(self.clamp_levels_electrons),
             barrier_spread_fraction=self.barrier_spread_fraction,
+            barrier_softness_electrons=self.barrier_softness_electrons,
+            barrier_reference_e_per_s=self.barrier_reference_e_per_s,
+            clamp_noise_electrons=self.clamp_noise_electrons,
         )
         return d
 

@@ -17,8 +17,11 @@ of its renewal process, as if it had been exposed long before t = 0: the interva
 progress is length-biased, Gamma(Q + 1, 1), and the pixel sits a uniform fraction of the
 way into it, so the charge still missing is the forward-recurrence law (1 − F_Q(x))/Q
 (mean (Q + 1)/2 e⁻, not Q/2). The firing rate is then λ/Q from the first tick, with no
-start-up transient. (The readout-reset pixel starts in the self-reset pixel's state.)
-Without it every pixel starts empty.
+start-up transient. With a dead time the cycle is the charge to the threshold plus the
+dead charge time λ·t_d, and the pixel starts in the stationary state of *that* cycle
+(length-biased, for the light of the first tick; the readout-reset pixel in whole ticks),
+see :func:`_dead_time_stationary_state`. (Without dead time the readout-reset pixel starts
+in the self-reset pixel's state.) Without ``random_initial_charge`` every pixel starts empty.
 
 Saturation: readout allows at most one spike per pixel per tick, so light above
 Q·clock_hz electrons/s (τ̌ = 1/clock_hz, seed 000 §4.3) gives a spike every tick; the
@@ -61,6 +64,7 @@ from viform.sensors._gamma import (
     stream_gamma,
     stream_keys,
     stream_poisson,
+    stream_uniform,
     uniform_from_hash,
 )
 from viform.sensors.base import Sensor
@@ -102,7 +106,8 @@ class SpikeSensorParameters:
     dark_current_e_per_s : float
         Dark current, e⁻/s (< 100 e⁻/s in modern CMOS, seed 000 §4.4).
     threshold_spread_fraction : float
-        Fixed-pattern spread of Q across pixels (std / mean).
+        Fixed-pattern spread of Q across pixels (std / mean; log-normal, mean Q, so no
+        pixel's threshold piles up at a clip).
     random_initial_charge : bool
         Start each pixel in the stationary state of its spike train (True: a uniform
         fraction of the way into a length-biased Gamma(Q + 1) interval, see the module
@@ -238,13 +243,16 @@ class SpikeSensor(Sensor):
 
     # ------------------------------------------------------------------ fixed pattern
     def threshold_map_electrons(self, height: int, width: int) -> np.ndarray:
-        """Per-pixel threshold Q (whole electrons) including the fixed-pattern spread."""
+        """Per-pixel threshold Q (whole electrons) including the fixed-pattern spread.
+
+        The spread is log-normal (mean Q, std / mean ``threshold_spread_fraction``, see
+        :func:`_threshold_spread_draw`), rounded to whole electrons, at least 1 e⁻.
+        """
         p = self.parameters
         q = np.full((height, width), float(round(p.threshold_electrons)))
         if p.threshold_spread_fraction > 0:
-            rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([p.fixed_pattern_seed, 0x51])))
-            q = np.rint(p.threshold_electrons * (1 + p.threshold_spread_fraction
-                                                 * rng.standard_normal((height, width))))
+            q = _threshold_spread_draw(p.threshold_electrons, p.threshold_spread_fraction, p.fixed_pattern_seed,
+                                       (height, width))
         return np.clip(q, 1.0, MAX_THRESHOLD_ELECTRONS)
 
     def _pattern_rng(self, stream: int) -> np.random.Generator:
@@ -415,6 +423,11 @@ class SpikeSensor(Sensor):
                               "so pass a fresh initial_state")
         reset_readout = p.reset == "readout"
         dead_ticks = p.dead_time_s * p.clock_hz
+        if dead_ticks > 0 and p.random_initial_charge:
+            # the stationary start with dead time depends on the light of the first tick
+            _dead_time_stationary_state(state.charge, state.target, state.counter, q, state.keys,
+                                        _first_tick_rates(self, scene, sample, height, width), dead_ticks,
+                                        p.photon_noise, reset_readout)
         per_tick_light = light is not None and light.kind != "frames"
         if per_tick_light:
             from viform.light.compiled import tick_buffers, tick_scalars
@@ -590,6 +603,92 @@ class _Segments:
                 self._cached = (k, self.sensor._fixed_point_rates(lux, self.height, self.width)[0])
             rates[i] = self._cached[1]
         return rates, seg_end
+
+
+# ---------------------------------------------------------------------- fixed pattern and start-up helpers
+
+def _threshold_spread_draw(threshold_electrons: float, spread_fraction: float, fixed_pattern_seed: int,
+                           shape) -> np.ndarray:
+    """Per-pixel thresholds, e⁻: log-normal of mean Q and std / mean ``spread_fraction``, rounded.
+
+    A threshold is a comparator level set by a reference voltage and a capacitance, both
+    positive; a log-normal law (σ² = ln(1 + spread²), median Q·e^(−σ²/2)) stays positive with
+    no mass piled up at a clip, where a Gaussian clipped at 1 e⁻ put 99 of 4,096 pixels at
+    Q = 1 at a spread of 0.49. At the few-percent spreads of real chips the two laws agree.
+    The same law as the gain spread (:meth:`SpikeSensor.gain_map`). Rounding to whole
+    electrons (and the 1 e⁻ floor the caller applies) matters only where Q·spread is a few e⁻.
+    """
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([fixed_pattern_seed, 0x51])))
+    sigma = math.sqrt(math.log1p(spread_fraction * spread_fraction))
+    return np.rint(threshold_electrons * np.exp(sigma * rng.standard_normal(shape) - 0.5 * sigma * sigma))
+
+
+def _first_tick_rates(sensor: SpikeSensor, scene: Scene, sample: int, height: int, width: int) -> np.ndarray:
+    """Each pixel's charge in tick 0 (fixed point, int64), as the kernels compute it."""
+    clock = sensor.parameters.clock_hz
+    lux = scene.illuminance_lux_many(np.array([0.5 * sample / clock])).reshape(1, -1)
+    return sensor._fixed_point_rates(lux, height, width)[0]
+
+
+@njit(cache=True)
+def _dead_time_stationary_state(charge, target, counter, q, keys, rates, dead_ticks, noise, reset_readout):
+    """Replace each pixel's state by the stationary state of its spike train *with* dead time.
+
+    With a dead time every cycle of the pixel is the charge to the threshold, G (Gamma(Q, 1)
+    in charge time, or Q without photon noise, seed 000 §5.1), plus the dead charge time
+    D = λ·t_d (λ e⁻/tick of the first tick, t_d in ticks), during which the charge sits
+    below zero (the kernels subtract D at each reset). An observer at a time unrelated to
+    the spikes sees a cycle chosen with probability ∝ its length and sits a uniform fraction
+    of the way into it (renewal theory, e.g. Cox, *Renewal Theory*, 1962, §1.4):
+
+    * self-reset (cycle G + D in charge time): G is Gamma(Q + 1) with probability Q/(Q + D)
+      and Gamma(Q) otherwise (the length-biased law of G + D), the charge is U·(G + D) − D;
+    * reset at readout (cycle N = ⌈(G + D)/λ⌉ whole ticks): the cycle is chosen ∝ N and the
+      observer stands at one of its N tick boundaries, m uniform, with charge m·λ − D.
+      Drawn by rejection from the law ∝ (G + D + λ)·f(G), accepting with N·λ/(G + D + λ)
+      (≥ 1/2, since N ≥ max(1, (G + D)/λ) and N ≤ (G + D)/λ + 1).
+
+    The firing rate is then the steady rate from the first tick (the whole array does not
+    fire in step). Exact for light that is steady over the first cycle. Uses one event of
+    each pixel's random stream (``counter[p]``, advanced).
+    """
+    scale = 4294967296.0
+    for p in range(q.size):
+        e = rates[p]
+        dead = np.int64(e * dead_ticks + 0.5)  # as the kernels' reset
+        state = event_stream(keys[p], counter[p])
+        counter[p] += 1
+        qq = float(q[p])
+        d_e = dead / scale
+        e_e = e / scale
+        if not reset_readout or e <= 0:
+            if noise:
+                u, state = stream_uniform(state)
+                shape = qq + 1.0 if u * (qq + d_e) < qq else qq
+                g, state = stream_gamma(shape, state)
+            else:
+                g = qq
+            t = max(np.int64(1), np.int64(g * scale + 0.5))
+            u, state = stream_uniform(state)
+            charge[p] = np.int64(u * (t + dead)) - dead
+            target[p] = t
+            continue
+        while True:
+            if noise:
+                u, state = stream_uniform(state)
+                shape = qq + 1.0 if u * (qq + d_e + e_e) < qq else qq
+                g, state = stream_gamma(shape, state)
+            else:
+                g = qq
+            t = max(np.int64(1), np.int64(g * scale + 0.5))
+            cycle = (t + dead + e - 1) // e  # ticks from a reset to the next crossing, ⌈(G + D)/λ⌉
+            u, state = stream_uniform(state)
+            if not noise or u * (t + dead + e) < cycle * e:
+                break
+        u, state = stream_uniform(state)
+        m = min(np.int64(u * cycle), cycle - 1)
+        charge[p] = m * e - dead
+        target[p] = t
 
 
 # ---------------------------------------------------------------------- kernels

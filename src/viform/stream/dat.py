@@ -10,6 +10,12 @@ fits the file size).
 Height, width, clock and threshold are not stored in the file: viform writes them, with the
 sensor description and provenance, to a JSON sidecar beside it (``clip.dat.json``, see
 :mod:`viform.stream.sidecar`), which the reader uses when present; otherwise it is told them.
+
+Integrity: the sidecar records the data's size, BLAKE2b and the CRC-32 of each block
+(:mod:`viform.stream.checksums`). Every read checks the blocks holding the ticks it returns
+before decoding them (a partial read costs a block or two); sidecars of version 1 (whole-file
+BLAKE2b only) get the whole file checked before the first read. A ``.dat`` without a viform
+sidecar is read unchecked (``verified`` is then False).
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import numpy as np
 
 from viform._io import atomic_open
 from viform._validate import ViformError, check_int, check_positive
+from viform.stream.checksums import BlockCrcs, BlockReader, block_bytes_for, check_manifest
 from viform.stream.container import SpikeSource, block_ticks_for
 from viform.stream.sidecar import read_sidecar, sidecar_body, sidecar_path, source_metadata, stream_header
 
@@ -32,9 +39,6 @@ DEFAULT_DAT_CLOCK_HZ = 40_000.0
 MAX_SIDE = 1 << 16
 #: Bytes read or written per block (bounded memory whatever the file length).
 BLOCK_BYTES = 16 << 20
-#: Files up to this size are checked against their sidecar's checksum when opened (bigger
-#: ones by ``viform info`` / ``viform verify``, which read them whole anyway), bytes.
-VERIFY_ON_OPEN_BYTES = 256 << 20
 
 
 def _agree(path, name, given, declared):
@@ -79,8 +83,9 @@ class DatFile(SpikeSource):
         When the file size is not a whole number of frames: False (default) refuses the
         file; True keeps the whole frames and ignores the trailing bytes.
     verify : bool or None
-        Check the file against its sidecar's size and BLAKE2b checksum at open; None (default)
-        does so for files up to :data:`VERIFY_ON_OPEN_BYTES`.
+        True: check the whole file against its sidecar's size and BLAKE2b at open. None
+        (default): check each block as it is read (version 1 sidecars: the whole file before
+        the first read). Reads are never left unchecked when the sidecar has checksums.
     """
 
     def __init__(self, path, height: int | None = None, width: int | None = None, *, flip: bool | None = None,
@@ -130,6 +135,26 @@ class DatFile(SpikeSource):
                               f"n_ticks = {int(side['n_ticks'])}: "
                               "the file was cut or replaced (keep the whole frames with --allow-partial)")
         self.path = path
+        self._reader = None
+        self._check_whole = False
+        if side is not None and side.get("data_bytes") is not None:
+            declared = int(side["data_bytes"])
+            if declared != size and not allow_partial:
+                raise ViformError(f"{str(path)!r} holds {size} bytes but its sidecar declares data_bytes = "
+                                  f"{declared}: the file was cut or replaced")
+            if declared % self.frame_bytes or (side.get("n_ticks") is not None
+                                               and int(side["n_ticks"]) * self.frame_bytes != declared):
+                raise ViformError(f"{str(sidecar_path(path))!r}: field 'data_bytes' = {declared} is not the "
+                                  f"declared n_ticks × {self.frame_bytes} bytes a frame: the sidecar is damaged")
+            whole = min(whole, declared // self.frame_bytes)  # only ticks the checksums cover
+            if side.get("block_crc32") is not None:
+                crcs = check_manifest(side["block_crc32"], side.get("block_bytes"), declared,
+                                      repr(str(sidecar_path(path))))
+                self._reader = BlockReader(crcs, side["block_bytes"], declared, self._pread, repr(str(path)))
+            else:
+                self._check_whole = True  # version 1: the whole file's BLAKE2b, before the first read
+        if whole == 0:
+            raise ViformError(f"{str(path)!r} holds no whole frame covered by its sidecar's checksums")
         self.flip = True if flip is None else bool(flip)
         self.n_ticks = whole
         self.clock_hz = check_positive("clock_hz", DEFAULT_DAT_CLOCK_HZ if clock_hz is None else clock_hz)
@@ -139,8 +164,10 @@ class DatFile(SpikeSource):
         self.metadata = source_metadata(side) if side is not None else {}
         self.metadata.update({"source": str(path), "format": "dat", "flip": self.flip,
                               "stored_width": self.stored_width})
+        #: True when every read is checked against the sidecar's checksums (False: nothing to check against)
+        self.checked = self._reader is not None or self._check_whole
         self._size = size
-        if verify or (verify is None and not allow_partial and size <= VERIFY_ON_OPEN_BYTES):
+        if verify:
             self.verify()
 
     def verify(self) -> dict:
@@ -151,6 +178,9 @@ class DatFile(SpikeSource):
         checks = []
         if self.sidecar is None:
             return {"verified": False, "checks": ["no sidecar: nothing to verify against"]}
+        if self.sidecar.get("blake2b") is None:
+            return {"verified": False, "checks": ["another tool's sidecar, without checksums: nothing to verify "
+                                                  "against"]}
         size = self.path.stat().st_size
         declared = self.sidecar.get("data_bytes")
         if declared is not None:
@@ -167,7 +197,16 @@ class DatFile(SpikeSource):
                 raise ViformError(f"{str(self.path)!r} is damaged: its BLAKE2b checksum differs from the one "
                                   "in its sidecar")
             checks.append("BLAKE2b checksum matches the sidecar")
+            self._check_whole = False
+        if self._reader is not None:
+            for first in range(0, self._reader.total_bytes, self._reader.block_bytes):
+                self._reader.read(first, min(self._reader.block_bytes, self._reader.total_bytes - first))
+            checks.append(f"{len(self._reader.crcs)} block CRC-32s match the sidecar")
         return {"verified": bool(checks), "checks": checks or ["sidecar records no size or checksum"]}
+
+    def _pread(self, offset: int, count: int) -> bytes:
+        with open(self.path, "rb") as f:
+            return os.pread(f.fileno(), count, offset)
 
     def _detect_stored_width(self, size: int) -> int:
         fits = size % _frame_bytes(self.height, self.width) == 0
@@ -181,8 +220,12 @@ class DatFile(SpikeSource):
         # positioned reads rather than a memory map: the resident memory stays one block whatever
         # the file size (mapped pages of a long file count against the process)
         want = (stop - start) * self.frame_bytes if stop > start else 0
-        with open(self.path, "rb") as f:
-            data = os.pread(f.fileno(), want, start * self.frame_bytes) if want else b""
+        if self._check_whole and want:
+            self.verify()  # version 1 sidecar: no block checksums, the whole file first
+        if self._reader is not None:  # the blocks holding these ticks, each checked before use
+            data = self._reader.read(start * self.frame_bytes, want)
+        else:
+            data = self._pread(start * self.frame_bytes, want) if want else b""
         if len(data) != want:
             raise ViformError(f"{str(self.path)!r} was cut while being read (ticks {start}–{stop - 1})")
         raw = np.frombuffer(data, np.uint8).reshape(-1, self.frame_bytes)
@@ -228,6 +271,7 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     _frame_bytes(source.height, source.width)
     block_ticks = block_ticks_for(source.height, source.width, block_ticks)
     digest = hashlib.blake2b(digest_size=16)
+    blocks = BlockCrcs(block_bytes_for(source.n_ticks * (source.height * source.width // 8)))
     size = 0
     side = sidecar_path(path)
     settle_sidecar(path)  # a pair left by a killed writer is made whole before anything is replaced
@@ -241,13 +285,16 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
             for _, block in source.iter_blocks(block_ticks):
                 raw = pack_frames(block, flip)
                 digest.update(raw)
+                blocks.update(raw)
                 size += len(raw)
                 f.write(raw)
             f.flush()
             os.fsync(f.fileno())
             if sidecar:
                 body = sidecar_body(stream_header(source, rows="bottom-up" if flip else "upright",
-                                                  extra={"data_bytes": size, "blake2b": digest.hexdigest()}))
+                                                  extra={"data_bytes": size, "blake2b": digest.hexdigest(),
+                                                         "block_bytes": blocks.block_bytes,
+                                                         "block_crc32": blocks.finish()}))
                 with open(pending, "w", encoding="utf-8") as p:
                     p.write(json.dumps(body, indent=2) + "\n")
                     p.flush()

@@ -7,6 +7,7 @@ and keep memory bounded whatever the file length or declared size.
 
 from __future__ import annotations
 
+import numbers
 from pathlib import Path
 
 from viform._validate import ViformError
@@ -35,6 +36,7 @@ def open_spikes(path, height: int | None = None, width: int | None = None, *,
     """
     from viform._io import clean_stale
 
+    _check_overrides(clock_hz, threshold_electrons)
     path = Path(path)
     suffix = path.suffix.lower()
     if not path.exists():
@@ -43,22 +45,46 @@ def open_spikes(path, height: int | None = None, width: int | None = None, *,
             raise ViformError(f"spike file {str(path)!r} does not exist")
     if not (path.is_file() or path.is_dir()):  # a FIFO or device would block the reader
         raise ViformError(f"{str(path)!r} is not a regular file or folder")
+    if suffix in (".dat", ".npz") and path.is_dir():
+        raise ViformError(f"{str(path)!r} is a folder, not a {suffix} file")
     if suffix == ".dat":
-        return DatFile(path, height, width, flip=flip, allow_partial=allow_partial,
-                       clock_hz=clock_hz, threshold_electrons=threshold_electrons)
-    if suffix == ".npz":
-        stream = NpzSpikes(path, clock_hz, key, axes)
+        source = DatFile(path, height, width, flip=flip, allow_partial=allow_partial,
+                         clock_hz=clock_hz, threshold_electrons=threshold_electrons)
+    elif suffix == ".npz":
+        source = NpzSpikes(path, clock_hz, key, axes)
         if threshold_electrons is not None:
-            stream.threshold_electrons = threshold_electrons
-        return stream
-    if suffix == ".zarr" or (path.is_dir() and (path / "zarr.json").exists()):
-        store = ZarrSpikeStore(path)
+            source.threshold_electrons = threshold_electrons
+    elif suffix == ".zarr" or (path.is_dir() and (path / "zarr.json").exists()):
+        source = ZarrSpikeStore(path)
         if clock_hz is not None:
-            store.clock_hz = clock_hz
+            source.clock_hz = clock_hz
         if threshold_electrons is not None:
-            store.threshold_electrons = threshold_electrons
-        return store
-    raise ViformError(f"unknown spike file type {suffix!r} for {str(path)!r}: use one of {', '.join(FORMATS)}")
+            source.threshold_electrons = threshold_electrons
+    else:
+        raise ViformError(f"unknown spike file type {suffix!r} for {str(path)!r}: use one of {', '.join(FORMATS)}")
+    if source.n_ticks == 0:  # an empty stream has no instant, duration or rate: every command says so here
+        raise ViformError(f"{str(path)!r} holds an empty stream (0 ticks of {source.height}×{source.width} "
+                          "pixels): there is nothing to read")
+    return source
+
+
+def _check_overrides(clock_hz, threshold_electrons) -> None:
+    """A clock or Q given by the caller passes the bounds a file's header must pass."""
+    from viform.stream.sidecar import (
+        MAX_CLOCK_HZ,
+        MAX_THRESHOLD_ELECTRONS,
+        MIN_CLOCK_HZ,
+        MIN_THRESHOLD_ELECTRONS,
+    )
+
+    for name, value, low, high, unit in (("clock_hz", clock_hz, MIN_CLOCK_HZ, MAX_CLOCK_HZ, "Hz"),
+                                         ("threshold_electrons", threshold_electrons, MIN_THRESHOLD_ELECTRONS,
+                                          MAX_THRESHOLD_ELECTRONS, "e⁻")):
+        if value is None:
+            continue
+        ok = not isinstance(value, bool) and isinstance(value, numbers.Real) and low <= value <= high
+        if not ok:
+            raise ViformError(f"{name} = {value!r} is not allowed: it must be a number in [{low:g}, {high:g}] {unit}")
 
 
 def verify_spikes(path, **kwargs) -> dict:

@@ -10,8 +10,14 @@ Layout written by viform (readable by plain ``numpy.load`` and by Spike-Zoo load
 
 The spike member is streamed: its ``.npy`` header is read from the zip member, then ticks are
 read block by block as the member decompresses, so neither the file length nor a forged shape
-costs memory (a shape that disagrees with the member's size is refused at open). The zip CRC
-of the member is checked whenever it is read to its end (``info``, ``verify``, full reads).
+costs memory (a shape that disagrees with the member's size is refused at open).
+
+Integrity: viform's header (written after ``spk``) holds ``format``, ``version``, the member's
+size, the CRC-32 of each block of it and the header's own BLAKE2b; every read checks the
+blocks it uses before decoding them, so a partial read (``reconstruct --at``) never returns
+damaged bits and costs only those blocks. Files of other tools (and of older viform) have no
+block checksums: the zip CRC-32 of the spike member is checked by one streamed pass before
+the first read.
 
 Axis order: viform's own files declare it; the arrays named ``spk`` and ``spikes`` are
 (T, H, W) by the Spike-Zoo and viform conventions; any other array must be given an explicit
@@ -21,6 +27,7 @@ transposed in memory, up to :data:`MAX_WHOLE_BYTES` (beyond that, convert to ``.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import zipfile
@@ -31,9 +38,9 @@ import numpy as np
 
 from viform._io import atomic_path
 from viform._validate import ViformError
+from viform.stream.checksums import BlockCrcs, BlockReader, block_bytes_for, check_manifest, header_digest
 from viform.stream.container import SpikeSource, block_ticks_for
 from viform.stream.sidecar import (
-    MAX_CLOCK_HZ,
     MAX_DIMENSION,
     MAX_TICKS,
     source_metadata,
@@ -44,6 +51,11 @@ from viform.stream.sidecar import (
 #: Keys read by default, in this order (Spike-Zoo's, then viform's older one); both are (T, H, W).
 DEFAULT_KEYS = ("spk", "spikes")
 HEADER_KEY = "viform_header"
+#: ``format`` and ``version`` of the header viform writes (inside its checksummed part).
+NPZ_FORMAT = "viform-spikes-npz"
+NPZ_VERSION = 2
+#: Header fields of viform's integrity scheme: a header holding one must hold all.
+_INTEGRITY_FIELDS = ("format", "version", "member_bytes", "block_bytes", "block_crc32", "header_blake2b")
 #: Largest array loaded whole (one not stored as (T, H, W) in C order), bytes.
 MAX_WHOLE_BYTES = 256 << 20
 #: Largest small member (header, scalars) read, bytes.
@@ -89,6 +101,11 @@ class NpzSpikes(SpikeSource):
                 raise ViformError(f"{str(path)!r} is not a .npz file (not a zip archive)")
             self._zip = zipfile.ZipFile(path)
             infos = {i.filename: i for i in self._zip.infolist()}
+            if len(infos) != len(self._zip.infolist()):  # readers disagree on which one counts
+                twice = sorted({i.filename for i in self._zip.infolist()
+                                if sum(j.filename == i.filename for j in self._zip.infolist()) > 1})
+                raise ViformError(f"{str(path)!r} is damaged or was tampered with: it holds several members "
+                                  f"named {twice[0]!r}")
         except ViformError:
             raise
         except _ERRORS as exc:
@@ -98,7 +115,7 @@ class NpzSpikes(SpikeSource):
             key = next((k for k in DEFAULT_KEYS if k in names), None)
             if key is None:
                 raise ViformError(f"{str(path)!r} has no 'spk' or 'spikes' array (it has {names[:20]}); "
-                                  "name the array with key=")
+                                  "choose one with key = NAME")
         elif key not in names:
             raise ViformError(f"{str(path)!r} has no array {key!r} (it has {names[:20]})")
         self.key = key
@@ -120,10 +137,13 @@ class NpzSpikes(SpikeSource):
                 raise ViformError(f"{str(path)!r}: member {HEADER_KEY!r} is not valid JSON: {_short(exc)}") from None
             if not isinstance(header, dict):
                 raise ViformError(f"{str(path)!r}: member {HEADER_KEY!r} must hold a JSON object")
+            marked = _check_integrity_fields(header, path)
             validate_header(header, path, required=("height", "width", "clock_hz", "start_time_s"))
             if "threshold_electrons" not in header:
                 raise ViformError(f"{str(path)!r}: required field 'threshold_electrons' is missing from "
                                   f"member {HEADER_KEY!r}")
+        else:
+            marked = False
         declared_axes = header.get("axes")
         if declared_axes is not None:
             declared_axes = _check_axes(declared_axes)
@@ -135,9 +155,20 @@ class NpzSpikes(SpikeSource):
         # scalars of older viform files and other tools (clock, Q, start; labels go to the metadata)
         legacy = {k: small.pop(k) for k in ("clock_hz", "threshold_electrons", "start_time_s") if k in small}
         self._open_member(key + ".npy", infos[key + ".npy"])
+        if marked:  # viform's own file: per-block CRC-32s of the member (its .npy header included)
+            if key != "spk" or header.get("member_bytes") != self._member_bytes:
+                raise ViformError(f"{str(path)!r}: array {key!r} holds {self._member_bytes} bytes but member "
+                                  f"{HEADER_KEY!r} declares member_bytes = {header.get('member_bytes')!r} for 'spk': "
+                                  "the file is damaged or was edited")
+            crcs = check_manifest(header.get("block_crc32"), header.get("block_bytes"), self._member_bytes,
+                                  f"{str(path)!r}: member {HEADER_KEY!r}")
+            self._blocks = BlockReader(crcs, header["block_bytes"], self._member_bytes, self._member_read,
+                                       f"{str(path)!r} (array {key!r})")
+            self._blocks.read(0, self._header_bytes)  # shape, order and dtype are checked too
         if axes is None:
             raise ViformError(f"{str(path)!r}: the axis order of array {key!r} (shape {self._shape}) is not "
-                              "declared: give it explicitly, e.g. axes='thw' (ticks, rows, columns) or 'hwt'")
+                              "declared: give it with axes = 'thw' (ticks, rows, columns) or 'hwt' (rows, columns, "
+                              "ticks)")
         self.axes = axes
         dims = dict(zip(axes, self._shape, strict=True))
         self.n_ticks, self.height, self.width = dims["t"], dims["h"], dims["w"]
@@ -155,17 +186,20 @@ class NpzSpikes(SpikeSource):
                 raise ViformError(f"{str(path)!r}: array {key!r} is not stored as (ticks, rows, columns) in C order "
                                   f"and holds {self._data_bytes / 1e6:.0f} MB, more than the "
                                   f"{MAX_WHOLE_BYTES / 1e6:.0f} MB viform transposes in memory: convert it to .zarr")
-        clock = clock_hz if clock_hz is not None else header.get("clock_hz", _scalar(legacy, "clock_hz"))
+        clock = clock_hz if clock_hz is not None else header.get("clock_hz", _scalar(legacy, "clock_hz", path))
         clock = DEFAULT_DAT_CLOCK_HZ if clock is None else clock
-        q = header["threshold_electrons"] if "threshold_electrons" in header else _scalar(legacy, "threshold_electrons")
-        start = header.get("start_time_s", _scalar(legacy, "start_time_s"))
-        check = {"clock_hz": float(clock),
-                 "threshold_electrons": None if q is None or (isinstance(q, float) and math.isnan(q)) else float(q),
-                 "start_time_s": 0.0 if start is None else float(start)}
+        q = header["threshold_electrons"] if "threshold_electrons" in header \
+            else _scalar(legacy, "threshold_electrons", path)
+        start = header.get("start_time_s", _scalar(legacy, "start_time_s", path))
+        # the same bounds as viform's own header, before anything is sized by them
+        check = {"clock_hz": clock,
+                 "threshold_electrons": None if q is None or (isinstance(q, float) and math.isnan(q)) else q,
+                 "start_time_s": 0.0 if start is None else start, "n_ticks": self.n_ticks}
         validate_header(check, path, required=())
-        if not 0 < check["clock_hz"] <= MAX_CLOCK_HZ:
-            raise ViformError(f"clock_hz = {clock!r} is not allowed for {str(path)!r}")
-        self.clock_hz = check["clock_hz"]
+        self.clock_hz = float(check["clock_hz"])
+        check["threshold_electrons"] = None if check["threshold_electrons"] is None \
+            else float(check["threshold_electrons"])
+        check["start_time_s"] = float(check["start_time_s"])
         self.threshold_electrons = check["threshold_electrons"]
         self.start_time_s = check["start_time_s"]
         self.header = header
@@ -175,6 +209,8 @@ class NpzSpikes(SpikeSource):
                 item = np.asarray(value).item()
                 self.metadata[name] = item.decode() if isinstance(item, bytes) else item
         self.metadata.update({"source": str(path), "format": "npz"})
+        #: Every read is checked: block CRC-32s (viform's files) or the member's zip CRC-32 (others).
+        self.checked = True
 
     # ---- zip member access
     def _read_small(self, member: str):
@@ -190,28 +226,31 @@ class NpzSpikes(SpikeSource):
 
     def _open_member(self, member: str, info: zipfile.ZipInfo) -> None:
         self._member = member
-        self._open_fp().close()
-        self._offset = self._header_bytes
+        self._fp, self._pos = None, 0
+        self._blocks = None
+        self._zip_checked = False
+        self._member_bytes = info.file_size
+        self._parse_npy_header()
         self._data_bytes = info.file_size - self._header_bytes
         expected = math.prod(self._shape) * self._dtype.itemsize
         if self._data_bytes != expected:
             raise ViformError(f"{str(self.path)!r}: array {self.key!r} declares shape {self._shape} of "
                               f"{self._dtype} ({expected} bytes) but the archive holds {self._data_bytes} bytes")
-        self._fp, self._pos = None, 0
 
-    def _open_fp(self):
-        """Open the member and read its .npy header; leaves the position at the data."""
+    def _parse_npy_header(self) -> None:
+        """Read the member's .npy header (shape, order, dtype) from a fresh stream of the member."""
         path = self.path
         try:
-            fp = self._zip.open(self._member)
-            version = np.lib.format.read_magic(fp)
-            if version == (1, 0):
-                shape, fortran, dtype = np.lib.format.read_array_header_1_0(fp)
-            elif version == (2, 0):
-                shape, fortran, dtype = np.lib.format.read_array_header_2_0(fp)
-            else:
-                raise ViformError(f"{str(path)!r}: array {self.key!r} uses .npy format {version}, "
-                                  "which viform does not stream (1.0 and 2.0 are read)")
+            with self._zip.open(self._member) as fp:
+                version = np.lib.format.read_magic(fp)
+                if version == (1, 0):
+                    shape, fortran, dtype = np.lib.format.read_array_header_1_0(fp)
+                elif version == (2, 0):
+                    shape, fortran, dtype = np.lib.format.read_array_header_2_0(fp)
+                else:
+                    raise ViformError(f"{str(path)!r}: array {self.key!r} uses .npy format {version}, "
+                                      "which viform does not stream (1.0 and 2.0 are read)")
+                header_bytes = fp.tell()
         except ViformError:
             raise
         except _ERRORS as exc:
@@ -223,37 +262,58 @@ class NpzSpikes(SpikeSource):
             raise ViformError(f"{str(path)!r}: array {self.key!r} must have 3 axes (ticks, rows, columns); "
                               f"got shape {shape}")
         self._shape, self._fortran, self._dtype = tuple(int(n) for n in shape), bool(fortran), dtype
-        self._header_bytes = fp.tell()
-        self._fp = fp
-        return fp
+        self._header_bytes = header_bytes
 
-    def _read_bytes(self, offset: int, count: int) -> bytes:
-        """``count`` bytes of the array's data from ``offset`` (sequential reads are cheap)."""
+    def _member_read(self, offset: int, count: int) -> bytes:
+        """Up to ``count`` bytes of the spike member from ``offset`` (member coordinates, .npy header
+        included); sequential reads are cheap, a read behind the position decompresses from the start.
+        Reading to the member's end checks its zip CRC-32."""
         try:
             if self._fp is None or offset < self._pos:
                 if self._fp is not None:
                     self._fp.close()
-                self._open_fp()
-                self._pos = 0
+                self._fp, self._pos = self._zip.open(self._member), 0
             if offset > self._pos:
                 self._skip(offset - self._pos)
             data = self._fp.read(count)
+            self._pos += len(data)
+            if self._pos == self._member_bytes and not self._zip_checked:
+                if self._fp.read(1):
+                    raise ViformError(f"{str(self.path)!r}: array {self.key!r} holds more data than its shape")
+                self._zip_checked = True  # zipfile compared the CRC-32 at the end of the member
         except ViformError:
             raise
         except _ERRORS as exc:
             raise ViformError(f"{str(self.path)!r}: array {self.key!r} is damaged: {_short(exc)}") from None
+        return data
+
+    def _check_member(self) -> None:
+        """A streamed pass over the whole member: its zip CRC-32 is checked before any of it is used."""
+        pos, step = 0, 8 << 20
+        while pos < self._member_bytes:
+            n = min(step, self._member_bytes - pos)
+            if len(self._member_read(pos, n)) != n:
+                raise ViformError(f"{str(self.path)!r}: array {self.key!r} is truncated")
+            pos += n
+
+    def _read_bytes(self, offset: int, count: int) -> bytes:
+        """``count`` bytes of the array's data from ``offset``, checked before they are returned.
+
+        viform's files: the CRC-32 of each block holding them (:mod:`viform.stream.checksums`).
+        Other files: the member's zip CRC-32, by one streamed pass before the first read (a read
+        of the whole array is that pass).
+        """
+        if self._blocks is not None:
+            data = self._blocks.read(self._header_bytes + offset, count)
+        else:
+            if not self._zip_checked and not (offset == 0 and count == self._data_bytes):
+                self._check_member()
+            data = self._member_read(self._header_bytes + offset, count)
+            if offset == 0 and count == self._data_bytes and not self._zip_checked:
+                self._check_member()
         if len(data) != count:
             raise ViformError(f"{str(self.path)!r}: array {self.key!r} is truncated (data ends "
                               f"{count - len(data)} bytes early)")
-        self._pos = offset + count
-        if self._pos == self._data_bytes:  # reading to the end checks the zip CRC
-            try:
-                if self._fp.read(1):
-                    raise ViformError(f"{str(self.path)!r}: array {self.key!r} holds more data than its shape")
-            except ViformError:
-                raise
-            except _ERRORS as exc:
-                raise ViformError(f"{str(self.path)!r}: array {self.key!r} is damaged: {_short(exc)}") from None
         return data
 
     def _skip(self, count: int) -> None:
@@ -309,10 +369,12 @@ class NpzSpikes(SpikeSource):
                 raise ViformError(f"{str(self.path)!r}: member {info.filename!r} is damaged: {_short(exc)}") from None
         for _ in self.iter_blocks(1 << 20):
             pass
-        if self.n_ticks == 0:
-            self._read_bytes(0, 0)
-        return {"verified": True, "checks": ["zip CRC-32 of every member matches; spikes are 0/1; "
-                                             "shape matches the data size"]}
+        if not self._zip_checked:
+            self._check_member()
+        checks = ["zip CRC-32 of every member matches; spikes are 0/1; shape matches the data size"]
+        if self._blocks is not None:
+            checks.append(f"{len(self._blocks.crcs)} block CRC-32s and the header checksum match")
+        return {"verified": True, "checks": checks}
 
     def close(self) -> None:
         if self._fp is not None:
@@ -320,12 +382,40 @@ class NpzSpikes(SpikeSource):
         self._zip.close()
 
 
-def _scalar(values: dict, name: str):
+def _check_integrity_fields(header: dict, path) -> bool:
+    """True for a header viform wrote (any of its integrity fields), after checking it is whole.
+
+    Removing fields does not turn the checks off: a header with some of them and not the others,
+    or whose own BLAKE2b differs, is damaged. Headers of older viform files (no such field) are
+    read like other tools' files (the member's zip CRC-32 checked before use).
+    """
+    marks = [k for k in _INTEGRITY_FIELDS if k in header]
+    if not marks:
+        return False
+    where = f"{str(path)!r}: member {HEADER_KEY!r}"
+    if header.get("format") != NPZ_FORMAT:
+        raise ViformError(f"{where}: field 'format' = {header.get('format')!r} is not {NPZ_FORMAT!r}, though it "
+                          f"holds viform's field {marks[0]!r}: the file is damaged or was edited")
+    version = header.get("version")
+    if isinstance(version, bool) or version != NPZ_VERSION:
+        raise ViformError(f"{where}: field 'version' = {version!r} is not supported (this viform reads version "
+                          f"{NPZ_VERSION})")
+    missing = [k for k in _INTEGRITY_FIELDS if k not in header]
+    if missing:
+        raise ViformError(f"{where}: field {missing[0]!r} is missing: the file is damaged or was edited")
+    if header["header_blake2b"] != header_digest(header):
+        raise ViformError(f"{where}: the header is damaged or was edited (its BLAKE2b checksum differs)")
+    return True
+
+
+def _scalar(values: dict, name: str, path=None):
+    """The number in member ``name`` (None when absent); anything but a number is refused."""
     if name not in values:
         return None
     v = np.asarray(values[name])
-    if v.ndim != 0 or v.dtype.kind not in "biuf":
-        return None
+    if v.ndim != 0 or v.dtype.kind not in "iuf":  # a bool is not a clock (True is not 1 Hz)
+        raise ViformError(f"{str(path)!r}: member {name!r} holds {v.dtype} of shape {v.shape}; it must be one "
+                          "number")
     return v.item()
 
 
@@ -340,31 +430,46 @@ def read_npz(path, clock_hz: float | None = None, key: str | None = None, axes: 
 
 
 def write_npz(path, source: SpikeSource, *, block_ticks: int = 1024) -> Path:
-    """Write ``source`` as a ``.npz`` (layout in the module docstring), block by block, atomically."""
+    """Write ``source`` as a ``.npz`` (layout in the module docstring), block by block, atomically.
+
+    The spike member is written first; the header that follows holds the CRC-32 of each block
+    of it (:mod:`viform.stream.checksums`), its size, ``format``/``version`` and its own BLAKE2b.
+    """
     path = Path(path)
-    header = stream_header(source, rows="upright", extra={"axes": "thw"})
     shape = (int(source.n_ticks), int(source.height), int(source.width))
     block_ticks = block_ticks_for(source.height, source.width, block_ticks)
+    npy_header = io.BytesIO()
+    write_header = np.lib.format.write_array_header_2_0 if len(str(shape)) > 60000 \
+        else np.lib.format.write_array_header_1_0
+    write_header(npy_header, {"descr": "|u1", "fortran_order": False, "shape": shape})
+    member_bytes = len(npy_header.getvalue()) + math.prod(shape)
+    crcs = BlockCrcs(block_bytes_for(member_bytes))
     with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED,
                                                    allowZip64=True) as zf:
         def small(name, value):
             with zf.open(name + ".npy", "w") as fp:
                 np.lib.format.write_array(fp, np.asarray(value), allow_pickle=False)
 
+        written = 0
+        with zf.open("spk.npy", "w", force_zip64=True) as fp:
+            fp.write(npy_header.getvalue())
+            crcs.update(npy_header.getvalue())
+            for _, block in source.iter_blocks(block_ticks):
+                raw = np.ascontiguousarray(block, dtype=np.uint8).tobytes()
+                fp.write(raw)
+                crcs.update(raw)
+                written += block.shape[0]
+        if written != shape[0]:
+            raise RuntimeError(f"the stream gave {written} ticks, not the {shape[0]} it declared")
+        header = stream_header(source, rows="upright",
+                               extra={"axes": "thw", "format": NPZ_FORMAT, "version": NPZ_VERSION,
+                                      "member_bytes": member_bytes, "block_bytes": crcs.block_bytes,
+                                      "block_crc32": crcs.finish()})
+        header = json.loads(json.dumps(header))
+        header["header_blake2b"] = header_digest(header)
         small(HEADER_KEY, np.array(json.dumps(header)))
         small("clock_hz", np.float64(source.clock_hz))
         small("threshold_electrons", np.float64(np.nan if source.threshold_electrons is None
                                                 else source.threshold_electrons))
         small("start_time_s", np.float64(source.start_time_s))
-        written = 0
-        with zf.open("spk.npy", "w", force_zip64=True) as fp:
-            np.lib.format.write_array_header_2_0(fp, {"descr": "|u1", "fortran_order": False, "shape": shape}) \
-                if len(str(shape)) > 60000 else \
-                np.lib.format.write_array_header_1_0(fp, {"descr": "|u1", "fortran_order": False, "shape": shape})
-            for _, block in source.iter_blocks(block_ticks):
-                fp.write(np.ascontiguousarray(block, dtype=np.uint8).tobytes())
-                written += block.shape[0]
-        if written != shape[0]:
-            raise RuntimeError(f"the stream gave {written} ticks, not the {shape[0]} it declared")
     return path
-

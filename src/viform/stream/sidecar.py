@@ -11,6 +11,13 @@ The same header is stored inside ``.npz`` files (member ``viform_header``) and z
 Every header is validated when it is read (:func:`validate_header`): a forged or damaged field
 gives a one-line :class:`~viform._validate.ViformError` naming the file and the field, before
 anything is allocated from it.
+
+Integrity cannot be edited away: a sidecar written by viform carries its ``format`` and
+``version`` markers, the data's size, BLAKE2b and per-block CRC-32s
+(:mod:`viform.stream.checksums`) and its own BLAKE2b (``sidecar_blake2b``), all inside the
+checked part. A sidecar that holds any viform marker but lacks one of these (deleted by hand)
+is refused as damaged; a sidecar with no viform marker at all is another tool's, read as such,
+and nothing reports its data as verified.
 """
 
 from __future__ import annotations
@@ -28,13 +35,23 @@ from viform._validate import ViformError
 
 #: ``format`` value of a sidecar written by viform.
 SIDECAR_FORMAT = "viform-spike-sidecar"
-SIDECAR_VERSION = 1
+#: Version 2 adds per-block CRC-32s of the data (``block_bytes``, ``block_crc32``); version 1
+#: sidecars (whole-file BLAKE2b only) are still read, their data checked whole before first use.
+SIDECAR_VERSION = 2
+SIDECAR_VERSIONS = (1, 2)
+#: Fields only viform writes: a sidecar holding any of them must hold every checksum field.
+VIFORM_MARKS = ("format", "sidecar_blake2b", "blake2b", "data_bytes", "block_bytes", "block_crc32",
+                "viform_version")
 #: Largest height or width a header may declare (pixels).
 MAX_DIMENSION = 1 << 16
-#: Largest readout clock a header may declare, Hz.
+#: Readout clock a header may declare, Hz: from 1 Hz (slower than any spike or frame sensor;
+#: below it tick lengths and durations reach absurd magnitudes) to 1 THz.
+MIN_CLOCK_HZ = 1.0
 MAX_CLOCK_HZ = 1e12
-#: Largest threshold Q a header may declare, e⁻ (far above any pixel's full well; beyond it
+#: Threshold Q a header may declare, e⁻: a pixel fires on at least one electron (Q is rounded to
+#: whole electrons, so 0.5 rounds to 1); at most 1e12 (far above any full well; beyond it
 #: Q × rate overflows the light estimates).
+MIN_THRESHOLD_ELECTRONS = 0.5
 MAX_THRESHOLD_ELECTRONS = 1e12
 #: Largest |start time| a header may declare, s.
 MAX_START_TIME_S = 1e12
@@ -102,13 +119,34 @@ def write_sidecar(data_path, metadata: dict) -> Path:
     """Write the JSON sidecar of ``data_path`` atomically; returns its path.
 
     ``metadata`` is stored as given (see :func:`stream_header` for the fields viform reads)
-    with ``format``/``version`` markers; provenance fields are added when absent.
+    with ``format``/``version`` markers; provenance fields are added when absent. When
+    ``metadata`` holds no checksum of the data, the data file is read once and its size,
+    BLAKE2b and block CRC-32s (:func:`data_checksums`) are recorded.
     """
     from viform._io import write_json
 
     path = sidecar_path(data_path)
+    if isinstance(metadata, dict) and "blake2b" not in metadata and Path(data_path).is_file():
+        metadata = {**metadata, **data_checksums(data_path)}
     write_json(path, sidecar_body(metadata))
     return path
+
+
+def data_checksums(data_path) -> dict:
+    """``data_bytes``, ``blake2b`` and per-block ``block_bytes``/``block_crc32`` of a data file (one read)."""
+    import hashlib
+
+    from viform.stream.checksums import BlockCrcs, block_bytes_for
+
+    size = Path(data_path).stat().st_size
+    blocks = BlockCrcs(block_bytes_for(size))
+    h = hashlib.blake2b(digest_size=16)
+    with open(data_path, "rb") as f:
+        for chunk in iter(lambda: f.read(HASH_BLOCK_BYTES), b""):
+            h.update(chunk)
+            blocks.update(chunk)
+    return {"data_bytes": size, "blake2b": h.hexdigest(), "block_bytes": blocks.block_bytes,
+            "block_crc32": blocks.finish()}
 
 
 def sidecar_body(metadata: dict) -> dict:
@@ -121,6 +159,9 @@ def sidecar_body(metadata: dict) -> dict:
     body.update({k: v for k, v in provenance().items() if k not in metadata})
     body.update(metadata)
     body.pop(DIGEST_KEY, None)
+    # the markers say what the body holds (a reader checks them first): never copied from elsewhere
+    body["format"] = SIDECAR_FORMAT
+    body["version"] = SIDECAR_VERSION if "block_crc32" in body else 1
     body = json.loads(json.dumps(body, default=_jsonable))
     body[DIGEST_KEY] = _digest(body)
     return body
@@ -236,6 +277,7 @@ def read_sidecar(data_path) -> dict | None:
     path = sidecar_path(data_path)
     chosen = settle_sidecar(data_path)
     if chosen is not None:
+        check_marks(chosen, path)
         return validate_header(chosen, path, required=())
     if not path.is_file():
         return None
@@ -250,10 +292,36 @@ def read_sidecar(data_path) -> dict | None:
         raise ViformError(f"{str(path)!r} is not a readable JSON sidecar: {_short(exc)}") from None
     if not isinstance(header, dict):
         raise ViformError(f"{str(path)!r}: a sidecar must hold a JSON object, not {type(header).__name__}")
-    if DIGEST_KEY in header and header[DIGEST_KEY] != _digest(header):
-        raise ViformError(f"{str(path)!r}: the sidecar is damaged or was edited (its checksum differs); "
-                          f"to accept hand edits, delete its {DIGEST_KEY!r} field")
+    check_marks(header, path)
     return validate_header(header, path, required=())
+
+
+def check_marks(header: dict, path) -> None:
+    """A sidecar viform wrote (any of :data:`VIFORM_MARKS`) must be whole: markers, checksums, own digest.
+
+    Deleting checksum fields does not turn the checks off: it makes the sidecar damaged.
+    """
+    marks = [k for k in VIFORM_MARKS if k in header]
+    if not marks:
+        return  # another tool's sidecar: read as such, never reported verified
+    where = repr(str(path))
+    if header.get("format") != SIDECAR_FORMAT:
+        raise ViformError(f"{where}: field 'format' = {header.get('format')!r} is not {SIDECAR_FORMAT!r}, though "
+                          f"the sidecar holds viform's field {marks[0]!r}: it is damaged or was edited")
+    version = header.get("version")
+    if isinstance(version, bool) or version not in SIDECAR_VERSIONS:
+        raise ViformError(f"{where}: field 'version' = {version!r} is not supported (this viform reads sidecar "
+                          f"versions {', '.join(map(str, SIDECAR_VERSIONS))})")
+    needed = [DIGEST_KEY, "data_bytes", "blake2b"] + (["block_bytes", "block_crc32"] if version >= 2 else [])
+    missing = [k for k in needed if header.get(k) is None]
+    if missing:
+        raise ViformError(f"{where}: the sidecar is damaged or was edited: field"
+                          f"{'' if len(missing) == 1 else 's'} {', '.join(repr(k) for k in missing)}, which viform "
+                          f"writes in every sidecar of version {version}, {'is' if len(missing) == 1 else 'are'} "
+                          "missing; write the file again with viform")
+    if header[DIGEST_KEY] != _digest(header):
+        raise ViformError(f"{where}: the sidecar is damaged or was edited (its checksum {DIGEST_KEY!r} differs); "
+                          "write the file again with viform")
 
 
 def _short(exc) -> str:
@@ -271,12 +339,14 @@ def _number(header: dict, key: str, where) -> float:
 def validate_header(header: dict, where, *, required=("height", "width", "clock_hz")) -> dict:
     """Check every field a reader relies on; return ``header`` unchanged.
 
+    The same bounds hold for every layout (viform's sidecars and headers, other tools' arrays
+    and sidecars), and are checked before anything is allocated from the fields.
     ``where`` (the file) and the field name appear in every message. Fields: ``height``,
-    ``width`` (whole numbers in [1, 65536]), ``clock_hz`` (finite, in (0, 1e12]),
-    ``threshold_electrons`` (null or in (0, 1e12]), ``start_time_s`` (|t| ≤ 1e12 s), ``n_ticks`` (whole,
-    in [0, 2^40]), ``rows`` (``bottom-up`` or ``upright``), ``bit_order`` (``little``),
-    ``dark_current_e_per_s`` (null or finite ≥ 0), ``optics`` (null or an object of finite
-    positive numbers).
+    ``width`` (whole numbers in [1, 65536]), ``clock_hz`` (in [1, 1e12] Hz),
+    ``threshold_electrons`` (null or in [0.5, 1e12] e⁻), ``start_time_s`` (|t| ≤ 1e12 s), ``n_ticks``
+    (whole, in [0, 2^40]; with the clock, a duration of at most 1e12 s), ``rows`` (``bottom-up`` or
+    ``upright``), ``bit_order`` (``little``), ``dark_current_e_per_s`` (null or finite ≥ 0),
+    ``optics`` (null or an object of finite positive numbers).
     """
     if not isinstance(header, dict):
         raise ViformError(f"{str(where)!r}: the header must be an object, not {type(header).__name__}")
@@ -291,15 +361,15 @@ def validate_header(header: dict, where, *, required=("height", "width", "clock_
                                   f"it must be a whole number in [1, {MAX_DIMENSION}]")
     if header.get("clock_hz") is not None:
         v = _number(header, "clock_hz", where)
-        if not (math.isfinite(v) and 0 < v <= MAX_CLOCK_HZ):
+        if not (math.isfinite(v) and MIN_CLOCK_HZ <= v <= MAX_CLOCK_HZ):
             raise ViformError(f"{str(where)!r}: field 'clock_hz' = {header['clock_hz']!r} is not allowed: "
-                              f"it must be a finite number in (0, {MAX_CLOCK_HZ:g}]")
+                              f"it must be a number of Hz in [{MIN_CLOCK_HZ:g}, {MAX_CLOCK_HZ:g}]")
     if header.get("threshold_electrons") is not None:
         v = _number(header, "threshold_electrons", where)
-        if not (math.isfinite(v) and 0 < v <= MAX_THRESHOLD_ELECTRONS):
+        if not (math.isfinite(v) and MIN_THRESHOLD_ELECTRONS <= v <= MAX_THRESHOLD_ELECTRONS):
             raise ViformError(f"{str(where)!r}: field 'threshold_electrons' = {header['threshold_electrons']!r} "
-                              f"is not allowed: it must be a finite number in (0, {MAX_THRESHOLD_ELECTRONS:g}] "
-                              "(or null)")
+                              f"is not allowed: it must be a number of electrons in [{MIN_THRESHOLD_ELECTRONS:g}, "
+                              f"{MAX_THRESHOLD_ELECTRONS:g}] (or null)")
     if header.get("start_time_s") is not None:
         v = _number(header, "start_time_s", where)
         if not (math.isfinite(v) and abs(v) <= MAX_START_TIME_S):
@@ -310,7 +380,10 @@ def validate_header(header: dict, where, *, required=("height", "width", "clock_
         if not (v.is_integer() and 0 <= v <= MAX_TICKS):
             raise ViformError(f"{str(where)!r}: field 'n_ticks' = {header['n_ticks']!r} is not allowed: "
                               f"it must be a whole number in [0, {MAX_TICKS}]")
-    for key, high in (("data_bytes", 1 << 62), ("stored_width", MAX_DIMENSION + 64)):
+        if header.get("clock_hz") is not None and v / float(header["clock_hz"]) > MAX_START_TIME_S:
+            raise ViformError(f"{str(where)!r}: field 'n_ticks' = {header['n_ticks']!r} at clock_hz = "
+                              f"{header['clock_hz']!r} lasts more than {MAX_START_TIME_S:g} s")
+    for key, high in (("data_bytes", 1 << 62), ("stored_width", MAX_DIMENSION + 64), ("block_bytes", 1 << 40)):
         if header.get(key) is not None:
             v = header[key]
             if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= high:
@@ -371,4 +444,5 @@ def source_metadata(header: dict) -> dict:
 
 _HEADER_KEYS = {"format", "version", "height", "width", "n_ticks", "clock_hz", "threshold_electrons",
                 "start_time_s", "rows", "bit_order", "optics", "dark_current_e_per_s", "metadata",
-                "stored_width", "data_bytes", "blake2b", "chunks", "chunk_ticks", "axes"}
+                "stored_width", "data_bytes", "blake2b", "chunks", "chunk_ticks", "axes", "block_bytes",
+                "block_crc32", "header_blake2b", "member_bytes"}

@@ -31,6 +31,9 @@ from viform.stream.sidecar import source_metadata, stream_header, validate_heade
 
 FORMAT_NAME = "viform-spikes"
 FORMAT_VERSION = 2
+#: Fields only version 2 writes (their presence in a "version 1" header means an edit).
+_MANIFEST_FIELDS = ("chunks", "chunk_ticks", "header_blake2b", "n_ticks", "viform_version", "utc_date",
+                    "command_line")
 #: Bytes of packed bits per stored chunk at most (a chunk is read whole to check its CRC).
 CHUNK_BUDGET_BYTES = 4 << 20
 
@@ -63,7 +66,9 @@ class ZarrSpikeStore(SpikeSource):
         The store (a folder).
     verify : bool
         Check each chunk's CRC-32 as it is read (default True). Stores written before
-        checksums existed (format version 1) are read unchecked; ``self.checked`` says which.
+        checksums existed (format version 1) are refused unless ``verify=False`` (then read
+        unchecked; ``self.checked`` says which). A version 1 store holding any field of the
+        version 2 manifest had its version edited down: it is refused as damaged.
     """
 
     def __init__(self, path, verify: bool = True):
@@ -87,6 +92,15 @@ class ZarrSpikeStore(SpikeSource):
         if version not in (1, FORMAT_VERSION):
             raise ViformError(f"{str(path)!r}: field 'version' = {version!r} is not supported "
                               f"(this viform reads versions 1 and {FORMAT_VERSION})")
+        if version == 1:
+            edited = [k for k in _MANIFEST_FIELDS if k in header]
+            if edited:
+                raise ViformError(f"{str(path)!r}: field 'version' = 1 but the header holds the version "
+                                  f"{FORMAT_VERSION} field {edited[0]!r}: the store is damaged or was edited")
+            if verify:
+                raise ViformError(f"{str(path)!r} was written without checksums (format version 1, an early "
+                                  "viform): its data cannot be verified; write it again with viform, or read it "
+                                  "unchecked from Python with ZarrSpikeStore(path, verify=False)")
         # version 2 stores are written whole by viform: every field must be there (null where unknown)
         validate_header(header, path, required=("height", "width", "clock_hz") if version == 1 else
                         ("height", "width", "clock_hz", "start_time_s", "rows", "bit_order"))

@@ -1,0 +1,191 @@
+"""Training clips made from the built-in scenes, with parameters drawn per clip, and their truth files.
+
+Files carry no truth; the built-in scenes know theirs exactly (:mod:`viform.light.truth`). A
+dataset of scene clips draws, for each clip, the scene's parameters — speeds, directions,
+brightness, texture, object count and sizes where the scene has them — from a random generator
+seeded by the dataset seed and the clip's name (the randomization SPCS used for the SPIFT flow
+set, here with exact photon statistics), records them in the clip's sidecar, and writes the
+truth beside the spikes.
+
+Truth layout, per clip (frames count output steps from 1, as MOTChallenge does: step k covers
+ticks [(k − 1)·N, k·N) and its truth is taken at the end of the step, t_k = k·N / clock):
+
+::
+
+    gt/<clip>_<k>.png        8-bit light at t_k (full scale = the dataset's max lux)
+    flow/<clip>_<k>.flo      forward flow t_k → t_{k+1}, px, Middlebury .flo (what SCFlow/SpikeCV
+                             read); occluded or leaving pixels stored as unknown (1e10)
+    depth/<clip>_<k>.npy     range (m) per pixel, float32, inf where no surface (scenes with range)
+    mot/<clip>/gt/gt.txt     MOTChallenge object truth (frame, id, x, y, w, h, conf, class, visibility)
+    mot/<clip>/seqinfo.ini   frame step in ticks, clock, size, class names
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from viform._io import atomic_open, save_image
+from viform._validate import ViformError, check_int
+from viform.datasets.layout import GT_DIR, clip_seed, sha256_file
+from viform.light.scenes import BUILTIN_SCENES, builtin_scene
+
+FLOW_DIR = "flow"
+DEPTH_DIR = "depth"
+MOT_DIR = "mot"
+#: Suffix of a clip's clean twin (same light and seed, photon noise and fixed patterns off).
+CLEAN_SUFFIX = "-clean"
+
+
+def _log_uniform(rng, lo, hi):
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+def _direction(rng, speed):
+    angle = rng.uniform(0, 2 * math.pi)
+    return [speed * math.cos(angle), speed * math.sin(angle)]
+
+
+def _pattern_light(rng, full_scale_lux):
+    top = full_scale_lux * rng.uniform(0.15, 1.0)
+    return {"max_lux": top, "min_lux": top * rng.uniform(0.03, 0.4),
+            "pattern": str(rng.choice(["texture", "texture", "bars", "edge"])),
+            "period_px": float(rng.uniform(16.0, 64.0))}
+
+
+#: Scene name → draw(rng, full-scale lux) → keyword arguments of :func:`builtin_scene`.
+RANDOMIZERS = {
+    "translating": lambda rng, fs: {**_pattern_light(rng, fs),
+                                    "velocity_px_per_s": _direction(rng, _log_uniform(rng, 100.0, 8000.0))},
+    "moving-edge": lambda rng, fs: {"max_lux": fs * rng.uniform(0.15, 1.0), "min_lux": fs * rng.uniform(0.005, 0.1),
+                                    "velocity_px_per_s": _direction(rng, _log_uniform(rng, 100.0, 8000.0))},
+    "rotating": lambda rng, fs: {**_pattern_light(rng, fs),
+                                 "angular_speed_rad_per_s": float(rng.choice([-1, 1]) * _log_uniform(rng, 2.0, 80.0))},
+    "dilemma": lambda rng, fs: {"brightness": _log_uniform(rng, 0.1, 10.0), "speed": _log_uniform(rng, 0.25, 3.0)},
+    "night-road-fog": lambda rng, fs: {"visibility_m": _log_uniform(rng, 50.0, 500.0),
+                                       "brightness": _log_uniform(rng, 0.3, 30.0)},
+    "waving-hand": lambda rng, fs: {"wall_lux": fs * rng.uniform(0.05, 0.4), "shirt_lux": fs * rng.uniform(0.02, 0.2),
+                                    "skin_lux": fs * rng.uniform(0.3, 1.0), "wave_hz": rng.uniform(1.0, 8.0),
+                                    "forearm_amplitude_rad": rng.uniform(0.3, 1.0)},
+    "multi-object": lambda rng, fs: {"brightness": _log_uniform(rng, 0.1, 10.0), "speed": _log_uniform(rng, 0.3, 2.0),
+                                     "background": str(rng.choice(["texture", "plain"])),
+                                     "background_lux": fs * _log_uniform(rng, 0.002, 0.2)},
+    "hdr": lambda rng, fs: {"min_lux": fs * _log_uniform(rng, 1e-4, 1e-2), "decades": rng.uniform(3.0, 6.0)},
+}
+
+
+def scene_parameters(scene: str, clip: str, dataset_seed: int, full_scale_lux: float) -> dict:
+    """The drawn parameters of one clip: a pure function of (dataset seed, clip name), JSON values."""
+    if scene not in RANDOMIZERS:
+        raise ViformError(f"--scenes {scene!r} is not allowed: choose among {', '.join(RANDOMIZERS)}")
+    rng = np.random.default_rng(clip_seed(dataset_seed, f"parameters/{clip}"))
+    drawn = RANDOMIZERS[scene](rng, float(full_scale_lux))
+    return json.loads(json.dumps(drawn, default=float))
+
+
+def parse_scene_list(text: str) -> list[str]:
+    """``--scenes a,b,c`` → names, each a built-in scene with drawn parameters."""
+    names = [n.strip() for n in str(text).split(",") if n.strip()]
+    if not names:
+        raise ViformError("--scenes is empty: give built-in scene names, e.g. --scenes translating,multi-object")
+    for name in names:
+        if name not in RANDOMIZERS:
+            known = name in BUILTIN_SCENES
+            raise ViformError(f"--scenes {name!r} is not allowed: " + (
+                "it has no parameters to draw; " if known else "") + f"choose among {', '.join(RANDOMIZERS)}")
+    if len(set(names)) != len(names):
+        raise ViformError(f"--scenes {text!r} names a scene twice")
+    return names
+
+
+def truth_times(n_ticks: int, step_ticks: int, clock_hz: float) -> np.ndarray:
+    """Truth instants t_k = k·N / clock for the whole steps k = 1 … ⌊T / N⌋ of a stream (s)."""
+    step_ticks = check_int("--truth-every-ticks", step_ticks, 1)
+    return np.arange(1, n_ticks // step_ticks + 1) * step_ticks / clock_hz
+
+
+def truth_name(clip: str, frame: int, suffix: str) -> str:
+    return f"{clip}_{frame:06d}{suffix}"
+
+
+def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: float, max_lux: float) -> dict:
+    """Write a clip's truth files under ``out`` (layout in the module notes); returns their records.
+
+    Returns
+    -------
+    dict
+        ``frames``: per step {frame, time_s, tick (the step's last tick), file, sha256, flow,
+        flow_sha256, depth, depth_sha256}; ``mot``: {gt, seqinfo, sha256} or None; ``kinds``.
+    """
+    from viform.datasets.sources import lux_to_gt_image
+    from viform.vision.flow import write_flo
+
+    out = Path(out)
+    kinds = scene.truth_kinds()
+    times = truth_times(n_ticks, step_ticks, clock_hz)
+    frames = []
+    for k, t in enumerate(times, start=1):
+        record = {"frame": k, "time_s": float(t), "tick": int(k * step_ticks - 1)}
+        name = truth_name(clip, k, ".png")
+        save_image(out / GT_DIR / name, lux_to_gt_image(scene.illuminance_lux(float(t)), max_lux))
+        record.update(file=name, sha256=sha256_file(out / GT_DIR / name))
+        if "motion" in kinds and k < len(times):
+            flow = scene.optical_flow_px(float(t), float(times[k]))
+            name = truth_name(clip, k, ".flo")
+            write_flo(out / FLOW_DIR / name, flow.flow_px, flow.valid)
+            record.update(flow=name, flow_sha256=sha256_file(out / FLOW_DIR / name))
+        if "depth" in kinds:
+            name = truth_name(clip, k, ".npy")
+            with atomic_open(out / DEPTH_DIR / name, "wb") as f:
+                np.save(f, scene.depth_m(float(t)).astype(np.float32))
+            record.update(depth=name, depth_sha256=sha256_file(out / DEPTH_DIR / name))
+        frames.append(record)
+    mot = None
+    if "objects" in kinds and len(times):
+        from viform.vision.motchallenge import class_ids_of, gt_rows, write_gt, write_seqinfo
+
+        classes = class_ids_of(scene, times)
+        folder = out / MOT_DIR / clip
+        write_gt(folder / "gt" / "gt.txt", gt_rows(scene, times, classes))
+        write_seqinfo(folder / "seqinfo.ini", name=clip, n_frames=len(times), step_ticks=step_ticks,
+                      clock_hz=clock_hz, width=scene.width, height=scene.height, classes=classes)
+        digest = hashlib.sha256()
+        for part in ("gt/gt.txt", "seqinfo.ini"):
+            digest.update((folder / part).read_bytes())
+        mot = {"gt": f"{MOT_DIR}/{clip}/gt/gt.txt", "seqinfo": f"{MOT_DIR}/{clip}/seqinfo.ini",
+               "sha256": digest.hexdigest(), "classes": classes}
+    return {"frames": frames, "mot": mot, "kinds": list(kinds)}
+
+
+def truth_intact(out, record: dict) -> bool:
+    """True when every truth file a finished clip's record names is on disk with its recorded hash."""
+    out = Path(out)
+    for frame in record.get("gt_frames", []):
+        for key, folder in (("flow", FLOW_DIR), ("depth", DEPTH_DIR)):
+            name = frame.get(key)
+            if name is not None:
+                path = out / folder / name
+                if not path.is_file() or sha256_file(path) != frame.get(f"{key}_sha256"):
+                    return False
+    mot = record.get("mot")
+    if mot:
+        digest = hashlib.sha256()
+        for part in (mot["gt"], mot["seqinfo"]):
+            path = out / part
+            if not path.is_file():
+                return False
+            digest.update(path.read_bytes())
+        if digest.hexdigest() != mot.get("sha256"):
+            return False
+    return True
+
+
+def make_scene(clip_source) -> object:
+    """The scene of a scene clip (:class:`~viform.datasets.sources.SourceClip` of kind ``"scene"``)."""
+    spec = json.loads(clip_source.path)
+    return builtin_scene(spec["scene"], spec["height"], spec["width"],
+                         **{k: tuple(v) if isinstance(v, list) else v for k, v in spec["parameters"].items()})
