@@ -55,13 +55,16 @@ MAX_SPEED = 100.0
               "to use instead of local workers.")
 @click.option("--worker-memory", default="auto", show_default=True,
               help="Memory limit of each local worker, e.g. 2GiB (auto: the machine's memory shared evenly).")
+@click.option("--tracking", is_flag=True,
+              help="Also track the scene's objects at every point and score it against the truth (HOTA, MOTA, IDF1, "
+                   "ID switches, latency; scenes with object truth). Slower.")
 @click.option("--list-parameters", is_flag=True, help="List each sensor's parameters and defaults, and exit.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help=JSON_FILE_HELP)
 def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at, height, width, brightness, speed,
-          visibility_m, seed, out_dir, workers, scheduler, worker_memory, list_parameters, no_progress, as_json,
-          json_file):
+          visibility_m, seed, out_dir, workers, scheduler, worker_memory, tracking, list_parameters, no_progress,
+          as_json, json_file):
     """Shoot SCENE with each --sensor at every setting --vary gives; score each point as `viform compare`
     does; write OUT/report.html (trade-offs, Pareto fronts, best images) and OUT/sweep.zarr.
 
@@ -98,7 +101,7 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
         raise ViformError(f"--speed {speed:g} is not allowed: at most {MAX_SPEED:g} (× the scene's 2 000–3 000 px/s)")
     plan = sw.make_plan(scene, list(sensors) or None, list(vary), height=height, width=width, duration_s=duration_s,
                         seed=seed, instants_s=instants, require=require, objective=objective,
-                        spike_image=spike_image, scene_options=options)
+                        spike_image=spike_image, scene_options=options, tracking=tracking)
     check_outputs(out_dir, json_file)
     check_json_file(json_file)
     if workers is not None and scheduler is not None:

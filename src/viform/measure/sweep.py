@@ -58,6 +58,9 @@ METRIC_DIRECTIONS = {
     "psnr_log_db": True, "ssim_log": True, "saturated_fraction": False, "underexposed_fraction": False,
     "edge_width_px": False, "flicker_error": False, "dr_captured_db": True, "data_rate_mb_per_s": False,
     "latency_s": False, "time_resolution_s": False, "targets_seen": True,
+    # tracking of the scene's objects (``--tracking``, scenes with object truth; measure.vision_comparison)
+    "tracking_hota": True, "tracking_mota": True, "tracking_idf1": True, "tracking_id_switches": False,
+    "tracking_latency_s": False, "tracking_objects_missed": False,
 }
 #: Contrast-to-noise at which a target counts as seen (as compare's verdict counts it).
 SEEN_CNR = 3.0
@@ -505,6 +508,7 @@ class SweepContext:
     seed: int
     spike_image: str = "best"
     scene_options: tuple = ()
+    tracking: bool = False
 
     def describe(self) -> dict:
         return {"format": SWEEP_FORMAT, "version": SWEEP_VERSION, **dataclasses.asdict(self),
@@ -553,6 +557,8 @@ def run_point(context: SweepContext, point: Point) -> dict:
                for k, v in shot.metrics.items()}
     if isinstance(metrics.get("target_cnr"), dict):  # scenes with targets (night-road-fog): how many are seen
         metrics["targets_seen"] = float(sum(v >= SEEN_CNR for v in metrics["target_cnr"].values()))
+    if context.tracking and not shot.skipped:
+        metrics.update(tracking_scores(scene, context.duration_s, shot))
     images = None
     if not shot.skipped:
         images = np.stack([np.where(e.underexposed, np.nan, np.nan_to_num(np.asarray(e.lux, np.float64)))
@@ -563,6 +569,30 @@ def run_point(context: SweepContext, point: Point) -> dict:
               "context_sha256": context.fingerprint(),
               "seconds": time.perf_counter() - started, "cpu_seconds": time.process_time() - cpu}
     return {"record": record, "images": images}
+
+
+def tracking_scores(scene, duration_s: float, shot) -> dict:
+    """HOTA, MOTA, IDF1, ID switches, median latency and objects never found of the comparison's tracker
+    on this shot (:func:`viform.measure.vision_comparison.vision_scores`); {} without object truth.
+
+    Frame cameras' frames are turned into lux with the comparison's inverse response of the sensor at
+    its default pixel parameters (exposure and frame times are the shot's own).
+    """
+    kinds = scene.truth_kinds() if hasattr(scene, "truth_kinds") else ()
+    if "objects" not in kinds or shot.key == "gated":
+        return {}
+    from viform.measure.vision_comparison import vision_scores, vision_table
+
+    rows = [r for r in vision_table(vision_scores({"scene": scene, "duration_s": duration_s, "shots": [shot]}))
+            if "skipped" not in r]
+    if not rows:
+        return {}
+    r = rows[0]
+    lat = r["median_latency_ms"]
+    return {"tracking_hota": float(r["hota"]), "tracking_mota": float(r["mota"]), "tracking_idf1": float(r["idf1"]),
+            "tracking_id_switches": float(r["id_switches"]),
+            "tracking_latency_s": math.nan if lat is None else lat / 1e3,
+            "tracking_objects_missed": float(len(r["never_found"]))}
 
 
 # ---------------------------------------------------------------------- storage
@@ -919,7 +949,7 @@ class SweepPlan:
 def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, width: int = 128,
               duration_s: float = 0.04, seed: int = 0, instants_s=None, require: str | None = None,
               objective: str = DEFAULT_OBJECTIVE, spike_image: str = "best", scene_options: dict | None = None,
-              vary: dict | None = None) -> SweepPlan:
+              vary: dict | None = None, tracking: bool = False) -> SweepPlan:
     """Validate everything a sweep needs before any work (errors name the flag).
 
     With no ``sensors`` and no ``vary_texts``: the standard sweep (:func:`standard_vary`).
@@ -929,8 +959,11 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
     demands = parse_require(require)
     objective = check_objective(objective)
     context = SweepContext(scene, height, width, float(duration_s), tuple(float(t) for t in instants), seed,
-                           spike_image, tuple(sorted((scene_options or {}).items())))
+                           spike_image, tuple(sorted((scene_options or {}).items())), bool(tracking))
     scene_obj = context.make_scene()
+    if tracking and "objects" not in (scene_obj.truth_kinds() if hasattr(scene_obj, "truth_kinds") else ()):
+        raise ViformError(f"--tracking: scene {scene!r} has no object truth to score tracking against "
+                          "(the built-in scenes have)")
     if sensors is None and not vary_texts and vary is None:
         sensors, vary = standard_vary(scene_obj)
     sensors = list(dict.fromkeys(sensors or (list(vary) if vary else [])))

@@ -48,7 +48,10 @@ def parameter_label(name: str) -> str:
 
 
 #: Labels of the metrics a sweep adds to compare's.
-EXTRA_LABELS = {"targets_seen": f"targets seen (contrast-to-noise ≥ {sw.SEEN_CNR:g})"}
+EXTRA_LABELS = {"targets_seen": f"targets seen (contrast-to-noise ≥ {sw.SEEN_CNR:g})",
+                "tracking_hota": "tracking HOTA", "tracking_mota": "tracking MOTA", "tracking_idf1": "tracking IDF1",
+                "tracking_id_switches": "tracking ID switches", "tracking_latency_s": "tracking latency (s)",
+                "tracking_objects_missed": "objects never tracked"}
 
 
 def metric_label(key: str) -> str:
