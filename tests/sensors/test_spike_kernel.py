@@ -179,6 +179,74 @@ def test_same_bits_whatever_the_block_size(name):
     assert outcome(name, block_ticks=37) == GOLDEN[name]
 
 
+def _eager(sensor):
+    """The same sensor with the saturated-pixel shortcut disabled (every tick drawn as it comes)."""
+    eager = type(sensor)(sensor.parameters)
+    eager._saturation_bounds = lambda height, width: np.full(height * width, np.iinfo(np.int64).max)
+    return eager
+
+
+@pytest.mark.parametrize("scene", [
+    HDRScene(8, 64, 0.01, 7.0),
+    StepScene(StillScene(_texture(8, 40, 1e3, 1e5)), 0.003, 1e-4),  # saturated, then dim: the stretch ends
+    VideoScene(np.stack([_texture(8, 40, 1e3, 1e5, seed=s) for s in range(4)]), 8000.0, "hold"),
+])
+def test_saturated_pixels_skipped_then_settled_give_the_same_bits_and_state(scene):
+    """Pixels above the saturation bound are only counted (fire every tick) and their draws replayed
+    when the light changes or the state is read: the bits and the state equal drawing every tick."""
+    sensor = SpikeSensor()
+    lazy = np.concatenate([b for _, b in sensor.simulate(scene, 0.006, seed=2, block_ticks=70)])
+    reference = _eager(sensor)
+    eager = np.concatenate([b for _, b in reference.simulate(scene, 0.006, seed=2, block_ticks=70)])
+    assert np.array_equal(lazy, eager)
+    assert lazy.mean() > 0.2  # the scene does saturate
+    state, eager_state = (s.initial_state(scene.height, scene.width, 2) for s in (sensor, reference))
+    for s, st in ((sensor, state), (reference, eager_state)):
+        for _ in s.simulate(scene, 0.006, seed=2, block_ticks=70, state=st):
+            pass
+    for name in ("charge", "target", "counter"):
+        assert np.array_equal(getattr(state, name), getattr(eager_state, name))
+    assert not state.pending_ticks.any()
+
+
+def test_saturated_pixels_are_only_counted_in_the_kernel():
+    """On a still saturated scene the kernel draws nothing for pixels above the bound: it counts their ticks."""
+    from viform.sensors import spike as module
+
+    sensor = SpikeSensor()
+    scene = HDRScene(4, 64, 0.01, 7.0)
+    q, _, index, tables = sensor._pixel_tables(4, 64)
+    bounds = sensor._saturation_bounds(4, 64)
+    state = sensor.initial_state(4, 64, 1)
+    rates = sensor._fixed_point_rates(scene.illuminance_lux(0.0).reshape(1, -1), 4, 64)
+    words = np.empty((500, 4), dtype=np.uint64)
+    drawn_before = state.counter.copy()
+    module._run_block(words, rates, np.array([500], np.int64), 0, state.charge, state.target, state.counter,
+                      q, index, *tables, state.keys, True, False, 0.0, module.MODE_GENERAL, bounds,
+                      state.pending_ticks, state.pending_rate)
+    above = rates[0] >= bounds
+    assert above.sum() > 30 and (~above).sum() > 30
+    assert np.all(state.pending_ticks[above] == 500) and not state.pending_ticks[~above].any()
+    assert np.array_equal(state.counter[above], drawn_before[above])  # nothing drawn for them
+    assert np.all(state.counter[~above] >= drawn_before[~above])
+    bits = np.unpackbits(words.view(np.uint8), axis=1, count=256, bitorder="little").astype(bool)
+    assert bits[:, above].all()
+
+
+@pytest.mark.parametrize("shape", [(12, 40), (8, 27), (3, 8)])
+def test_packed_frames_are_the_dat_layout(shape):
+    """simulate_packed gives pack_frames of the bool stream, upright or flipped, for any width."""
+    from viform.stream.dat import pack_frames
+
+    sensor = SpikeSensor(threshold_electrons=20)
+    scene = TranslatingScene(*shape, (1500.0, 0.0))
+    spikes = sensor.capture(scene, 0.004, seed=5).spikes
+    for flip in (False, True):
+        packed = np.concatenate([b for _, b in sensor.simulate_packed(scene, 0.004, seed=5, block_ticks=53,
+                                                                      flip=flip)])
+        assert packed.tobytes() == pack_frames(spikes, flip)
+
+
 if __name__ == "__main__":
     names = sys.argv[1:] or sorted(CASES)
     for name in names:
