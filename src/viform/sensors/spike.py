@@ -370,7 +370,8 @@ class SpikeSensor(Sensor):
     def simulate(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
                  light_sample_ticks: int = 1, progress: bool = False,
                  state: SpikeSimulationState | None = None,
-                 reuse_buffer: bool = False, compiled_light: bool = True) -> Iterator[tuple[int, np.ndarray]]:
+                 reuse_buffer: bool = False, compiled_light: bool = True,
+                 device: str = "cpu") -> Iterator[tuple[int, np.ndarray]]:
         """Simulate tick by tick in time blocks; yields ``(first_tick, spikes)`` with bool (T, H, W).
 
         Memory is bounded by the block (default: about :data:`BLOCK_BYTES` of spike bits and
@@ -406,12 +407,16 @@ class SpikeSensor(Sensor):
             tick 0: a state already advanced is refused rather than restarted.
         compiled_light : bool
             Use the scene's compiled light when it has one (True); False forces the NumPy path.
+        device : {"cpu", "cuda", "auto"}
+            Where the kernels run: the CPU cores, a CUDA GPU through numba-cuda
+            (:mod:`viform.sensors.spike_cuda`: the same algorithm and draws), or a GPU when
+            numba-cuda finds one, else the CPU.
         """
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
         buffer = None
         for first, packed in self._packed_blocks(scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
-                                                 state, reuse_buffer, compiled_light):
+                                                 state, reuse_buffer, compiled_light, device=device):
             n = packed.shape[0]
             if reuse_buffer:
                 if buffer is None or buffer.shape[0] < n:
@@ -424,18 +429,19 @@ class SpikeSensor(Sensor):
 
     def simulate_packed(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
                         light_sample_ticks: int = 1, progress: bool = False, flip: bool = False,
-                        compiled_light: bool = True) -> Iterator[tuple[int, np.ndarray]]:
+                        compiled_light: bool = True, device: str = "cpu") -> Iterator[tuple[int, np.ndarray]]:
         """As :meth:`simulate`, but yields the spikes as they are produced: packed bits in the
         ``.dat`` layout, ``(first_tick, frames)`` with uint8 frames (T, H·W/8), pixel k = r·W + c
         in bit k mod 8 of byte k // 8; ``flip`` stores the rows bottom-up, as the cameras write.
-        Every block is a fresh array. Needs H·W to be a multiple of 8 (whole bytes per frame)."""
+        Every block is a fresh array. Needs H·W to be a multiple of 8 (whole bytes per frame).
+        ``device`` as in :meth:`simulate`."""
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
         if pixels % 8:
             raise ViformError(f"height × width = {height}×{width} is not a multiple of 8 pixels; packed frames "
                               "(.dat) hold whole bytes")
         for first, packed in self._packed_blocks(scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
-                                                 None, True, compiled_light, packed_only=True):
+                                                 None, True, compiled_light, packed_only=True, device=device):
             frames = packed[:, : pixels // 8]
             if flip:
                 if width % 8 == 0:
@@ -446,8 +452,18 @@ class SpikeSensor(Sensor):
             yield first, np.ascontiguousarray(frames)
 
     def _packed_blocks(self, scene, duration_s, seed, block_ticks, light_sample_ticks, progress, state,
-                       reuse_buffer, compiled_light, packed_only=False):
+                       reuse_buffer, compiled_light, packed_only=False, device="cpu"):
         """(first tick, packed bits uint8 (T, 8·⌈H·W/64⌉)) per block: the kernels' own output."""
+        from viform.sensors.spike_cuda import packed_blocks_cuda, resolve_device
+
+        if resolve_device(device) == "cuda":
+            if block_ticks is None:
+                block_ticks = self.default_block_ticks(scene, light_sample_ticks,
+                                                       scene.compiled_light() if compiled_light else None,
+                                                       packed=packed_only)
+            yield from packed_blocks_cuda(self, scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
+                                          state, compiled_light)
+            return
         check_positive("duration_s", duration_s)
         p = self.parameters
         n_ticks = max(1, int(round(duration_s * p.clock_hz)))
@@ -551,25 +567,38 @@ class SpikeSensor(Sensor):
         return max(1, int(budget // per_tick))
 
     def capture(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
-                light_sample_ticks: int = 1, progress: bool = False) -> SpikeStream:
-        """Simulate into memory and return the :class:`SpikeStream`."""
+                light_sample_ticks: int = 1, progress: bool = False, device: str = "cpu") -> SpikeStream:
+        """Simulate into memory and return the :class:`SpikeStream` (``device`` as in :meth:`simulate`)."""
+        from viform.sensors.spike_cuda import resolve_device
+
+        device = resolve_device(device)
         blocks = [b for _, b in self.simulate(scene, duration_s, seed=seed, block_ticks=block_ticks,
-                                              light_sample_ticks=light_sample_ticks, progress=progress)]
+                                              light_sample_ticks=light_sample_ticks, progress=progress,
+                                              device=device)]
         return SpikeStream(np.concatenate(blocks), self.parameters.clock_hz, self.parameters.threshold_electrons,
-                           0.0, self.capture_metadata(scene, seed, light_sample_ticks))
+                           0.0, self.capture_metadata(scene, seed, light_sample_ticks, device))
 
     def stream(self, scene: Scene, duration_s: float, *, seed: int = 0, light_sample_ticks: int = 1,
-               progress: bool = False, reuse_buffer: bool = False) -> SimulatedSpikes:
+               progress: bool = False, reuse_buffer: bool = False, device: str = "cpu") -> SimulatedSpikes:
         """A lazy :class:`SpikeSource` that simulates as it is read (bounded memory).
 
         With ``reuse_buffer`` the blocks of ``iter_blocks`` share one buffer (see
-        :meth:`simulate`): for writers that consume each block at once.
+        :meth:`simulate`): for writers that consume each block at once. ``device`` as in
+        :meth:`simulate` ("auto" is resolved here, once).
         """
-        return SimulatedSpikes(self, scene, duration_s, seed, light_sample_ticks, progress, reuse_buffer)
+        return SimulatedSpikes(self, scene, duration_s, seed, light_sample_ticks, progress, reuse_buffer, device)
 
-    def capture_metadata(self, scene: Scene, seed: int, light_sample_ticks: int) -> dict:
-        return {"sensor": self.describe(), "scene": scene.describe(), "seed": seed,
+    def capture_metadata(self, scene: Scene, seed: int, light_sample_ticks: int, device: str = "cpu") -> dict:
+        """Provenance of a simulated stream; ``device`` ("cpu" or "cuda") names the machine that ran it."""
+        meta = {"sensor": self.describe(), "scene": scene.describe(), "seed": seed,
                 "light_sample_ticks": light_sample_ticks}
+        if device == "cuda":
+            from viform.sensors.spike_cuda import device_description
+
+            meta["device"] = f"cuda: {device_description()}"
+        else:
+            meta["device"] = "cpu"
+        return meta
 
     def describe(self) -> dict:
         d = self.parameters.to_dict()
@@ -587,7 +616,11 @@ class SimulatedSpikes(SpikeSource):
     """
 
     def __init__(self, sensor: SpikeSensor, scene: Scene, duration_s: float, seed: int,
-                 light_sample_ticks: int = 1, progress: bool = False, reuse_buffer: bool = False):
+                 light_sample_ticks: int = 1, progress: bool = False, reuse_buffer: bool = False,
+                 device: str = "cpu"):
+        from viform.sensors.spike_cuda import resolve_device
+
+        self.device = resolve_device(device)
         p = sensor.parameters
         self.sensor, self.scene, self.seed = sensor, scene, seed
         self.light_sample_ticks, self.progress = light_sample_ticks, progress
@@ -597,7 +630,7 @@ class SimulatedSpikes(SpikeSource):
         self.clock_hz = p.clock_hz
         self.threshold_electrons = p.threshold_electrons
         self.start_time_s = 0.0
-        self.metadata = sensor.capture_metadata(scene, seed, light_sample_ticks)
+        self.metadata = sensor.capture_metadata(scene, seed, light_sample_ticks, self.device)
 
     def iter_blocks(self, block_ticks: int = 1024, start: int = 0, stop: int | None = None,
                     reuse_buffer: bool | None = None):
@@ -609,7 +642,7 @@ class SimulatedSpikes(SpikeSource):
                                                           self.scene.compiled_light()))
         sim = self.sensor.simulate(self.scene, self.n_ticks / self.clock_hz, seed=self.seed,
                                    block_ticks=block_ticks, light_sample_ticks=self.light_sample_ticks,
-                                   progress=self.progress, reuse_buffer=reuse)
+                                   progress=self.progress, reuse_buffer=reuse, device=self.device)
         for first, block in sim:
             if first + block.shape[0] <= start:
                 continue
@@ -627,7 +660,7 @@ class SimulatedSpikes(SpikeSource):
                                                           self.scene.compiled_light(), packed=True))
         yield from self.sensor.simulate_packed(self.scene, self.n_ticks / self.clock_hz, seed=self.seed,
                                                block_ticks=block_ticks, light_sample_ticks=self.light_sample_ticks,
-                                               progress=self.progress, flip=flip)
+                                               progress=self.progress, flip=flip, device=self.device)
 
     def read_ticks(self, start: int, stop: int) -> np.ndarray:
         parts = [b for _, b in self.iter_blocks(max(1, stop - start), start, stop, reuse_buffer=False)]
