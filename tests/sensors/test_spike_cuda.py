@@ -125,3 +125,18 @@ def test_cuda_without_a_gpu_is_one_clear_error():
     run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout.strip() == "--device = 'cuda': numba-cuda finds no CUDA GPU on this machine (use cpu or auto)"
+
+
+def test_cli_device_cuda_without_a_gpu_exits_2_with_one_line(tmp_path, capsys):
+    from viform.cli import main
+    from viform.sensors.spike_cuda import cuda_available
+
+    if cuda_available():
+        pytest.skip("this machine has a CUDA GPU")
+    out = tmp_path / "x.dat"
+    code = main(["simulate", "hdr", "--duration", "0.001", "--height", "8", "--width", "8", "--out", str(out),
+                 "--device", "cuda"])
+    assert code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "--device = 'cuda'" in lines[0] and "no CUDA GPU" in lines[0]
+    assert not any(tmp_path.iterdir())

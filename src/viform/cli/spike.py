@@ -135,11 +135,14 @@ def _apply(options):
               help="Light between video frames.")
 @click.option("--light-sample-ticks", type=int, default=1, show_default=True,
               help="Evaluate the scene every N ticks (held in between).")
+@click.option("--device", type=click.Choice(["cpu", "cuda", "auto"]), default="cpu", show_default=True,
+              help="Where the simulation runs: CPU cores, a CUDA GPU (pip install \"viform[cuda]\"; the same "
+                   "bits for the same seed), or a GPU when one is found.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 @_apply(sensor_options)
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
-             light_sample_ticks, as_json, json_file, **sensor_kw):
+             light_sample_ticks, device, as_json, json_file, **sensor_kw):
     """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the spike stream.
 
     Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
@@ -147,10 +150,12 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     """
     from viform._io import check_json_file, check_output_folder, write_json
     from viform.light.scenes import VideoScene, load_scene
+    from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS, save_spikes
 
     if Path(out_path).suffix.lower() not in FORMATS:
         raise ViformError(f"--out = {out_path!r}: the suffix must be one of {', '.join(FORMATS)}")
+    device = resolve_device(device, "--device")
     check_output_folder("--out", Path(out_path).resolve().parent)
     check_json_file(json_file)
     if not max_lux > 0:
@@ -171,7 +176,7 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
     reuse = Path(out_path).suffix.lower() in (".dat", ".zarr")
     stream = sensor.stream(light, duration_s, seed=seed, light_sample_ticks=light_sample_ticks, progress=True,
-                           reuse_buffer=reuse)
+                           reuse_buffer=reuse, device=device)
     if preset is not None:
         stream.metadata["preset"] = preset.name
     started = time.perf_counter()
@@ -185,7 +190,8 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
                "threshold_electrons": stream.threshold_electrons, "seed": seed,
                "preset": None if preset is None else preset.name,
                "gain_spread_fraction": p.gain_spread_fraction, "dead_time_s": p.dead_time_s,
-               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed}
+               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed,
+               "device": stream.metadata["device"]}
     if json_file:
         write_json(json_file, summary)
     if as_json:
@@ -195,7 +201,7 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
             ("size", f"{stream.height} × {stream.width} pixels"), ("clock", f"{stream.clock_hz:,.0f} Hz"),
             ("threshold Q", f"{stream.threshold_electrons:.4g} e-"),
             ("preset", "none" if preset is None else preset.name),
-            ("speed", f"{pixel_ticks / elapsed:.3g} pixel-ticks/s")]
+            ("speed", f"{pixel_ticks / elapsed:.3g} pixel-ticks/s"), ("device", stream.metadata["device"])]
     width_ = max(len(k) for k, _ in rows)
     for k, v in rows:
         click.echo(f"{k:<{width_}}  {v}")
