@@ -984,9 +984,22 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
         e = np.zeros(size, dtype=np.int64)
         lazy_from = np.full(size, -1, dtype=np.int64)  # tick of the block where a lane's lazy run began
         lazy_mask = np.zeros(nw, dtype=np.uint64)
+        # per lane, what a spike's common case reads (kept beside the lane state, in L1): the charge
+        # past a crossing below which _fire draws crossing by crossing, and the draw's arguments
+        one_by_one = np.zeros(size, dtype=np.int64)
+        shape = np.ones(size)
+        table = np.zeros(size, dtype=np.int64)
+        key = np.zeros(size, dtype=np.uint64)
+        drawn = np.zeros(size, dtype=np.int64)
         for j in range(n):
-            c[j] = charge[p0 + j]
-            t[j] = target[p0 + j]
+            p = p0 + j
+            c[j] = charge[p]
+            t[j] = target[p]
+            one_by_one[j] = min(_fixed_charge(_JUMP_INTERVALS * q[p]), _fixed_charge(8.0 * q[p] * q[p]))
+            shape[j] = q[p]
+            table[j] = index[p]
+            key[j] = keys[p]
+        fast = lazy_ok  # photon noise, self-reset, no dead time: the common case inlined below
         s = 0
         while seg_end[s] <= first_tick:
             s += 1
@@ -1005,6 +1018,9 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                     r = rates[s, p]
                     lazy = r >= lazy_bound[p]
                     bit = np.uint64(1) << np.uint64(j & 63)
+                    if drawn[j]:  # the lane's draws so far, into the pixel's counter
+                        counter[p] += drawn[j]
+                        drawn[j] = 0
                     if pending_ticks[p] > 0 and (not lazy or pending_rate[p] != r):
                         # the saturated stretch ends (or its light changes): its draws first
                         _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
@@ -1041,8 +1057,24 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                         while todo != 0:
                             i = base + np.int64(trailing_zeros(todo))
                             todo &= todo - np.uint64(1)
-                            c[i], t[i] = _fire(c[i], t[i], e[i], dead_ticks, p0 + i, q, index, bins, keys, noise,
-                                               reset_readout, counter)
+                            ci = c[i]
+                            ti = t[i]
+                            if fast and ci - ti < one_by_one[i]:
+                                # _fire's common case, from the lane's copies: one Gamma target per crossing
+                                # (the k-th draw of the pixel's stream: counter + drawn), later ones lost
+                                while ci >= ti:
+                                    ci -= ti
+                                    x = gamma_draw(shape[i], table[i], bins, key[i], counter[p0 + i] + drawn[i])
+                                    drawn[i] += 1
+                                    ti = max(np.int64(1), np.int64(x * 4294967296.0 + 0.5))
+                                c[i] = ci
+                                t[i] = ti
+                            else:
+                                if drawn[i]:
+                                    counter[p0 + i] += drawn[i]
+                                    drawn[i] = 0
+                                c[i], t[i] = _fire(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins, keys, noise,
+                                                   reset_readout, counter)
                     words[kk, w0 + w] = word
             if lazy_ok:
                 for j in range(n):
@@ -1052,6 +1084,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
             k = end
             s += 1
         for j in range(n):
+            counter[p0 + j] += drawn[j]
             if not lazy_mask[j >> 6] & (np.uint64(1) << np.uint64(j & 63)):
                 charge[p0 + j] = c[j]
                 target[p0 + j] = t[j]
