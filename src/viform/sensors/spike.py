@@ -31,7 +31,21 @@ within e^-64, so the pixel leaves the tick in the stationary state above, drawn 
 
 Reproducibility: the k-th interval of pixel p is drawn by a counter-based generator from
 (seed, p, k) (:mod:`viform.sensors._gamma`), and the light of each tick is computed from
-absolute tick indices, so the same seed gives the same bits whatever the block size.
+absolute tick indices, so the same seed gives the same bits whatever the block size, the
+number of threads and the device (:mod:`viform.sensors.spike_cuda` runs the same functions
+on a CUDA GPU).
+
+Kernels (issue 30): pixels sit in lanes of 64, one uint64 of spike bits per tick — the
+``.dat`` bit order, so the kernels write the file's bytes as the pixels fire
+(:meth:`SpikeSensor.simulate_packed`; :meth:`SpikeSensor.simulate` unpacks them to bool). The
+tick loop runs inside each work item (a tile of pixels, or a band of rows when the light is
+computed per tick), the lane loop compiles to SIMD add/compare/mask code (see the notes
+above :func:`_lanes_add_compare`), and only the lanes that fired take the scalar path with
+its Gamma draw. A self-reset pixel with photon noise whose charge per tick exceeds every gap a
+draw can leave (:func:`saturation_bound_fixed`) fires in every tick whatever its state: in
+constant light the kernel only counts those ticks and replays their draws when the light
+changes or the caller reads the state, so saturated light costs no more than dim light, with
+the same bits and state.
 """
 
 from __future__ import annotations
