@@ -179,6 +179,18 @@ def test_same_bits_whatever_the_block_size(name):
     assert outcome(name, block_ticks=37) == GOLDEN[name]
 
 
+@pytest.mark.parametrize("name", ["hdr-q100", "translating", "still-noise-free"])
+def test_same_bits_on_one_thread(name):
+    from numba import get_num_threads, set_num_threads
+
+    before = get_num_threads()
+    try:
+        set_num_threads(1)
+        assert outcome(name, block_ticks=101) == GOLDEN[name]
+    finally:
+        set_num_threads(before)
+
+
 def _eager(sensor):
     """The same sensor with the saturated-pixel shortcut disabled (every tick drawn as it comes)."""
     eager = type(sensor)(sensor.parameters)
