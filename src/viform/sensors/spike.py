@@ -1054,9 +1054,9 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                         if lazy_mask[j >> 6] & bit:  # left laziness above: its state is back
                             lazy_mask[j >> 6] &= ~bit
                         e[j] = r
-            for kk in range(k, end):
-                for w in range(nw):
-                    base = w * _LANES
+            for w in range(nw):  # a word's 64 lanes through the run's ticks, then the next word
+                base = w * _LANES
+                for kk in range(k, end):
                     if mode == MODE_NOISE_FREE_SELF:
                         word, over = _lanes_noise_free_self(c, e, t, base)
                         if over:  # crossings lost inside the tick: the charge modulo the target
