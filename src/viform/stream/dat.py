@@ -269,6 +269,9 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
 
     path = Path(path)
     _frame_bytes(source.height, source.width)
+    # a simulator hands its packed bits as they are produced (bounded by its own budget)
+    packed_blocks = getattr(source, "iter_packed_blocks", None)
+    blocks = packed_blocks(block_ticks, flip) if packed_blocks is not None else None
     block_ticks = block_ticks_for(source.height, source.width, block_ticks)
     digest = hashlib.blake2b(digest_size=16)
     blocks = BlockCrcs(block_bytes_for(source.n_ticks * (source.height * source.width // 8)))
@@ -282,8 +285,10 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     body = old_side = None
     try:
         with atomic_open(path, "wb") as f:
-            for _, block in source.iter_blocks(block_ticks):
-                raw = pack_frames(block, flip)
+            if blocks is None:
+                blocks = ((first, pack_frames(block, flip)) for first, block in source.iter_blocks(block_ticks))
+            for _, raw in blocks:
+                raw = memoryview(raw).cast("B") if not isinstance(raw, bytes) else raw
                 digest.update(raw)
                 blocks.update(raw)
                 size += len(raw)
