@@ -156,13 +156,23 @@ def _state_for(sensor, scene, twin_state: bool, seed: int):
 
 def outcome(name: str, block_ticks: int | None = None, seed: int = 11) -> str:
     """Hash of the spikes and of the final state of one case."""
+    import contextlib
+    from unittest import mock
+
+    import viform.sensors.spike as spike_module
+
     make_sensor, make_scene, n_ticks, options, twin = CASES[name]
     sensor, scene = make_sensor(), make_scene()
     state = _state_for(sensor, scene, twin, seed)
     digest = hashlib.blake2b(digest_size=12)
-    for _, block in sensor.simulate(scene, n_ticks / sensor.parameters.clock_hz, seed=seed, state=state,
-                                    block_ticks=block_ticks, **options):
-        digest.update(np.packbits(block.reshape(block.shape[0], -1), axis=1).tobytes())
+    # dead-time cases: the kernel alone, from the twin's state (the stationary start with dead time,
+    # issue 29, is tested in test_spike.py)
+    keep = mock.patch.object(spike_module, "_dead_time_stationary_state", lambda *args: None) if twin else \
+        contextlib.nullcontext()
+    with keep:
+        for _, block in sensor.simulate(scene, n_ticks / sensor.parameters.clock_hz, seed=seed, state=state,
+                                        block_ticks=block_ticks, **options):
+            digest.update(np.packbits(block.reshape(block.shape[0], -1), axis=1).tobytes())
     for array in (state.charge, state.target, state.counter):
         digest.update(np.ascontiguousarray(array, dtype=np.int64).tobytes())
     return digest.hexdigest()
