@@ -39,10 +39,12 @@ Both return MOTChallenge-style rows (:mod:`viform.vision.motchallenge`).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit, prange
+from scipy.ndimage import median_filter
 from scipy.optimize import linear_sum_assignment
 
 from viform._validate import ViformError, check_int, check_non_negative, check_positive
@@ -76,6 +78,13 @@ class TrackerParameters:
         A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
         not reported: it is where an object stood when the tracker started (background
         subtraction's "ghost"), or an object that stopped (absorbed into the background anyway).
+    seed_ticks, seed_window_px : int
+        Objects already in view when tracking starts: after ``seed_ticks`` ticks (0: never),
+        a pixel whose learned light differs (beyond ``threshold_log``) from the robust background
+        around it — the median over ``seed_window_px`` px, wider than any object, on the
+        assumption that the background is smoother than the objects on it — takes that median
+        as its background, so the object is foreground at once and the place it leaves is not a
+        ghost (:func:`seed_background`). Frames apply it to their first frame.
     """
 
     threshold_log: float = 0.4
@@ -88,6 +97,8 @@ class TrackerParameters:
     gate_px: float = 8.0
     min_speed_px_per_s: float = 50.0
     still_ticks: int = 400
+    seed_ticks: int = 40
+    seed_window_px: int = 96
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -100,6 +111,8 @@ class TrackerParameters:
         check_positive("gate_px", self.gate_px)
         check_non_negative("min_speed_px_per_s", self.min_speed_px_per_s)
         check_int("still_ticks", self.still_ticks, 1)
+        check_int("seed_ticks", self.seed_ticks, 0)
+        check_int("seed_window_px", self.seed_window_px, 1)
 
 
 # --------------------------------------------------------------------------- spike front end
@@ -207,7 +220,11 @@ class SpikeChangeDetector:
     def feed(self, spikes: np.ndarray) -> np.ndarray:
         """Process the next ``spikes`` block (T, H, W) bool; returns (steps completed, H, W) bool masks."""
         spikes = np.ascontiguousarray(spikes, dtype=np.bool_)
+        seed = self.parameters.seed_ticks
         first = self.next_tick
+        if 0 < seed and first < seed < first + spikes.shape[0]:  # seed at the same tick whatever the blocks
+            head = self.feed(spikes[:seed - first])
+            return np.concatenate([head, self.feed(spikes[seed - first:])])
         n_out = (first + spikes.shape[0]) // self.step_ticks - first // self.step_ticks
         out = np.zeros((n_out,) + self.ref.shape, np.bool_)
         p = self.parameters
@@ -215,6 +232,14 @@ class SpikeChangeDetector:
                             self.flag_since, self.pending, out, math.exp(-p.threshold_log),
                             math.exp(p.threshold_log), p.background_ticks, p.hold_ticks)
         self.next_tick += spikes.shape[0]
+        if seed > 0 and self.next_tick == seed:
+            measured = ~self.censored & (self.last1 >= 0)
+            # intervals are inverse light: the same test on ln τ
+            log_ref = np.log(np.where(measured, self.ref, 1.0))
+            seeded = seed_background(log_ref, measured, p.threshold_log, p.seed_window_px)
+            self.ref[seeded] = np.exp(_robust_background(log_ref, measured, p.seed_window_px))[seeded]
+            self.prev[seeded] = 0.0
+            self.flag_since[seeded] = -1
         return out
 
 
@@ -242,6 +267,11 @@ class FrameChangeDetector:
         cur = np.log(np.maximum(np.asarray(frame, dtype=np.float64), self.floor))
         if self.ref is None:
             self.ref, self.flag_since, self.last_t = cur.copy(), np.full(cur.shape, np.nan), t_s
+            p = self.parameters
+            if p.seed_ticks > 0:  # objects in the first frame: the background around them, as for spikes
+                valid = np.ones(cur.shape, bool)
+                seeded = seed_background(cur, valid, p.threshold_log, p.seed_window_px)
+                self.ref[seeded] = _robust_background(cur, valid, p.seed_window_px)[seeded]
             return np.zeros(cur.shape, bool)
         d = cur - self.ref
         flagged = np.abs(d) > self.parameters.threshold_log
@@ -252,6 +282,56 @@ class FrameChangeDetector:
         self.ref[update] += gain * d[update]
         self.last_t = t_s
         return flagged
+
+
+# --------------------------------------------------------------------------- start-up background
+
+_SEED_BLOCK_PX = 4  # the robust background is computed on blocks of 4×4 px (the background is smooth)
+
+
+def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int) -> np.ndarray:
+    """Median of ``log_light`` over valid pixels in a ``window_px`` square around each pixel (blocks of 4 px)."""
+    H, W = log_light.shape
+    b = _SEED_BLOCK_PX
+    hb, wb = -(-H // b), -(-W // b)
+    pad = np.full((hb * b, wb * b), np.nan)
+    pad[:H, :W] = np.where(valid, log_light, np.nan)
+    blocks = pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks: filled below
+        med = np.nanmedian(blocks, axis=2)
+    fill = np.nanmedian(med) if np.isfinite(med).any() else 0.0
+    med = np.where(np.isfinite(med), med, fill)
+    size = max(1, window_px // b) | 1  # odd, in blocks
+    smooth = median_filter(med, size=size, mode="nearest")
+    return np.repeat(np.repeat(smooth, b, axis=0), b, axis=1)[:H, :W]
+
+
+def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int) -> np.ndarray:
+    """Pixels whose light stands out from the robust background around them: objects in view at the start.
+
+    A change detector that learns its background from the first light it sees learns the objects
+    already in view as background: they stay invisible until they move off and leave a "ghost"
+    where they stood. Assuming the background is smoother than the objects on it (it varies over
+    more than ``window_px`` px, and objects are smaller than half the window), its level at each
+    pixel is the median of ln(light) over the window, and a pixel more than ``threshold_log``
+    away from it is on an object.
+
+    Parameters
+    ----------
+    log_light : ndarray (H, W)
+        ln of the light (or of the spike interval, its inverse: the test is symmetric).
+    valid : ndarray (H, W) bool
+        Pixels with a measurement (spike pixels that have no interval yet are left out).
+    threshold_log : float
+    window_px : int
+
+    Returns
+    -------
+    ndarray (H, W) bool
+    """
+    background = _robust_background(log_light, valid, check_int("window_px", window_px, 1))
+    return valid & (np.abs(log_light - background) > threshold_log)
 
 
 # --------------------------------------------------------------------------- grouping
