@@ -97,7 +97,7 @@ class TrackerParameters:
     gate_px: float = 8.0
     min_speed_px_per_s: float = 50.0
     still_ticks: int = 400
-    seed_ticks: int = 40
+    seed_ticks: int = 20
     seed_window_px: int = 96
 
     def __post_init__(self):
