@@ -117,16 +117,19 @@ class TrackerParameters:
 
 # --------------------------------------------------------------------------- spike front end
 
+#: Two intervals spanning fewer ticks than this are averaged over four instead (bright pixels).
+_SHORT_SPAN_TICKS = 8
+
 @njit(parallel=True, cache=True)
-def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev, censored, flag_since, pending,
-                        out, k_lo, k_hi, background_ticks, hold_ticks):  # pragma: no cover - compiled
+def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, last3, last4, ref, prev, censored,
+                        flag_since, pending, out, k_lo, k_hi, background_ticks, hold_ticks):  # pragma: no cover
     # Intervals in ticks, compared by ratio (k_lo = e^−threshold, k_hi = e^threshold): no logarithm
     # per spike. The background interval follows an exponential mean with weight τ/(T + τ) per
     # interval τ (time constant T ticks).
     T, H, W = spikes.shape
     for r in prange(H):
         step = 0
-        l1, l2, rf, pv = last1[r], last2[r], ref[r], prev[r]
+        l1, l2, l3, l4, rf, pv = last1[r], last2[r], last3[r], last4[r], ref[r], prev[r]
         cs, fs, pd = censored[r], flag_since[r], pending[r]
         for t in range(T):
             tick = first_tick + t
@@ -141,8 +144,15 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                     l1[c] = tick
                     continue
                 p2 = l2[c]
-                n = 2.0 if p2 >= 0 else 1.0
-                span = float(tick - p2) if p2 >= 0 else float(tick - p1)
+                p4 = l4[c]
+                if p4 >= 0 and tick - p2 < _SHORT_SPAN_TICKS:
+                    # intervals of a few ticks: the one-tick quantization dominates, so average four of
+                    # them (a saturated object spiking every tick is told from a background every 2 ticks)
+                    n = 4.0
+                    span = float(tick - p4)
+                else:
+                    n = 2.0 if p2 >= 0 else 1.0
+                    span = float(tick - p2) if p2 >= 0 else float(tick - p1)
                 tau = span / n
                 b = rf[c]
                 # the readout knows each spike to a tick: the span of n intervals is (span − 1, span + 1)
@@ -155,6 +165,8 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                         rf[c] = tau
                         cs[c] = False
                         fs[c] = -1
+                        l4[c] = l3[c]
+                        l3[c] = p2
                         l2[c] = p1
                         l1[c] = tick
                         continue
@@ -179,6 +191,8 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                 else:
                     fs[c] = -1
                     rf[c] = b + tau / (background_ticks + tau) * (tau - b)
+                l4[c] = l3[c]
+                l3[c] = p2
                 l2[c] = p1
                 l1[c] = tick
             if (tick + 1) % step_ticks == 0:  # end of an output step: darker pixels, then emit
@@ -210,6 +224,8 @@ class SpikeChangeDetector:
         shape = (check_int("height", height, 1), check_int("width", width, 1))
         self.last1 = np.full(shape, -1, np.int64)
         self.last2 = np.full(shape, -1, np.int64)
+        self.last3 = np.full(shape, -1, np.int64)
+        self.last4 = np.full(shape, -1, np.int64)
         self.ref = np.zeros(shape, np.float64)  # background interval, ticks
         self.prev = np.zeros(shape, np.float64)  # the background before the last absorption (0: none)
         self.censored = np.zeros(shape, np.bool_)
@@ -228,7 +244,8 @@ class SpikeChangeDetector:
         n_out = (first + spikes.shape[0]) // self.step_ticks - first // self.step_ticks
         out = np.zeros((n_out,) + self.ref.shape, np.bool_)
         p = self.parameters
-        _spike_change_block(spikes, first, self.step_ticks, self.last1, self.last2, self.ref, self.prev, self.censored,
+        _spike_change_block(spikes, first, self.step_ticks, self.last1, self.last2, self.last3, self.last4, self.ref,
+                            self.prev, self.censored,
                             self.flag_since, self.pending, out, math.exp(-p.threshold_log),
                             math.exp(p.threshold_log), p.background_ticks, p.hold_ticks)
         self.next_tick += spikes.shape[0]
