@@ -78,9 +78,9 @@ class TrackerParameters:
         A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
         not reported: it is where an object stood when the tracker started (background
         subtraction's "ghost"), or an object that stopped (absorbed into the background anyway).
-    seed_ticks, seed_window_px : int
+    seed_ticks, seed_window_px, seed_threshold_log : int, int, float
         Objects already in view when tracking starts: after ``seed_ticks`` ticks (0: never),
-        a pixel whose learned light differs (beyond ``threshold_log``) from the robust background
+        a pixel whose learned light differs (|ln ratio| > ``seed_threshold_log``) from the robust background
         around it — the median over ``seed_window_px`` px, wider than any object, on the
         assumption that the background is smoother than the objects on it — takes that median
         as its background, so the object is foreground at once and the place it leaves is not a
@@ -99,6 +99,7 @@ class TrackerParameters:
     still_ticks: int = 400
     seed_ticks: int = 20
     seed_window_px: int = 96
+    seed_threshold_log: float = 0.7
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -113,6 +114,7 @@ class TrackerParameters:
         check_int("still_ticks", self.still_ticks, 1)
         check_int("seed_ticks", self.seed_ticks, 0)
         check_int("seed_window_px", self.seed_window_px, 1)
+        check_positive("seed_threshold_log", self.seed_threshold_log)
 
 
 # --------------------------------------------------------------------------- spike front end
@@ -253,7 +255,7 @@ class SpikeChangeDetector:
             measured = ~self.censored & (self.last1 >= 0)
             # intervals are inverse light: the same test on ln τ
             log_ref = np.log(np.where(measured, self.ref, 1.0))
-            seeded = seed_background(log_ref, measured, p.threshold_log, p.seed_window_px)
+            seeded = seed_background(log_ref, measured, p.seed_threshold_log, p.seed_window_px)
             self.ref[seeded] = np.exp(_robust_background(log_ref, measured, p.seed_window_px))[seeded]
             self.prev[seeded] = 0.0
             self.flag_since[seeded] = -1
@@ -287,7 +289,7 @@ class FrameChangeDetector:
             p = self.parameters
             if p.seed_ticks > 0:  # objects in the first frame: the background around them, as for spikes
                 valid = np.ones(cur.shape, bool)
-                seeded = seed_background(cur, valid, p.threshold_log, p.seed_window_px)
+                seeded = seed_background(cur, valid, p.seed_threshold_log, p.seed_window_px)
                 self.ref[seeded] = _robust_background(cur, valid, p.seed_window_px)[seeded]
             return np.zeros(cur.shape, bool)
         d = cur - self.ref
