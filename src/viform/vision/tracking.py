@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit, prange
-from scipy.ndimage import median_filter
+from scipy.ndimage import binary_dilation, gaussian_filter, median_filter
 from scipy.optimize import linear_sum_assignment
 
 from viform._validate import ViformError, check_int, check_non_negative, check_positive
@@ -78,13 +78,15 @@ class TrackerParameters:
         A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
         not reported: it is where an object stood when the tracker started (background
         subtraction's "ghost"), or an object that stopped (absorbed into the background anyway).
-    seed_ticks, seed_window_px, seed_threshold_log : int, int, float
+    seed_ticks, seed_window_px, seed_threshold_log, seed_unsure : int, int, float, bool
         Objects already in view when tracking starts: after ``seed_ticks`` ticks (0: never),
-        a pixel whose learned light differs (|ln ratio| > ``seed_threshold_log``) from the robust background
-        around it — the median over ``seed_window_px`` px, wider than any object, on the
-        assumption that the background is smoother than the objects on it — takes that median
-        as its background, so the object is foreground at once and the place it leaves is not a
-        ghost (:func:`seed_background`). Frames apply it to their first frame.
+        a pixel whose learned light differs (|ln ratio| > ``seed_threshold_log``) from the median
+        over ``seed_window_px`` px around it (wider than any object, on the assumption that the
+        background is smoother than the objects on it) takes the background interpolated from
+        the pixels around it, so the object is foreground at once and the place it leaves is not
+        a ghost (:func:`seed_background`); with ``seed_unsure``, pixels that differ from that
+        background by more than ``threshold_log`` only may return to it without being flagged.
+        Frames apply it to their first frame.
     """
 
     threshold_log: float = 0.4
@@ -100,6 +102,7 @@ class TrackerParameters:
     seed_ticks: int = 20
     seed_window_px: int = 96
     seed_threshold_log: float = 0.7
+    seed_unsure: bool = True
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -255,10 +258,13 @@ class SpikeChangeDetector:
             measured = ~self.censored & (self.last1 >= 0)
             # intervals are inverse light: the same test on ln τ
             log_ref = np.log(np.where(measured, self.ref, 1.0))
-            seeded = seed_background(log_ref, measured, p.seed_threshold_log, p.seed_window_px)
-            self.ref[seeded] = np.exp(_robust_background(log_ref, measured, p.seed_window_px))[seeded]
+            seeded, unsure, around = seed_background(log_ref, measured, p.seed_threshold_log, p.seed_window_px,
+                                                     p.threshold_log)
+            self.ref[seeded] = np.exp(around)[seeded]
             self.prev[seeded] = 0.0
             self.flag_since[seeded] = -1
+            if p.seed_unsure:
+                self.prev[unsure] = np.exp(around)[unsure]
         return out
 
 
@@ -288,9 +294,9 @@ class FrameChangeDetector:
             self.ref, self.flag_since, self.last_t = cur.copy(), np.full(cur.shape, np.nan), t_s
             p = self.parameters
             if p.seed_ticks > 0:  # objects in the first frame: the background around them, as for spikes
-                valid = np.ones(cur.shape, bool)
-                seeded = seed_background(cur, valid, p.seed_threshold_log, p.seed_window_px)
-                self.ref[seeded] = _robust_background(cur, valid, p.seed_window_px)[seeded]
+                seeded, _, around = seed_background(cur, np.ones(cur.shape, bool), p.seed_threshold_log,
+                                                    p.seed_window_px, p.threshold_log)
+                self.ref[seeded] = around[seeded]
             return np.zeros(cur.shape, bool)
         d = cur - self.ref
         flagged = np.abs(d) > self.parameters.threshold_log
@@ -326,15 +332,18 @@ def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int)
     return np.repeat(np.repeat(smooth, b, axis=0), b, axis=1)[:H, :W]
 
 
-def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int) -> np.ndarray:
-    """Pixels whose light stands out from the robust background around them: objects in view at the start.
+def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int,
+                    unsure_log: float | None = None):
+    """Objects in view at the start: pixels that stand out from the background around them, and that background.
 
     A change detector that learns its background from the first light it sees learns the objects
     already in view as background: they stay invisible until they move off and leave a "ghost"
-    where they stood. Assuming the background is smoother than the objects on it (it varies over
-    more than ``window_px`` px, and objects are smaller than half the window), its level at each
-    pixel is the median of ln(light) over the window, and a pixel more than ``threshold_log``
-    away from it is on an object.
+    where they stood. Assuming the background is smoother than the objects on it, a pixel more
+    than ``threshold_log`` from the median of ln(light) over ``window_px`` px (wider than twice
+    any object) is on an object (*seeded*). The background under and near it is then
+    interpolated from the pixels around that are not seeded (normalised Gaussian smoothing,
+    σ = ``window_px``/8: the local background, not the window's median), which is what the
+    pixel shows once the object has moved off.
 
     Parameters
     ----------
@@ -342,15 +351,29 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
         ln of the light (or of the spike interval, its inverse: the test is symmetric).
     valid : ndarray (H, W) bool
         Pixels with a measurement (spike pixels that have no interval yet are left out).
-    threshold_log : float
-    window_px : int
+    threshold_log, window_px : float, int
+    unsure_log : float, optional
+        Pixels not seeded but more than this from the local background are returned as *unsure*.
 
     Returns
     -------
-    ndarray (H, W) bool
+    seeded, unsure : ndarray (H, W) bool
+    background : ndarray (H, W) float
+        The estimated ln(light) of the background (same unit as ``log_light``).
     """
-    background = _robust_background(log_light, valid, check_int("window_px", window_px, 1))
-    return valid & (np.abs(log_light - background) > threshold_log)
+    window_px = check_int("window_px", window_px, 1)
+    coarse = _robust_background(log_light, valid, window_px)
+    seeded = valid & (np.abs(log_light - coarse) > threshold_log)
+    # the local background from the pixels that are not on an object (their anti-aliased edges excluded)
+    clear = (valid & ~binary_dilation(seeded, iterations=2)).astype(np.float64)
+    sigma = max(window_px / 8.0, 1.0)
+    weight = gaussian_filter(clear, sigma, mode="nearest")
+    total = gaussian_filter(np.where(clear > 0, log_light, 0.0), sigma, mode="nearest")
+    background = np.where(weight > 1e-3, total / np.maximum(weight, 1e-3), coarse)
+    unsure = np.zeros_like(seeded)
+    if unsure_log is not None:
+        unsure = valid & ~seeded & (np.abs(log_light - background) > unsure_log)
+    return seeded, unsure, background
 
 
 # --------------------------------------------------------------------------- grouping
