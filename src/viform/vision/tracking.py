@@ -127,7 +127,7 @@ _SHORT_SPAN_TICKS = 8
 
 @njit(parallel=True, cache=True)
 def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, last3, last4, ref, prev, censored,
-                        flag_since, pending, out, k_lo, k_hi, background_ticks, hold_ticks):  # pragma: no cover
+                        flag_since, pending, out, k_lo, k_hi, k_seed, background_ticks, hold_ticks):  # pragma: no cover
     # Intervals in ticks, compared by ratio (k_lo = e^−threshold, k_hi = e^threshold): no logarithm
     # per spike. The background interval follows an exponential mean with weight τ/(T + τ) per
     # interval τ (time constant T ticks).
@@ -167,9 +167,18 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, last3, las
                 if cs[c]:
                     flagged = brighter  # only "brighter" is known against a lower bound
                     if not flagged:  # the first measured interval replaces the bound
-                        rf[c] = tau
+                        q = pv[c]
+                        if q > 0.0 and ((span - 1.0) / n > q * k_seed or (span + 1.0) / n < q / k_seed):
+                            # no interval yet when the background was seeded, and far from the background
+                            # seeded around it: on an object since the start (seed_background)
+                            rf[c] = q
+                            pv[c] = 0.0
+                            pd[c] = True
+                            fs[c] = tick
+                        else:
+                            rf[c] = tau
+                            fs[c] = -1
                         cs[c] = False
-                        fs[c] = -1
                         l4[c] = l3[c]
                         l3[c] = p2
                         l2[c] = p1
@@ -252,19 +261,24 @@ class SpikeChangeDetector:
         _spike_change_block(spikes, first, self.step_ticks, self.last1, self.last2, self.last3, self.last4, self.ref,
                             self.prev, self.censored,
                             self.flag_since, self.pending, out, math.exp(-p.threshold_log),
-                            math.exp(p.threshold_log), p.background_ticks, p.hold_ticks)
+                            math.exp(p.threshold_log), math.exp(p.seed_threshold_log), p.background_ticks,
+                            p.hold_ticks)
         self.next_tick += spikes.shape[0]
         if seed > 0 and self.next_tick == seed:
             measured = ~self.censored & (self.last1 >= 0)
             # intervals are inverse light: the same test on ln τ
             log_ref = np.log(np.where(measured, self.ref, 1.0))
-            seeded, unsure, around = seed_background(log_ref, measured, p.seed_threshold_log, p.seed_window_px,
-                                                     p.threshold_log)
+            seeded, unsure, around, weight = seed_background(log_ref, measured, p.seed_threshold_log,
+                                                             p.seed_window_px, p.threshold_log, weights=True)
             self.ref[seeded] = np.exp(around)[seeded]
             self.prev[seeded] = 0.0
             self.flag_since[seeded] = -1
             if p.seed_unsure:
                 self.prev[unsure] = np.exp(around)[unsure]
+            # no interval yet (dim pixels): their first one is compared with the background seeded around them,
+            # where enough pixels around were measured
+            later = self.censored & (weight > 0.5)
+            self.prev[later] = np.exp(around)[later]
         return out
 
 
@@ -333,7 +347,7 @@ def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int)
 
 
 def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int,
-                    unsure_log: float | None = None):
+                    unsure_log: float | None = None, weights: bool = False):
     """Objects in view at the start: pixels that stand out from the background around them, and that background.
 
     A change detector that learns its background from the first light it sees learns the objects
@@ -360,6 +374,9 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
     seeded, unsure : ndarray (H, W) bool
     background : ndarray (H, W) float
         The estimated ln(light) of the background (same unit as ``log_light``).
+    weight : ndarray (H, W) float
+        With ``weights``: the Gaussian-weighted fraction of clear measured pixels the background
+        was interpolated from (0 … 1).
     """
     window_px = check_int("window_px", window_px, 1)
     coarse = _robust_background(log_light, valid, window_px)
@@ -373,7 +390,7 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
     unsure = np.zeros_like(seeded)
     if unsure_log is not None:
         unsure = valid & ~seeded & (np.abs(log_light - background) > unsure_log)
-    return seeded, unsure, background
+    return (seeded, unsure, background, weight) if weights else (seeded, unsure, background)
 
 
 # --------------------------------------------------------------------------- grouping
