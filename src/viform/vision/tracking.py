@@ -277,7 +277,7 @@ class SpikeChangeDetector:
                 self.prev[unsure] = np.exp(around)[unsure]
             # no interval yet (dim pixels): their first one is compared with the background seeded around them,
             # where enough pixels around were measured
-            later = self.censored & (weight > 0.5)
+            later = ~measured & (weight > 0.5)
             self.prev[later] = np.exp(around)[later]
         return out
 
