@@ -62,7 +62,8 @@ class TrackerParameters:
         Time constant of the background level, in ticks (spike) — frames use the same
         time in seconds, converted with the stream's clock.
     hold_ticks : int
-        Foreground longer than this (ticks) is absorbed into the background.
+        Foreground longer than this (ticks) is absorbed into the background (a stopped object;
+        2,000 ticks = 50 ms, longer than a 100 px/s object's passage would be shorter).
     merge_px : int
         Foreground pixels closer than this (px) belong to one detection.
     min_pixels : int
@@ -76,8 +77,8 @@ class TrackerParameters:
         on top of the two boxes' half-diagonals.
     min_speed_px_per_s, still_ticks : float, int
         A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
-        not reported: it is where an object stood when the tracker started (background
-        subtraction's "ghost"), or an object that stopped (absorbed into the background anyway).
+        not reported (a ghost, or an object that stopped). 0 (the default) reports every track:
+        with the start-up seeding there are few ghosts left, and slow objects (100 px/s) count.
     seed_ticks, seed_window_px, seed_threshold_log, seed_unsure : int, int, float, bool
         Objects already in view when tracking starts: after ``seed_ticks`` ticks (0: never),
         a pixel whose learned light differs (|ln ratio| > ``seed_threshold_log``) from the median
@@ -91,13 +92,13 @@ class TrackerParameters:
 
     threshold_log: float = 0.4
     background_ticks: float = 80.0
-    hold_ticks: int = 1000
+    hold_ticks: int = 2000
     merge_px: int = 2
     min_pixels: int = 12
     min_hits: int = 2
     max_coast_ticks: int = 600
     gate_px: float = 8.0
-    min_speed_px_per_s: float = 50.0
+    min_speed_px_per_s: float = 0.0
     still_ticks: int = 400
     seed_ticks: int = 20
     seed_window_px: int = 96
