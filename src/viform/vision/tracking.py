@@ -7,15 +7,19 @@ spike stream itself. This module is that pipeline, one stage per function:
    background level, so static texture never responds, only a change of light does:
 
    * spikes (:class:`SpikeChangeDetector`): each spike gives the pixel's current interval
-     τ (the mean of its last two intervals, seed 000 §3.3: light ∝ Q/τ); the background level
-     is a running mean of τ (time constant ``background_ticks``) updated only while the
-     pixel agrees with it, so an object passing by does not leak into it; a pixel that stays
-     different for longer than ``hold_ticks`` is absorbed (a stopped object, or where an object
-     stood at the start: the "ghost" of background subtraction). Between spikes, a silence
-     longer than the background interval times e^threshold flags a pixel that got darker,
-     without waiting for its next spike. A pixel with no interval yet starts from the
-     censored bound "at least as long as the stream so far", so a bright object is seen from
-     its first interval even at a high threshold Q.
+     τ (the mean of its last two intervals, seed 000 §3.3: light ∝ Q/τ; of its last four
+     where two span fewer than 8 ticks, since the one-tick readout quantization dominates
+     there); the background level is a running mean of τ (time constant ``background_ticks``)
+     updated only while the pixel agrees with it, so an object passing by does not leak into
+     it; a pixel that stays different for longer than ``hold_ticks`` is absorbed (a stopped
+     object). Between spikes, a silence longer than the background interval times
+     e^threshold flags a pixel that got darker, without waiting for its next spike. A pixel
+     with no interval yet starts from the censored bound "at least as long as the stream so
+     far", so a bright object is seen from its first interval even at a high threshold Q.
+     Objects already in view at the start would be learned as background (and leave a
+     "ghost" where they stood): after ``seed_ticks`` the background of pixels that stand out
+     from the background around them is interpolated from their surroundings
+     (:func:`seed_background`).
    * frames (:class:`FrameChangeDetector`): the same rule on log light per frame.
 
 2. **Grouping** (:func:`detect_boxes`): foreground pixels of one output step whose squares of
@@ -62,8 +66,8 @@ class TrackerParameters:
         Time constant of the background level, in ticks (spike) — frames use the same
         time in seconds, converted with the stream's clock.
     hold_ticks : int
-        Foreground longer than this (ticks) is absorbed into the background (a stopped object;
-        2,000 ticks = 50 ms, longer than a 100 px/s object's passage would be shorter).
+        Foreground longer than this (ticks) is absorbed into the background (an object that
+        stopped; 2,000 ticks = 50 ms at 40 kHz).
     merge_px : int
         Foreground pixels closer than this (px) belong to one detection.
     min_pixels : int
@@ -79,8 +83,12 @@ class TrackerParameters:
         A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
         not reported (a ghost, or an object that stopped). 0 (the default) reports every track:
         with the start-up seeding there are few ghosts left, and slow objects (100 px/s) count.
-    seed_ticks, seed_window_px, seed_threshold_log, seed_unsure : int, int, float, bool
-        Objects already in view when tracking starts: after ``seed_ticks`` ticks (0: never),
+    seed_ticks, seed_measured_fraction : int, float
+        When to seed: at the first multiple of ``seed_ticks`` ticks (0: never), up to
+        ``hold_ticks``, at which at least this fraction of the pixels has measured an interval
+        (later at a high threshold Q).
+    seed_window_px, seed_threshold_log, seed_unsure : int, float, bool
+        Objects already in view when tracking starts: when seeded,
         a pixel whose learned light differs (|ln ratio| > ``seed_threshold_log``) from the median
         over ``seed_window_px`` px around it (wider than any object, on the assumption that the
         background is smoother than the objects on it) takes the background interpolated from
@@ -104,6 +112,7 @@ class TrackerParameters:
     seed_window_px: int = 96
     seed_threshold_log: float = 0.7
     seed_unsure: bool = True
+    seed_measured_fraction: float = 0.9
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -119,6 +128,8 @@ class TrackerParameters:
         check_int("seed_ticks", self.seed_ticks, 0)
         check_int("seed_window_px", self.seed_window_px, 1)
         check_positive("seed_threshold_log", self.seed_threshold_log)
+        if not 0.0 <= self.seed_measured_fraction <= 1.0:
+            raise ViformError(f"seed_measured_fraction = {self.seed_measured_fraction!r} must be within 0 … 1")
 
 
 # --------------------------------------------------------------------------- spike front end
@@ -247,15 +258,24 @@ class SpikeChangeDetector:
         self.flag_since = np.full(shape, -1, np.int64)
         self.pending = np.zeros(shape, np.bool_)
         self.next_tick = 0
+        self.seeded = False
 
     def feed(self, spikes: np.ndarray) -> np.ndarray:
         """Process the next ``spikes`` block (T, H, W) bool; returns (steps completed, H, W) bool masks."""
         spikes = np.ascontiguousarray(spikes, dtype=np.bool_)
-        seed = self.parameters.seed_ticks
+        outs, start = [], 0
+        while True:  # split at the seeding checks: the same ticks whatever the blocks
+            check = self._next_seed_check()
+            end = spikes.shape[0] if check is None else min(spikes.shape[0], start + check - self.next_tick)
+            outs.append(self._feed(spikes[start:end]))
+            start = end
+            if check is not None and self.next_tick == check:
+                self._seed()
+            if start >= spikes.shape[0]:
+                return np.concatenate(outs)
+
+    def _feed(self, spikes):
         first = self.next_tick
-        if 0 < seed and first < seed < first + spikes.shape[0]:  # seed at the same tick whatever the blocks
-            head = self.feed(spikes[:seed - first])
-            return np.concatenate([head, self.feed(spikes[seed - first:])])
         n_out = (first + spikes.shape[0]) // self.step_ticks - first // self.step_ticks
         out = np.zeros((n_out,) + self.ref.shape, np.bool_)
         p = self.parameters
@@ -265,22 +285,36 @@ class SpikeChangeDetector:
                             math.exp(p.threshold_log), math.exp(p.seed_threshold_log), p.background_ticks,
                             p.hold_ticks)
         self.next_tick += spikes.shape[0]
-        if seed > 0 and self.next_tick == seed:
-            measured = ~self.censored & (self.last1 >= 0)
-            # intervals are inverse light: the same test on ln τ
-            log_ref = np.log(np.where(measured, self.ref, 1.0))
-            seeded, unsure, around, weight = seed_background(log_ref, measured, p.seed_threshold_log,
-                                                             p.seed_window_px, p.threshold_log, weights=True)
-            self.ref[seeded] = np.exp(around)[seeded]
-            self.prev[seeded] = 0.0
-            self.flag_since[seeded] = -1
-            if p.seed_unsure:
-                self.prev[unsure] = np.exp(around)[unsure]
-            # no interval yet (dim pixels): their first one is compared with the background seeded around them,
-            # where enough pixels around were measured
-            later = ~measured & (weight > 0.5)
-            self.prev[later] = np.exp(around)[later]
         return out
+
+    def _next_seed_check(self):
+        """The next tick (a multiple of ``seed_ticks``) at which to try seeding the background, or None."""
+        every = self.parameters.seed_ticks
+        if every <= 0 or self.seeded:
+            return None
+        check = (self.next_tick // every + 1) * every
+        return check if check <= self.parameters.hold_ticks else None  # past that, give up (bounded cost)
+
+    def _seed(self):
+        """Seed the background (:func:`seed_background`) once enough pixels have measured an interval."""
+        p = self.parameters
+        measured = ~self.censored & (self.last1 >= 0)
+        if measured.mean() < p.seed_measured_fraction:
+            return  # a high threshold Q or dim light: wait for more intervals
+        self.seeded = True
+        # intervals are inverse light: the same test on ln τ
+        log_ref = np.log(np.where(measured, self.ref, 1.0))
+        seeded, unsure, around, weight = seed_background(log_ref, measured, p.seed_threshold_log,
+                                                         p.seed_window_px, p.threshold_log, weights=True)
+        self.ref[seeded] = np.exp(around)[seeded]
+        self.prev[seeded] = 0.0
+        self.flag_since[seeded] = -1
+        if p.seed_unsure:
+            self.prev[unsure] = np.exp(around)[unsure]
+        # no interval yet (dim pixels): their first one is compared with the background seeded around them,
+        # where enough pixels around were measured
+        later = ~measured & (weight > 0.5)
+        self.prev[later] = np.exp(around)[later]
 
 
 class FrameChangeDetector:
