@@ -84,7 +84,7 @@ class TrackerParameters:
         not reported (a ghost, or an object that stopped). 0 (the default) reports every track:
         with the start-up seeding there are few ghosts left, and slow objects (100 px/s) count.
     seed_ticks, seed_measured_fraction : int, float
-        When to seed: at the first multiple of ``seed_ticks`` ticks (0: never), up to
+        When to seed: at the first of ``seed_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to
         ``hold_ticks``, at which at least this fraction of the pixels has measured an interval
         (later at a high threshold Q).
     seed_window_px, seed_threshold_log, seed_unsure : int, float, bool
@@ -288,12 +288,14 @@ class SpikeChangeDetector:
         return out
 
     def _next_seed_check(self):
-        """The next tick (a multiple of ``seed_ticks``) at which to try seeding the background, or None."""
+        """The next tick (``seed_ticks``·2^k) at which to try seeding the background, or None."""
         every = self.parameters.seed_ticks
         if every <= 0 or self.seeded:
             return None
-        check = (self.next_tick // every + 1) * every
-        return check if check <= self.parameters.hold_ticks else None  # past that, give up (bounded cost)
+        check = every
+        while check <= self.next_tick:  # checks at seed_ticks·2^k: a handful, whatever the threshold Q
+            check *= 2
+        return check if check <= self.parameters.hold_ticks else None  # past that, give up
 
     def _seed(self):
         """Seed the background (:func:`seed_background`) once enough pixels have measured an interval."""
