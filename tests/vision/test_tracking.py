@@ -227,3 +227,28 @@ def test_seed_background_marks_only_what_stands_out():
     assert not unsure.any()
     # under the square, the background interpolated from around it: the ramp within ±5 %
     assert np.abs(background - ramp)[expected].max() < math.log(1.05)
+
+
+@pytest.mark.parametrize("keep_alive", [True, False])
+def test_a_track_merged_with_a_larger_object_keeps_its_id(keep_alive):
+    # B (8×8 px, −1,000 px/s) passes through A (40×40 px, +500 px/s): for ≈ 21 ms, longer than the
+    # 15 ms coast, only A's box is detected. Kept alive while its prediction lies inside A's detection,
+    # B comes out under its old id; without that, under a new one.
+    from viform.vision.tracking import Tracker
+
+    tracker = Tracker(TrackerParameters(merged_keep_alive=keep_alive))
+    ids_of_b = set()
+    for k in range(1, 480):
+        t = k * 10 / 40_000
+        a = np.array([100 + 500 * t, 50, 40, 40])
+        b = np.array([200 - 1000 * t, 66, 8, 8])
+        overlap = b[0] < a[0] + a[2] and a[0] < b[0] + b[2]
+        if overlap:  # one detection: the union of the two
+            x0, x1 = min(a[0], b[0]), max(a[0] + a[2], b[0] + b[2])
+            boxes = [[x0, 50, x1 - x0, 40]]
+        else:
+            boxes = [a, b]
+        for tid, box in tracker.update(np.array(boxes), t):
+            if not overlap and iou_matrix(box, b)[0, 0] > 0.5:
+                ids_of_b.add(tid)
+    assert len(ids_of_b) == (1 if keep_alive else 2)

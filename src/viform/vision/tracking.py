@@ -83,6 +83,10 @@ class TrackerParameters:
         A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
         not reported (a ghost, or an object that stopped). 0 (the default) reports every track:
         with the start-up seeding there are few ghosts left, and slow objects (100 px/s) count.
+    merged_keep_alive : bool
+        A confirmed track with no detection whose predicted box lies at least half inside a
+        detection matched to another track is merged with (or hidden by) that object: it does
+        not age while that lasts (the ball behind the truck keeps its id), and is not reported.
     seed_ticks, seed_measured_fraction : int, float
         When to seed: at the first of ``seed_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to
         ``hold_ticks``, at which at least this fraction of the pixels has measured an interval
@@ -113,6 +117,7 @@ class TrackerParameters:
     seed_threshold_log: float = 0.7
     seed_unsure: bool = True
     seed_measured_fraction: float = 0.9
+    merged_keep_alive: bool = True
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -611,6 +616,21 @@ class Tracker:
                 track.confirmed = True
                 if self._moving(track, t_s):
                     reported.append((track.track_id, boxes[j].copy()))
+        if p.merged_keep_alive and matches:
+            # a confirmed track without a detection whose prediction lies inside another track's detection
+            # is merged with (or hidden by) that object: it coasts on as long as that lasts
+            matched_boxes = boxes[[j for _, j in matches]]
+            for i, track in enumerate(self.tracks):
+                if i in matched_tracks or not track.confirmed:
+                    continue
+                pb = predicted[i]
+                ix = np.clip(np.minimum(pb[0] + pb[2], matched_boxes[:, 0] + matched_boxes[:, 2])
+                             - np.maximum(pb[0], matched_boxes[:, 0]), 0, None)
+                iy = np.clip(np.minimum(pb[1] + pb[3], matched_boxes[:, 1] + matched_boxes[:, 3])
+                             - np.maximum(pb[1], matched_boxes[:, 1]), 0, None)
+                inside = ix * iy / max(pb[2] * pb[3], 1e-9)
+                if inside.max() >= 0.5:
+                    track.last_seen_t = t_s  # not reported: its box is a prediction, not a measurement
         coast_s = p.max_coast_ticks * self.tick_s
         self.tracks = [tr for i, tr in enumerate(self.tracks)
                        if i in matched_tracks or (tr.confirmed and t_s - tr.last_seen_t <= coast_s)]
