@@ -4,8 +4,8 @@ Configuration (issue 10 §3): 400×250 pixels, 40 kHz clock, Q = 100 e⁻, exact
 For an image-folder video (PNG frames written to a temporary folder, 1 kHz, hold and linear
 interpolation) and for each built-in scene, this runs in one process:
 
-* viform end to end: ``SpikeSensor.simulate`` (light evaluated in compiled code when the scene
-  describes itself, else by NumPy) and ``pack_frames`` into .dat bytes (not written to disk);
+* viform end to end: ``SpikeSensor.simulate_packed`` (light evaluated in compiled code when the
+  scene describes itself, else by NumPy; the kernels write the .dat bits), not written to disk;
 * the plain noise-free per-frame loop public spike-dataset generators use, on precomputed
   float32 frames of the same light in electrons per tick (``integral += frame; fire =
   integral >= threshold; integral[fire] -= threshold``), no packing;
@@ -62,7 +62,16 @@ def best(fn, repeats: int) -> tuple[float, float]:
 
 
 def end_to_end(sensor, scene, n_ticks) -> int:
-    """Scene → packed .dat bytes, block by block (as ``viform simulate`` writes them)."""
+    """Scene → packed .dat bytes (rows bottom-up), block by block, as ``viform simulate`` writes them:
+    the kernels produce the packed bits themselves (``simulate_packed``)."""
+    size = 0
+    for _, frames in sensor.simulate_packed(scene, n_ticks / CLOCK_HZ, seed=1, flip=True):
+        size += frames.nbytes
+    return size
+
+
+def end_to_end_bool(sensor, scene, n_ticks) -> int:
+    """The same through bool frames and ``pack_frames`` (the path before the kernels packed bits)."""
     size = 0
     for _, block in sensor.simulate(scene, n_ticks / CLOCK_HZ, seed=1, reuse_buffer=True):
         size += len(pack_frames(block))
@@ -70,7 +79,7 @@ def end_to_end(sensor, scene, n_ticks) -> int:
 
 
 def kernel_only(sensor, scene, n_ticks) -> None:
-    for _ in sensor.simulate(scene, n_ticks / CLOCK_HZ, seed=1, reuse_buffer=True):
+    for _ in sensor.simulate_packed(scene, n_ticks / CLOCK_HZ, seed=1):
         pass
 
 

@@ -37,6 +37,7 @@ ARGS = {
     "dataset": ["{tmp}", "--out", "{tmp}/ds"],
     "capture": ["cmos", "translating", "--duration", "0.001", "--out", "{tmp}/c.npz"],
     "compare": ["translating", "--out", "{tmp}/cmp"],
+    "sweep": ["dilemma", "--sensor", "cmos", "--workers", "0", "--out", "{tmp}/sw"],
     "chip-figures": ["--out", "{tmp}/chip"],
     "calibrate": ["{clip}"],
     "flow": ["{clip}", "--at", "0.0002", "--dt", "0.0002", "--out", "{tmp}/flow"],

@@ -133,6 +133,11 @@ def test_demo_runs_and_reports_scores(tmp_path):
     assert doc["sensors"]["spike-interval"]["metrics"]["psnr_log_db"] > 10
     assert (tmp_path / "d" / "report.html").stat().st_size > 0
     assert "PSNR dB" in result.stdout
+    # it ends with the designer's answer from a sweep of settings (issue 23)
+    assert "Which setting would meet the scene's demands" in result.stdout.split("PSNR dB")[-1]
+    swept = json.loads((tmp_path / "d" / "sweep" / "sweep.json").read_text())
+    assert swept["answer"]["sentences"][0] in result.stdout
+    assert {p["sensor"] for p in swept["points"]} == {"spike", "cmos", "seed003-overflow"}
 
 
 def test_help_of_every_command(capsys):

@@ -173,8 +173,9 @@ def test_bad_parameters_name_themselves(field, value):
 
 
 @pytest.mark.parametrize("reset", ["self", "readout"])
-def test_vectorized_noise_free_kernel_matches_the_event_kernel(reset):
-    """The noise-free model runs a SIMD tick loop; it must give the event-driven kernel's bits."""
+def test_vectorized_noise_free_kernel_matches_the_general_lanes(reset):
+    """The noise-free model resolves crossings in the SIMD loop itself; it must give the bits of the
+    general path (every crossing through ``_fire``)."""
     from viform.sensors import spike as module
 
     sensor = SpikeSensor(photon_noise=False, reset=reset)
@@ -182,15 +183,18 @@ def test_vectorized_noise_free_kernel_matches_the_event_kernel(reset):
     vectorized = sensor.capture(scene, 0.01, seed=3).spikes
     q, _, index, tables = sensor._pixel_tables(20, 50)
     state = sensor.initial_state(20, 50, 3)
+    bounds = sensor._saturation_bounds(20, 50)
     blocks = []
     for first, last in ((0, 123), (123, 400)):
-        out = np.empty((last - first, 1000), dtype=bool)
+        words = np.empty((last - first, 16), dtype=np.uint64)
         lux = scene.illuminance_lux_many((np.arange(first, last) + 0.5) / sensor.parameters.clock_hz)
         rates = sensor._fixed_point_rates(lux.reshape(last - first, -1), 20, 50)
         seg_end = np.arange(first + 1, last + 1, dtype=np.int64)
-        module._run_block(out, rates, seg_end, first, state.charge, state.target, state.counter,
-                          q, index, *tables, state.keys, False, reset == "readout", 0.0)
-        blocks.append(out.reshape(-1, 20, 50))
+        module._run_block(words, rates, seg_end, first, state.charge, state.target, state.counter,
+                          q, index, *tables, state.keys, False, reset == "readout", 0.0, module.MODE_GENERAL,
+                          bounds, state.pending_ticks, state.pending_rate)
+        bits = np.unpackbits(words.view(np.uint8), axis=1, count=1000, bitorder="little")
+        blocks.append(bits.reshape(-1, 20, 50).astype(bool))
     assert np.array_equal(vectorized, np.concatenate(blocks))
     assert 0.05 < vectorized.mean() < 1.0
 

@@ -29,6 +29,7 @@ COMMAND_MODULES = [
     "viform.cli.dataset",  # dataset (issue 14)
     "viform.cli.capture",  # capture (issue 12)
     "viform.cli.compare",  # compare (issue 12)
+    "viform.cli.sweep",  # sweep (issue 23)
     "viform.cli.chip_figures",  # chip-figures (issue 16)
     "viform.cli.calibrate",  # calibrate (issue 10)
     "viform.cli.flow",  # flow (issue 21)

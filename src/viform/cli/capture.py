@@ -217,7 +217,8 @@ def _spike_preview(path, stream, rate_per_tick: float) -> float:
     return window
 
 
-def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int = 0, preview=None) -> dict:
+def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int = 0, preview=None,
+                device: str = "cpu") -> dict:
     """Shoot ``scene`` with ``sensor_name`` and save the output (see the module notes); returns a summary.
 
     Spike streams are simulated block by block straight into the file (bounded memory).
@@ -234,12 +235,14 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
 
         sensor = _spike_sensor(sensor_name)
         # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
-        lazy = sensor.stream(scene, duration_s, seed=seed, progress=True, reuse_buffer=suffix in (".dat", ".zarr"))
+        lazy = sensor.stream(scene, duration_s, seed=seed, progress=True, reuse_buffer=suffix in (".dat", ".zarr"),
+                             device=device)
         save_spikes(out_path, lazy)
         stream = open_spikes(out_path)
         summary = {"file": str(out_path), "sensor": sensor_name, "kind": "spikes", "n_ticks": stream.n_ticks,
                    "height": stream.height, "width": stream.width, "clock_hz": stream.clock_hz,
-                   "threshold_electrons": stream.threshold_electrons, **stream.summary()}
+                   "threshold_electrons": stream.threshold_electrons, **stream.summary(),
+                   "device": lazy.metadata["device"]}
         if preview:
             summary["preview_window_s"] = _spike_preview(preview, stream, summary["mean_firing_rate_per_tick"])
         return summary
@@ -327,10 +330,13 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
 @click.option("--max-lux", type=float, default=4.0, show_default=True,
               help="Illuminance on the sensor of full-scale image/video pixels, lux.")
 @click.option("--frame-rate-hz", type=float, default=None, help="Frame rate of a video or image folder.")
+@click.option("--device", type=click.Choice(["cpu", "cuda", "auto"]), default="cpu", show_default=True,
+              help="Spike sensors: where the simulation runs (CPU cores, a CUDA GPU with the same bits, or a GPU "
+                   "when one is found). Frame sensors run on the CPU.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of a line of text.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
-def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, max_lux, frame_rate_hz, as_json,
-            json_file):
+def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, max_lux, frame_rate_hz, device,
+            as_json, json_file):
     """Shoot SCENE with SENSOR and save its output with every exposure window.
 
     SENSOR: cmos, cmos-short, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
@@ -340,11 +346,13 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     """
     from viform._io import check_json_file, check_output_folder, write_json
     from viform.light.scenes import load_scene
+    from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS
 
     names = capture_sensor_names()
     if sensor not in names:
         raise ViformError(f"SENSOR = {sensor!r} is not allowed: choose one of {', '.join(names)}")
+    device = resolve_device(device, "--device") if is_spike(sensor) else "cpu"
     check_positive("--duration", duration_s)
     default_height, default_width = default_resolution(sensor)
     height = check_int("--height", default_height if height is None else height, 1)
@@ -367,7 +375,7 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz)
     if is_spike(sensor):
         announce_preparation()
-    summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview)
+    summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview, device=device)
     if preview:
         summary["preview"] = str(preview)
     summary = finite_json(summary)  # null, not a bare NaN: valid JSON

@@ -90,7 +90,7 @@ def announce_preparation() -> None:
         click.echo("compiling the simulation kernels (first run only; cached afterwards) …", err=True)
 
 
-def finish(doc: dict, out_dir, elapsed_s: float, as_json: bool, json_file) -> None:
+def finish(doc: dict, out_dir, elapsed_s: float, as_json: bool, json_file, extra: dict | None = None) -> None:
     from viform._io import write_json
     from viform.report.compare_report import RUN_TIME_NOTE, finite_json, metrics_table
 
@@ -99,7 +99,7 @@ def finish(doc: dict, out_dir, elapsed_s: float, as_json: bool, json_file) -> No
     summary = {"report": str(Path(out_dir) / "report.html"), "metrics": str(Path(out_dir) / "metrics.json"),
                "elapsed_s": elapsed_s, "sensors": {k: {"label": v["label"], "skipped": v["skipped"],
                                                         **v["metrics"]} for k, v in doc["sensors"].items()},
-               "verdict": doc["verdict"], "elapsed_note": RUN_TIME_NOTE}
+               "verdict": doc["verdict"], "elapsed_note": RUN_TIME_NOTE, **(extra or {})}
     if doc.get("vision"):
         summary["vision"] = doc["vision"]
     summary = finite_json(summary)  # NaN (a metric not defined here) becomes null: valid JSON

@@ -52,12 +52,15 @@ def _sig(value: float) -> str:
               help="Evaluate the light once every N ticks (1: every tick).")
 @click.option("--block-ticks", type=int, default=4096, show_default=True,
               help="Ticks simulated and written at a time (bounds each worker's memory; same bits).")
+@click.option("--device", type=click.Choice(["cpu", "cuda", "auto"]), default="cpu", show_default=True,
+              help="Where the spike simulation runs: CPU cores, a CUDA GPU (pip install \"viform[cuda]\"; "
+                   "the same bits), or a GPU when one is found.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, out_dir, preset, height, width,
             workers, scheduler, worker_memory, gt_every, seed, frame_rate_hz, max_lux, interpolation,
-            light_sample_ticks, block_ticks, no_progress, as_json, json_file):
+            light_sample_ticks, block_ticks, device, no_progress, as_json, json_file):
     """Convert SRC, a folder of videos or of frame folders, into a spike dataset in --out;
     or, with --scenes, make one from built-in scenes with exact truth.
 
@@ -71,8 +74,10 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
     """
     from viform._io import check_json_file, write_json
     from viform.datasets.build import build_dataset, make_settings, scene_clips
+    from viform.sensors.spike_cuda import resolve_device
 
     check_json_file(json_file)
+    device = resolve_device(device, "--device")
     if (src is None) == (scenes is None):
         raise ViformError("give either SRC (a folder of videos or frame folders) or --scenes NAME[,NAME…], "
                           "not " + ("both" if src is not None else "neither"))
@@ -94,7 +99,8 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
     if scenes is not None:
         src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs)
     summary = build_dataset(src, out_dir, settings, workers=workers, scheduler=scheduler,
-                            memory_limit=worker_memory, block_ticks=block_ticks, progress=not no_progress)
+                            memory_limit=worker_memory, block_ticks=block_ticks, progress=not no_progress,
+                            device=device)
     if json_file is not None:
         write_json(json_file, summary)
     if as_json:

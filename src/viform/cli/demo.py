@@ -33,4 +33,14 @@ def demo(out_dir, duration_s, seed, as_json, json_file):
     check_outputs(out_dir, json_file)
     announce_preparation()
     doc = run_demo(out_dir, duration_s=duration_s, seed=seed, started_s=started)
-    finish(doc, out_dir, time.perf_counter() - started, as_json, json_file)
+    from viform.report.demo import run_demo_sweep
+
+    swept = run_demo_sweep(out_dir, duration_s=duration_s, seed=seed)
+    answer = {"report": swept["report"], "demands": swept["answer"]["demands"],
+              "sentences": swept["answer"]["sentences"], "points": swept["n_points"], "seconds": swept["seconds"]}
+    finish(doc, out_dir, time.perf_counter() - started, as_json, json_file, extra={"sweep": answer})
+    if not as_json:
+        click.echo(f"\nWhich setting would meet the scene's demands ({', '.join(answer['demands'])})? "
+                   f"From {answer['points']} settings swept in {answer['seconds']:.0f} s ({answer['report']}):")
+        for line in answer["sentences"]:
+            click.echo(f"- {line}")

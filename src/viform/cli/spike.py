@@ -162,11 +162,14 @@ def _apply(options):
               help="Ticks per truth frame (40 ticks = 1 ms at 40 kHz).")
 @click.option("--force", is_flag=True,
               help="Run a simulation estimated to take more than a minute (refused without it, with the estimate).")
+@click.option("--device", type=click.Choice(["cpu", "cuda", "auto"]), default="cpu", show_default=True,
+              help="Where the simulation runs: CPU cores, a CUDA GPU (pip install \"viform[cuda]\"; the same "
+                   "bits for the same seed), or a GPU when one is found.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 @_apply(sensor_options)
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
-             light_sample_ticks, truth_dir, truth_every_ticks, force, as_json, json_file, **sensor_kw):
+             light_sample_ticks, truth_dir, truth_every_ticks, force, device, as_json, json_file, **sensor_kw):
     """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the spike stream.
 
     Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
@@ -175,10 +178,12 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     from viform._io import check_json_file, check_output_folder, write_json
     from viform.cli._types import check_simulation_work
     from viform.light.scenes import VideoScene, load_scene
+    from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS, save_spikes
 
     if Path(out_path).suffix.lower() not in FORMATS:
         raise ViformError(f"--out = {out_path!r}: the suffix must be one of {', '.join(FORMATS)}")
+    device = resolve_device(device, "--device")
     check_output_folder("--out", Path(out_path).resolve().parent)
     check_json_file(json_file)
     if not max_lux > 0:
@@ -221,7 +226,7 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
     reuse = Path(out_path).suffix.lower() in (".dat", ".zarr")
     stream = sensor.stream(light, duration_s, seed=seed, light_sample_ticks=light_sample_ticks, progress=True,
-                           reuse_buffer=reuse)
+                           reuse_buffer=reuse, device=device)
     if preset is not None:
         stream.metadata["preset"] = preset.name
     started = time.perf_counter()
@@ -239,7 +244,8 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
                "preset": None if preset is None else preset.name,
                "duration_s": stream.n_ticks / stream.clock_hz, "duration_from": duration_from,
                "gain_spread_fraction": p.gain_spread_fraction, "dead_time_s": p.dead_time_s,
-               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed, "truth": truth}
+               "elapsed_s": elapsed, "pixel_ticks_per_s": pixel_ticks / elapsed, "truth": truth,
+               "device": stream.metadata["device"]}
     if json_file:
         write_json(json_file, summary)
     if as_json:
@@ -251,7 +257,7 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
             ("size", f"{stream.height} × {stream.width} pixels"), ("clock", f"{stream.clock_hz:,.0f} Hz"),
             ("threshold Q", f"{stream.threshold_electrons:.4g} e-"),
             ("preset", "none" if preset is None else preset.name),
-            ("speed", f"{pixel_ticks / elapsed:.3g} pixel-ticks/s")]
+            ("speed", f"{pixel_ticks / elapsed:.3g} pixel-ticks/s"), ("device", stream.metadata["device"])]
     if truth is not None:
         rows.append(("truth", f"{truth['frames']} frames every {truth_every_ticks} ticks in {truth_dir}/ "
                               f"({', '.join(truth['kinds'])})"))

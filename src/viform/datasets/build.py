@@ -95,6 +95,7 @@ class ClipTask:
     # testing aid: after this many blocks of this clip the worker process exits abruptly,
     # once per output folder (a marker file remembers it), as a killed worker would
     crash_after_blocks: int | None = None
+    device: str = "cpu"  # where the spike kernels run: "cpu" or "cuda" (viform.sensors.spike_cuda)
 
 
 def _jsonable(value):
@@ -392,7 +393,7 @@ def _convert(task: ClipTask, dat: Path, started: float) -> dict:
     sensor = SpikeSensor(s.parameters, s.height, s.width)
     scene = VideoScene(frames, frame_rate_hz, s.interpolation)
     source = sensor.stream(scene, n_frames / frame_rate_hz, seed=seed,
-                           light_sample_ticks=s.light_sample_ticks, reuse_buffer=True)
+                           light_sample_ticks=s.light_sample_ticks, reuse_buffer=True, device=task.device)
     clock_hz = source.clock_hz
 
     # ground truth first: the sidecar, written last, is what marks the clip finished
@@ -526,7 +527,7 @@ def _open_client(workers: int, scheduler: str | None, memory_limit):
 
 def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,
                   client=None, memory_limit="auto", block_ticks: int = 4096, progress: bool = True,
-                  crash: tuple[str, int] | None = None) -> dict:
+                  crash: tuple[str, int] | None = None, device: str = "cpu") -> dict:
     """Convert every clip of ``src`` into the spike dataset ``out``; returns a summary.
 
     Parameters
@@ -549,6 +550,8 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
         Ticks simulated, packed and written at a time (bounds a worker's memory; no effect on bits).
     progress : bool
         One tqdm progress bar (stderr) for the whole dataset.
+    device : {"cpu", "cuda", "auto"}
+        Where each clip's spike kernels run (a GPU: same bits, see :mod:`viform.sensors.spike_cuda`).
 
     Returns
     -------
@@ -594,8 +597,11 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
         raise
 
     prov = _provenance()
+    from viform.sensors.spike_cuda import resolve_device
+
+    device = resolve_device(device, "--device")
     tasks = [ClipTask(c, str(out), settings, prov, block_ticks,
-                      crash[1] if crash is not None and crash[0] == c.name else None) for c in clips]
+                      crash[1] if crash is not None and crash[0] == c.name else None, device) for c in clips]
     rows: dict[str, dict] = {}
     failed: dict[str, str] = {}
     opened = time.perf_counter()

@@ -389,6 +389,35 @@ class DilemmaScene(Scene):
                  0.5 * (self.road_rows[1] + self.height) - 0.5),
         }
 
+    def compiled_light(self):
+        """The scene's light for the compiled simulator (kind "dilemma" of :mod:`viform.light.compiled`):
+        the same light as :meth:`illuminance_lux`, bit for bit, evaluated in the spike kernel."""
+        if not self._own_light(DilemmaScene):
+            return None
+        from viform.light.compiled import CompiledLight
+
+        reach = 5 * self.object_sigma_px
+        row0 = max(0, int(self.object_row_px - reach))
+        row1 = min(self.height, int(self.object_row_px + reach) + 2)
+        theta = np.where(self._prop_disc, self._prop_theta, np.nan)
+        frames = np.stack([self._background, theta, self.led.astype(np.float64)])
+        constants = {
+            "vehicle_front0_px": self.vehicle_front0_px, "vehicle_speed_px_per_s": self.vehicle_speed_px_per_s,
+            "vehicle_span_px": self.width + self.vehicle_length_px, "vehicle_length_px": self.vehicle_length_px,
+            "vehicle_row0": self.vehicle_rows[0], "vehicle_row1": self.vehicle_rows[1],
+            "vehicle_lux": self.vehicle_lux, "prop_omega_rad_per_s": self.prop_omega_rad_per_s,
+            "blade_cos": math.cos(3.0 * math.radians(14.0)), "prop_lux": self.prop_lux,
+            "object_x0_px": self.object_x0_px, "object_speed_px_per_s": self.object_speed_px_per_s,
+            "width": self.width, "object_reach_px": reach, "object_row_px": self.object_row_px,
+            "object_denominator": 2 * self.object_sigma_px ** 2, "object_lux": self.object_lux,
+            "object_row0": row0, "object_row1": row1, "led_frequency_hz": self.led_frequency_hz,
+            "led_duty": self.led_duty, "led_on_lux": self.led_on_lux, "led_off_lux": self.led_off_lux,
+            "box_width": int(2 * reach) + 3,
+        }
+        peak = max(float(self._background.max()), self.vehicle_lux, self.prop_lux) + self.object_lux
+        return CompiledLight("dilemma", self.height, self.width, frames=frames, dilemma=constants,
+                             max_lux=max(peak, self.led_on_lux, self.led_off_lux))
+
     def regions(self) -> dict:
         """Masks and geometry the comparison metrics use."""
         return {"led": self.led, "lamp": self.lamp, "window": self.window,
@@ -488,6 +517,15 @@ class NightRoadFogScene(Scene):
 
     def mean_illuminance_lux(self, t0_s, t1_s, samples=None):
         return self._lux
+
+    def compiled_light(self):
+        """The static light as one frame: the simulator jumps from spike to spike (no per-tick light)."""
+        if not self._own_light(NightRoadFogScene):
+            return None
+        from viform.light.compiled import CompiledLight
+
+        return CompiledLight("frames", self.height, self.width, frames=self._lux[None],
+                             frame_index=lambda times: np.zeros(np.shape(times), np.int64))
 
     def demand(self) -> dict:
         lo, hi = float(self._lux.min()), float(self._lux.max())

@@ -362,8 +362,15 @@ def data_rate_mb_per_s(height: int, width: int, bits_per_pixel: float, rate_hz: 
     return height * width * bits_per_pixel * rate_hz / 8e6
 
 
-def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> list:
-    """Shoot ``scene`` with sensor ``key``; return its :class:`Shot` (several for the spike camera)."""
+def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sensor=None,
+          spike_methods=None) -> list:
+    """Shoot ``scene`` with sensor ``key``; return its :class:`Shot` (several for the spike camera).
+
+    ``sensor`` replaces the comparison's own sensor of that key (the same model at other settings,
+    as :mod:`viform.measure.sweep` builds it; a ``HighSpeedConfig`` for "highspeed");
+    ``spike_methods`` limits the spike reconstructions (default: every one of :data:`SPIKE_METHODS`).
+    """
+    override = sensor
     h, w = scene.shape
     desc = SENSOR_DESCRIPTIONS[key]
     if key == "gated":
@@ -371,7 +378,7 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
         if active is None:
             return [Shot(key, SENSOR_LABELS[key], desc, skipped="the scene has no range (the gated camera needs a "
                                                    "laser-lit scene with distances, e.g. night-road-fog)")]
-        sensor = make_compare_sensor(key)
+        sensor = override if override is not None else make_compare_sensor(key)
         frame = sensor.capture_frame(active, seed=seed)
         e = frame.electrons
         p = sensor.parameters.pixel
@@ -385,11 +392,12 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
         return [shot]
     if key == "spike":
         sensor, preset = spike_preset()
+        sensor = override if override is not None else sensor
         stream = sensor.capture(scene, duration_s, seed=seed)
         par = sensor.parameters
         rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
         shots = []
-        methods = [m for m in SPIKE_METHODS if m != "best" or best_spike_method_name() is not None]
+        methods = [m for m in (spike_methods or SPIKE_METHODS) if m != "best" or best_spike_method_name() is not None]
         head = spike_label(sensor, preset)
         note = spike_exposure_note(sensor, preset, duration_s)
         from viform.measure.dynamic_range import clip_limited_dynamic_range_db, dynamic_range_db
@@ -432,7 +440,7 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
 
         from viform.isp.highspeed_pipeline import HighSpeedConfig, run_highspeed
 
-        base = HighSpeedConfig()
+        base = override if override is not None else HighSpeedConfig()
         from viform.sensors.highspeed_timing import lux13hs_timing
 
         timing = lux13hs_timing(base.mode, base.pixel_clock_hz)
@@ -446,7 +454,7 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0) -> l
                      time_resolution_s=float(np.median(result.exposure_s)), latency_s=period,
                      data_rate_mb_per_s=data_rate_mb_per_s(h, w, config.pixel_parameters.adc_bits, 1 / period),
                      frame_rate_hz=1 / period, raw=result)]
-    sensor = make_compare_sensor(key)
+    sensor = override if override is not None else make_compare_sensor(key)
     try:
         stack = sensor.capture(scene, duration_s, seed=seed)
     except ViformError as exc:

@@ -19,3 +19,30 @@ def run_demo(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = 
 
     return compare("dilemma", out_dir, None, duration_s, DEMO_HEIGHT, DEMO_WIDTH, seed, progress=progress,
                    command="viform demo", started_s=started_s)
+
+
+#: The demo's closing sweep: the spike chip's 16 threshold levels (at its 40 kHz clock), and the main
+#: knob of the CMOS (exposure) and of the overflow pixel (its capacitor), 10 settings each.
+DEMO_SWEEP = {"spike": ["spike:threshold_level=all"], "cmos": ["cmos:exposure_s=log:2e-5:3.3e-2:10"],
+              "seed003-overflow": ["seed003-overflow:overflow_capacitance_f=log:2e-14:2e-11:10"]}
+
+
+def demo_demands(scene) -> str:
+    """The dilemma's two demands as ``--require`` text: its range (within 6 dB, as compare's verdict
+    counts it) and its speed (integration no longer than one pixel of the fastest motion)."""
+    d = scene.demand()
+    return f"dr_captured_db>={d['dynamic_range_db'] - 6:.0f},time_resolution_s<={d['time_resolution_s']:.3g}"
+
+
+def run_demo_sweep(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = True) -> dict:
+    """The designer's question on the demo scene: which setting meets both demands? (OUT/sweep/report.html)."""
+    from pathlib import Path
+
+    from viform.light.scenes import builtin_scene
+    from viform.measure.sweep import make_plan
+    from viform.report.sweep_report import run_sweep_report
+
+    demands = demo_demands(builtin_scene("dilemma", DEMO_HEIGHT, DEMO_WIDTH))
+    plan = make_plan("dilemma", list(DEMO_SWEEP), [v for vs in DEMO_SWEEP.values() for v in vs],
+                     height=DEMO_HEIGHT, width=DEMO_WIDTH, duration_s=duration_s, seed=seed, require=demands)
+    return run_sweep_report(plan, Path(out_dir) / "sweep", workers=0, progress=progress, command="viform demo")

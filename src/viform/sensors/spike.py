@@ -34,7 +34,21 @@ within e^-64, so the pixel leaves the tick in the stationary state above, drawn 
 
 Reproducibility: the k-th interval of pixel p is drawn by a counter-based generator from
 (seed, p, k) (:mod:`viform.sensors._gamma`), and the light of each tick is computed from
-absolute tick indices, so the same seed gives the same bits whatever the block size.
+absolute tick indices, so the same seed gives the same bits whatever the block size, the
+number of threads and the device (:mod:`viform.sensors.spike_cuda` runs the same functions
+on a CUDA GPU).
+
+Kernels (issue 30): pixels sit in lanes of 64, one uint64 of spike bits per tick — the
+``.dat`` bit order, so the kernels write the file's bytes as the pixels fire
+(:meth:`SpikeSensor.simulate_packed`; :meth:`SpikeSensor.simulate` unpacks them to bool). The
+tick loop runs inside each work item (a tile of pixels, or a band of rows when the light is
+computed per tick), the lane loop compiles to SIMD add/compare/mask code (see the notes
+above :func:`_lanes_add_compare`), and only the lanes that fired take the scalar path with
+its Gamma draw. A self-reset pixel with photon noise whose charge per tick exceeds every gap a
+draw can leave (:func:`saturation_bound_fixed`) fires in every tick whatever its state: in
+constant light the kernel only counts those ticks and replays their draws when the light
+changes or the caller reads the state, so saturated light costs no more than dim light, with
+the same bits and state.
 """
 
 from __future__ import annotations
@@ -45,6 +59,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from numba import get_num_threads, njit, prange
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from viform._validate import (
     ViformError,
@@ -81,9 +96,6 @@ CHIP_THRESHOLD_LEVELS_ELECTRONS = tuple(1250.0 * (k + 1) for k in range(16))
 CLOCK_40KHZ = 40_000.0
 CLOCK_20KHZ = 20_000.0
 
-_TILE = 256  # pixels per work item
-_WINDOW = 64  # ticks per window: the tile's output (16 KB) stays in L1 while it is written
-_WIDE_TILE = 2048  # pixels per work item of the vectorized noise-free kernel
 #: Default memory budget of one simulated block (spike bits + light), bytes.
 BLOCK_BYTES = 48 << 20
 #: Largest threshold, e⁻: targets (≈ Q·2^32 in fixed point) plus a tick's charge stay inside int64.
@@ -205,6 +217,9 @@ class SpikeSimulationState:
         self.counter = counter
         self.keys = keys  # per-pixel random-stream keys derived from the seed
         self.next_tick = next_tick
+        # saturated ticks not yet applied to charge/target (see _run_block): count and charge per tick
+        self.pending_ticks = np.zeros(np.shape(charge), dtype=np.int64)
+        self.pending_rate = np.zeros(np.shape(charge), dtype=np.int64)
 
 
 class SpikeSensor(Sensor):
@@ -316,6 +331,19 @@ class SpikeSensor(Sensor):
             self._tables[key] = (q, shapes, index.astype(np.int32), tables)
         return self._tables[key]
 
+    def _saturation_bounds(self, height: int, width: int) -> np.ndarray:
+        """Per pixel, the charge per tick (fixed point) from which it fires every tick whatever its
+        state (:func:`saturation_bound_fixed`; photon noise only)."""
+        key = ("saturation", height, width)
+        if key not in self._tables:
+            q, shapes, index, tables = self._pixel_tables(height, width)
+            if self.parameters.photon_noise:
+                bounds = saturation_bound_fixed(shapes, tables[0])[index]
+            else:
+                bounds = np.full(q.size, np.iinfo(np.int64).max, dtype=np.int64)
+            self._tables[key] = np.ascontiguousarray(bounds)
+        return self._tables[key]
+
     # ------------------------------------------------------------------ light
     def electrons_per_tick(self, lux) -> np.ndarray:
         """Expected electrons (signal + dark) collected per tick at illuminance ``lux``."""
@@ -349,6 +377,27 @@ class SpikeSensor(Sensor):
         return np.minimum(self.electrons_per_tick(lux) / round(self.parameters.threshold_electrons), 1.0)
 
     # ------------------------------------------------------------------ simulation
+    def start_state(self, scene: Scene, sample: int, height: int, width: int, seed: int, q,
+                    state: SpikeSimulationState | None = None) -> SpikeSimulationState:
+        """The state at t = 0 that every device starts from (CPU and GPU share this host code).
+
+        ``state`` (a fresh :meth:`initial_state`) or a new one; with dead time and a random
+        start, replaced by the stationary state with dead time, which depends on the light
+        of the first tick (see :func:`_dead_time_stationary_state`).
+        """
+        if state is None:
+            state = self.initial_state(height, width, seed)
+        elif state.next_tick != 0:
+            raise ViformError(f"state has already run to tick {state.next_tick}; simulate starts at tick 0, "
+                              "so pass a fresh initial_state")
+        p = self.parameters
+        dead_ticks = p.dead_time_s * p.clock_hz
+        if dead_ticks > 0 and p.random_initial_charge:
+            _dead_time_stationary_state(state.charge, state.target, state.counter, q, state.keys,
+                                        _first_tick_rates(self, scene, sample, height, width), dead_ticks,
+                                        p.photon_noise, p.reset == "readout")
+        return state
+
     def initial_state(self, height: int, width: int, seed: int) -> SpikeSimulationState:
         """State at t = 0: first targets and (optionally) a random initial charge."""
         q, shapes, index, tables = self._pixel_tables(height, width)
@@ -364,11 +413,14 @@ class SpikeSensor(Sensor):
     def simulate(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
                  light_sample_ticks: int = 1, progress: bool = False,
                  state: SpikeSimulationState | None = None,
-                 reuse_buffer: bool = False, compiled_light: bool = True) -> Iterator[tuple[int, np.ndarray]]:
+                 reuse_buffer: bool = False, compiled_light: bool = True,
+                 device: str = "cpu") -> Iterator[tuple[int, np.ndarray]]:
         """Simulate tick by tick in time blocks; yields ``(first_tick, spikes)`` with bool (T, H, W).
 
         Memory is bounded by the block (default: about :data:`BLOCK_BYTES` of spike bits and
-        light, see :meth:`default_block_ticks`), whatever the resolution and duration.
+        light, see :meth:`default_block_ticks`), whatever the resolution and duration. The
+        kernels produce packed bits (:meth:`simulate_packed`, what file writers use); this
+        unpacks them.
 
         Light: a scene that describes itself (``scene.compiled_light()``, see
         :mod:`viform.light.compiled`: still images, image sequences, the built-in synthetic
@@ -398,16 +450,73 @@ class SpikeSensor(Sensor):
             tick 0: a state already advanced is refused rather than restarted.
         compiled_light : bool
             Use the scene's compiled light when it has one (True); False forces the NumPy path.
+        device : {"cpu", "cuda", "auto"}
+            Where the kernels run: the CPU cores, a CUDA GPU through numba-cuda
+            (:mod:`viform.sensors.spike_cuda`: the same algorithm and draws), or a GPU when
+            numba-cuda finds one, else the CPU.
         """
+        height, width = self.check_scene(scene, self.height, self.width)
+        pixels = height * width
+        buffer = None
+        for first, packed in self._packed_blocks(scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
+                                                 state, reuse_buffer, compiled_light, device=device):
+            n = packed.shape[0]
+            if reuse_buffer:
+                if buffer is None or buffer.shape[0] < n:
+                    buffer = np.empty((n, pixels), dtype=np.bool_)
+                out = buffer[:n]
+            else:
+                out = np.empty((n, pixels), dtype=np.bool_)
+            _unpack_bits(packed, out.view(np.uint8))
+            yield first, out.reshape(n, height, width)
+
+    def simulate_packed(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
+                        light_sample_ticks: int = 1, progress: bool = False, flip: bool = False,
+                        compiled_light: bool = True, device: str = "cpu") -> Iterator[tuple[int, np.ndarray]]:
+        """As :meth:`simulate`, but yields the spikes as they are produced: packed bits in the
+        ``.dat`` layout, ``(first_tick, frames)`` with uint8 frames (T, H·W/8), pixel k = r·W + c
+        in bit k mod 8 of byte k // 8; ``flip`` stores the rows bottom-up, as the cameras write.
+        Every block is a fresh array. Needs H·W to be a multiple of 8 (whole bytes per frame).
+        ``device`` as in :meth:`simulate`."""
+        height, width = self.check_scene(scene, self.height, self.width)
+        pixels = height * width
+        if pixels % 8:
+            raise ViformError(f"height × width = {height}×{width} is not a multiple of 8 pixels; packed frames "
+                              "(.dat) hold whole bytes")
+        for first, packed in self._packed_blocks(scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
+                                                 None, True, compiled_light, packed_only=True, device=device):
+            frames = packed[:, : pixels // 8]
+            if flip:
+                if width % 8 == 0:
+                    frames = frames.reshape(-1, height, width // 8)[:, ::-1].reshape(-1, pixels // 8)
+                else:  # rows do not start on bytes: through bits
+                    bits = np.unpackbits(frames, axis=1, bitorder="little").reshape(-1, height, width)
+                    frames = np.packbits(bits[:, ::-1].reshape(-1, pixels), axis=1, bitorder="little")
+            yield first, np.ascontiguousarray(frames)
+
+    def _packed_blocks(self, scene, duration_s, seed, block_ticks, light_sample_ticks, progress, state,
+                       reuse_buffer, compiled_light, packed_only=False, device="cpu"):
+        """(first tick, packed bits uint8 (T, 8·⌈H·W/64⌉)) per block: the kernels' own output."""
+        from viform.sensors.spike_cuda import packed_blocks_cuda, resolve_device
+
+        if resolve_device(device) == "cuda":
+            if block_ticks is None:
+                block_ticks = self.default_block_ticks(scene, light_sample_ticks,
+                                                       scene.compiled_light() if compiled_light else None,
+                                                       packed=packed_only)
+            yield from packed_blocks_cuda(self, scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
+                                          state, compiled_light)
+            return
         check_positive("duration_s", duration_s)
         p = self.parameters
         n_ticks = max(1, int(round(duration_s * p.clock_hz)))
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
+        row_bytes = 8 * ((pixels + _LANES - 1) // _LANES)
         sample = check_int("light_sample_ticks", light_sample_ticks, 1)
         light = scene.compiled_light() if compiled_light else None
         if block_ticks is None:
-            block_ticks = self.default_block_ticks(scene, sample, light)
+            block_ticks = self.default_block_ticks(scene, sample, light, packed=packed_only)
         block_ticks = check_int("block_ticks", block_ticks, 1)
         q, shapes, index, tables = self._pixel_tables(height, width)
         a, b = self._pixel_light(height, width)
@@ -416,18 +525,14 @@ class SpikeSensor(Sensor):
             if rate_bound >= MAX_RATE_FIXED_POINT:
                 raise self._too_bright(light.lux_max)
             fast_round = rate_bound < _FAST_ROUND_LIMIT
-        if state is None:
-            state = self.initial_state(height, width, seed)
-        elif state.next_tick != 0:
-            raise ViformError(f"state has already run to tick {state.next_tick}; simulate starts at tick 0, "
-                              "so pass a fresh initial_state")
+        caller_state = state is not None
+        state = self.start_state(scene, sample, height, width, seed, q, state)
         reset_readout = p.reset == "readout"
         dead_ticks = p.dead_time_s * p.clock_hz
-        if dead_ticks > 0 and p.random_initial_charge:
-            # the stationary start with dead time depends on the light of the first tick
-            _dead_time_stationary_state(state.charge, state.target, state.counter, q, state.keys,
-                                        _first_tick_rates(self, scene, sample, height, width), dead_ticks,
-                                        p.photon_noise, reset_readout)
+        if not p.photon_noise and dead_ticks == 0:
+            mode = MODE_NOISE_FREE_READOUT if reset_readout else MODE_NOISE_FREE_SELF
+        else:
+            mode = MODE_GENERAL
         per_tick_light = light is not None and light.kind != "frames"
         if per_tick_light:
             from viform.light.compiled import tick_buffers, tick_scalars
@@ -435,6 +540,9 @@ class SpikeSensor(Sensor):
             kind, params, frames = light.kernel_kind(), light.parameters(), light.flat_frames()
             scalars, xtab, ytab = tick_buffers(light, min(block_ticks, n_ticks))
             xs = np.arange(width, dtype=np.float64)
+            band_rows = _band_rows(height, width)
+        else:
+            bounds = self._saturation_bounds(height, width)
         segments = _Segments(self, scene, light, sample, height, width)
         buffer = None
         bar = None
@@ -447,10 +555,10 @@ class SpikeSensor(Sensor):
                 last = min(first + block_ticks, n_ticks)
                 if reuse_buffer:
                     if buffer is None or buffer.shape[0] < last - first:
-                        buffer = np.empty((last - first, pixels), dtype=np.bool_)
+                        buffer = np.empty((last - first, row_bytes), dtype=np.uint8)
                     out = buffer[: last - first]
                 else:
-                    out = np.empty((last - first, pixels), dtype=np.bool_)
+                    out = np.empty((last - first, row_bytes), dtype=np.uint8)
                 if per_tick_light:
                     # light at the middle of each interval of `sample` ticks, held over it
                     times = (np.arange(first, last) // sample + 0.5) * (sample / p.clock_hz)
@@ -458,62 +566,78 @@ class SpikeSensor(Sensor):
                     tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
                     _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round,
                                      state.charge, state.target, state.counter, q, index, *tables, state.keys,
-                                     p.photon_noise, reset_readout, dead_ticks)
+                                     p.photon_noise, reset_readout, dead_ticks, band_rows)
                 else:
                     rates, seg_end = segments.block(first, last)
-                    if not p.photon_noise and dead_ticks == 0:
-                        _run_block_deterministic(out, rates, seg_end, first, state.charge, state.target,
-                                                 reset_readout)
-                    else:
-                        _run_block(out, rates, seg_end, first, state.charge, state.target, state.counter,
-                                   q, index, *tables, state.keys, p.photon_noise, reset_readout, dead_ticks)
+                    _run_block(out.view(np.uint64), rates, seg_end, first, state.charge, state.target,
+                               state.counter, q, index, *tables, state.keys, p.photon_noise, reset_readout,
+                               dead_ticks, mode, bounds, state.pending_ticks, state.pending_rate)
+                    if caller_state:  # the caller reads the state between blocks: no tick left pending
+                        _settle_all(state.charge, state.target, state.counter, q, index, *tables, state.keys,
+                                    state.pending_ticks, state.pending_rate)
                 state.next_tick = last
                 if bar is not None:
                     bar.update(last - first)
-                yield first, out.reshape(last - first, height, width)
+                yield first, out
         finally:
             if bar is not None:
                 bar.close()
 
     def default_block_ticks(self, scene: Scene, light_sample_ticks: int = 1, light=None,
-                            budget_bytes: int | None = None) -> int:
+                            budget_bytes: int | None = None, packed: bool = False) -> int:
         """Ticks per block so that a block's buffers take about ``budget_bytes`` (default
-        :data:`BLOCK_BYTES`): spike bits (1 byte per pixel-tick) plus the light it needs
-        (compiled light: a few per-tick scalars; otherwise float64 light and int64 charge
-        rates, plus the scene's own temporaries, per light sample)."""
+        :data:`BLOCK_BYTES`): spike bits (packed, 1/8 byte per pixel-tick, plus 1 byte per
+        pixel-tick when unpacked to bool, unless ``packed``) plus the light it needs (compiled
+        light: a few per-tick scalars, or one int64 rate row per run of constant light;
+        otherwise float64 light and int64 charge rates, plus the scene's own temporaries, per
+        light sample)."""
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
         budget = BLOCK_BYTES if budget_bytes is None else budget_bytes
+        spikes = pixels / 8 + (0 if packed else pixels)
         if light is None:
-            per_tick = pixels * (1 + 32 / light_sample_ticks)
+            per_tick = spikes + pixels * 32 / light_sample_ticks
         elif light.kind == "frames":
-            per_tick = pixels * (1 + 8 / light_sample_ticks)  # at most one rate row per sample
+            per_tick = spikes + pixels * 8 / _ticks_per_run(light, light_sample_ticks, self.parameters.clock_hz)
         else:
             from viform.light.compiled import tick_bytes
 
-            per_tick = pixels + tick_bytes(light)
+            per_tick = spikes + tick_bytes(light)
         return max(1, int(budget // per_tick))
 
     def capture(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
-                light_sample_ticks: int = 1, progress: bool = False) -> SpikeStream:
-        """Simulate into memory and return the :class:`SpikeStream`."""
+                light_sample_ticks: int = 1, progress: bool = False, device: str = "cpu") -> SpikeStream:
+        """Simulate into memory and return the :class:`SpikeStream` (``device`` as in :meth:`simulate`)."""
+        from viform.sensors.spike_cuda import resolve_device
+
+        device = resolve_device(device)
         blocks = [b for _, b in self.simulate(scene, duration_s, seed=seed, block_ticks=block_ticks,
-                                              light_sample_ticks=light_sample_ticks, progress=progress)]
+                                              light_sample_ticks=light_sample_ticks, progress=progress,
+                                              device=device)]
         return SpikeStream(np.concatenate(blocks), self.parameters.clock_hz, self.parameters.threshold_electrons,
-                           0.0, self.capture_metadata(scene, seed, light_sample_ticks))
+                           0.0, self.capture_metadata(scene, seed, light_sample_ticks, device))
 
     def stream(self, scene: Scene, duration_s: float, *, seed: int = 0, light_sample_ticks: int = 1,
-               progress: bool = False, reuse_buffer: bool = False) -> SimulatedSpikes:
+               progress: bool = False, reuse_buffer: bool = False, device: str = "cpu") -> SimulatedSpikes:
         """A lazy :class:`SpikeSource` that simulates as it is read (bounded memory).
 
         With ``reuse_buffer`` the blocks of ``iter_blocks`` share one buffer (see
-        :meth:`simulate`): for writers that consume each block at once.
+        :meth:`simulate`): for writers that consume each block at once. ``device`` as in
+        :meth:`simulate` ("auto" is resolved here, once).
         """
-        return SimulatedSpikes(self, scene, duration_s, seed, light_sample_ticks, progress, reuse_buffer)
+        return SimulatedSpikes(self, scene, duration_s, seed, light_sample_ticks, progress, reuse_buffer, device)
 
-    def capture_metadata(self, scene: Scene, seed: int, light_sample_ticks: int) -> dict:
-        return {"sensor": self.describe(), "scene": scene.describe(), "seed": seed,
+    def capture_metadata(self, scene: Scene, seed: int, light_sample_ticks: int, device: str = "cpu") -> dict:
+        """Provenance of a simulated stream; ``device`` ("cpu" or "cuda") names the machine that ran it."""
+        meta = {"sensor": self.describe(), "scene": scene.describe(), "seed": seed,
                 "light_sample_ticks": light_sample_ticks}
+        if device == "cuda":
+            from viform.sensors.spike_cuda import device_description
+
+            meta["device"] = f"cuda: {device_description()}"
+        else:
+            meta["device"] = "cpu"
+        return meta
 
     def describe(self) -> dict:
         d = self.parameters.to_dict()
@@ -531,7 +655,11 @@ class SimulatedSpikes(SpikeSource):
     """
 
     def __init__(self, sensor: SpikeSensor, scene: Scene, duration_s: float, seed: int,
-                 light_sample_ticks: int = 1, progress: bool = False, reuse_buffer: bool = False):
+                 light_sample_ticks: int = 1, progress: bool = False, reuse_buffer: bool = False,
+                 device: str = "cpu"):
+        from viform.sensors.spike_cuda import resolve_device
+
+        self.device = resolve_device(device)
         p = sensor.parameters
         self.sensor, self.scene, self.seed = sensor, scene, seed
         self.light_sample_ticks, self.progress = light_sample_ticks, progress
@@ -541,7 +669,7 @@ class SimulatedSpikes(SpikeSource):
         self.clock_hz = p.clock_hz
         self.threshold_electrons = p.threshold_electrons
         self.start_time_s = 0.0
-        self.metadata = sensor.capture_metadata(scene, seed, light_sample_ticks)
+        self.metadata = sensor.capture_metadata(scene, seed, light_sample_ticks, self.device)
 
     def iter_blocks(self, block_ticks: int = 1024, start: int = 0, stop: int | None = None,
                     reuse_buffer: bool | None = None):
@@ -553,7 +681,7 @@ class SimulatedSpikes(SpikeSource):
                                                           self.scene.compiled_light()))
         sim = self.sensor.simulate(self.scene, self.n_ticks / self.clock_hz, seed=self.seed,
                                    block_ticks=block_ticks, light_sample_ticks=self.light_sample_ticks,
-                                   progress=self.progress, reuse_buffer=reuse)
+                                   progress=self.progress, reuse_buffer=reuse, device=self.device)
         for first, block in sim:
             if first + block.shape[0] <= start:
                 continue
@@ -561,6 +689,17 @@ class SimulatedSpikes(SpikeSource):
                 break
             a, b = max(start - first, 0), min(stop - first, block.shape[0])
             yield first + a, block[a:b]
+
+    def iter_packed_blocks(self, block_ticks: int = 1 << 20, flip: bool = True):
+        """The whole stream as packed ``.dat`` frames, ``(first_tick, uint8 (T, H·W/8))``, straight
+        from the kernels (no bool round trip): what :func:`viform.stream.dat.write_dat` writes.
+        Blocks are at most ``block_ticks`` and the simulator's memory budget."""
+        block_ticks = min(check_int("block_ticks", block_ticks, 1),
+                          self.sensor.default_block_ticks(self.scene, self.light_sample_ticks,
+                                                          self.scene.compiled_light(), packed=True))
+        yield from self.sensor.simulate_packed(self.scene, self.n_ticks / self.clock_hz, seed=self.seed,
+                                               block_ticks=block_ticks, light_sample_ticks=self.light_sample_ticks,
+                                               progress=self.progress, flip=flip, device=self.device)
 
     def read_ticks(self, start: int, stop: int) -> np.ndarray:
         parts = [b for _, b in self.iter_blocks(max(1, stop - start), start, stop, reuse_buffer=False)]
@@ -853,107 +992,305 @@ def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, co
     return _fire_general(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter)
 
 
+# ---------------------------------------------------------------------- lane kernels (issue 30)
+# Layout: pixels in lanes of 64 (one uint64 of spike bits per tick: bit i of word w is pixel
+# 64·w + i, which on a little-endian machine is the .dat bit order, so the words are the file's
+# bytes), the tick loop inside the work item so a tile's state stays in L1, and the spikes
+# written as bits the moment they are produced.
+#
+# What the lane loop compiles to (checked with ``inspect_asm`` on x86-64 AVX-512, Zen 4;
+# ``NUMBA_DEBUG_ARRAY_OPT_STATS`` reports only prange fusion, not LLVM's loop vectorizer):
+# :func:`_lanes_add_compare` is fully unrolled into 8 × (vpaddq, vpcmpnltq → k-mask) per
+# 64 lanes, the mask expanded and shifted into place (vpsllq / vporq) and OR-reduced to the
+# word; on AVX2 the same code runs as 16 × 4 lanes. The fired lanes of a word are then
+# visited with ``tzcnt`` (count trailing zeros), so a tick without spikes costs no branch
+# per pixel, and the per-spike Gamma draw stays off the common path.
+_LANES = 64
+_TILE_WORDS = 4  # words (× 64 pixels) per work item of the constant-light kernel: state, rates in L1
+_NO_TARGET = np.int64(0x7FFFFFFFFFFFFFFF)  # target of padding lanes: they never fire
+#: Lane modes of the constant-light kernel: any option through :func:`_fire`; the two
+#: noise-free models without dead time, resolved in the vector loop itself.
+MODE_GENERAL, MODE_NOISE_FREE_SELF, MODE_NOISE_FREE_READOUT = 0, 1, 2
+
+
+@njit(cache=True, inline="always")
+def _lanes_add_compare(c, e, t, base):
+    """Add each lane's charge for the tick; the word of lanes that reached their target."""
+    word = np.uint64(0)
+    for i in range(_LANES):
+        cc = c[base + i] + e[base + i]
+        c[base + i] = cc
+        word |= np.uint64(cc >= t[base + i]) << np.uint64(i)
+    return word
+
+
+@njit(cache=True, inline="always")
+def _lanes_noise_free_self(c, e, t, base):
+    """Noise-free self-reset: add, compare, subtract the target where reached; also whether a
+    lane is still at or above its target (light above one spike per tick: lost crossings)."""
+    word = np.uint64(0)
+    over = False
+    for i in range(_LANES):
+        tt = t[base + i]
+        cc = c[base + i] + e[base + i]
+        fired = cc >= tt
+        cc = cc - tt if fired else cc
+        c[base + i] = cc
+        word |= np.uint64(fired) << np.uint64(i)
+        over |= cc >= tt
+    return word, over
+
+
+@njit(cache=True, inline="always")
+def _lanes_noise_free_readout(c, e, t, base):
+    """Noise-free readout reset: add, compare, drain the lanes that fired."""
+    word = np.uint64(0)
+    for i in range(_LANES):
+        cc = c[base + i] + e[base + i]
+        fired = cc >= t[base + i]
+        c[base + i] = 0 if fired else cc
+        word |= np.uint64(fired) << np.uint64(i)
+    return word
+
+
+@njit(cache=True)
+def _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate):
+    """Apply pixel p's pending saturated ticks (see :func:`_run_block`) to its state, exactly
+    as the lane loop would have: the same draws in the same order."""
+    c = charge[p]
+    t = target[p]
+    e = pending_rate[p]
+    for _ in range(pending_ticks[p]):
+        c += e
+        if c >= t:
+            c, t = _fire(c, t, e, 0.0, p, q, index, bins, keys, True, False, counter)
+    charge[p] = c
+    target[p] = t
+    pending_ticks[p] = 0
+
+
 @njit(cache=True, parallel=True)
-def _run_block(out, rates, seg_end, first_tick, charge, target, counter, q, index,
-               bins, keys, noise, reset_readout, dead_ticks):
-    """Integrate-and-fire over one block of ticks, event-driven per pixel.
+def _settle_all(charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate):
+    for p in prange(charge.size):
+        if pending_ticks[p] > 0:
+            _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
 
-    ``rates[s, p]`` is the fixed-point charge per tick of pixel p in run s of constant
-    light, which ends (exclusive) at absolute tick ``seg_end[s]``; the runs cover the block.
-    Within a run the charge grows linearly, so the tick of the next crossing is one integer
-    division: a still scene costs per spike, not per tick.
-    Work goes in tiles of pixels × windows of ticks so the output being written stays in
-    cache; ``out`` need not be zeroed beforehand.
+
+@njit(cache=True, parallel=True)
+def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, keys, noise,
+               reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate):
+    """Integrate-and-fire over one block of ticks in runs of constant light, 64 pixels per word.
+
+    ``rates[s, p]`` is the fixed-point charge per tick of pixel p in run s, which ends
+    (exclusive) at absolute tick ``seg_end[s]``; the runs cover the block. ``words[k, w]``
+    receives the spikes of pixels 64·w … 64·w + 63 in tick k (bit i: pixel 64·w + i).
+    Charge sums are exact integers, so adding a run's rate tick by tick gives the bits the
+    event-driven form (a jump to each crossing) gave.
+
+    Saturated pixels cost nothing per tick: with photon noise, self-reset and no dead time, a
+    pixel whose charge per tick reaches ``lazy_bound[p]`` — above the largest gap between
+    charge and target that any draw can leave (:func:`saturation_bound_fixed`) — fires in every
+    tick whatever its state, so the kernel only counts those ticks (``pending_ticks``, at rate
+    ``pending_rate``) and :func:`_settle` replays the draws when the light changes or the
+    caller asks for the state: same bits, same state, and a still saturated scene draws nothing.
     """
-    n_ticks, n_pixels = out.shape
-    n_tiles = (n_pixels + _TILE - 1) // _TILE
+    n_ticks, n_words = words.shape
+    n_pixels = charge.size
+    lazy_ok = mode == MODE_GENERAL and noise and not reset_readout and dead_ticks == 0.0
+    n_tiles = (n_words + _TILE_WORDS - 1) // _TILE_WORDS
     for tile in prange(n_tiles):
-        p0 = tile * _TILE
-        p1 = min(p0 + _TILE, n_pixels)
-        s_first = 0
-        for w0 in range(0, n_ticks, _WINDOW):
-            w1 = min(w0 + _WINDOW, n_ticks)
-            for row in range(w0, w1):
-                out[row, p0:p1] = False
-            while seg_end[s_first] <= first_tick + w0:  # the runs are shared by all pixels
-                s_first += 1
-            for p in range(p0, p1):
-                c = charge[p]
-                t = target[p]
-                k = w0
-                s = s_first
-                j_end = seg_end[s] - first_tick
-                while k < w1:
-                    end = min(j_end, w1)
-                    e = rates[s, p]
-                    inv_e = 1.0 / e if e > 0 else 0.0
-                    while e > 0:
-                        # ticks until the charge reaches the target, ceil((t − c)/e), by a float
-                        # product (division is slow) corrected to the exact integer
-                        steps = np.int64((t - c) * inv_e)
-                        if c + steps * e < t:
-                            steps += 1
-                        elif steps > 1 and c + (steps - 1) * e >= t:
-                            steps -= 1
-                        if steps < 1:
-                            steps = 1
-                        if k + steps > end:
-                            break
-                        c += steps * e
-                        k += steps
-                        out[k - 1, p] = True
-                        c, t = _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise,
-                                     reset_readout, counter)
-                    c += (end - k) * e
-                    k = end
-                    if k == j_end and s + 1 < seg_end.size:
-                        s += 1
-                        j_end = seg_end[s] - first_tick
-                charge[p] = c
-                target[p] = t
+        w0 = tile * _TILE_WORDS
+        nw = min(w0 + _TILE_WORDS, n_words) - w0
+        p0 = w0 * _LANES
+        n = min(nw * _LANES, n_pixels - p0)
+        size = nw * _LANES
+        c = np.zeros(size, dtype=np.int64)
+        t = np.full(size, _NO_TARGET)
+        e = np.zeros(size, dtype=np.int64)
+        lazy_from = np.full(size, -1, dtype=np.int64)  # tick of the block where a lane's lazy run began
+        lazy_mask = np.zeros(nw, dtype=np.uint64)
+        # per lane, what a spike's common case reads (kept beside the lane state, in L1): the charge
+        # past a crossing below which _fire draws crossing by crossing, and the draw's arguments
+        one_by_one = np.zeros(size, dtype=np.int64)
+        shape = np.ones(size)
+        table = np.zeros(size, dtype=np.int64)
+        key = np.zeros(size, dtype=np.uint64)
+        drawn = np.zeros(size, dtype=np.int64)
+        for j in range(n):
+            p = p0 + j
+            c[j] = charge[p]
+            t[j] = target[p]
+            one_by_one[j] = min(_fixed_charge(_JUMP_INTERVALS * q[p]), _fixed_charge(8.0 * q[p] * q[p]))
+            shape[j] = q[p]
+            table[j] = index[p]
+            key[j] = keys[p]
+        fast = lazy_ok  # photon noise, self-reset, no dead time: the common case inlined below
+        s = 0
+        while seg_end[s] <= first_tick:
+            s += 1
+        k = 0
+        while k < n_ticks:
+            end = min(seg_end[s] - first_tick, n_ticks)
+            if end <= k:  # an empty run
+                s += 1
+                continue
+            if not lazy_ok:
+                for j in range(n):
+                    e[j] = rates[s, p0 + j]
+            else:
+                for j in range(n):
+                    p = p0 + j
+                    r = rates[s, p]
+                    lazy = r >= lazy_bound[p]
+                    bit = np.uint64(1) << np.uint64(j & 63)
+                    if drawn[j]:  # the lane's draws so far, into the pixel's counter
+                        counter[p] += drawn[j]
+                        drawn[j] = 0
+                    if pending_ticks[p] > 0 and (not lazy or pending_rate[p] != r):
+                        # the saturated stretch ends (or its light changes): its draws first
+                        _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
+                        c[j] = charge[p]
+                        t[j] = target[p]
+                    if lazy:
+                        if pending_ticks[p] == 0:  # a new stretch starts from the lane's state
+                            charge[p] = c[j]
+                            target[p] = t[j]
+                            pending_rate[p] = r
+                        lazy_from[j] = k
+                        c[j] = 0  # fires every tick and stays put
+                        t[j] = 0
+                        e[j] = 0
+                        lazy_mask[j >> 6] |= bit
+                    else:
+                        if lazy_mask[j >> 6] & bit:  # left laziness above: its state is back
+                            lazy_mask[j >> 6] &= ~bit
+                        e[j] = r
+            for w in range(nw):  # a word's 64 lanes through the run's ticks, then the next word
+                base = w * _LANES
+                for kk in range(k, end):
+                    if mode == MODE_NOISE_FREE_SELF:
+                        word, over = _lanes_noise_free_self(c, e, t, base)
+                        if over:  # crossings lost inside the tick: the charge modulo the target
+                            for i in range(base, base + _LANES):
+                                if c[i] >= t[i]:
+                                    c[i] %= t[i]
+                    elif mode == MODE_NOISE_FREE_READOUT:
+                        word = _lanes_noise_free_readout(c, e, t, base)
+                    else:
+                        word = _lanes_add_compare(c, e, t, base)
+                        todo = word & ~lazy_mask[w]
+                        while todo != 0:
+                            i = base + np.int64(trailing_zeros(todo))
+                            todo &= todo - np.uint64(1)
+                            ci = c[i]
+                            ti = t[i]
+                            if fast and ci - ti < one_by_one[i]:
+                                # _fire's common case, from the lane's copies: one Gamma target per crossing
+                                # (the k-th draw of the pixel's stream: counter + drawn), later ones lost
+                                while ci >= ti:
+                                    ci -= ti
+                                    x = gamma_draw(shape[i], table[i], bins, key[i], counter[p0 + i] + drawn[i])
+                                    drawn[i] += 1
+                                    ti = max(np.int64(1), np.int64(x * 4294967296.0 + 0.5))
+                                c[i] = ci
+                                t[i] = ti
+                            else:
+                                if drawn[i]:
+                                    counter[p0 + i] += drawn[i]
+                                    drawn[i] = 0
+                                c[i], t[i] = _fire(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins, keys, noise,
+                                                   reset_readout, counter)
+                    words[kk, w0 + w] = word
+            if lazy_ok:
+                for j in range(n):
+                    if lazy_from[j] >= 0:
+                        pending_ticks[p0 + j] += end - lazy_from[j]
+                        lazy_from[j] = -1
+            k = end
+            s += 1
+        for j in range(n):
+            counter[p0 + j] += drawn[j]
+            if not lazy_mask[j >> 6] & (np.uint64(1) << np.uint64(j & 63)):
+                charge[p0 + j] = c[j]
+                target[p0 + j] = t[j]
 
 
-_ROWS = 8  # image rows per work item of the per-tick-light kernel
+_LIGHT_WINDOW = 16  # ticks per window of the per-tick kernel: the window's light tables stay in cache
 _ROUNDING_MAGIC = 6755399441055744.0  # 1.5·2^52
 _ROUNDING_MAGIC_BITS = np.int64(0x4338000000000000)  # its bit pattern
 #: Charge rates (fixed point) below which the per-tick kernel rounds by the magic number.
 _FAST_ROUND_LIMIT = float(1 << 51)
-_LIGHT_WINDOW = 16  # ticks per window there: the window's light tables stay in cache
+
+
+@njit(cache=True, inline="always")
+def _store_row_bits(out, k, bit0, n_bits, row_words, aligned):
+    """Write the ``n_bits`` spike bits of one image row (``row_words``) at bit ``bit0`` of tick k's
+    packed frame. ``aligned``: the row starts on a byte and is whole bytes (plain stores);
+    otherwise its bytes are OR-ed into a frame zeroed beforehand (rows share edge bytes)."""
+    byte0 = bit0 >> 3
+    if aligned:
+        for j in range(n_bits >> 3):
+            out[k, byte0 + j] = np.uint8((row_words[j >> 3] >> np.uint64((j & 7) * 8)) & np.uint64(0xFF))
+        return
+    last = (bit0 + n_bits - 1) >> 3
+    n_words = row_words.size
+    for j in range(byte0, last + 1):
+        rel = j * 8 - bit0  # row bit held by bit 0 of byte j (negative: the byte starts in the row before)
+        if rel < 0:
+            v = row_words[0] << np.uint64(-rel)
+        else:
+            wi = rel >> 6
+            o = rel & 63
+            v = row_words[wi] >> np.uint64(o)
+            if o > 56 and wi + 1 < n_words:
+                v |= row_words[wi + 1] << np.uint64(64 - o)
+        out[k, j] |= np.uint8(v & np.uint64(0xFF))
 
 
 @njit(cache=True, parallel=True)
 def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round, charge, target,
-                     counter, q, index, bins, keys, noise, reset_readout, dead_ticks):
+                     counter, q, index, bins, keys, noise, reset_readout, dead_ticks, band_rows):
     """Integrate-and-fire with the light computed per pixel and tick in compiled code.
 
     The light of pixel p in tick k is :func:`viform.light.compiled.pixel_lux` from the
     tick's scalars (row k of ``scalars``, ``xtab``, ``ytab``); its charge that tick is
     int64(a[p]·lux + b[p] + 0.5) in fixed point (gain and dark current per pixel), added
     exactly; the pixel fires when the sum reaches its Gamma(Q) target (the same
-    :func:`_fire` as the event-driven kernel). Per image row and tick: one vectorizable
-    pass for the light, the charge and the comparison, then the (few) pixels that fired.
-    Work items are bands of rows × windows of ticks, so the light tables stay in cache.
+    :func:`_fire` as the constant-light kernel). Per image row and tick: one vectorized pass
+    for the light (:func:`~viform.light.compiled.row_lux`), one for the charge, one that adds,
+    compares and packs 64 lanes per word, then only the lanes that fired. ``out`` (uint8,
+    ticks × packed frame bytes) receives the bits in the .dat order. Work items are bands of
+    ``band_rows`` rows × windows of ticks, so the light tables stay in cache.
     """
-    n_ticks, n_pixels = out.shape
+    n_ticks = out.shape[0]
+    n_pixels = charge.size
     width = xs.size
     height = n_pixels // width
-    n_bands = (height + _ROWS - 1) // _ROWS
+    n_row_words = (width + _LANES - 1) // _LANES
+    padded = n_row_words * _LANES
+    aligned = width % 8 == 0
+    n_bands = (height + band_rows - 1) // band_rows
     for band in prange(n_bands):
-        y0 = band * _ROWS
-        y1 = min(y0 + _ROWS, height)
+        y0 = band * band_rows
+        y1 = min(y0 + band_rows, height)
         lux = np.empty(width)
-        rounded = np.empty(width)
+        rounded = np.zeros(padded)  # lanes past the row stay 0: no charge
         rate = rounded.view(np.int64)
-        cw = np.empty(width, dtype=np.int64)
-        tw = np.empty(width, dtype=np.int64)
-        fired_row = np.empty(width, dtype=np.bool_)
+        cw = np.zeros(padded, dtype=np.int64)
+        tw = np.full(padded, _NO_TARGET)
+        row_words = np.empty(n_row_words, dtype=np.uint64)
+        byte_lo = (y0 * width) >> 3
+        byte_hi = (y1 * width + 7) >> 3
         for w0 in range(0, n_ticks, _LIGHT_WINDOW):
             w1 = min(w0 + _LIGHT_WINDOW, n_ticks)
+            if not aligned:
+                for k in range(w0, w1):
+                    out[k, byte_lo:byte_hi] = 0
             for y in range(y0, y1):
                 base = y * width
                 # the row's state in local buffers for the window: plain loops over them vectorize
-                cw[:] = charge[base:base + width]
-                tw[:] = target[base:base + width]
+                cw[:width] = charge[base:base + width]
+                tw[:width] = target[base:base + width]
                 for k in range(w0, w1):
                     row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, lux)
                     # charge this tick, rint(a·lux + b) in fixed point
@@ -968,77 +1305,74 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
                     else:
                         for x in range(width):
                             rate[x] = np.int64(np.rint(a[base + x] * lux[x] + b[base + x]))
-                    fired = 0
-                    for x in range(width):
-                        c = cw[x] + rate[x]
-                        cw[x] = c
-                        f = c >= tw[x]
-                        fired_row[x] = f
-                        fired += f
-                    out[k, base:base + width] = fired_row
-                    if fired == 0:
-                        continue
-                    for x in range(width):
-                        if fired_row[x]:
-                            c, t = _fire(cw[x], tw[x], rate[x], dead_ticks, base + x, q, index, bins, keys,
-                                         noise, reset_readout, counter)
-                            cw[x] = c
-                            tw[x] = t
-                charge[base:base + width] = cw
-                target[base:base + width] = tw
-
-
-@njit(cache=True)
-def _tick_self_reset(c, e, t, row):
-    # one tick for a run of pixels; a plain loop the compiler turns into SIMD code
-    over = False
-    for i in range(c.size):
-        cc = c[i] + e[i]
-        fired = cc >= t[i]
-        cc = cc - t[i] if fired else cc
-        c[i] = cc
-        row[i] = fired
-        over |= cc >= t[i]
-    return over
-
-
-@njit(cache=True)
-def _tick_readout_reset(c, e, t, row):
-    for i in range(c.size):
-        cc = c[i] + e[i]
-        fired = cc >= t[i]
-        c[i] = 0 if fired else cc
-        row[i] = fired
+                    for w in range(n_row_words):
+                        row_words[w] = _lanes_add_compare(cw, rate, tw, w * _LANES)
+                    _store_row_bits(out, k, base, width, row_words, aligned)
+                    for w in range(n_row_words):
+                        todo = row_words[w]
+                        while todo != 0:
+                            x = w * _LANES + np.int64(trailing_zeros(todo))
+                            todo &= todo - np.uint64(1)
+                            cw[x], tw[x] = _fire(cw[x], tw[x], rate[x], dead_ticks, base + x, q, index, bins, keys,
+                                                 noise, reset_readout, counter)
+                charge[base:base + width] = cw[:width]
+                target[base:base + width] = tw[:width]
 
 
 @njit(cache=True, parallel=True)
-def _run_block_deterministic(out, rates, seg_end, first_tick, charge, target, reset_readout):
-    """The noise-free model tick by tick, branch-free over pixels so the compiler vectorizes it.
+def _unpack_bits(packed, out):
+    """Spike bits (ticks × packed bytes, .dat bit order) → bool (ticks × pixels)."""
+    n_pixels = out.shape[1]
+    whole = n_pixels >> 3
+    for k in prange(out.shape[0]):
+        for j in range(whole):
+            byte = packed[k, j]
+            for i in range(8):
+                out[k, 8 * j + i] = (byte >> i) & 1
+        for p in range(whole * 8, n_pixels):
+            out[k, p] = (packed[k, p >> 3] >> (p & 7)) & 1
 
-    Same fixed-point arithmetic as :func:`_run_block` (the target stays Q), hence the same
-    bits; without random targets every pixel does identical work each tick, which SIMD
-    lanes do faster than the event-driven jumps.
+
+def saturation_bound_fixed(shapes, bins) -> np.ndarray:
+    """Per Gamma table, a charge per tick (fixed point, 2^-32 e⁻) above which a self-reset
+    pixel with photon noise and no dead time fires in every tick, whatever its state.
+
+    After any draw the gap between a pixel's target and its charge is at most the largest
+    value a draw can return (the samplers' uniforms have finite resolution): a table Gamma(Q)
+    draw is below the last quantile plus 18.72 (= ln 2^27, the smallest 26-bit uniform) over
+    its envelope's rate; the stationary state adds an Exp(1) below 37.5 (53-bit uniforms);
+    the saturated jump leaves a Marsaglia–Tsang Gamma(≤ Q) draw d·(1 + c·x)³ with the
+    Box–Muller |x| ≤ 8.66. One electron of margin covers the fixed-point roundings.
     """
-    n_ticks, n_pixels = out.shape
-    n_tiles = (n_pixels + _WIDE_TILE - 1) // _WIDE_TILE
-    for tile in prange(n_tiles):
-        p0 = tile * _WIDE_TILE
-        p1 = min(p0 + _WIDE_TILE, n_pixels)
-        c = charge[p0:p1].copy()
-        t = target[p0:p1].copy()
-        s = 0
-        for k in range(n_ticks):
-            while seg_end[s] <= first_tick + k:
-                s += 1
-            e = rates[s, p0:p1]
-            if reset_readout:
-                _tick_readout_reset(c, e, t, out[k, p0:p1])
-            elif _tick_self_reset(c, e, t, out[k, p0:p1]):
-                # saturating pixels: further crossings in the tick are lost to the readout
-                for i in range(p1 - p0):
-                    if c[i] >= t[i]:
-                        c[i] %= t[i]
-        charge[p0:p1] = c
+    shapes = np.asarray(shapes, dtype=np.float64)
+    bounds = np.empty(shapes.size, dtype=np.int64)
+    for i, shape in enumerate(shapes):
+        last = float(bins[i, -1, 0]) if bins.shape[0] > i and bins.shape[1] > 1 else shape
+        rate = 1.0 - (shape - 1.0) / last if last > 0 else 1.0
+        table_max = last + 18.72 / rate
+        # d·(1 + 8.66/√(9d))³ = (√d + 2.887)³/√d is convex in √d: its largest value over the
+        # shapes 1 … Q of the jump's draw is at one end
+        marsaglia_max = max(((math.sqrt(d) + 8.66 / 3.0) ** 3) / math.sqrt(d) for d in (2.0 / 3.0, shape - 1.0 / 3.0))
+        electrons = max(table_max + 37.5, marsaglia_max) + 3.0
+        bounds[i] = min(int(math.ceil(electrons * FIXED_POINT_SCALE)), (1 << 63) - 1)
+    return bounds
+
+
+def _ticks_per_run(light, light_sample_ticks: int, clock_hz: float, probe: int = 4096) -> float:
+    """Ticks per run of constant light of "frames" light, from its first ``probe`` light samples
+    (each run is one int64 rate row of the block)."""
+    times = (np.arange(probe) + 0.5) * (light_sample_ticks / clock_hz)
+    index = np.asarray(light.frame_index(times))
+    return probe * light_sample_ticks / (1 + int(np.count_nonzero(np.diff(index))))
+
+
+def _band_rows(height: int, width: int) -> int:
+    """Rows per work item of the per-tick kernel: 8, or fewer so that small images still give
+    every thread a few bands (only where rows are whole bytes: bands must not share a byte)."""
+    if width % 8:
+        return 8
+    threads = max(1, get_num_threads())
+    return max(1, min(8, -(-height // (4 * threads))))
 
 
 def simulation_threads() -> int:

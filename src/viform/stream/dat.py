@@ -274,9 +274,12 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
 
     path = Path(path)
     _frame_bytes(source.height, source.width)
+    # a simulator hands its packed bits as they are produced (bounded by its own budget)
+    packed_blocks = getattr(source, "iter_packed_blocks", None)
+    blocks = packed_blocks(block_ticks, flip) if packed_blocks is not None else None
     block_ticks = block_ticks_for(source.height, source.width, block_ticks)
     digest = hashlib.blake2b(digest_size=16)
-    blocks = BlockCrcs(block_bytes_for(source.n_ticks * (source.height * source.width // 8)))
+    crcs = BlockCrcs(block_bytes_for(source.n_ticks * (source.height * source.width // 8)))
     size = 0
     side = sidecar_path(path)
     settle_sidecar(path)  # a pair left by a killed writer is made whole before anything is replaced
@@ -287,10 +290,12 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     body = old_side = None
     try:
         with atomic_open(path, "wb") as f:
-            for _, block in source.iter_blocks(block_ticks):
-                raw = pack_frames(block, flip)
+            if blocks is None:
+                blocks = ((first, pack_frames(block, flip)) for first, block in source.iter_blocks(block_ticks))
+            for _, raw in blocks:
+                raw = memoryview(raw).cast("B") if not isinstance(raw, bytes) else raw
                 digest.update(raw)
-                blocks.update(raw)
+                crcs.update(raw)
                 size += len(raw)
                 f.write(raw)
             f.flush()
@@ -298,8 +303,8 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
             if sidecar:
                 body = sidecar_body(stream_header(source, rows="bottom-up" if flip else "upright",
                                                   extra={"data_bytes": size, "blake2b": digest.hexdigest(),
-                                                         "block_bytes": blocks.block_bytes,
-                                                         "block_crc32": blocks.finish()}))
+                                                         "block_bytes": crcs.block_bytes,
+                                                         "block_crc32": crcs.finish()}))
                 with open(pending, "w", encoding="utf-8") as p:
                     p.write(json.dumps(body, indent=2) + "\n")
                     p.flush()

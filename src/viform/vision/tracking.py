@@ -7,15 +7,19 @@ spike stream itself. This module is that pipeline, one stage per function:
    background level, so static texture never responds, only a change of light does:
 
    * spikes (:class:`SpikeChangeDetector`): each spike gives the pixel's current interval
-     τ (the mean of its last two intervals, seed 000 §3.3: light ∝ Q/τ); the background level
-     is a running mean of τ (time constant ``background_ticks``) updated only while the
-     pixel agrees with it, so an object passing by does not leak into it; a pixel that stays
-     different for longer than ``hold_ticks`` is absorbed (a stopped object, or where an object
-     stood at the start: the "ghost" of background subtraction). Between spikes, a silence
-     longer than the background interval times e^threshold flags a pixel that got darker,
-     without waiting for its next spike. A pixel with no interval yet starts from the
-     censored bound "at least as long as the stream so far", so a bright object is seen from
-     its first interval even at a high threshold Q.
+     τ (the mean of its last two intervals, seed 000 §3.3: light ∝ Q/τ; of its last four
+     where two span fewer than 8 ticks, since the one-tick readout quantization dominates
+     there); the background level is a running mean of τ (time constant ``background_ticks``)
+     updated only while the pixel agrees with it, so an object passing by does not leak into
+     it; a pixel that stays different for longer than ``hold_ticks`` is absorbed (a stopped
+     object). Between spikes, a silence longer than the background interval times
+     e^threshold flags a pixel that got darker, without waiting for its next spike. A pixel
+     with no interval yet starts from the censored bound "at least as long as the stream so
+     far", so a bright object is seen from its first interval even at a high threshold Q.
+     Objects already in view at the start would be learned as background (and leave a
+     "ghost" where they stood): after ``seed_ticks`` the background of pixels that stand out
+     from the background around them is interpolated from their surroundings
+     (:func:`seed_background`).
    * frames (:class:`FrameChangeDetector`): the same rule on log light per frame.
 
 2. **Grouping** (:func:`detect_boxes`): foreground pixels of one output step whose squares of
@@ -39,10 +43,12 @@ Both return MOTChallenge-style rows (:mod:`viform.vision.motchallenge`).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit, prange
+from scipy.ndimage import binary_dilation, gaussian_filter, median_filter
 from scipy.optimize import linear_sum_assignment
 
 from viform._validate import ViformError, check_int, check_non_negative, check_positive
@@ -60,7 +66,8 @@ class TrackerParameters:
         Time constant of the background level, in ticks (spike) — frames use the same
         time in seconds, converted with the stream's clock.
     hold_ticks : int
-        Foreground longer than this (ticks) is absorbed into the background.
+        Foreground longer than this (ticks) is absorbed into the background (an object that
+        stopped; 2,000 ticks = 50 ms at 40 kHz).
     merge_px : int
         Foreground pixels closer than this (px) belong to one detection.
     min_pixels : int
@@ -74,20 +81,43 @@ class TrackerParameters:
         on top of the two boxes' half-diagonals.
     min_speed_px_per_s, still_ticks : float, int
         A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
-        not reported: it is where an object stood when the tracker started (background
-        subtraction's "ghost"), or an object that stopped (absorbed into the background anyway).
+        not reported (a ghost, or an object that stopped). 0 (the default) reports every track:
+        with the start-up seeding there are few ghosts left, and slow objects (100 px/s) count.
+    merged_keep_alive : bool
+        A confirmed track with no detection whose predicted box lies at least half inside a
+        detection matched to another track is merged with (or hidden by) that object: it does
+        not age while that lasts (the ball behind the truck keeps its id), and is not reported.
+    seed_ticks, seed_measured_fraction : int, float
+        When to seed: at the first of ``seed_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to
+        ``hold_ticks``, at which at least this fraction of the pixels has measured an interval
+        (later at a high threshold Q).
+    seed_window_px, seed_threshold_log, seed_unsure : int, float, bool
+        Objects already in view when tracking starts: when seeded,
+        a pixel whose learned light differs (|ln ratio| > ``seed_threshold_log``) from the median
+        over ``seed_window_px`` px around it (wider than any object, on the assumption that the
+        background is smoother than the objects on it) takes the background interpolated from
+        the pixels around it, so the object is foreground at once and the place it leaves is not
+        a ghost (:func:`seed_background`); with ``seed_unsure``, pixels that differ from that
+        background by more than ``threshold_log`` only may return to it without being flagged.
+        Frames apply it to their first frame.
     """
 
     threshold_log: float = 0.4
     background_ticks: float = 80.0
-    hold_ticks: int = 1000
+    hold_ticks: int = 2000
     merge_px: int = 2
     min_pixels: int = 12
     min_hits: int = 2
     max_coast_ticks: int = 600
     gate_px: float = 8.0
-    min_speed_px_per_s: float = 50.0
+    min_speed_px_per_s: float = 0.0
     still_ticks: int = 400
+    seed_ticks: int = 20
+    seed_window_px: int = 96
+    seed_threshold_log: float = 0.7
+    seed_unsure: bool = True
+    seed_measured_fraction: float = 0.9
+    merged_keep_alive: bool = True
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -100,20 +130,28 @@ class TrackerParameters:
         check_positive("gate_px", self.gate_px)
         check_non_negative("min_speed_px_per_s", self.min_speed_px_per_s)
         check_int("still_ticks", self.still_ticks, 1)
+        check_int("seed_ticks", self.seed_ticks, 0)
+        check_int("seed_window_px", self.seed_window_px, 1)
+        check_positive("seed_threshold_log", self.seed_threshold_log)
+        if not 0.0 <= self.seed_measured_fraction <= 1.0:
+            raise ViformError(f"seed_measured_fraction = {self.seed_measured_fraction!r} must be within 0 … 1")
 
 
 # --------------------------------------------------------------------------- spike front end
 
+#: Two intervals spanning fewer ticks than this are averaged over four instead (bright pixels).
+_SHORT_SPAN_TICKS = 8
+
 @njit(parallel=True, cache=True)
-def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev, censored, flag_since, pending,
-                        out, k_lo, k_hi, background_ticks, hold_ticks):  # pragma: no cover - compiled
+def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, last3, last4, ref, prev, censored,
+                        flag_since, pending, out, k_lo, k_hi, k_seed, background_ticks, hold_ticks):  # pragma: no cover
     # Intervals in ticks, compared by ratio (k_lo = e^−threshold, k_hi = e^threshold): no logarithm
     # per spike. The background interval follows an exponential mean with weight τ/(T + τ) per
     # interval τ (time constant T ticks).
     T, H, W = spikes.shape
     for r in prange(H):
         step = 0
-        l1, l2, rf, pv = last1[r], last2[r], ref[r], prev[r]
+        l1, l2, l3, l4, rf, pv = last1[r], last2[r], last3[r], last4[r], ref[r], prev[r]
         cs, fs, pd = censored[r], flag_since[r], pending[r]
         for t in range(T):
             tick = first_tick + t
@@ -128,8 +166,15 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                     l1[c] = tick
                     continue
                 p2 = l2[c]
-                n = 2.0 if p2 >= 0 else 1.0
-                span = float(tick - p2) if p2 >= 0 else float(tick - p1)
+                p4 = l4[c]
+                if p4 >= 0 and tick - p2 < _SHORT_SPAN_TICKS:
+                    # intervals of a few ticks: the one-tick quantization dominates, so average four of
+                    # them (a saturated object spiking every tick is told from a background every 2 ticks)
+                    n = 4.0
+                    span = float(tick - p4)
+                else:
+                    n = 2.0 if p2 >= 0 else 1.0
+                    span = float(tick - p2) if p2 >= 0 else float(tick - p1)
                 tau = span / n
                 b = rf[c]
                 # the readout knows each spike to a tick: the span of n intervals is (span − 1, span + 1)
@@ -139,9 +184,20 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                 if cs[c]:
                     flagged = brighter  # only "brighter" is known against a lower bound
                     if not flagged:  # the first measured interval replaces the bound
-                        rf[c] = tau
+                        q = pv[c]
+                        if q > 0.0 and ((span - 1.0) / n > q * k_seed or (span + 1.0) / n < q / k_seed):
+                            # no interval yet when the background was seeded, and far from the background
+                            # seeded around it: on an object since the start (seed_background)
+                            rf[c] = q
+                            pv[c] = 0.0
+                            pd[c] = True
+                            fs[c] = tick
+                        else:
+                            rf[c] = tau
+                            fs[c] = -1
                         cs[c] = False
-                        fs[c] = -1
+                        l4[c] = l3[c]
+                        l3[c] = p2
                         l2[c] = p1
                         l1[c] = tick
                         continue
@@ -166,6 +222,8 @@ def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, ref, prev,
                 else:
                     fs[c] = -1
                     rf[c] = b + tau / (background_ticks + tau) * (tau - b)
+                l4[c] = l3[c]
+                l3[c] = p2
                 l2[c] = p1
                 l1[c] = tick
             if (tick + 1) % step_ticks == 0:  # end of an output step: darker pixels, then emit
@@ -197,25 +255,73 @@ class SpikeChangeDetector:
         shape = (check_int("height", height, 1), check_int("width", width, 1))
         self.last1 = np.full(shape, -1, np.int64)
         self.last2 = np.full(shape, -1, np.int64)
+        self.last3 = np.full(shape, -1, np.int64)
+        self.last4 = np.full(shape, -1, np.int64)
         self.ref = np.zeros(shape, np.float64)  # background interval, ticks
         self.prev = np.zeros(shape, np.float64)  # the background before the last absorption (0: none)
         self.censored = np.zeros(shape, np.bool_)
         self.flag_since = np.full(shape, -1, np.int64)
         self.pending = np.zeros(shape, np.bool_)
         self.next_tick = 0
+        self.seeded = False
 
     def feed(self, spikes: np.ndarray) -> np.ndarray:
         """Process the next ``spikes`` block (T, H, W) bool; returns (steps completed, H, W) bool masks."""
         spikes = np.ascontiguousarray(spikes, dtype=np.bool_)
+        outs, start = [], 0
+        while True:  # split at the seeding checks: the same ticks whatever the blocks
+            check = self._next_seed_check()
+            end = spikes.shape[0] if check is None else min(spikes.shape[0], start + check - self.next_tick)
+            outs.append(self._feed(spikes[start:end]))
+            start = end
+            if check is not None and self.next_tick == check:
+                self._seed()
+            if start >= spikes.shape[0]:
+                return np.concatenate(outs)
+
+    def _feed(self, spikes):
         first = self.next_tick
         n_out = (first + spikes.shape[0]) // self.step_ticks - first // self.step_ticks
         out = np.zeros((n_out,) + self.ref.shape, np.bool_)
         p = self.parameters
-        _spike_change_block(spikes, first, self.step_ticks, self.last1, self.last2, self.ref, self.prev, self.censored,
+        _spike_change_block(spikes, first, self.step_ticks, self.last1, self.last2, self.last3, self.last4, self.ref,
+                            self.prev, self.censored,
                             self.flag_since, self.pending, out, math.exp(-p.threshold_log),
-                            math.exp(p.threshold_log), p.background_ticks, p.hold_ticks)
+                            math.exp(p.threshold_log), math.exp(p.seed_threshold_log), p.background_ticks,
+                            p.hold_ticks)
         self.next_tick += spikes.shape[0]
         return out
+
+    def _next_seed_check(self):
+        """The next tick (``seed_ticks``·2^k) at which to try seeding the background, or None."""
+        every = self.parameters.seed_ticks
+        if every <= 0 or self.seeded:
+            return None
+        check = every
+        while check <= self.next_tick:  # checks at seed_ticks·2^k: a handful, whatever the threshold Q
+            check *= 2
+        return check if check <= self.parameters.hold_ticks else None  # past that, give up
+
+    def _seed(self):
+        """Seed the background (:func:`seed_background`) once enough pixels have measured an interval."""
+        p = self.parameters
+        measured = ~self.censored & (self.last1 >= 0)
+        if measured.mean() < p.seed_measured_fraction:
+            return  # a high threshold Q or dim light: wait for more intervals
+        self.seeded = True
+        # intervals are inverse light: the same test on ln τ
+        log_ref = np.log(np.where(measured, self.ref, 1.0))
+        seeded, unsure, around, weight = seed_background(log_ref, measured, p.seed_threshold_log,
+                                                         p.seed_window_px, p.threshold_log, weights=True)
+        self.ref[seeded] = np.exp(around)[seeded]
+        self.prev[seeded] = 0.0
+        self.flag_since[seeded] = -1
+        if p.seed_unsure:
+            self.prev[unsure] = np.exp(around)[unsure]
+        # no interval yet (dim pixels): their first one is compared with the background seeded around them,
+        # where enough pixels around were measured
+        later = ~measured & (weight > 0.5)
+        self.prev[later] = np.exp(around)[later]
 
 
 class FrameChangeDetector:
@@ -242,6 +348,11 @@ class FrameChangeDetector:
         cur = np.log(np.maximum(np.asarray(frame, dtype=np.float64), self.floor))
         if self.ref is None:
             self.ref, self.flag_since, self.last_t = cur.copy(), np.full(cur.shape, np.nan), t_s
+            p = self.parameters
+            if p.seed_ticks > 0:  # objects in the first frame: the background around them, as for spikes
+                seeded, _, around = seed_background(cur, np.ones(cur.shape, bool), p.seed_threshold_log,
+                                                    p.seed_window_px, p.threshold_log)
+                self.ref[seeded] = around[seeded]
             return np.zeros(cur.shape, bool)
         d = cur - self.ref
         flagged = np.abs(d) > self.parameters.threshold_log
@@ -252,6 +363,76 @@ class FrameChangeDetector:
         self.ref[update] += gain * d[update]
         self.last_t = t_s
         return flagged
+
+
+# --------------------------------------------------------------------------- start-up background
+
+_SEED_BLOCK_PX = 4  # the robust background is computed on blocks of 4×4 px (the background is smooth)
+
+
+def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int) -> np.ndarray:
+    """Median of ``log_light`` over valid pixels in a ``window_px`` square around each pixel (blocks of 4 px)."""
+    H, W = log_light.shape
+    b = _SEED_BLOCK_PX
+    hb, wb = -(-H // b), -(-W // b)
+    pad = np.full((hb * b, wb * b), np.nan)
+    pad[:H, :W] = np.where(valid, log_light, np.nan)
+    blocks = pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks: filled below
+        med = np.nanmedian(blocks, axis=2)
+    fill = np.nanmedian(med) if np.isfinite(med).any() else 0.0
+    med = np.where(np.isfinite(med), med, fill)
+    size = max(1, window_px // b) | 1  # odd, in blocks
+    smooth = median_filter(med, size=size, mode="nearest")
+    return np.repeat(np.repeat(smooth, b, axis=0), b, axis=1)[:H, :W]
+
+
+def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int,
+                    unsure_log: float | None = None, weights: bool = False):
+    """Objects in view at the start: pixels that stand out from the background around them, and that background.
+
+    A change detector that learns its background from the first light it sees learns the objects
+    already in view as background: they stay invisible until they move off and leave a "ghost"
+    where they stood. Assuming the background is smoother than the objects on it, a pixel more
+    than ``threshold_log`` from the median of ln(light) over ``window_px`` px (wider than twice
+    any object) is on an object (*seeded*). The background under and near it is then
+    interpolated from the pixels around that are not seeded (normalised Gaussian smoothing,
+    σ = ``window_px``/8: the local background, not the window's median), which is what the
+    pixel shows once the object has moved off.
+
+    Parameters
+    ----------
+    log_light : ndarray (H, W)
+        ln of the light (or of the spike interval, its inverse: the test is symmetric).
+    valid : ndarray (H, W) bool
+        Pixels with a measurement (spike pixels that have no interval yet are left out).
+    threshold_log, window_px : float, int
+    unsure_log : float, optional
+        Pixels not seeded but more than this from the local background are returned as *unsure*.
+
+    Returns
+    -------
+    seeded, unsure : ndarray (H, W) bool
+    background : ndarray (H, W) float
+        The estimated ln(light) of the background (same unit as ``log_light``).
+    weight : ndarray (H, W) float
+        With ``weights``: the Gaussian-weighted fraction of clear measured pixels the background
+        was interpolated from (0 … 1).
+    """
+    window_px = check_int("window_px", window_px, 1)
+    coarse = _robust_background(log_light, valid, window_px)
+    seeded = valid & (np.abs(log_light - coarse) > threshold_log)
+    # the local background from the pixels that are not on an object (their anti-aliased edges excluded)
+    clear = (valid & ~binary_dilation(seeded, iterations=2)).astype(np.float64)
+    sigma = max(window_px / 8.0, 1.0)
+    weight = gaussian_filter(clear, sigma, mode="nearest")
+    total = gaussian_filter(np.where(clear > 0, log_light, 0.0), sigma, mode="nearest")
+    background = np.where(weight > 1e-3, total / np.maximum(weight, 1e-3), coarse)
+    unsure = np.zeros_like(seeded)
+    if unsure_log is not None:
+        unsure = valid & ~seeded & (np.abs(log_light - background) > unsure_log)
+    return (seeded, unsure, background, weight) if weights else (seeded, unsure, background)
 
 
 # --------------------------------------------------------------------------- grouping
@@ -435,6 +616,21 @@ class Tracker:
                 track.confirmed = True
                 if self._moving(track, t_s):
                     reported.append((track.track_id, boxes[j].copy()))
+        if p.merged_keep_alive and matches:
+            # a confirmed track without a detection whose prediction lies inside another track's detection
+            # is merged with (or hidden by) that object: it coasts on as long as that lasts
+            matched_boxes = boxes[[j for _, j in matches]]
+            for i, track in enumerate(self.tracks):
+                if i in matched_tracks or not track.confirmed:
+                    continue
+                pb = predicted[i]
+                ix = np.clip(np.minimum(pb[0] + pb[2], matched_boxes[:, 0] + matched_boxes[:, 2])
+                             - np.maximum(pb[0], matched_boxes[:, 0]), 0, None)
+                iy = np.clip(np.minimum(pb[1] + pb[3], matched_boxes[:, 1] + matched_boxes[:, 3])
+                             - np.maximum(pb[1], matched_boxes[:, 1]), 0, None)
+                inside = ix * iy / max(pb[2] * pb[3], 1e-9)
+                if inside.max() >= 0.5:
+                    track.last_seen_t = t_s  # not reported: its box is a prediction, not a measurement
         coast_s = p.max_coast_ticks * self.tick_s
         self.tracks = [tr for i, tr in enumerate(self.tracks)
                        if i in matched_tracks or (tr.confirmed and t_s - tr.last_seen_t <= coast_s)]

@@ -1,0 +1,127 @@
+"""CLI: ``viform sweep SCENE`` — a sensor at many settings on one scene: the trade-off, the setting meeting demands."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from viform._io import JSON_FILE_HELP
+from viform._validate import ViformError
+from viform.cli.app import cli
+
+#: Largest --speed factor of the dilemma scene a sweep accepts.
+MAX_SPEED = 100.0
+
+
+@cli.command("sweep")
+@click.argument("scene")
+@click.option("--sensor", "sensors", multiple=True,
+              help="A sensor to sweep (repeat for several): spike, cmos-short, cmos, seed001-2seg, seed001-3seg, "
+                   "seed003-4t, seed003-overflow, highspeed, gated. Default: the standard sweep (the spike chip's 16 "
+                   "threshold levels × 20/40 kHz, 20 settings of each frame sensor).")
+@click.option("--vary", "vary", multiple=True, metavar="[SENSOR:]PARAM=SPEC",
+              help="Values of one parameter (repeat for a grid): a,b,c | start:stop:step | log:start:stop:n "
+                   "(threshold_level=all: the 16 chip levels). Without SENSOR: every swept sensor that has PARAM. "
+                   "--list-parameters shows each sensor's parameters.")
+@click.option("--require", default=None, metavar="DEMANDS",
+              help="Demands every point is checked against, e.g. \"dr_captured_db>=120,edge_width_px<=2,"
+                   "data_rate_mb_per_s<=50\" (metric names of compare's metrics.json).")
+@click.option("--objective", default="psnr_log_db", show_default=True,
+              help="Metric that picks the best point per sensor among those meeting the demands.")
+@click.option("--spike-image", default="best", show_default=True,
+              help="Spike reconstruction scored: best (the best method of the imaging package), interval, "
+                   "accumulation.")
+@click.option("--duration", "duration_s", type=float, default=0.04, show_default=True, help="Clip length, s.")
+@click.option("--at", "at", default=None, help="Instants to score, s, comma-separated (default: 30/50/70 %).")
+@click.option("--height", type=int, default=64, show_default=True, help="Resolution of built-in scenes.")
+@click.option("--width", type=int, default=128, show_default=True)
+@click.option("--brightness", type=float, default=None,
+              help="Factor on the light of the dilemma and night-road-fog scenes.")
+@click.option("--speed", type=float, default=None, help="Factor on the dilemma scene's speeds.")
+@click.option("--visibility-m", type=float, default=None, help="Fog visibility of night-road-fog, m.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Sweep seed; each point's noise seed is derived from it and the point.")
+@click.option("--out", "out_dir", type=click.Path(), default="viform-sweep", show_default=True,
+              help="Output folder (report.html, sweep.zarr, sweep.json, points/). A folder holding a sweep of the "
+                   "same scene and options is resumed or extended: stored points are reused.")
+@click.option("--workers", type=int, default=None,
+              help="Local dask worker processes (default: the number of CPU cores); 0: in this process, no dask.")
+@click.option("--scheduler", default=None, help="Address of a running dask scheduler (tcp://HOST:PORT) "
+              "to use instead of local workers.")
+@click.option("--worker-memory", default="auto", show_default=True,
+              help="Memory limit of each local worker, e.g. 2GiB (auto: the machine's memory shared evenly).")
+@click.option("--tracking", is_flag=True,
+              help="Also track the scene's objects at every point and score it against the truth (HOTA, MOTA, IDF1, "
+                   "ID switches, latency; scenes with object truth). Slower.")
+@click.option("--list-parameters", is_flag=True, help="List each sensor's parameters and defaults, and exit.")
+@click.option("--no-progress", is_flag=True, help="No progress bar.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
+@click.option("--json-file", type=click.Path(dir_okay=False), default=None, help=JSON_FILE_HELP)
+def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at, height, width, brightness, speed,
+          visibility_m, seed, out_dir, workers, scheduler, worker_memory, tracking, list_parameters, no_progress,
+          as_json, json_file):
+    """Shoot SCENE with each --sensor at every setting --vary gives; score each point as `viform compare`
+    does; write OUT/report.html (trade-offs, Pareto fronts, best images) and OUT/sweep.zarr.
+
+    With --require, names the setting of each sensor that meets every demand (best by --objective)
+    or, where none does, the nearest miss and by how much.
+    """
+    from viform.cli.compare import command_start
+
+    started = command_start()
+    from viform._io import check_json_file, write_json
+    from viform.measure import sweep as sw
+
+    if list_parameters:
+        keys = list(sensors) or list(sw.SWEEP_SENSORS)
+        doc = {k: {n: p.default for n, p in sw.sweep_parameters(k).items()} for k in keys}
+        if as_json:
+            click.echo(json.dumps(doc, indent=2, default=str))
+        else:
+            for k in keys:
+                click.echo(f"{k}: " + ", ".join(f"{n}={p!r}" for n, p in sorted(doc[k].items())))
+        return
+    from viform.cli.compare import announce_preparation, check_outputs, parse_instants
+    from viform.report.sweep_report import console_lines, run_sweep_report
+
+    instants = parse_instants(at)
+    options = {k: v for k, v in (("brightness", brightness), ("speed", speed), ("visibility_m", visibility_m))
+               if v is not None}
+    for name, scenes in (("brightness", ("dilemma", "night-road-fog")), ("speed", ("dilemma",)),
+                         ("visibility_m", ("night-road-fog",))):
+        if name in options and scene not in scenes:
+            raise ViformError(f"--{name.replace('_', '-')} applies to the {' and '.join(scenes)} scene"
+                              f"{'s' if len(scenes) > 1 else ''} only, not to SCENE = {scene!r}")
+    if speed is not None and speed > MAX_SPEED:  # the scene samples its window means every 0.5 px of motion
+        raise ViformError(f"--speed {speed:g} is not allowed: at most {MAX_SPEED:g} (× the scene's 2 000–3 000 px/s)")
+    plan = sw.make_plan(scene, list(sensors) or None, list(vary), height=height, width=width, duration_s=duration_s,
+                        seed=seed, instants_s=instants, require=require, objective=objective,
+                        spike_image=spike_image, scene_options=options, tracking=tracking)
+    check_outputs(out_dir, json_file)
+    check_json_file(json_file)
+    if workers is not None and scheduler is not None:
+        raise click.UsageError("--workers and --scheduler exclude each other: a scheduler brings its own workers")
+    if "spike" in plan.sensors:
+        announce_preparation()
+    doc = run_sweep_report(plan, out_dir, workers=workers, scheduler=scheduler, memory_limit=worker_memory,
+                           progress=not no_progress, command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "",
+                           started_s=started)
+    summary = {"report": doc["report"], "table": str(Path(out_dir) / "sweep.zarr"),
+               "sweep": str(Path(out_dir) / "sweep.json"), "n_points": doc["n_points"], "computed": doc["computed"],
+               "reused": doc["reused"], "seconds": doc["seconds"], "cpu_seconds": doc["cpu_seconds"],
+               "wall_s": time.perf_counter() - started, "workers": doc["workers"],
+               "answer": {k: v for k, v in doc["answer"].items() if k != "meeting"}}
+    summary = sw._finite(summary)
+    if json_file:
+        write_json(json_file, summary)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2, allow_nan=False))
+        return
+    for line in console_lines(doc):
+        click.echo(line)
+    click.echo(f"\nwrote {summary['report']} and {summary['table']} in {summary['wall_s']:.1f} s")

@@ -1,0 +1,181 @@
+"""``viform sweep``'s engine: value specs, demands, per-point seeds, worker-count independence, resuming."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from viform._validate import ViformError
+from viform.measure import sweep as sw
+
+#: A tiny sweep: dilemma at 32×48, a 12 ms clip (480 spike-camera ticks at 40 kHz).
+TINY = dict(height=32, width=48, duration_s=0.012, instants_s=[0.004, 0.008], seed=3)
+
+
+def tiny_plan(vary, sensors=None, require=None):
+    return sw.make_plan("dilemma", sensors or list(dict.fromkeys(v.split(":")[0] for v in vary)), vary,
+                        require=require, **TINY)
+
+
+# ---------------------------------------------------------------------- specs and demands
+def test_value_specs():
+    p = sw.sweep_parameters("cmos")["exposure_s"]
+    assert sw.parse_values("--vary", p, "1e-3, 2e-3,3e-3") == [1e-3, 2e-3, 3e-3]
+    assert sw.parse_values("--vary", p, "0.001:0.004:0.001") == [0.001, 0.002, 0.003, 0.004]  # stop included
+    log = sw.parse_values("--vary", p, "log:1e-5:1e-2:4")
+    assert log == pytest.approx([1e-5, 1e-4, 1e-3, 1e-2])
+    level = sw.sweep_parameters("spike")["threshold_level"]
+    assert sw.parse_values("--vary", level, "all") == list(range(16))
+    assert sw.parse_values("--vary", level, "0:15:5") == [0, 5, 10, 15]
+    assert sw.parse_values("--vary", sw.sweep_parameters("spike")["photon_noise"], "true,false") == [True, False]
+
+
+@pytest.mark.parametrize("spec, needle", [("5:1:1", "no points"), ("log:1e-3:1e-2:0", "no points"), ("", "no values"),
+                                          ("1:2:0", "step"), ("log:0:1:3", "> 0"), ("abc", "not a number")])
+def test_bad_value_specs(spec, needle):
+    with pytest.raises(ViformError, match=needle) as err:
+        sw.parse_values("--vary exposure_s=" + spec, sw.sweep_parameters("cmos")["exposure_s"], spec)
+    assert str(err.value).startswith("--vary")
+
+
+def test_require_parsing_and_checks():
+    ds = sw.parse_require("dr_captured_db>=120, edge_width_px<=2")
+    assert [d.text() for d in ds] == ["dr_captured_db>=120", "edge_width_px<=2"]
+    assert ds[0].met(121.0) and not ds[0].met(119.0) and not ds[0].met(math.nan)
+    assert ds[0].shortfall(110.0) == pytest.approx(10.0) and ds[1].shortfall(5.0) == pytest.approx(3.0)
+    with pytest.raises(ViformError, match="'blur' is not a metric; allowed: psnr_log_db"):
+        sw.parse_require("blur<=2")
+    for bad in ("dr_captured_db>>3", "dr_captured_db>=abc", "dr_captured_db>=nan", "dr_captured_db"):
+        with pytest.raises(ViformError, match="--require"):
+            sw.parse_require(bad)
+
+
+def test_unknown_parameter_names_the_allowed_ones():
+    with pytest.raises(ViformError, match=r"'exposure' is not a parameter of cmos; allowed: .*exposure_s"):
+        sw.parse_vary(["exposure=1e-3"], ["cmos"])
+    # a setting the sensor refuses is refused before any work, naming --vary and the value
+    with pytest.raises(ViformError, match=r"--vary: sensor 'cmos' at exposure_s=0.05"):
+        sw.make_point_sensor("cmos", {"exposure_s": 0.05})  # longer than the 30 fps frame period
+
+
+def test_points_default_once_and_seeds_are_per_point():
+    plan = tiny_plan(["spike:threshold_level=11,12,13"])
+    assert len(plan.points) == 3  # level 12 is the preset's default: one point, not two
+    assert sum(p.is_default for p in plan.points) == 1
+    seeds = {p.point_id: sw.point_seed(3, p) for p in plan.points}
+    assert len(set(seeds.values())) == 3
+    again = tiny_plan(["spike:threshold_level=13,12"])  # other order, fewer points: same ids and seeds
+    assert {p.point_id: sw.point_seed(3, p) for p in again.points}.items() <= seeds.items()
+
+
+def test_answer_best_and_nearest_miss():
+    recs = [{"point_id": str(i), "sensor": s, "settings": {"x": i}, "label": f"{s} {i}", "metrics": m}
+            for i, (s, m) in enumerate([("a", {"dr_captured_db": 130.0, "edge_width_px": 1.0, "psnr_log_db": 20.0}),
+                                        ("a", {"dr_captured_db": 125.0, "edge_width_px": 1.5, "psnr_log_db": 25.0}),
+                                        ("b", {"dr_captured_db": 100.0, "edge_width_px": 1.0, "psnr_log_db": 30.0}),
+                                        ("b", {"dr_captured_db": 119.0, "edge_width_px": 3.0, "psnr_log_db": 10.0}),
+                                        ("b", {"dr_captured_db": 60.0, "edge_width_px": math.nan,
+                                               "psnr_log_db": 40.0})])]
+    ans = sw.answer(recs, sw.parse_require("dr_captured_db>=120,edge_width_px<=2"))
+    assert ans["per_sensor"]["a"]["meets"] and ans["per_sensor"]["a"]["best"] == "1"  # higher PSNR of the two
+    b = ans["per_sensor"]["b"]
+    assert not b["meets"] and b["best"] == "2"  # one demand missed (by 20 dB) beats two missed
+    assert [m["demand"] for m in b["misses"]] == ["dr_captured_db>=120"] and b["misses"][0]["shortfall"] == 20.0
+    assert ans["meeting"] == ["0", "1"]
+    assert "a meets" in ans["sentences"][0]
+
+
+# ---------------------------------------------------------------------- running
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    """The reference: a spike + CMOS sweep run in this process, no dask."""
+    plan = tiny_plan(["spike:threshold_level=0,15", "cmos:exposure_s=1e-4,1e-3"],
+                     require="underexposed_fraction<=0.5")
+    out = tmp_path_factory.mktemp("serial")
+    return plan, out, sw.sweep(plan, out, workers=0, progress=False)
+
+
+def _same(a, b):
+    assert [r["point_id"] for r in a] == [r["point_id"] for r in b]
+    for x, y in zip(a, b, strict=True):
+        assert x["seed"] == y["seed"]
+        for k, v in x["metrics"].items():
+            w = y["metrics"][k]
+            assert v == w or (isinstance(v, float) and math.isnan(v) and math.isnan(w)), (x["label"], k, v, w)
+
+
+def test_identical_results_with_one_and_two_workers(serial, tmp_path):
+    """The same points on a dask cluster of 1 and of 2 workers give the same metrics and images as in-process."""
+    from distributed import Client, LocalCluster
+
+    plan, out, ref = serial
+    for n in (1, 2):
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster, \
+                Client(cluster) as client:
+            doc = sw.sweep(plan, tmp_path / f"w{n}", client=client, progress=False)
+        assert doc["computed"] == len(plan.points) and doc["workers"] == n
+        _same(ref["records"], doc["records"])
+        for r in ref["records"]:
+            np.testing.assert_array_equal(sw.load_images(out, r["point_id"]),
+                                          sw.load_images(tmp_path / f"w{n}", r["point_id"]))
+
+
+def test_table_and_physics(serial):
+    """sweep.zarr holds one row per point; a lower threshold sees darker light in the same clip (fewer pixels
+    under-exposed) and the spike camera's range in a clip stays within its 20·lg(clock · clip) bound."""
+    plan, out, doc = serial
+    table = sw.read_table(out / "sweep.zarr")
+    assert list(table["point_id"]) == [p.point_id for p in plan.points]
+    assert table["metric/psnr_log_db"].shape == (len(plan.points),)
+    spike = {r["settings"].get("threshold_level", 12): r["metrics"] for r in doc["records"] if r["sensor"] == "spike"}
+    under = [spike[level]["underexposed_fraction"] for level in (0, 12, 15)]
+    assert under[0] < under[1] < under[2]
+    # seed 000 §3.3: floor Q/(η·T) (one spike per clip), ceiling Q·f/η: DR ≤ 20·lg(f·T), ± a factor 2 at each
+    # end for the "rendered within a factor of 2" rule of the metric
+    bound = 20 * math.log10(40e3 * TINY["duration_s"]) + 20 * math.log10(4)
+    assert all(m["dr_captured_db"] <= bound for m in spike.values())
+    assert doc["answer"]["per_sensor"]["spike"]["meets"]  # level 0 sees most of the scene
+    assert doc["answer"]["per_sensor"]["spike"]["settings"] == {"threshold_level": 0}
+
+
+def test_resume_after_kill_and_extend(serial, tmp_path):
+    """A sweep killed after 2 points recomputes only the others; a longer sweep reuses every stored point."""
+    plan, _, ref = serial
+    vary = ["cmos:exposure_s=1e-4,1e-3"]
+    code = (f"from viform.measure import sweep as sw\n"
+            f"plan = sw.make_plan('dilemma', ['cmos'], {vary!r}, **{TINY!r})\n"
+            f"sw.sweep(plan, {str(tmp_path)!r}, workers=0, progress=False, crash_after_points=2)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[2])})
+    assert run.returncode == 70, run.stderr[-2000:]
+    assert len(list((tmp_path / "points").glob("*.json"))) == 2 and not (tmp_path / "sweep.json").exists()
+    plan2 = sw.make_plan("dilemma", ["cmos"], vary, **TINY)
+    doc = sw.sweep(plan2, tmp_path, workers=0, progress=False)
+    assert (doc["computed"], doc["reused"]) == (1, 2)
+    wanted = [r for r in ref["records"] if r["sensor"] == "cmos"]
+    _same(wanted, doc["records"])
+    more = sw.make_plan("dilemma", ["cmos"], ["cmos:exposure_s=1e-4,1e-3,3e-3"], **TINY)
+    doc = sw.sweep(more, tmp_path, workers=0, progress=False)
+    assert (doc["computed"], doc["reused"]) == (1, 3)
+    assert json.loads((tmp_path / "sweep.json").read_text())["n_points"] == 4
+    with pytest.raises(ViformError, match="other settings"):  # another clip length: not this sweep
+        sw.sweep(sw.make_plan("dilemma", ["cmos"], vary, **{**TINY, "duration_s": 0.02}), tmp_path, workers=0,
+                 progress=False)
+
+
+def test_tracking_scores_join_the_table(tmp_path):
+    """--tracking adds the comparison tracker's scores as columns; a 30 fps camera has one frame in a 40 ms
+    clip, so it tracks nothing: HOTA 0 and objects missed."""
+    plan = sw.make_plan("multi-object", ["cmos"], ["cmos:exposure_s=1e-3"], height=32, width=48, duration_s=0.04,
+                        tracking=True, require="tracking_hota>=0.5")
+    doc = sw.sweep(plan, tmp_path, workers=0, progress=False)
+    table = sw.read_table(tmp_path / "sweep.zarr")
+    assert {"metric/tracking_hota", "metric/tracking_objects_missed"} <= set(table)
+    assert np.all(table["metric/tracking_hota"] == 0) and np.all(table["metric/tracking_objects_missed"] >= 1)
+    assert not doc["answer"]["per_sensor"]["cmos"]["meets"]
