@@ -305,6 +305,8 @@ def packed_blocks_cuda(sensor, scene, duration_s, seed, block_ticks, light_sampl
     row_bytes = 8 * ((pixels + _LANES - 1) // _LANES)
     sample = check_int("light_sample_ticks", light_sample_ticks, 1)
     light = scene.compiled_light() if compiled_light else None
+    if light is not None and light.kind == "dilemma":
+        light = None  # pixel_lux does not draw this kind: the NumPy light, which gives the same bits
     if block_ticks is None:
         block_ticks = sensor.default_block_ticks(scene, sample, light, packed=True)
     block_ticks = check_int("block_ticks", block_ticks, 1)
