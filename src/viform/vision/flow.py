@@ -223,7 +223,7 @@ def flow_between_images(image0: np.ndarray, image1: np.ndarray, preset: str = "f
     return np.moveaxis(flow, -1, 0)
 
 
-def _rate_images(source, ticks, method: str, spikes_per_side: int, window_ticks: int):
+def rate_images(source, ticks, method: str = "multi-interval", spikes_per_side: int = 4, window_ticks: int = 41):
     """Firing-rate images (spikes per tick) at ``ticks`` (sorted), yielded as ``(tick, rate)``.
 
     Accumulation windows are counted directly around each instant (a window per instant, not
@@ -293,7 +293,7 @@ def estimate_flow(source, t_s: float, dt_s: float, *, method: str = "multi-inter
     spikes_per_side = check_int("spikes_per_side", spikes_per_side, 1)
     window_ticks = check_int("window_ticks", window_ticks, 1)
     tick0, tick1 = check_interval(source, t_s, dt_s, names=("t_s", "dt_s"))
-    (_, rate0), (_, rate1) = _rate_images(source, [tick0, tick1], method, spikes_per_side, window_ticks)
+    (_, rate0), (_, rate1) = rate_images(source, [tick0, tick1], method, spikes_per_side, window_ticks)
     image0, image1, (lo, hi) = log_light_pair_8bit(rate0, rate1)
     flow = flow_between_images(image0, image1, preset).astype(np.float32)
     # each image stands for the middle of its tick
@@ -318,7 +318,7 @@ def flow_sequence(source, step_ticks: int, *, method: str = "multi-interval", sp
     if len(ticks) < 2:
         raise ViformError(f"the stream has fewer than two instants {step_ticks} ticks apart")
     previous = None
-    for tick, rate in _rate_images(source, ticks, method, spikes_per_side, window_ticks):
+    for tick, rate in rate_images(source, ticks, method, spikes_per_side, window_ticks):
         if previous is not None:
             image0, image1, _ = log_light_pair_8bit(previous[1], rate)
             yield previous[0], tick, flow_between_images(image0, image1, preset)
