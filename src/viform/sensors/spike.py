@@ -222,6 +222,34 @@ class SpikeSimulationState:
         self.pending_rate = np.zeros(np.shape(charge), dtype=np.int64)
 
 
+@dataclass
+class _RunPlan:
+    """What :meth:`SpikeSensor.run_plan` fixes before the first tick (shared by the CPU and GPU paths)."""
+
+    p: object
+    n_ticks: int
+    height: int
+    width: int
+    pixels: int
+    row_bytes: int
+    sample: int
+    light: object
+    block_ticks: int
+    q: np.ndarray
+    shapes: object
+    index: np.ndarray
+    tables: tuple
+    a: np.ndarray
+    b: np.ndarray
+    rate_bound: float | None
+    state: object
+    caller_state: bool
+    reset_readout: bool
+    dead_ticks: float
+    mode: int
+    per_tick_light: bool
+
+
 class SpikeSensor(Sensor):
     """A spike camera (pulse-sequence modulation, seed 000 §3.2) of a given resolution.
 
@@ -377,6 +405,42 @@ class SpikeSensor(Sensor):
         return np.minimum(self.electrons_per_tick(lux) / round(self.parameters.threshold_electrons), 1.0)
 
     # ------------------------------------------------------------------ simulation
+    def run_plan(self, scene: Scene, duration_s: float, seed: int, block_ticks: int | None, light_sample_ticks: int,
+                 state, compiled_light: bool, packed: bool, drop_light_kinds: tuple = ()) -> _RunPlan:
+        """Everything a simulation run fixes before its first tick, the same for every device: sizes, the
+        compiled light (None for kinds in ``drop_light_kinds``: the NumPy light, same bits), block size,
+        per-pixel tables and light factors, the start state and the kernel mode."""
+        check_positive("duration_s", duration_s)
+        p = self.parameters
+        n_ticks = max(1, int(round(duration_s * p.clock_hz)))
+        height, width = self.check_scene(scene, self.height, self.width)
+        pixels = height * width
+        sample = check_int("light_sample_ticks", light_sample_ticks, 1)
+        light = scene.compiled_light() if compiled_light else None
+        if light is not None and light.kind in drop_light_kinds:
+            light = None
+        if block_ticks is None:
+            block_ticks = self.default_block_ticks(scene, sample, light, packed=packed)
+        block_ticks = check_int("block_ticks", block_ticks, 1)
+        q, shapes, index, tables = self._pixel_tables(height, width)
+        a, b = self._pixel_light(height, width)
+        rate_bound = None
+        if light is not None:
+            rate_bound = float(a.max()) * light.lux_max + float(b.max())
+            if rate_bound >= MAX_RATE_FIXED_POINT:
+                raise self._too_bright(light.lux_max)
+        caller_state = state is not None
+        state = self.start_state(scene, sample, height, width, seed, q, state)
+        reset_readout = p.reset == "readout"
+        dead_ticks = p.dead_time_s * p.clock_hz
+        if not p.photon_noise and dead_ticks == 0:
+            mode = MODE_NOISE_FREE_READOUT if reset_readout else MODE_NOISE_FREE_SELF
+        else:
+            mode = MODE_GENERAL
+        return _RunPlan(p, n_ticks, height, width, pixels, 8 * ((pixels + _LANES - 1) // _LANES), sample, light,
+                        block_ticks, q, shapes, index, tables, a, b, rate_bound, state, caller_state, reset_readout,
+                        dead_ticks, mode, light is not None and light.kind != "frames")
+
     def start_state(self, scene: Scene, sample: int, height: int, width: int, seed: int, q,
                     state: SpikeSimulationState | None = None) -> SpikeSimulationState:
         """The state at t = 0 that every device starts from (CPU and GPU share this host code).
@@ -507,33 +571,15 @@ class SpikeSensor(Sensor):
             yield from packed_blocks_cuda(self, scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
                                           state, compiled_light)
             return
-        check_positive("duration_s", duration_s)
-        p = self.parameters
-        n_ticks = max(1, int(round(duration_s * p.clock_hz)))
-        height, width = self.check_scene(scene, self.height, self.width)
-        pixels = height * width
-        row_bytes = 8 * ((pixels + _LANES - 1) // _LANES)
-        sample = check_int("light_sample_ticks", light_sample_ticks, 1)
-        light = scene.compiled_light() if compiled_light else None
-        if block_ticks is None:
-            block_ticks = self.default_block_ticks(scene, sample, light, packed=packed_only)
-        block_ticks = check_int("block_ticks", block_ticks, 1)
-        q, shapes, index, tables = self._pixel_tables(height, width)
-        a, b = self._pixel_light(height, width)
+        plan = self.run_plan(scene, duration_s, seed, block_ticks, light_sample_ticks, state, compiled_light,
+                             packed_only)
+        p, n_ticks, height, width, row_bytes = plan.p, plan.n_ticks, plan.height, plan.width, plan.row_bytes
+        sample, light, block_ticks, q, index, tables = (plan.sample, plan.light, plan.block_ticks, plan.q,
+                                                        plan.index, plan.tables)
+        a, b, state, caller_state, reset_readout = plan.a, plan.b, plan.state, plan.caller_state, plan.reset_readout
+        dead_ticks, mode, per_tick_light = plan.dead_ticks, plan.mode, plan.per_tick_light
         if light is not None:
-            rate_bound = float(a.max()) * light.lux_max + float(b.max())
-            if rate_bound >= MAX_RATE_FIXED_POINT:
-                raise self._too_bright(light.lux_max)
-            fast_round = rate_bound < _FAST_ROUND_LIMIT
-        caller_state = state is not None
-        state = self.start_state(scene, sample, height, width, seed, q, state)
-        reset_readout = p.reset == "readout"
-        dead_ticks = p.dead_time_s * p.clock_hz
-        if not p.photon_noise and dead_ticks == 0:
-            mode = MODE_NOISE_FREE_READOUT if reset_readout else MODE_NOISE_FREE_SELF
-        else:
-            mode = MODE_GENERAL
-        per_tick_light = light is not None and light.kind != "frames"
+            fast_round = plan.rate_bound < _FAST_ROUND_LIMIT
         if per_tick_light:
             from viform.light.compiled import tick_buffers, tick_scalars
 

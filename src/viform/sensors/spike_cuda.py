@@ -287,44 +287,17 @@ def packed_blocks_cuda(sensor, scene, duration_s, seed, block_ticks, light_sampl
     """As :meth:`SpikeSensor._packed_blocks`, on the GPU: (first tick, packed bits uint8 (T, 8·⌈H·W/64⌉))."""
     from numba import cuda
 
-    from viform._validate import check_int, check_positive
-    from viform.sensors.spike import (
-        _LANES,
-        MAX_RATE_FIXED_POINT,
-        MODE_GENERAL,
-        MODE_NOISE_FREE_READOUT,
-        MODE_NOISE_FREE_SELF,
-        _Segments,
-    )
+    from viform.sensors.spike import _Segments
 
-    check_positive("duration_s", duration_s)
-    p = sensor.parameters
-    n_ticks = max(1, int(round(duration_s * p.clock_hz)))
-    height, width = sensor.check_scene(scene, sensor.height, sensor.width)
-    pixels = height * width
-    row_bytes = 8 * ((pixels + _LANES - 1) // _LANES)
-    sample = check_int("light_sample_ticks", light_sample_ticks, 1)
-    light = scene.compiled_light() if compiled_light else None
-    if light is not None and light.kind == "dilemma":
-        light = None  # pixel_lux does not draw this kind: the NumPy light, which gives the same bits
-    if block_ticks is None:
-        block_ticks = sensor.default_block_ticks(scene, sample, light, packed=True)
-    block_ticks = check_int("block_ticks", block_ticks, 1)
-    q, shapes, index, tables = sensor._pixel_tables(height, width)
-    a, b = sensor._pixel_light(height, width)
-    if light is not None:
-        rate_bound = float(a.max()) * light.lux_max + float(b.max())
-        if rate_bound >= MAX_RATE_FIXED_POINT:
-            raise sensor._too_bright(light.lux_max)
-    caller_state = state is not None
-    state = sensor.start_state(scene, sample, height, width, seed, q, state)  # the host code the CPU uses
-    reset_readout = p.reset == "readout"
-    dead_ticks = p.dead_time_s * p.clock_hz
-    if not p.photon_noise and dead_ticks == 0:
-        mode = MODE_NOISE_FREE_READOUT if reset_readout else MODE_NOISE_FREE_SELF
-    else:
-        mode = MODE_GENERAL
-    per_tick_light = light is not None and light.kind != "frames"
+    # pixel_lux does not draw the dilemma kind: the NumPy light, which gives the same bits
+    plan = sensor.run_plan(scene, duration_s, seed, block_ticks, light_sample_ticks, state, compiled_light, True,
+                           drop_light_kinds=("dilemma",))
+    p, n_ticks, height, width, pixels, row_bytes = (plan.p, plan.n_ticks, plan.height, plan.width, plan.pixels,
+                                                    plan.row_bytes)
+    sample, light, block_ticks, q, index, tables = (plan.sample, plan.light, plan.block_ticks, plan.q,
+                                                    plan.index, plan.tables)
+    a, b, state, caller_state, reset_readout = plan.a, plan.b, plan.state, plan.caller_state, plan.reset_readout
+    dead_ticks, mode, per_tick_light = plan.dead_ticks, plan.mode, plan.per_tick_light
     runs_kernel, ticks_kernel = kernels()
     # whole warps; small images launch fewer threads per block (the simulator runs every one)
     threads = min(THREADS_PER_BLOCK, 32 * ((pixels + 31) // 32))
