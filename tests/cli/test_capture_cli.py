@@ -121,3 +121,25 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, needle
     assert code == 2
     assert needle in err and len(err.strip().splitlines()) == 1
     assert list(tmp_path.iterdir()) == []
+
+
+def test_set_changes_a_frame_preset_parameter(tmp_path, capsys):
+    """--set dark_current_e_per_s adds dark·exposure electrons per pixel: the mean rises by that × gain."""
+    from viform.sensors.presets import make_sensor
+
+    outs = {}
+    for label, extra in (("plain", []), ("dark", ["--set", "dark_current_e_per_s=5000"])):
+        outs[label] = tmp_path / f"{label}.npz"
+        code, _, err = run(["capture", "cmos", "translating", "--duration", "0.04", "--out", str(outs[label]),
+                            "--seed", "3", *extra], capsys)
+        assert code == 0, err
+    sensor = make_sensor("cmos")
+    p = sensor.parameters
+    expected = (5000 - p.dark_current_e_per_s) * sensor.exposure_s * p.system_gain_dn_per_e
+    plain, dark = (load_frame_stack(outs[k])["frames"].astype(float) for k in ("plain", "dark"))
+    assert dark.max() < p.max_dn  # nothing clipped
+    # Poisson noise of 50 e- over 8,192 pixels: the mean is known to about 0.1 e-
+    assert dark.mean() - plain.mean() == pytest.approx(expected, rel=0.05)
+    code, _, err = run(["capture", "spike", "translating", "--duration", "0.001", "--out", str(tmp_path / "s.npz"),
+                        "--set", "x=1"], capsys)
+    assert code == 2 and "--set" in err and not (tmp_path / "s.npz").exists()

@@ -218,7 +218,7 @@ def _spike_preview(path, stream, rate_per_tick: float) -> float:
 
 
 def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int = 0, preview=None,
-                device: str = "cpu") -> dict:
+                device: str = "cpu", settings: dict | None = None) -> dict:
     """Shoot ``scene`` with ``sensor_name`` and save the output (see the module notes); returns a summary.
 
     Spike streams are simulated block by block straight into the file (bounded memory).
@@ -253,7 +253,8 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         from viform.measure.comparison import make_compare_sensor
         from viform.sensors.presets import make_sensor
 
-        sensor = make_compare_sensor(sensor_name) if sensor_name == "cmos-short" else make_sensor(sensor_name)
+        sensor = make_compare_sensor(sensor_name) if sensor_name == "cmos-short" else \
+            make_sensor(sensor_name, **(settings or {}))
         rate = sensor.frame_rate_hz
     check_frame_budget(max(1.0, duration_s * rate), scene.height, scene.width)
     meta = {"scene": scene.describe(), "seed": seed, **provenance()}
@@ -297,7 +298,7 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         else:
             from viform.sensors.presets import make_sensor
 
-            sensor = make_sensor(sensor_name)
+            sensor = make_sensor(sensor_name, **(settings or {}))
         stack = sensor.capture(scene, duration_s, seed=seed)
         frames, starts, exposures = stack.frames_dn, stack.start_times_s, stack.exposure_s
         p = sensor.parameters
@@ -333,10 +334,13 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
 @click.option("--device", type=click.Choice(["cpu", "cuda", "auto"]), default="cpu", show_default=True,
               help="Spike sensors: where the simulation runs (CPU cores, a CUDA GPU with the same bits, or a GPU "
                    "when one is found). Frame sensors run on the CPU.")
+@click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
+              help="Frame presets: change one parameter by name, e.g. --set parasitic_light_sensitivity=0.01 "
+                   "(repeatable; viform characterize SENSOR --set lists the names on a wrong one).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of a line of text.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, max_lux, frame_rate_hz, device,
-            as_json, json_file):
+            settings, as_json, json_file):
     """Shoot SCENE with SENSOR and save its output with every exposure window.
 
     SENSOR: cmos, cmos-short, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
@@ -369,13 +373,19 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     if preview:
         check_output_folder("--preview", Path(preview).resolve().parent)
     check_json_file(json_file)
+    from viform.cli.frame import parse_settings
+
+    overrides = parse_settings(sensor, settings)  # frame presets only; names and values checked
     from viform.cli.compare import announce_preparation
     from viform.report.compare_report import finite_json
 
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz)
     if is_spike(sensor):
         announce_preparation()
-    summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview, device=device)
+    summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview, device=device,
+                          settings=overrides)
+    if overrides:
+        summary["settings"] = overrides
     if preview:
         summary["preview"] = str(preview)
     summary = finite_json(summary)  # null, not a bare NaN: valid JSON

@@ -230,8 +230,9 @@ def parse_settings(sensor: str, settings) -> dict:
         name, sep, text = item.partition("=")
         name = name.strip()
         if not sep or name not in allowed:
+            # quoted: the CLI would otherwise read a field such as frame_rate_hz as its own flag's name
             raise ViformError(f"--set {item!r} is not allowed: give NAME=VALUE with NAME one of "
-                              f"{', '.join(allowed)}")
+                              f"{', '.join(repr(name) for name in allowed)}")
         text = text.strip()
         low = text.lower()
         if low in ("true", "false"):
