@@ -18,6 +18,50 @@ TMP_MARK = ".viform-tmp-"
 OLD_MARK = ".viform-old-"
 
 
+_deferred_sections = 0
+_pending_interrupt: BaseException | None = None
+
+
+@contextlib.contextmanager
+def interrupts_deferred():
+    """Hold Ctrl-C and SIGTERM while a library call that must not be cut runs; raise them after it.
+
+    zarr does its I/O on an event-loop thread and waits for it: an interrupt raised in the middle
+    of such a call can leave that thread waiting forever (the process then hangs at exit) or the
+    library in a broken state. The CLI's signal handlers call :func:`raise_or_defer`, which raises
+    at once outside these sections and at the end of the outermost one inside.
+    """
+    global _deferred_sections, _pending_interrupt
+    _deferred_sections += 1
+    try:
+        yield
+    finally:
+        _deferred_sections -= 1
+        if _deferred_sections == 0 and _pending_interrupt is not None:
+            interrupt, _pending_interrupt = _pending_interrupt, None
+            raise interrupt
+
+
+def import_uninterrupted(module: str):
+    """Import ``module`` with interrupts held: an interrupt in the middle of a big library's first
+    import leaves it half-initialised (dataclass fields that raise RuntimeError, event-loop threads
+    that never finish)."""
+    import importlib
+
+    with interrupts_deferred():
+        return importlib.import_module(module)
+
+
+def raise_or_defer(interrupt: BaseException) -> None:
+    """Raise ``interrupt`` now, or when the current :func:`interrupts_deferred` section ends."""
+    global _pending_interrupt
+    if _deferred_sections:
+        if _pending_interrupt is None:
+            _pending_interrupt = interrupt
+        return
+    raise interrupt
+
+
 def _pid_alive(pid: int) -> bool:
     if pid == os.getpid():
         return True

@@ -50,15 +50,26 @@ class _Terminated(KeyboardInterrupt):
 
 
 def _on_sigterm(signum, frame):
-    raise _Terminated()
+    from viform._io import raise_or_defer
+
+    raise_or_defer(_Terminated())
+
+
+def _on_sigint(signum, frame):
+    from viform._io import raise_or_defer
+
+    raise_or_defer(KeyboardInterrupt())
 
 
 def _install_sigterm() -> None:
+    """SIGTERM as Ctrl-C; both held while a library call that must not be cut runs (_io.interrupts_deferred)."""
     import signal
     import threading
 
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _on_sigterm)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, _on_sigint)
 
 
 def _first_line(exc: BaseException) -> str:

@@ -105,7 +105,9 @@ def save_frame_stack(path, frames, start_times_s, exposure_s, units: str, metada
                                 end_times_s=starts + exposures, units=np.array(units),
                                 metadata_json=np.array(meta_json), **extra)
         return path
-    import zarr
+    from viform._io import import_uninterrupted
+
+    zarr = import_uninterrupted("zarr")
 
     with atomic_path(path, suffix=".zarr") as tmp:
         tmp.unlink()
@@ -129,7 +131,9 @@ def load_frame_stack(path) -> dict:
         with np.load(path) as z:
             return {"frames": z["frames"], "start_times_s": z["start_times_s"], "exposure_s": z["exposure_s"],
                     "units": str(z["units"]), "metadata": json.loads(str(z["metadata_json"]))}
-    import zarr
+    from viform._io import import_uninterrupted
+
+    zarr = import_uninterrupted("zarr")
 
     group = zarr.open_group(str(path), mode="r")
     head = group.attrs["viform"]

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from viform._io import atomic_path
+from viform._io import atomic_path, import_uninterrupted, interrupts_deferred
 from viform._validate import ViformError, check_int
 from viform.stream.container import SpikeSource
 from viform.stream.sidecar import source_metadata, stream_header, validate_header
@@ -72,15 +72,16 @@ class ZarrSpikeStore(SpikeSource):
     """
 
     def __init__(self, path, verify: bool = True):
-        import zarr
+        zarr = import_uninterrupted("zarr")
 
         path = Path(path)
         self.path = path
         if not path.is_dir():
             raise ViformError(f"{str(path)!r} is not a zarr store (not a folder)")
         try:
-            self._array = zarr.open_array(store=str(path), mode="r")
-            attrs = self._array.attrs.asdict()
+            with interrupts_deferred():
+                self._array = zarr.open_array(store=str(path), mode="r")
+                attrs = self._array.attrs.asdict()
         except Exception as exc:
             raise ViformError(f"{str(path)!r} is not a readable zarr store: {_short(exc)}") from None
         header = attrs.get("viform")
@@ -185,7 +186,8 @@ class ZarrSpikeStore(SpikeSource):
 
     def _load(self, a: int, b: int) -> np.ndarray:
         try:
-            return np.asarray(self._array[a:b])
+            with interrupts_deferred():
+                return np.asarray(self._array[a:b])
         except Exception as exc:  # the codec's own error names neither the store nor the chunk
             raise ViformError(f"{str(self.path)!r}: ticks {a}–{b - 1} cannot be decoded (damaged chunk: "
                               f"{_short(exc)})") from None
@@ -218,20 +220,22 @@ def write_zarr(path, source: SpikeSource, *, block_ticks: int = 1024) -> Path:
     Chunks hold ``block_ticks`` ticks (capped at :data:`CHUNK_BUDGET_BYTES` of packed bits);
     each chunk's CRC-32 goes into the header's manifest.
     """
-    import zarr
+    zarr = import_uninterrupted("zarr")
 
     block_ticks = chunk_ticks_for(source.height, source.width, check_int("block_ticks", block_ticks, 1))
     path = Path(path)
     packed_width = (source.width + 7) // 8
     with atomic_path(path, suffix=".zarr", directory=True) as tmp:
-        array = zarr.create_array(store=str(tmp), shape=(0, source.height, packed_width),
-                                  chunks=(block_ticks, source.height, packed_width), dtype="uint8",
-                                  compressors=zarr.codecs.ZstdCodec(level=3, checksum=True),
-                                  config={"write_empty_chunks": True})
+        with interrupts_deferred():  # zarr's calls are not cut by Ctrl-C/SIGTERM (raised right after)
+            array = zarr.create_array(store=str(tmp), shape=(0, source.height, packed_width),
+                                      chunks=(block_ticks, source.height, packed_width), dtype="uint8",
+                                      compressors=zarr.codecs.ZstdCodec(level=3, checksum=True),
+                                      config={"write_empty_chunks": True})
         crcs, pending, n_ticks = [], [], 0
 
         def flush(rows):
-            array.append(rows, axis=0)
+            with interrupts_deferred():
+                array.append(rows, axis=0)
             crcs.append(zlib.crc32(rows.tobytes()))
 
         # re-block the source so each append fills exactly one chunk (its CRC is then the chunk's)
@@ -253,5 +257,6 @@ def write_zarr(path, source: SpikeSource, *, block_ticks: int = 1024) -> Path:
                                       "chunk_ticks": block_ticks, "chunks": crcs})
         header = _jsonable(header)
         header["header_blake2b"] = _header_digest(header)
-        array.attrs["viform"] = header
+        with interrupts_deferred():
+            array.attrs["viform"] = header
     return path
