@@ -231,3 +231,28 @@ if __name__ == "__main__":  # python tests/stream/test_atomic.py --kills 30 --se
     result = campaign(opts.kills, opts.seed)
     print(f"{opts.kills} kills: {result['whole']} whole pairs, {result['refused']} refused, "
           f"{result['wrong']} with wrong bits")
+
+
+def test_interrupts_are_held_inside_a_deferred_section_and_raised_after():
+    """SIGTERM inside interrupts_deferred() (zarr's calls) waits for the section's end, then ends the command."""
+    from viform._io import interrupts_deferred
+    from viform.cli import _install_sigterm, _Terminated
+
+    previous = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+    _install_sigterm()
+    reached = []
+    try:
+        with pytest.raises(_Terminated):
+            with interrupts_deferred():
+                with interrupts_deferred():  # nested: held until the outermost section ends
+                    os.kill(os.getpid(), signal.SIGTERM)
+                    time.sleep(0.05)  # the handler runs here
+                    reached.append("inner")
+                reached.append("outer")
+        assert reached == ["inner", "outer"]
+        with pytest.raises(KeyboardInterrupt):  # outside a section: at once
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+    finally:
+        signal.signal(signal.SIGTERM, previous[0])
+        signal.signal(signal.SIGINT, previous[1])
