@@ -239,6 +239,7 @@ def test_interrupts_are_held_inside_a_deferred_section_and_raised_after():
     from viform.cli import _install_sigterm, _Terminated
 
     previous = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a fresh process (other tests may change it)
     _install_sigterm()
     reached = []
     try:
