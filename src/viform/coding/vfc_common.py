@@ -72,6 +72,14 @@ _POOL: ThreadPoolExecutor | None = None
 _POOL_PID = -1
 
 
+def _check_band_totals(payload, band_bytes_end: int, band_spikes: int, spikes: int) -> None:
+    """The band table must account for the whole payload and every spike of the segment header."""
+    if band_bytes_end != len(payload):
+        raise ViformError(f"segment payload holds {len(payload)} bytes, its band table says {band_bytes_end}")
+    if band_spikes != spikes:
+        raise ViformError(f"bands hold {band_spikes} spikes, the segment header says {spikes}")
+
+
 def coding_threads() -> int:
     """Threads that code bands at once (``VIFORM_THREADS``, else the CPU count, at most 8).
 

@@ -15,7 +15,14 @@ import numpy as np
 
 from viform._validate import ViformError
 from viform.coding import interval_model
-from viform.coding.vfc_common import _PAYLOAD_HEAD, TickSegment, _bands, _interval_data_limit, _map
+from viform.coding.vfc_common import (
+    _PAYLOAD_HEAD,
+    TickSegment,
+    _bands,
+    _check_band_totals,
+    _interval_data_limit,
+    _map,
+)
 
 _FLAG_BANDS = 4
 _BAND_HEAD = struct.Struct("<IQ")  # per band: coded bytes, spikes
@@ -99,10 +106,7 @@ def _decode_payload_v4(payload: bytes, height: int, width: int, band_rows: int, 
         spans.append((pos, nbytes, sp))
         pos += nbytes
         total += sp
-    if pos != len(payload):
-        raise ViformError(f"segment payload holds {len(payload)} bytes, its band table says {pos}")
-    if total != spikes:
-        raise ViformError(f"bands hold {total} spikes, the segment header says {spikes}")
+    _check_band_totals(payload, pos, total, spikes)
     buf = np.frombuffer(payload, np.uint8)
 
     def one(b):

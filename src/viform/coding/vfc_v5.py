@@ -43,6 +43,7 @@ from viform.coding.vfc_common import (
     _PAYLOAD_HEAD,
     TickSegment,
     _bands,
+    _check_band_totals,
     _interval_data_limit,
     _map,
     _segment_from_ticks,
@@ -313,10 +314,7 @@ def decode_payload(payload: bytes, state: BandState, expected_start: int, segmen
         spans.append((model, pos, nbytes, sp, recs))
         pos += nbytes
         total += sp
-    if pos != len(payload):
-        raise ViformError(f"segment payload holds {len(payload)} bytes, its band table says {pos}")
-    if total != spikes:
-        raise ViformError(f"bands hold {total} spikes, the segment header says {spikes}")
+    _check_band_totals(payload, pos, total, spikes)
     buf = np.frombuffer(payload, np.uint8)
     end = start + n_ticks
 
