@@ -11,7 +11,31 @@ import numbers
 
 
 class ViformError(ValueError):
-    """Bad input to viform; the message is a complete one-line explanation."""
+    """Bad input to viform; the message is a complete one-line explanation.
+
+    ``remedies`` maps a parameter name to a way out that needs it (``{"allow_partial": "keep
+    the whole frames with allow_partial=True"}``): each is appended to the message (after
+    "; "). A caller that lacks the parameter drops its remedy (the command line keeps only
+    those of flags the command has, see :attr:`message` and :attr:`remedies`).
+    """
+
+    def __init__(self, message: str = "", *args, remedies: dict | None = None):
+        self.message = str(message)
+        self.remedies = dict(remedies or {})
+        text = self.message + "".join(f"; {r}" for r in self.remedies.values())
+        super().__init__(text, *args)
+
+    def without(self, keep) -> str:
+        """The message with only the remedies whose parameter ``keep(name)`` accepts."""
+        return self.message + "".join(f"; {r}" for name, r in self.remedies.items() if keep(name))
+
+
+class ViformWarning(UserWarning):
+    """Something the user should know about a result that is still produced (one line)."""
+
+
+class UnverifiedDataWarning(ViformWarning):
+    """Data read without checksums viform can verify (another tool's file, or its checksums removed)."""
 
 
 def _as_float(name: str, value) -> float:

@@ -45,6 +45,14 @@ def _load_commands() -> None:
     install(cli)  # bounded numeric options and flag names in errors, for every command
 
 
+class ExitStatus(Exception):  # noqa: N818 -- not an error: a status the command chose
+    """Raised by a command that has printed its result and ends with exit status ``code``."""
+
+    def __init__(self, code: int):
+        super().__init__(code)
+        self.code = int(code)
+
+
 class _Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the program is so that atomic writers clean up as for Ctrl-C."""
 
@@ -77,12 +85,56 @@ def _first_line(exc: BaseException) -> str:
     return lines[0] if lines else type(exc).__name__
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Every warning as one line on stderr: viform's own as they are, a library's with its origin
+    (no source line, no file path)."""
+    from viform._validate import ViformWarning
+
+    text = _first_line(message) if str(message).strip() else category.__name__
+    if not issubclass(category, ViformWarning):
+        parts = os.path.normpath(str(filename)).split(os.sep)
+        origin = next((parts[i + 1] for i in range(len(parts) - 1) if parts[i] in ("site-packages", "dist-packages")),
+                      None)
+        origin = origin[:-3] if origin and origin.endswith(".py") else origin
+        text += f" ({category.__name__}{f' from {origin}' if origin else ''})"
+    click.echo(f"viform: warning: {text}", err=True)
+
+
+def _interrupted(exc: BaseException) -> int:
+    """The line an interrupted command prints: what it kept (complete files), never a partial one."""
+    from viform._io import completed_outputs
+
+    kept = completed_outputs()
+    if not kept:
+        click.echo("viform: interrupted; no output was left (the file being written was removed)", err=True)
+    else:
+        names = ", ".join(str(p) for p in kept[:3]) + (f" and {len(kept) - 3} more" if len(kept) > 3 else "")
+        click.echo(f"viform: interrupted; kept {len(kept)} complete file(s) written before it: {names} (the file "
+                   "being written was removed)", err=True)
+    terminated = isinstance(exc, _Terminated) or isinstance(exc.__cause__, _Terminated)
+    return 143 if terminated else 130
+
+
 def main(argv=None) -> int:
     """Entry point: bad input prints one line on stderr and exits 2; no traceback.
 
-    SIGTERM is handled as Ctrl-C (temporary outputs removed; exit 143).
+    SIGTERM is handled as Ctrl-C (temporary outputs removed; exit 143). Warnings (viform's and
+    the libraries') are printed one line each.
     """
+    import warnings
+
+    from viform._io import begin_outputs
+
     _install_sigterm()
+    begin_outputs()
+    with warnings.catch_warnings():
+        # a filter added here also clears the "already shown" records of earlier runs in this process
+        warnings.filterwarnings("default", category=UserWarning)
+        warnings.showwarning = _show_warning
+        return _main(argv)
+
+
+def _main(argv) -> int:
     try:
         _load_commands()
     except KeyboardInterrupt as exc:
@@ -90,17 +142,17 @@ def main(argv=None) -> int:
         return 143 if isinstance(exc, _Terminated) else 130
     try:
         cli.main(args=argv, prog_name="viform", standalone_mode=False)
+    except ExitStatus as exc:  # a command's own status after its output (verify's 3)
+        return exc.code
     except click.exceptions.Exit as exc:
         return exc.exit_code
     except click.ClickException as exc:
         click.echo(f"viform: error: {exc.format_message()}", err=True)
         return exc.exit_code if exc.exit_code else 2
     except click.Abort as exc:  # click turns Ctrl-C (and our SIGTERM) into Abort
-        click.echo("viform: interrupted; no partial output was left", err=True)
-        return 143 if isinstance(exc.__cause__, _Terminated) else 130
+        return _interrupted(exc)
     except KeyboardInterrupt as exc:
-        click.echo("viform: interrupted; no partial output was left", err=True)
-        return 143 if isinstance(exc, _Terminated) else 130
+        return _interrupted(exc)
     except MemoryError:
         if os.environ.get("VIFORM_DEBUG"):
             raise

@@ -223,6 +223,8 @@ def name_flags(message: str, command: click.Command) -> str:
 
     Only option names are replaced, only as whole words not inside quotes (file fields such
     as ``'clock_hz'`` stay), and names without an underscore only when followed by `` = ``.
+    A remedy in keyword form names the flag as it is typed: ``height=250`` → ``--height 250``,
+    ``allow_partial=True`` → ``--allow-partial``.
     """
     names = {p.name for p in command.params if p.name}
     names_with_units = {n for n in names if any(m.startswith(n + "_") for m in names)}
@@ -230,6 +232,11 @@ def name_flags(message: str, command: click.Command) -> str:
         if not isinstance(param, click.Option) or not param.name:
             continue
         flag = flag_of(param)
+        # a library remedy in keyword form: "allow_partial=True" is the flag itself, "height=250" is "--height 250"
+        if getattr(param, "is_flag", False):
+            message = re.sub(rf"(?<![\w'\"./-]){re.escape(param.name)}=True(?![\w'\"-])", flag, message)
+        else:
+            message = re.sub(rf"(?<![\w'\"./-]){re.escape(param.name)}=(?=[^\s,;)])", flag + " ", message)
         if flag.lstrip("-") == param.name and "_" not in param.name:
             pattern = rf"(?<![\w'\"./-]){re.escape(param.name)}(?= = )"
         elif "_" in param.name:
@@ -374,7 +381,9 @@ def _wrap(command: click.Command) -> None:
             check_request(command, kwargs)
             return callback(*args, **kwargs)
         except ViformError as exc:
-            text = name_flags(str(exc), command)
+            # a remedy that needs a parameter this command has no flag for is left out
+            options = {p.name for p in command.params if isinstance(p, click.Option)}
+            text = name_flags(exc.without(options.__contains__) if exc.remedies else str(exc), command)
             if text == str(exc):
                 raise
             raise ViformError(text) from None
