@@ -690,7 +690,7 @@ def test_v4_coding_in_a_forked_child_does_not_hang(tmp_path):
     ctx = mp.get_context("fork")
     child = ctx.Process(target=encode_source, args=(s, tmp_path / "child.vfc"))
     child.start()
-    child.join(60)
+    child.join(1800)  # a hang guard only: generous for a loaded machine
     alive = child.is_alive()
     if alive:
         child.kill()

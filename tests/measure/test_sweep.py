@@ -151,7 +151,7 @@ def test_resume_after_kill_and_extend(serial, tmp_path):
     code = (f"from viform.measure import sweep as sw\n"
             f"plan = sw.make_plan('dilemma', ['cmos'], {vary!r}, **{TINY!r})\n"
             f"sw.sweep(plan, {str(tmp_path)!r}, workers=0, progress=False, crash_after_points=2)\n")
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800,
                          env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[2])})
     assert run.returncode == 70, run.stderr[-2000:]
     assert len(list((tmp_path / "points").glob("*.json"))) == 2 and not (tmp_path / "sweep.json").exists()

@@ -90,7 +90,7 @@ def test_report_renders_in_chromium(report, tmp_path):
     url = (out / "report.html").resolve().as_uri()
     profile = tmp_path / "profile"
     dom = subprocess.run([CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--dump-dom", url],
-                         capture_output=True, text=True, timeout=120)
+                         capture_output=True, text=True, timeout=1800)
     assert dom.returncode == 0, dom.stderr[-2000:]
     parser = _Sections()
     parser.feed(dom.stdout)
@@ -102,7 +102,7 @@ def test_report_renders_in_chromium(report, tmp_path):
     shot = tmp_path / "shot.png"
     run = subprocess.run([CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--screenshot={shot}",
                           "--window-size=1280,2400", "--hide-scrollbars", url],
-                         capture_output=True, text=True, timeout=120)
+                         capture_output=True, text=True, timeout=1800)
     assert run.returncode == 0 and shot.exists(), run.stderr[-2000:]
     import imageio.v3 as iio
 

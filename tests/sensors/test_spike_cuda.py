@@ -87,7 +87,7 @@ CHILD = textwrap.dedent('''
 @pytest.fixture(scope="module")
 def simulated():
     env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
-    run = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=600)
+    run = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=1800)
     assert run.returncode == 0, run.stderr[-3000:]
     return json.loads(run.stdout.strip().splitlines()[-1])
 
@@ -122,7 +122,7 @@ def test_cuda_without_a_gpu_is_one_clear_error():
             print(exc)
     ''')
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
-    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=1800)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout.strip() == "--device = 'cuda': numba-cuda finds no CUDA GPU on this machine (use cpu or auto)"
 

@@ -92,12 +92,29 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
     text = _first_line(message) if str(message).strip() else category.__name__
     if not issubclass(category, ViformWarning):
-        parts = os.path.normpath(str(filename)).split(os.sep)
-        origin = next((parts[i + 1] for i in range(len(parts) - 1) if parts[i] in ("site-packages", "dist-packages")),
-                      None)
-        origin = origin[:-3] if origin and origin.endswith(".py") else origin
+        origin = _warning_origin()
         text += f" ({category.__name__}{f' from {origin}' if origin else ''})"
     click.echo(f"viform: warning: {text}", err=True)
+
+
+def _warning_origin() -> str | None:
+    """The installed library whose code issued the warning being shown (the first frame below the
+    warnings machinery), or None (viform's own code, or a warning raised from C)."""
+    import sys
+
+    frame = sys._getframe(2)
+    while frame is not None and frame.f_globals.get("__name__", "").split(".")[0] in ("warnings", "viform"):
+        if frame.f_globals.get("__name__", "").startswith("viform"):
+            return None
+        frame = frame.f_back
+    if frame is None:
+        return None
+    parts = os.path.normpath(frame.f_code.co_filename).split(os.sep)
+    for i in range(len(parts) - 1):
+        if parts[i] in ("site-packages", "dist-packages"):
+            name = parts[i + 1]
+            return name[:-3] if name.endswith(".py") else name
+    return None
 
 
 def _interrupted(exc: BaseException) -> int:
