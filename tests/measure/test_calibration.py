@@ -144,7 +144,7 @@ def test_moving_scene_gives_no_false_hot_pixels(hot_fraction):
     of the recording, so none is reported without real ones, and real ones (2·10⁵ e⁻/s at
     Q = 100: 20 extra spikes in 10 ms, ≥ 6 Poisson σ above the local median in each half)
     are still found."""
-    from viform.light.scenes import builtin_scene
+    from viform.light.catalog import builtin_scene
 
     sensor = SpikeSensor(threshold_electrons=100, hot_pixel_fraction=hot_fraction,
                          hot_pixel_dark_current_e_per_s=2e5)

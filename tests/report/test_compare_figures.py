@@ -3,7 +3,7 @@ plot's long sensor names), no text drawn over another, one colour bar per quanti
 
 import pytest
 
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.report import compare_report as cr
 
 

@@ -95,7 +95,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         write_outputs,
     )
     from viform.isp.link import INTERFACES, link_plan
-    from viform.light.scenes import load_scene
+    from viform.light.catalog import load_scene
     from viform.sensors.highspeed_timing import lux13hs_timing
 
     check_choice("interface", interface, tuple(INTERFACES))
@@ -104,7 +104,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     window = timing.window(roi)
     rh, rw = _parse_size(render, "render")
     rh, rw = min(rh, window.height), min(rw, window.width)
-    from viform.light.scenes import BUILTIN_SCENES
+    from viform.light.catalog import BUILTIN_SCENES
 
     if scene in BUILTIN_SCENES:
         base = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps)

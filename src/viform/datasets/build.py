@@ -456,7 +456,7 @@ def _label_types(clips) -> list:
     types = [1]
     scenes = [c for c in clips if c.kind == "scene"]
     if scenes:
-        from viform.light.scenes import builtin_scene
+        from viform.light.catalog import builtin_scene
 
         kinds = set()
         for name in {json.loads(c.path)["scene"] for c in scenes}:

@@ -655,7 +655,7 @@ def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, he
 
     ``started_s``: ``time.perf_counter()`` at the command's start; the reported wall time runs from it.
     """
-    from viform.light.scenes import BUILTIN_SCENES, builtin_scene, load_scene
+    from viform.light.catalog import BUILTIN_SCENES, builtin_scene, load_scene
 
     height = check_int("--height", height, 32)
     width = check_int("--width", width, 48)

@@ -54,7 +54,7 @@ def run_demo_sweep(out_dir, duration_s: float = 0.04, seed: int = 0, progress: b
     """The designer's question on the demo scene: which setting meets both demands? (OUT/sweep/report.html)."""
     from pathlib import Path
 
-    from viform.light.scenes import builtin_scene
+    from viform.light.catalog import builtin_scene
     from viform.measure.sweep import make_plan
     from viform.report.sweep_report import run_sweep_report
 
