@@ -353,7 +353,7 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     image, a video or a folder of images.
     """
     from viform._io import check_json_file, check_output_folder, write_json
-    from viform.light.scenes import load_scene
+    from viform.light.catalog import load_scene
     from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS
 

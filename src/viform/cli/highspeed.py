@@ -95,7 +95,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         write_outputs,
     )
     from viform.isp.link import INTERFACES, link_plan
-    from viform.light.scenes import load_scene
+    from viform.light.catalog import load_scene
     from viform.sensors.highspeed_timing import lux13hs_timing
 
     check_choice("interface", interface, tuple(INTERFACES))
@@ -104,7 +104,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     window = timing.window(roi)
     rh, rw = _parse_size(render, "render")
     rh, rw = min(rh, window.height), min(rw, window.width)
-    from viform.light.scenes import BUILTIN_SCENES
+    from viform.light.catalog import BUILTIN_SCENES
 
     if scene in BUILTIN_SCENES:
         base = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps)
@@ -141,7 +141,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         click.echo(f"note: {decimation}:1 over {interface} is faster than the link ({plan['decimation_strict']}:1 "
                    "fits); the DDR ring will overflow and frames will be lost", err=True)
     with tqdm(total=n_frames, desc="frames", file=sys.stderr, leave=False) as bar:
-        result = run_highspeed(sc, cfg, timing, progress=bar.update)
+        result = run_highspeed(sc, cfg, progress=bar.update)
     report = write_outputs(result, out_dir, video_format, [t for t, _ in step_list])
     if json_file:
         from viform._io import write_json

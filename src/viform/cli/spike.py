@@ -177,7 +177,8 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     """
     from viform._io import check_json_file, check_output_folder, write_json
     from viform.cli._types import check_simulation_work
-    from viform.light.scenes import VideoScene, load_scene
+    from viform.light.catalog import load_scene
+    from viform.light.scenes import VideoScene
     from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS, save_spikes
 

@@ -32,7 +32,7 @@ import numpy as np
 from viform._io import atomic_open, save_image
 from viform._validate import ViformError, check_int
 from viform.datasets.layout import GT_DIR, clip_seed, sha256_file
-from viform.light.scenes import BUILTIN_SCENES, builtin_scene
+from viform.light.catalog import BUILTIN_SCENES, builtin_scene
 
 FLOW_DIR = "flow"
 DEPTH_DIR = "depth"
