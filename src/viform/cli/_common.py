@@ -62,5 +62,11 @@ def spike_file_options(*, partial: bool = False):
     return decorate
 
 
+def announce_connection(scheduler: str, timeout_s: float) -> None:
+    """Say, before the wait, that a command is reaching a dask scheduler and for how long it tries."""
+    click.echo(f"connecting to the dask scheduler at {scheduler} (trying for up to {timeout_s:g} s: "
+               "--connect-timeout) …", err=True)
+
+
 def report(as_json: bool, line: str, summary: dict) -> None:
     click.echo(json.dumps(summary, indent=2) if as_json else line)

@@ -35,6 +35,9 @@ def _sig(value: float) -> str:
               help="Local worker processes, one clip each at a time (default: the number of CPU cores).")
 @click.option("--scheduler", default=None, help="Address of a running dask scheduler (tcp://HOST:PORT) "
               "to use instead of local workers.")
+@click.option("--connect-timeout", "connect_timeout_s", type=float, default=20.0, show_default=True,
+              help="Seconds to keep trying to reach --scheduler, at the start and after losing it; then the run "
+                   "stops with one line saying what is done (running the command again resumes).")
 @click.option("--worker-memory", default="auto", show_default=True,
               help="Memory limit of each local worker, e.g. 2GiB (auto: the machine's memory shared evenly).")
 @click.option("--gt-every", type=int, default=1, show_default=True,
@@ -59,8 +62,8 @@ def _sig(value: float) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, out_dir, preset, height, width,
-            workers, scheduler, worker_memory, gt_every, seed, frame_rate_hz, max_lux, interpolation,
-            light_sample_ticks, block_ticks, device, no_progress, as_json, json_file):
+            workers, scheduler, connect_timeout_s, worker_memory, gt_every, seed, frame_rate_hz, max_lux,
+            interpolation, light_sample_ticks, block_ticks, device, no_progress, as_json, json_file):
     """Convert SRC, a folder of videos or of frame folders, into a spike dataset in --out;
     or, with --scenes, make one from built-in scenes with exact truth.
 
@@ -73,6 +76,7 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
     command is run again. Exit status 1 when a clip failed (the others are still written).
     """
     from viform._io import check_json_file, write_json
+    from viform.cli._common import announce_connection
     from viform.datasets.build import build_dataset, make_settings, scene_clips
     from viform.sensors.spike_cuda import resolve_device
 
@@ -98,9 +102,11 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
     _check_max_lux(settings)
     if scenes is not None:
         src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs)
+    if scheduler is not None:
+        announce_connection(scheduler, connect_timeout_s)
     summary = build_dataset(src, out_dir, settings, workers=workers, scheduler=scheduler,
                             memory_limit=worker_memory, block_ticks=block_ticks, progress=not no_progress,
-                            device=device)
+                            device=device, connect_timeout_s=connect_timeout_s)
     if json_file is not None:
         write_json(json_file, summary)
     if as_json:

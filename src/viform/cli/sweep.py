@@ -53,6 +53,9 @@ MAX_SPEED = 100.0
               help="Local dask worker processes (default: the number of CPU cores); 0: in this process, no dask.")
 @click.option("--scheduler", default=None, help="Address of a running dask scheduler (tcp://HOST:PORT) "
               "to use instead of local workers.")
+@click.option("--connect-timeout", "connect_timeout_s", type=float, default=20.0, show_default=True,
+              help="Seconds to keep trying to reach --scheduler, at the start and after losing it; then the run "
+                   "stops with one line saying what is done (running the command again resumes).")
 @click.option("--worker-memory", default="auto", show_default=True,
               help="Memory limit of each local worker, e.g. 2GiB (auto: the machine's memory shared evenly).")
 @click.option("--tracking", is_flag=True,
@@ -63,8 +66,8 @@ MAX_SPEED = 100.0
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help=JSON_FILE_HELP)
 def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at, height, width, brightness, speed,
-          visibility_m, seed, out_dir, workers, scheduler, worker_memory, tracking, list_parameters, no_progress,
-          as_json, json_file):
+          visibility_m, seed, out_dir, workers, scheduler, connect_timeout_s, worker_memory, tracking, list_parameters,
+          no_progress, as_json, json_file):
     """Shoot SCENE with each --sensor at every setting --vary gives; score each point as `viform compare`
     does; write OUT/report.html (trade-offs, Pareto fronts, best images) and OUT/sweep.zarr.
 
@@ -108,8 +111,13 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
         raise click.UsageError("--workers and --scheduler exclude each other: a scheduler brings its own workers")
     if "spike" in plan.sensors:
         announce_preparation()
+    if scheduler is not None:
+        from viform.cli._common import announce_connection
+
+        announce_connection(scheduler, connect_timeout_s)
     doc = run_sweep_report(plan, out_dir, workers=workers, scheduler=scheduler, memory_limit=worker_memory,
-                           progress=not no_progress, command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "",
+                           connect_timeout_s=connect_timeout_s, progress=not no_progress,
+                           command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "",
                            started_s=started)
     summary = {"report": doc["report"], "table": str(Path(out_dir) / "sweep.zarr"),
                "sweep": str(Path(out_dir) / "sweep.json"), "n_points": doc["n_points"], "computed": doc["computed"],

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open, check_output_folder, save_image, write_json
-from viform._parallel import open_client, parse_memory
+from viform._parallel import DEFAULT_CONNECT_TIMEOUT_S, SchedulerLost, completed, open_client, parse_memory
 from viform._validate import ViformError, check_choice, check_int, check_positive, one_line
 from viform.datasets.layout import (
     CONFIG_NAME,
@@ -498,7 +498,8 @@ def _check_existing_config(out: Path, config: dict) -> None:
 
 def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,
                   client=None, memory_limit="auto", block_ticks: int = 4096, progress: bool = True,
-                  crash: tuple[str, int] | None = None, device: str = "cpu") -> dict:
+                  crash: tuple[str, int] | None = None, device: str = "cpu",
+                  connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> dict:
     """Convert every clip of ``src`` into the spike dataset ``out``; returns a summary.
 
     Parameters
@@ -523,6 +524,13 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
         One tqdm progress bar (stderr) for the whole dataset.
     device : {"cpu", "cuda", "auto"}
         Where each clip's spike kernels run (a GPU: same bits, see :mod:`viform.sensors.spike_cuda`).
+    connect_timeout_s : float
+        Seconds to keep trying to reach the scheduler, at the start and after losing it.
+
+    Faults: a worker that dies mid-clip is replaced and the clip converted again from the start
+    (its partial files removed first; the bits are the same). A lost scheduler (or one without a
+    worker for ``connect_timeout_s``) stops the run with one line saying how many clips are done;
+    each finished clip is whole on disk, and running the command again converts only the others.
 
     Returns
     -------
@@ -555,7 +563,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     own_client = client is None
     own_cluster = None
     if own_client:
-        client, own_cluster = open_client(workers, scheduler, memory_limit)
+        client, own_cluster = open_client(workers, scheduler, memory_limit, connect_timeout_s)
     try:
         (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
         (out / GT_DIR).mkdir(parents=True, exist_ok=True)
@@ -588,28 +596,30 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     try:
         n_workers = len(client.scheduler_info().get("workers", {}))
         started = time.perf_counter()  # rates count conversion, not the cluster's start-up
-        from distributed import as_completed
         from tqdm import tqdm
 
         bar = tqdm(total=len(tasks), unit="clip", desc="dataset", disable=not progress, leave=True)
         token = uuid.uuid4().hex[:8]
         futures = {client.submit(_convert_or_report, t, key=f"viform-clip-{t.clip.name}-{token}", pure=False): t
                    for t in tasks}
-        for fut in as_completed(futures):
-            task = futures[fut]
-            try:
-                result = fut.result()
-                if result.get("status") == "failed":
+        try:
+            for fut, result in completed(client, futures, connect_timeout_s):
+                task = futures[fut]
+                if isinstance(result, ViformError):
+                    record(task, None, str(result))
+                elif isinstance(result, BaseException):  # a worker lost too often, an unexpected failure
+                    record(task, None, f"{type(result).__name__}: {one_line(result)}")
+                elif result.get("status") == "failed":
                     record(task, None, result["error"])
                 else:
                     record(task, result, None)
-            except ViformError as exc:
-                record(task, None, str(exc))
-            except Exception as exc:  # a worker lost too often, an unexpected failure: report, go on
-                record(task, None, f"{type(exc).__name__}: {one_line(exc)}")
-            bar.update(1)
-            if failed:
-                bar.set_postfix(failed=len(failed))
+                bar.update(1)
+                if failed:
+                    bar.set_postfix(failed=len(failed))
+        except SchedulerLost as exc:
+            raise ViformError(f"{exc}: {len(rows)} of {len(tasks)} clips are done and listed in "
+                              f"{str(out / MANIFEST_NAME)!r} (every clip file written is whole); run the same command "
+                              "again: it keeps the finished clips and converts the others") from None
     finally:
         if bar is not None:
             bar.close()

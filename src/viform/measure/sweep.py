@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_path, write_json
-from viform._parallel import open_client, parse_memory
+from viform._parallel import DEFAULT_CONNECT_TIMEOUT_S, SchedulerLost, completed, open_client, parse_memory
 from viform._validate import ViformError, check_int, check_positive, one_line
 from viform.measure import comparison as cmp
 
@@ -825,18 +825,24 @@ def standard_vary(scene) -> tuple[list[str], dict[str, dict[str, list]]]:
     return list(vary), vary
 
 
-def _open(workers, scheduler, memory_limit):
-    return open_client(workers, scheduler, parse_memory(memory_limit))
+def _open(workers, scheduler, memory_limit, connect_timeout_s=DEFAULT_CONNECT_TIMEOUT_S):
+    return open_client(workers, scheduler, parse_memory(memory_limit), connect_timeout_s)
 
 
 def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,
-              client=None, memory_limit="auto", progress: bool = True, crash_after_points: int | None = None) -> dict:
+              client=None, memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
+              connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> dict:
     """Run every point not already stored in ``out``; return the records (plan order) and run figures.
 
     ``workers=0`` runs the points in this process, one after the other (no dask); otherwise on a
     dask LocalCluster of ``workers`` processes (default: the CPU count), on ``scheduler``, or on
     an open ``client``. ``crash_after_points`` (testing aid) ends this process abruptly after
     storing that many new points, as a kill would.
+
+    Faults: points are computed on the workers and stored here, each whole (images, then the
+    record that marks it finished); a worker that dies has its point computed again by dask. A
+    lost scheduler (or one without a worker for ``connect_timeout_s``) stops the run with one
+    line saying how many points are stored; running the same sweep again computes only the others.
     """
     out = Path(out)
     stored = {p.point_id: load_point(out, p, context) for p in points}
@@ -865,7 +871,7 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
     own_client = own_cluster = None
     if todo and client is None and workers != 0:  # a scheduler that cannot be reached: nothing written yet
         n = max(1, min(os.cpu_count() or 1, len(todo))) if workers is None else workers
-        own_client, own_cluster = _open(n, scheduler, memory_limit)
+        own_client, own_cluster = _open(n, scheduler, memory_limit, connect_timeout_s)
         client = own_client
     (out / POINTS_DIR).mkdir(parents=True, exist_ok=True)
     try:
@@ -873,14 +879,19 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
             for p in todo:
                 take(run_point(context, p))
         elif todo:
-            from distributed import as_completed
-
             n_workers = len(client.scheduler_info().get("workers", {}))
             token = uuid.uuid4().hex[:8]
             futures = [client.submit(run_point, context, p, key=f"viform-sweep-{p.point_id}-{token}", pure=False)
                        for p in todo]
-            for fut in as_completed(futures):
-                take(fut.result())
+            try:
+                for _, result in completed(client, futures, connect_timeout_s):
+                    if isinstance(result, BaseException):
+                        raise result
+                    take(result)
+            except SchedulerLost as exc:
+                raise ViformError(f"{exc}: {len(records)} of {len(points)} points are stored, each whole, in "
+                                  f"{str(out / POINTS_DIR)!r}; run the same sweep again to compute the other "
+                                  f"{len(points) - len(records)}") from None
     finally:
         if bar is not None:
             bar.close()
@@ -994,7 +1005,8 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
 
 
 def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | None = None, client=None,
-          memory_limit="auto", progress: bool = True, crash_after_points: int | None = None) -> dict:
+          memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
+          connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> dict:
     """Run a planned sweep into ``out``: points, ``sweep.zarr`` and ``sweep.json``; returns the sweep document."""
     from viform._io import check_output_folder
 
@@ -1008,7 +1020,8 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
         workers = check_int("--workers", workers, 0, 1024)
     check_context(out, plan.context)
     run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
-                    memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points)
+                    memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points,
+                    connect_timeout_s=connect_timeout_s)
     records = run["records"]
     result = answer(records, plan.demands, plan.objective)
     write_table(out / "sweep.zarr", records, plan.context)

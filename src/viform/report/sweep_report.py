@@ -395,11 +395,14 @@ def console_lines(doc) -> list[str]:
 
 def run_sweep_report(plan, out, *, workers=None, scheduler=None, client=None, memory_limit="auto",
                      progress: bool = True, command: str = "", started_s: float | None = None,
-                     crash_after_points: int | None = None, demand_notes: list[str] | None = None) -> dict:
-    """Run a planned sweep into ``out`` and write its report; returns the sweep document."""
+                     crash_after_points: int | None = None, demand_notes: list[str] | None = None,
+                     **run_options) -> dict:
+    """Run a planned sweep into ``out`` and write its report; returns the sweep document.
+
+    ``run_options`` go to :func:`viform.measure.sweep.sweep` (e.g. ``connect_timeout_s``)."""
     started = time.perf_counter() if started_s is None else started_s
     doc = sw.sweep(plan, out, workers=workers, scheduler=scheduler, client=client, memory_limit=memory_limit,
-                   progress=progress, crash_after_points=crash_after_points)
+                   progress=progress, crash_after_points=crash_after_points, **run_options)
     write_sweep_report(doc, plan.context.make_scene(), out, command, started, demand_notes)
     doc["report"] = str(Path(out) / "report.html")
     return doc
