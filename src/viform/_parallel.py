@@ -42,6 +42,23 @@ def parse_memory(memory_limit) -> str | int:
     return value
 
 
+def one_line_warnings(fn):
+    """``fn`` for ``client.submit``: warnings raised while it runs on a worker print one line each, as
+    the command's own do (a local cluster's workers write to the command's stderr)."""
+    import functools
+
+    return functools.partial(_run_with_one_line_warnings, fn)
+
+
+def _run_with_one_line_warnings(fn, *args, **kwargs):
+    import warnings
+
+    from viform._validate import show_warning
+
+    warnings.showwarning = show_warning  # this worker process shows every warning so from now on
+    return fn(*args, **kwargs)
+
+
 def check_connect_timeout(timeout_s) -> float:
     """The seconds a client keeps trying to reach its scheduler: a number in [0.1, 3600]."""
     if isinstance(timeout_s, bool) or not isinstance(timeout_s, (int, float)) or not 0.1 <= timeout_s <= 3600:

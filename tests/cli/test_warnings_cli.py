@@ -65,3 +65,15 @@ def test_gated_plot_of_a_fog_that_hides_everything_warns_nothing(tmp_path):
         plot_range_intensity(tmp_path / "r.png", profile, "fog V = 1e-300 m")
     assert [str(w.message) for w in caught] == []
     assert (tmp_path / "r.png").stat().st_size > 0
+
+
+def test_warnings_in_tasks_on_workers_are_one_line_too():
+    """A dask task (dataset's clips, sweep's points) runs wrapped: its worker shows warnings as the command does."""
+    import subprocess
+    import sys
+
+    code = ("import numpy as np; from viform._parallel import one_line_warnings; "
+            "print(one_line_warnings(np.log)(np.zeros(1))[0])")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800)
+    assert proc.returncode == 0 and proc.stdout.strip() == "-inf"
+    assert proc.stderr.splitlines() == ["viform: warning: divide by zero encountered in log (RuntimeWarning)"]

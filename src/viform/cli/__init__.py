@@ -86,35 +86,10 @@ def _first_line(exc: BaseException) -> str:
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """Every warning as one line on stderr: viform's own as they are, a library's with its origin
-    (no source line, no file path)."""
-    from viform._validate import ViformWarning
+    """Every warning as one line on stderr (:func:`viform._validate.warning_line`)."""
+    from viform._validate import warning_line
 
-    text = _first_line(message) if str(message).strip() else category.__name__
-    if not issubclass(category, ViformWarning):
-        origin = _warning_origin()
-        text += f" ({category.__name__}{f' from {origin}' if origin else ''})"
-    click.echo(f"viform: warning: {text}", err=True)
-
-
-def _warning_origin() -> str | None:
-    """The installed library whose code issued the warning being shown (the first frame below the
-    warnings machinery), or None (viform's own code, or a warning raised from C)."""
-    import sys
-
-    frame = sys._getframe(2)
-    while frame is not None and frame.f_globals.get("__name__", "").split(".")[0] in ("warnings", "viform"):
-        if frame.f_globals.get("__name__", "").startswith("viform"):
-            return None
-        frame = frame.f_back
-    if frame is None:
-        return None
-    parts = os.path.normpath(frame.f_code.co_filename).split(os.sep)
-    for i in range(len(parts) - 1):
-        if parts[i] in ("site-packages", "dist-packages"):
-            name = parts[i + 1]
-            return name[:-3] if name.endswith(".py") else name
-    return None
+    click.echo(warning_line(message, category), err=True)
 
 
 def _interrupted(exc: BaseException) -> int:

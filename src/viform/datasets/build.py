@@ -32,7 +32,14 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open, check_output_folder, save_image, write_json
-from viform._parallel import DEFAULT_CONNECT_TIMEOUT_S, SchedulerLost, completed, open_client, parse_memory
+from viform._parallel import (
+    DEFAULT_CONNECT_TIMEOUT_S,
+    SchedulerLost,
+    completed,
+    one_line_warnings,
+    open_client,
+    parse_memory,
+)
 from viform._validate import ViformError, check_choice, check_int, check_positive, one_line
 from viform.datasets.layout import (
     CONFIG_NAME,
@@ -600,8 +607,8 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
 
         bar = tqdm(total=len(tasks), unit="clip", desc="dataset", disable=not progress, leave=True)
         token = uuid.uuid4().hex[:8]
-        futures = {client.submit(_convert_or_report, t, key=f"viform-clip-{t.clip.name}-{token}", pure=False): t
-                   for t in tasks}
+        futures = {client.submit(one_line_warnings(_convert_or_report), t, key=f"viform-clip-{t.clip.name}-{token}",
+                                 pure=False): t for t in tasks}
         try:
             for fut, result in completed(client, futures, connect_timeout_s):
                 task = futures[fut]

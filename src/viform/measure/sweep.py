@@ -48,7 +48,14 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_path, write_json
-from viform._parallel import DEFAULT_CONNECT_TIMEOUT_S, SchedulerLost, completed, open_client, parse_memory
+from viform._parallel import (
+    DEFAULT_CONNECT_TIMEOUT_S,
+    SchedulerLost,
+    completed,
+    one_line_warnings,
+    open_client,
+    parse_memory,
+)
 from viform._validate import ViformError, check_int, check_positive, one_line
 from viform.measure import comparison as cmp
 
@@ -881,8 +888,8 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
         elif todo:
             n_workers = len(client.scheduler_info().get("workers", {}))
             token = uuid.uuid4().hex[:8]
-            futures = [client.submit(run_point, context, p, key=f"viform-sweep-{p.point_id}-{token}", pure=False)
-                       for p in todo]
+            futures = [client.submit(one_line_warnings(run_point), context, p, key=f"viform-sweep-{p.point_id}-{token}",
+                                     pure=False) for p in todo]
             try:
                 for _, result in completed(client, futures, connect_timeout_s):
                     if isinstance(result, BaseException):
