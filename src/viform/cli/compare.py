@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from viform._validate import ViformError
+from viform._validate import ViformError, check_positive
 from viform.cli.app import cli
 
 
@@ -67,16 +67,17 @@ def command_start() -> float:
 def kernels_cached() -> bool:
     """Whether numba's on-disk cache holds the spike simulation kernels for the current source.
 
-    Cheap check: an index file (``*.nbi``) of ``viform/sensors/spike.py`` no older than the source,
-    in ``__pycache__`` next to it or under ``NUMBA_CACHE_DIR`` when that is set.
+    Cheap check: an index file (``*.nbi``) of the kernels' module ``viform/sensors/_spike_kernels.py`` no
+    older than the source, in ``__pycache__`` next to it or under ``NUMBA_CACHE_DIR`` when that is set.
     """
     import os
 
     import viform.sensors as sensors
 
-    src = Path(sensors.__file__).with_name("spike.py")
+    src = Path(sensors.__file__).with_name("_spike_kernels.py")
     where = os.environ.get("NUMBA_CACHE_DIR")
-    found = Path(where).rglob("spike.*.nbi") if where else (src.parent / "__pycache__").glob("spike.*.nbi")
+    pattern = f"{src.stem}.*.nbi"
+    found = Path(where).rglob(pattern) if where else (src.parent / "__pycache__").glob(pattern)
     try:
         made = src.stat().st_mtime
         return any(p.stat().st_mtime >= made for p in found)
@@ -165,6 +166,7 @@ def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, 
 
     keys = parse_sensors(sensors)
     instants = parse_instants(at)
+    check_positive("--duration", duration_s)
     check_outputs(out_dir, json_file)
     options = {k: v for k, v in (("brightness", brightness), ("speed", speed), ("visibility_m", visibility_m))
                if v is not None}
