@@ -44,3 +44,25 @@ def scene_settings(text: str | None) -> dict:
     from viform.light.description import parse_settings
 
     return parse_settings(text, "--scene-set")
+
+
+def scene_options(scene: str, text: str | None) -> dict:
+    """``--scene-set`` for SCENE as the keyword arguments of a built-in scene, or the settings of a
+    scene description; refused for an image or video (errors name the flag)."""
+    from viform._validate import ViformError
+    from viform.light.catalog import BUILTIN_SCENES, entry_settings
+    from viform.light.description import is_description_file, load_description
+
+    settings = scene_settings(text)
+    if not settings:
+        return {}
+    if scene in BUILTIN_SCENES:
+        return entry_settings(scene, settings, "--scene-set")
+    if is_description_file(scene):
+        try:
+            load_description(scene, settings)  # checks the names and values before any work
+        except ViformError as exc:
+            raise ViformError(f"--scene-set: {exc}") from None
+        return settings
+    raise ViformError(f"--scene-set applies to built-in scenes and scene descriptions, not to SCENE = {scene!r} "
+                      "(an image or video)")
