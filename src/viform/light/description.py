@@ -37,6 +37,10 @@ MAX_SIDE_PX = 16384
 MAX_PIXELS = 1 << 26
 #: Image files a source or mask may name.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".npy", ".exr", ".hdr")
+#: Images that ship with scikit-image (public domain or CC0), named ``skimage:NAME`` in a description.
+BUNDLED_PREFIX = "skimage:"
+BUNDLED_IMAGES = ("astronaut", "camera", "coffee", "chelsea", "rocket", "grass", "gravel", "brick", "coins",
+                  "moon", "page", "text", "horse")
 #: Settings every description has (besides its own named parameters).
 UNIVERSAL_SETTINGS = {
     "brightness": "factor on every illuminance of the scene (1 = as described)",
@@ -88,7 +92,8 @@ SOURCE = _one_of(
     image=_obj({
         "path": {"type": "string", "minLength": 1,
                  "description": "image file, relative to the description's folder (8/16-bit: PNG, JPEG, TIFF, "
-                                "BMP; float lux: .npy, .exr, .hdr)"},
+                                "BMP; float lux: .npy, .exr, .hdr), or skimage:NAME for an image that ships with "
+                                "scikit-image (astronaut, camera, coffee, chelsea, rocket, grass, gravel, brick, …)"},
         "transfer": {"enum": ["srgb", "linear"], "description": "8/16-bit values: sRGB-encoded or linear"},
         "lux": {"description": "8/16-bit images: lux of value 0 and of full scale", **_LUX_RANGE},
         "map": {"enum": ["linear", "log"],
@@ -423,6 +428,11 @@ def validate(document: dict, origin: str = "description", settings: dict | None 
                           f"keyframe instants must increase (the one before is {keys[j - 1]['t_s']:g} s)")
     base = Path(base_dir) if base_dir is not None else Path.cwd()
     for where, source_path, node in _files(resolved):
+        if str(node[source_path[-1]]).startswith(BUNDLED_PREFIX):
+            name = str(node[source_path[-1]])[len(BUNDLED_PREFIX):]
+            if name not in BUNDLED_IMAGES:
+                _fail(origin, where, node[source_path[-1]], f"bundled images: {', '.join(BUNDLED_IMAGES)}")
+            continue
         file = Path(node[source_path[-1]])
         if not file.is_absolute():
             file = base / file

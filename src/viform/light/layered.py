@@ -176,7 +176,11 @@ def read_image(path: str, what: str):
     """(grey float64 (H, W), alpha in [0, 1] or None, integer: bool) of an image file."""
     p = Path(path)
     try:
-        if p.suffix.lower() == ".npy":
+        if str(path).startswith("skimage:"):
+            import skimage.data
+
+            arr = getattr(skimage.data, str(path)[len("skimage:"):])()
+        elif p.suffix.lower() == ".npy":
             arr = np.load(p, allow_pickle=False)
         else:
             import imageio.v3 as iio
