@@ -107,3 +107,12 @@ def test_shipped_descriptions_validate_and_render(name):
     scene = described_scene(name)
     lux = scene.illuminance_lux(0.001)
     assert lux.shape == scene.shape and np.all(np.isfinite(lux)) and lux.min() >= 0
+
+
+def test_docs_format_reference_is_the_schemas():
+    from pathlib import Path
+
+    from viform.light.description import schema_reference
+
+    doc = (Path(__file__).parents[2] / "docs" / "scenes.md").read_text(encoding="utf-8")
+    assert doc.endswith(schema_reference())

@@ -502,3 +502,46 @@ def parse_settings(text: str | None, flag: str = "--scene-set") -> dict:
             raise ViformError(f"{flag}: {name}={value} is not allowed: it must be a finite number")
         out[name] = parsed
     return out
+
+
+def schema_reference() -> str:
+    """The format's keys as a Markdown list, made from :data:`SCHEMA` (docs/scenes.md includes it)."""
+    lines: list[str] = []
+
+    def kind(node) -> str:
+        if "enum" in node:
+            return " | ".join(map(str, node["enum"]))
+        if "const" in node:
+            return repr(node["const"])
+        t = node.get("type")
+        if t == "array":
+            item = node.get("items", {})
+            more = "" if node.get("maxItems") == node.get("minItems") else "…"
+            return f"[{kind(item)} × {node.get('minItems', '')}{more}]"
+        if "oneOf" in node:
+            forms = [next(iter(sub.get("required", [])), kind(sub)) for sub in node["oneOf"]]
+            return "one of: " + ", ".join(forms)
+        bounds = []
+        for key, sym in (("minimum", "≥"), ("exclusiveMinimum", ">"), ("maximum", "≤"), ("exclusiveMaximum", "<")):
+            if key in node:
+                bounds.append(f"{sym} {node[key]:g}")
+        return (t or "any") + (f" ({', '.join(bounds)})" if bounds else "")
+
+    def walk(node, path, depth):
+        if "oneOf" in node and all(sub.get("type") == "object" for sub in node["oneOf"]):
+            for sub in node["oneOf"]:
+                name = sub["required"][0]
+                inner = sub["properties"][name]
+                lines.append(f"{'  ' * depth}- `{path}.{name}`: {inner.get('description', '')}")
+                walk(inner, f"{path}.{name}", depth + 1)
+            return
+        for name, child in node.get("properties", {}).items():
+            req = " (required)" if name in node.get("required", []) else ""
+            here = f"{path}.{name}" if path else name
+            desc = child.get("description", "")
+            lines.append(f"{'  ' * depth}- `{here}`{req}: {kind(child)}{' — ' + desc if desc else ''}")
+            target = child.get("items", child) if child.get("type") == "array" else child
+            walk(target, here + ("[i]" if child.get("type") == "array" else ""), depth + 1)
+
+    walk(SCHEMA, "", 0)
+    return "\n".join(lines) + "\n"
