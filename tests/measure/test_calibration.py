@@ -1,6 +1,7 @@
 """Calibration of a spike-sensor preset from a recording (issue 10 item 5; seed 000 §5.1)."""
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,8 @@ from viform.sensors.spike_presets import load_spike_preset
 from viform.stream.container import SpikeStream
 from viform.stream.io import open_spikes, save_spikes
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike" / "real_uhsr_250x250.npz"
+REAL = Path(os.environ.get("VIFORM_SPIKE_DATA")
+            or Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike") / "real_uhsr_250x250.npz"
 
 
 def _ramp_recording(q, prnu, size=96, ticks=400, seed=1, **kw):

@@ -40,10 +40,13 @@ def demo(out_dir, duration_s, seed, as_json, json_file, scene_set):
 
     swept = run_demo_sweep(out_dir, duration_s=duration_s, seed=seed, scene_options=options or None)
     answer = {"report": swept["report"], "demands": swept["answer"]["demands"],
+              "demands_explained": swept["demands_explained"],
               "sentences": swept["answer"]["sentences"], "points": swept["n_points"], "seconds": swept["seconds"]}
     finish(doc, out_dir, time.perf_counter() - started, as_json, json_file, extra={"sweep": answer})
     if not as_json:
-        click.echo(f"\nWhich setting would meet the scene's demands ({', '.join(answer['demands'])})? "
-                   f"From {answer['points']} settings swept in {answer['seconds']:.0f} s ({answer['report']}):")
+        click.echo(f"\nWhich setting would meet the scene's demands ({', '.join(answer['demands'])})?")
+        for line in answer["demands_explained"]:
+            click.echo(f"  {line}")
+        click.echo(f"From {answer['points']} settings swept in {answer['seconds']:.0f} s ({answer['report']}):")
         for line in answer["sentences"]:
             click.echo(f"- {line}")

@@ -142,7 +142,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         click.echo(f"note: {decimation}:1 over {interface} is faster than the link ({plan['decimation_strict']}:1 "
                    "fits); the DDR ring will overflow and frames will be lost", err=True)
     with tqdm(total=n_frames, desc="frames", file=sys.stderr, leave=False) as bar:
-        result = run_highspeed(sc, cfg, timing, progress=bar.update)
+        result = run_highspeed(sc, cfg, progress=bar.update)
     report = write_outputs(result, out_dir, video_format, [t for t, _ in step_list])
     if json_file:
         from viform._io import write_json

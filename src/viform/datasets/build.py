@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import logging
 import math
 import os
 import time
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open, check_output_folder, save_image, write_json
+from viform._parallel import open_client, parse_memory
 from viform._validate import ViformError, check_choice, check_int, check_positive, one_line
 from viform.datasets.layout import (
     CONFIG_NAME,
@@ -499,35 +499,6 @@ def _check_existing_config(out: Path, config: dict) -> None:
                       "use a new --out folder, or the same options to resume it")
 
 
-def _parse_memory(memory_limit) -> str | int:
-    if memory_limit in (None, "auto"):
-        return "auto"
-    from dask.utils import parse_bytes
-
-    try:
-        value = parse_bytes(str(memory_limit))
-    except (ValueError, TypeError):
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: give a size such as 2GiB, "
-                          "or auto") from None
-    if value < 64 << 20:
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: at least 64MiB per worker")
-    return value
-
-
-def _open_client(workers: int, scheduler: str | None, memory_limit):
-    """A dask client: on an existing scheduler, or on a new LocalCluster (processes, 1 thread each)."""
-    from distributed import Client, LocalCluster
-
-    if scheduler:
-        try:
-            return Client(scheduler, timeout="20s"), None
-        except (OSError, TimeoutError) as exc:
-            raise ViformError(f"--scheduler {scheduler!r}: could not connect ({one_line(exc)})") from None
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                           dashboard_address=":0", silence_logs=logging.ERROR)
-    return Client(cluster), cluster
-
-
 def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,
                   client=None, memory_limit="auto", block_ticks: int = 4096, progress: bool = True,
                   crash: tuple[str, int] | None = None, device: str = "cpu") -> dict:
@@ -576,7 +547,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     if workers is None:
         workers = max(1, min(os.cpu_count() or 1, len(clips)))
     workers = check_int("--workers", workers, 1, 1024)
-    memory_limit = _parse_memory(memory_limit)
+    memory_limit = parse_memory(memory_limit)
     check_output_folder("--out", out)
     if out.exists() and not out.is_dir():
         raise ViformError(f"--out {str(out)!r} is a file, not a folder")
@@ -587,7 +558,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     own_client = client is None
     own_cluster = None
     if own_client:
-        client, own_cluster = _open_client(workers, scheduler, memory_limit)
+        client, own_cluster = open_client(workers, scheduler, memory_limit)
     try:
         (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
         (out / GT_DIR).mkdir(parents=True, exist_ok=True)

@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_path, write_json
+from viform._parallel import open_client, parse_memory
 from viform._validate import ViformError, check_int, check_positive, one_line
 from viform.measure import comparison as cmp
 
@@ -826,9 +827,7 @@ def standard_vary(scene) -> tuple[list[str], dict[str, dict[str, list]]]:
 
 
 def _open(workers, scheduler, memory_limit):
-    from viform.datasets.build import _open_client, _parse_memory
-
-    return _open_client(workers, scheduler, _parse_memory(memory_limit))
+    return open_client(workers, scheduler, parse_memory(memory_limit))
 
 
 def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,

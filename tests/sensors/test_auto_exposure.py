@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from viform._validate import ViformError
-from viform.isp.auto_exposure import (
+from viform.sensors.auto_exposure import (
     AutoExposure,
     MeanMeter,
     PercentileMeter,
