@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from viform._validate import ViformError, check_positive
+from viform.cli._scenes import scene_options, scene_set_option, with_scene_list
 from viform.cli.app import cli
 
 
@@ -154,12 +155,14 @@ def _echo_vision(doc: dict) -> None:
 @click.option("--seed", type=int, default=0, show_default=True, help="Noise seed.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(), default=None, help="Also write the JSON summary here.")
+@scene_set_option
+@with_scene_list
 def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, speed, visibility_m, seed, as_json,
-            json_file):
+            json_file, scene_set):
     """Shoot SCENE with every sensor and write a self-contained report.html and metrics.json.
 
     SCENE: dilemma (high speed and high dynamic range at once), night-road-fog (with range,
-    for the gated camera), another built-in scene, an image or a video.
+    for the gated camera), another scene. {scenes}
     """
     started = command_start()
     from viform.report.compare_report import compare as run
@@ -177,6 +180,7 @@ def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, 
         raise ViformError("--speed applies to the dilemma scene only")
     if visibility_m is not None and scene != "night-road-fog":
         raise ViformError("--visibility-m applies to the night-road-fog scene only")
+    options.update(scene_options(scene, scene_set))
     announce_preparation()
     doc = run(scene, out_dir, keys, duration_s, height, width, seed, instants, progress=True,
               command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "", scene_options=options,
