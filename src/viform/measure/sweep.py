@@ -530,7 +530,8 @@ class SweepContext:
 
         if self.scene in BUILTIN_SCENES:
             return builtin_scene(self.scene, self.height, self.width, **dict(self.scene_options))
-        return load_scene(self.scene, self.height, self.width, resize=True)
+        return load_scene(self.scene, self.height, self.width, resize=True,
+                          settings={k: list(v) if isinstance(v, tuple) else v for k, v in self.scene_options} or None)
 
 
 def run_point(context: SweepContext, point: Point) -> dict:

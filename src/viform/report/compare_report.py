@@ -665,7 +665,7 @@ def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, he
     if scene_spec in BUILTIN_SCENES:
         scene = builtin_scene(scene_spec, height, width, **(scene_options or {}))
     else:
-        scene = load_scene(scene_spec, height, width, resize=True)
+        scene = load_scene(scene_spec, height, width, resize=True, settings=scene_options or None)
     started = time.perf_counter() if started_s is None else started_s
     result = run_comparison(scene, duration_s, keys, instants_s, seed, progress)
     return write_report(result, out_dir, command, started_s=started)

@@ -13,12 +13,13 @@ DEMO_HEIGHT, DEMO_WIDTH = 64, 128
 
 
 def run_demo(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = True,
-             started_s: float | None = None) -> dict:
-    """Run the comparison on the dilemma scene; write the report; return the metrics document."""
+             started_s: float | None = None, scene_options: dict | None = None) -> dict:
+    """Run the comparison on the dilemma scene (its parameters ``scene_options``); write the report; return
+    the metrics document."""
     from viform.report.compare_report import compare
 
     return compare("dilemma", out_dir, None, duration_s, DEMO_HEIGHT, DEMO_WIDTH, seed, progress=progress,
-                   command="viform demo", started_s=started_s)
+                   command="viform demo", started_s=started_s, scene_options=scene_options)
 
 
 #: The demo's closing sweep: the spike chip's 16 threshold levels (at its 40 kHz clock), and the main
@@ -50,7 +51,8 @@ def demo_demands_explained(scene) -> list[str]:
             f"({d['max_speed_px_per_s']:,.0f} px/s) takes to cross one pixel"]
 
 
-def run_demo_sweep(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = True) -> dict:
+def run_demo_sweep(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = True,
+                   scene_options: dict | None = None) -> dict:
     """The designer's question on the demo scene: which setting meets both demands? (OUT/sweep/report.html)."""
     from pathlib import Path
 
@@ -58,10 +60,11 @@ def run_demo_sweep(out_dir, duration_s: float = 0.04, seed: int = 0, progress: b
     from viform.measure.sweep import make_plan
     from viform.report.sweep_report import run_sweep_report
 
-    demands = demo_demands(builtin_scene("dilemma", DEMO_HEIGHT, DEMO_WIDTH))
+    demands = demo_demands(builtin_scene("dilemma", DEMO_HEIGHT, DEMO_WIDTH, **(scene_options or {})))
     plan = make_plan("dilemma", list(DEMO_SWEEP), [v for vs in DEMO_SWEEP.values() for v in vs],
-                     height=DEMO_HEIGHT, width=DEMO_WIDTH, duration_s=duration_s, seed=seed, require=demands)
-    notes = demo_demands_explained(builtin_scene("dilemma", DEMO_HEIGHT, DEMO_WIDTH))
+                     height=DEMO_HEIGHT, width=DEMO_WIDTH, duration_s=duration_s, seed=seed, require=demands,
+                     scene_options=scene_options)
+    notes = demo_demands_explained(builtin_scene("dilemma", DEMO_HEIGHT, DEMO_WIDTH, **(scene_options or {})))
     result = run_sweep_report(plan, Path(out_dir) / "sweep", workers=0, progress=progress, command="viform demo",
                               demand_notes=notes)
     result["demands_explained"] = notes
