@@ -360,3 +360,19 @@ def test_every_vfc_version_writes_only_known_header_fields(tmp_path):
             path = tmp_path / f"v{version}{mode}.vfc"
             encode_source(stream(), path, mode, segment_ticks=64, version=version)
             assert set(CodedFile(path).header) <= set(HEADER_FIELDS), (version, mode)
+
+
+def test_info_does_not_call_a_vfc_verified_that_it_has_not_decoded(tmp_path):
+    """A header edited to another width, its CRC-32 recomputed: every checksum still matches, only a
+    decode shows the damage. ``info`` (no decode) says not verified; ``verify`` refuses the file."""
+    from viform.coding.aer_file import encode_source
+
+    path = tmp_path / "c.vfc"
+    encode_source(stream(), path, "strict", segment_ticks=64)
+    rc, out, _ = run("info", path)
+    assert rc == 0 and "verified: no" in out and "run viform verify" in out
+    _forge_vfc(path, "width", 8)
+    rc, out, _ = run("info", path)
+    assert rc == 0 and "verified: no" in out
+    rc, _, err = run("verify", path)
+    assert rc == 2 and "c.vfc" in err and err.count("\n") == 1

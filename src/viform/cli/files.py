@@ -177,9 +177,14 @@ def info(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, 
                 summary[field] = meta[field].get("name", meta[field]) if isinstance(meta[field], dict) else meta[field]
         summary.update(_verification(source))
     else:
+        # info does not decode the segments: a header edited with its CRC recomputed (another width, another
+        # mode) passes every checksum and only a decode shows it, so only verify says "verified"
         summary = dict(summary)
-        summary.setdefault("verified", False)
-        summary.setdefault("verification", "segment checksums not checked here: run viform verify")
+        checked = summary.get("verification") if summary.get("verified") else None
+        summary["verified"] = False
+        summary["verification"] = ("header, end record and segment checksums match, but the segments are not "
+                                   "decoded here: run viform verify" if checked
+                                   else "segments not decoded here: run viform verify")
     if _emit_json(summary, as_json, json_file):
         return
     _table(summary)
