@@ -102,11 +102,9 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
     _check_max_lux(settings)
     if scenes is not None:
         src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs)
-    if scheduler is not None:
-        announce_connection(scheduler, connect_timeout_s)
     summary = build_dataset(src, out_dir, settings, workers=workers, scheduler=scheduler,
                             memory_limit=worker_memory, block_ticks=block_ticks, progress=not no_progress,
-                            device=device, connect_timeout_s=connect_timeout_s)
+                            device=device, connect_timeout_s=connect_timeout_s, on_connect=announce_connection)
     if json_file is not None:
         write_json(json_file, summary)
     if as_json:

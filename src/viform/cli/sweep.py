@@ -117,12 +117,11 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
         raise click.UsageError("--workers and --scheduler exclude each other: a scheduler brings its own workers")
     if "spike" in plan.sensors:
         announce_preparation()
-    if scheduler is not None:
-        from viform.cli._common import announce_connection
+    from viform.cli._common import announce_connection
 
-        announce_connection(scheduler, connect_timeout_s)
     doc = run_sweep_report(plan, out_dir, workers=workers, scheduler=scheduler, memory_limit=worker_memory,
-                           connect_timeout_s=connect_timeout_s, progress=not no_progress,
+                           connect_timeout_s=connect_timeout_s, on_connect=announce_connection,
+                           progress=not no_progress,
                            command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "",
                            started_s=started)
     summary = {"report": doc["report"], "table": str(Path(out_dir) / "sweep.zarr"),

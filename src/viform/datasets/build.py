@@ -509,7 +509,7 @@ def _check_existing_config(out: Path, config: dict) -> None:
 def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,
                   client=None, memory_limit="auto", block_ticks: int = 4096, progress: bool = True,
                   crash: tuple[str, int] | None = None, device: str = "cpu",
-                  connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> dict:
+                  connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None) -> dict:
     """Convert every clip of ``src`` into the spike dataset ``out``; returns a summary.
 
     Parameters
@@ -536,6 +536,8 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
         Where each clip's spike kernels run (a GPU: same bits, see :mod:`viform.sensors.spike_cuda`).
     connect_timeout_s : float
         Seconds to keep trying to reach the scheduler, at the start and after losing it.
+    on_connect : callable (scheduler, connect_timeout_s), optional
+        Called once the inputs are checked, just before a ``scheduler`` is reached (the CLI says so).
 
     Faults: a worker that dies mid-clip is replaced and the clip converted again from the start
     (its partial files removed first; the bits are the same). A lost scheduler (or one without a
@@ -573,6 +575,8 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     own_client = client is None
     own_cluster = None
     if own_client:
+        if scheduler is not None and on_connect is not None:
+            on_connect(scheduler, connect_timeout_s)
         client, own_cluster = open_client(workers, scheduler, memory_limit, connect_timeout_s)
     try:
         (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)

@@ -839,7 +839,7 @@ def _open(workers, scheduler, memory_limit, connect_timeout_s=DEFAULT_CONNECT_TI
 
 def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,
               client=None, memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
-              connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> dict:
+              connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None) -> dict:
     """Run every point not already stored in ``out``; return the records (plan order) and run figures.
 
     ``workers=0`` runs the points in this process, one after the other (no dask); otherwise on a
@@ -851,6 +851,7 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
     record that marks it finished); a worker that dies has its point computed again by dask. A
     lost scheduler (or one without a worker for ``connect_timeout_s``) stops the run with one
     line saying how many points are stored; running the same sweep again computes only the others.
+    ``on_connect(scheduler, connect_timeout_s)`` is called just before a ``scheduler`` is reached.
     """
     out = Path(out)
     stored = {p.point_id: load_point(out, p, context) for p in points}
@@ -879,6 +880,8 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
     own_client = own_cluster = None
     if todo and client is None and workers != 0:  # a scheduler that cannot be reached: nothing written yet
         n = max(1, min(os.cpu_count() or 1, len(todo))) if workers is None else workers
+        if scheduler is not None and on_connect is not None:
+            on_connect(scheduler, connect_timeout_s)
         own_client, own_cluster = _open(n, scheduler, memory_limit, connect_timeout_s)
         client = own_client
     (out / POINTS_DIR).mkdir(parents=True, exist_ok=True)
@@ -1014,7 +1017,7 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
 
 def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | None = None, client=None,
           memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
-          connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> dict:
+          connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None) -> dict:
     """Run a planned sweep into ``out``: points, ``sweep.zarr`` and ``sweep.json``; returns the sweep document."""
     from viform._io import check_output_folder
 
@@ -1029,7 +1032,7 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
     check_context(out, plan.context)
     run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
                     memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points,
-                    connect_timeout_s=connect_timeout_s)
+                    connect_timeout_s=connect_timeout_s, on_connect=on_connect)
     records = run["records"]
     result = answer(records, plan.demands, plan.objective)
     write_table(out / "sweep.zarr", records, plan.context)
