@@ -34,7 +34,8 @@ while True:
 
 CLI_WRITER = """
 import sys
-from viform.cli import main
+from viform.cli import _install_sigterm, main
+_install_sigterm()  # what main() does first: a SIGTERM however soon after "ready" is the command's to handle
 print("ready", flush=True)
 while True:
     rc = main(["simulate", "translating", "--duration", "0.02", "--height", "8", "--width", "16",
@@ -99,7 +100,7 @@ def test_sigterm_leaves_nothing_behind(tmp_path):
         proc = _start(CLI_WRITER, path)
         time.sleep(rng.uniform(0.2, 0.6))
         proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=600)
+        _, err = proc.communicate(timeout=1800)  # a hang guard only
         assert proc.returncode == 143, err
         assert "Traceback" not in err
         assert _leftovers(tmp_path) == []  # no cleanup run needed
