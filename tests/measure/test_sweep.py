@@ -30,10 +30,10 @@ def test_value_specs():
     assert sw.parse_values("--vary", p, "0.001:0.004:0.001") == [0.001, 0.002, 0.003, 0.004]  # stop included
     log = sw.parse_values("--vary", p, "log:1e-5:1e-2:4")
     assert log == pytest.approx([1e-5, 1e-4, 1e-3, 1e-2])
-    level = sw.sweep_parameters("spike")["threshold_level"]
+    level = sw.sweep_parameters("spikeone")["threshold_level"]
     assert sw.parse_values("--vary", level, "all") == list(range(16))
     assert sw.parse_values("--vary", level, "0:15:5") == [0, 5, 10, 15]
-    assert sw.parse_values("--vary", sw.sweep_parameters("spike")["photon_noise"], "true,false") == [True, False]
+    assert sw.parse_values("--vary", sw.sweep_parameters("spikeone")["photon_noise"], "true,false") == [True, False]
 
 
 @pytest.mark.parametrize("spec, needle", [("5:1:1", "no points"), ("log:1e-3:1e-2:0", "no points"), ("", "no values"),
@@ -65,12 +65,12 @@ def test_unknown_parameter_names_the_allowed_ones():
 
 
 def test_points_default_once_and_seeds_are_per_point():
-    plan = tiny_plan(["spike:threshold_level=11,12,13"])
+    plan = tiny_plan(["spikeone:threshold_level=11,12,13"])
     assert len(plan.points) == 3  # level 12 is the preset's default: one point, not two
     assert sum(p.is_default for p in plan.points) == 1
     seeds = {p.point_id: sw.point_seed(3, p) for p in plan.points}
     assert len(set(seeds.values())) == 3
-    again = tiny_plan(["spike:threshold_level=13,12"])  # other order, fewer points: same ids and seeds
+    again = tiny_plan(["spikeone:threshold_level=13,12"])  # other order, fewer points: same ids and seeds
     assert {p.point_id: sw.point_seed(3, p) for p in again.points}.items() <= seeds.items()
 
 
@@ -95,7 +95,7 @@ def test_answer_best_and_nearest_miss():
 @pytest.fixture(scope="module")
 def serial(tmp_path_factory):
     """The reference: a spike + CMOS sweep run in this process, no dask."""
-    plan = tiny_plan(["spike:threshold_level=0,15", "cmos:exposure_s=1e-4,1e-3"],
+    plan = tiny_plan(["spikeone:threshold_level=0,15", "cmos:exposure_s=1e-4,1e-3"],
                      require="underexposed_fraction<=0.5")
     out = tmp_path_factory.mktemp("serial")
     return plan, out, sw.sweep(plan, out, workers=0, progress=False)
@@ -133,15 +133,16 @@ def test_table_and_physics(serial):
     table = sw.read_table(out / "sweep.zarr")
     assert list(table["point_id"]) == [p.point_id for p in plan.points]
     assert table["metric/psnr_log_db"].shape == (len(plan.points),)
-    spike = {r["settings"].get("threshold_level", 12): r["metrics"] for r in doc["records"] if r["sensor"] == "spike"}
+    spike = {r["settings"].get("threshold_level", 12): r["metrics"] for r in doc["records"]
+             if r["sensor"] == "spikeone"}
     under = [spike[level]["underexposed_fraction"] for level in (0, 12, 15)]
     assert under[0] < under[1] < under[2]
     # seed 000 §3.3: floor Q/(η·T) (one spike per clip), ceiling Q·f/η: DR ≤ 20·lg(f·T), ± a factor 2 at each
     # end for the "rendered within a factor of 2" rule of the metric
     bound = 20 * math.log10(40e3 * TINY["duration_s"]) + 20 * math.log10(4)
     assert all(m["dr_captured_db"] <= bound for m in spike.values())
-    assert doc["answer"]["per_sensor"]["spike"]["meets"]  # level 0 sees most of the scene
-    assert doc["answer"]["per_sensor"]["spike"]["settings"] == {"threshold_level": 0}
+    assert doc["answer"]["per_sensor"]["spikeone"]["meets"]  # level 0 sees most of the scene
+    assert doc["answer"]["per_sensor"]["spikeone"]["settings"] == {"threshold_level": 0}
 
 
 def test_resume_after_kill_and_extend(serial, tmp_path):

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from viform._validate import ViformError
+from viform.isp.highspeed_pipeline import HighSpeedConfig, StepsScene, metering_demo, run_highspeed
+from viform.light.scenes import TranslatingScene
 from viform.sensors.auto_exposure import (
     AutoExposure,
     MeanMeter,
@@ -13,8 +15,6 @@ from viform.sensors.auto_exposure import (
     WeightedMeter,
     settle_frames,
 )
-from viform.isp.highspeed_pipeline import HighSpeedConfig, StepsScene, metering_demo, run_highspeed
-from viform.light.scenes import TranslatingScene
 
 T_UP, T_DOWN = 0.02, 0.05  # s: ×10 then ×0.1
 

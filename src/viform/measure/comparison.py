@@ -36,34 +36,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from viform._validate import ViformError, check_choice
+from viform._validate import ViformError, one_line
+from viform.sensors import catalog
 
-#: Sensors of the comparison, in report order, with a one-line description for users.
-SENSOR_DESCRIPTIONS = {
-    "spike": "spike camera (self-reset pixels, 40 kHz readout; the SpikeOne chip preset)",
-    "cmos-short": "conventional CMOS, 1 ms exposure at 30 fps",
-    "cmos": "conventional CMOS, 10 ms exposure at 30 fps",
-    "seed001-2seg": "segmented exposure, two segments, 130 µs at 60 fps",
-    "seed001-3seg": "segmented exposure, three segments, 130 µs at 60 fps",
-    "seed003-4t": "plain 4T pixel, 33.3 ms integration at 30 fps",
-    "seed003-overflow": "conditional-overflow pixel, three integrations in 33.3 ms",
-    "highspeed": "high-speed camera with auto-exposure, 1 667 fps",
-    "gated": "range-gated CCD, 905 nm laser, 200 pulses a frame, gate from 40 m (scenes with range only)",
-}
-DEFAULT_SENSORS = tuple(SENSOR_DESCRIPTIONS)
-#: Short labels for tables and figures (the key, as given to ``--sensors``, in brackets).
-SENSOR_LABELS = {
-    "cmos-short": "CMOS 1 ms (cmos-short)",
-    "cmos": "CMOS 10 ms (cmos)",
-    "seed001-2seg": "segmented, 2 segments (seed001-2seg)",
-    "seed001-3seg": "segmented, 3 segments (seed001-3seg)",
-    "seed003-4t": "plain 4T 33 ms (seed003-4t)",
-    "seed003-overflow": "conditional overflow (seed003-overflow)",
-    "highspeed": "high-speed 1 667 fps, AE (highspeed)",
-    "gated": "gated CCD, laser returns (gated)",
-}
-#: Gated camera of the comparison: laser pulses per frame and near edge of the gate, m.
-GATED_PULSES, GATED_RANGE_M = 200, 40.0
+#: Sensors of a comparison when none are named, in report order (names of :data:`viform.sensors.catalog.SENSORS`;
+#: any sensor of the catalogue can be compared).
+DEFAULT_SENSORS = ("spikeone", "cmos-short", "cmos", "seed001-2seg", "seed001-3seg", "seed003-4t", "seed003-overflow",
+                   "highspeed", "gated")
+#: Names whose meaning changed, with where they went: ``compare``/``sweep`` called the SpikeOne chip
+#: "spike", which every command now takes for seed 000's Q = 100 e⁻ model.
+RENAMED = {"spike": "in compare and sweep this name meant the SpikeOne chip, which is now 'spikeone' "
+                    "('spike' is seed 000's Q = 100 e⁻ model in every command; it is refused here so that an old "
+                    "command line does not silently compare another camera)"}
 #: Spike reconstructions reported as separate rows.
 SPIKE_METHODS = ("accumulation", "interval", "best")
 #: Accumulation window of the spike camera's accumulation image, s.
@@ -84,23 +68,9 @@ METRICS = {
 }
 
 
-def spike_preset():
-    """The spike camera: the ``spikeone`` preset when the project has it, else the defaults.
-
-    Its pixel and readout are the preset's; the resolution is the scene's (every sensor of a
-    comparison sees the same pixels).
-    """
-    try:
-        from viform.sensors.spike_presets import load_spike_preset
-    except ImportError:  # preset module not there: the documented defaults
-        from viform.sensors.presets import make_sensor
-
-        return make_sensor("spike"), "spike defaults"
-    return load_spike_preset("spikeone").sensor(height=None, width=None), "spikeone"
-
-
 #: How presets are named for users.
-PRESET_DISPLAY_NAMES = {"spikeone": "SpikeOne", "spiketwo": "SpikeTwo", "spiketwo-40k": "SpikeTwo 40 kHz"}
+PRESET_DISPLAY_NAMES = {"spikeone": "SpikeOne", "spiketwo": "SpikeTwo", "spiketwo-40k": "SpikeTwo 40 kHz",
+                        "spike": "seed 000 model"}
 
 
 def _grouped(v: float) -> str:
@@ -140,27 +110,16 @@ def spike_exposure_note(sensor, preset: str, duration_s: float) -> dict:
             "text": text}
 
 
-def make_compare_sensor(key: str, scene=None):
-    """The sensor behind a comparison key (see :data:`SENSOR_DESCRIPTIONS`)."""
-    check_choice("sensor", key, DEFAULT_SENSORS)
-    from viform.sensors.frame import FramePixelParameters, FrameSensor
-    from viform.sensors.presets import make_sensor
+def compare_entry(name: str, what: str = "sensor"):
+    """The catalogue entry of a comparison's sensor ``name`` (names that changed meaning are refused)."""
+    return catalog.entry(name, renamed=RENAMED, what=what)
 
-    if key == "spike":
-        return spike_preset()[0]
-    if key == "cmos-short":
-        return FrameSensor(FramePixelParameters(), exposure_s=1e-3, frame_rate_hz=30.0)
-    if key == "highspeed":
-        from viform.isp.highspeed_pipeline import HighSpeedConfig
 
-        return HighSpeedConfig()
-    if key == "gated":
-        from viform.sensors.gated_ccd import GatedInterlineCCD
-
-        # 200 pulses accumulated in the vertical register (fits a 25 fps frame), gate from 40 m:
-        # the fog closer than 40 m, which would veil everything, is not recorded (seed 004).
-        return GatedInterlineCCD(pulses=GATED_PULSES, gate_range_m=GATED_RANGE_M)
-    return make_sensor(key)
+def make_compare_sensor(name: str, **settings):
+    """The sensor ``name`` as a comparison shoots it: at the scene's resolution, with the entry's
+    comparison settings (:attr:`~viform.sensors.catalog.SensorEntry.compare_settings`) and ``settings``."""
+    entry = compare_entry(name)
+    return entry.build(height=None, width=None, **{**entry.compare_settings, **settings})
 
 
 # ------------------------------------------------------------------ shots
@@ -191,7 +150,10 @@ class Shot:
     lux_units: bool = True
     skipped: str | None = None
     metrics: dict = field(default_factory=dict)
-    raw: object = None
+    raw: object = None  # the sensor's native output (its capture)
+    name: str = ""  # the catalogue's name of the sensor
+    family: str = ""  # its family (viform.sensors.catalog.FAMILIES)
+    sensor: object = None  # the sensor that shot it
 
 
 def frame_at(starts_s, exposures_s, t_s: float) -> int:
@@ -340,22 +302,67 @@ def best_spike_image(stream, t_s: float) -> Estimate:
     return Estimate(lux, sat, under, (t_s, t_s), integration)
 
 
-def highspeed_estimates(result, config, instants_s) -> list:
-    """Light estimates from the high-speed camera's 8-bit sensor frames (before equalization)."""
-    p = config.pixel_parameters
+def highspeed_estimates(sensor, stack, instants_s) -> list:
+    """Light estimates from the high-speed camera's 8-bit frames (its ``capture``, before equalization)."""
+    p = sensor.parameters
     shift = p.adc_bits - 8
-    starts = result.frame_times_s - result.exposure_s
+    starts, exposures = stack.start_times_s, stack.exposure_s
+    ends = stack.metadata.get("frame_end_s", starts + exposures)
     out = []
     for t in instants_s:
-        i = frame_at(starts, result.exposure_s, t)
-        gray = result.gray8[i].astype(np.float64)
+        i = frame_at(starts, exposures, t)
+        gray = stack.frames_dn[i].astype(np.float64)
         dn = gray * (1 << shift) + ((1 << shift) - 1) / 2.0  # middle of the dropped low bits
-        exposure = float(result.exposure_s[i])
+        exposure = float(exposures[i])
         signal, lux = _linear_lux(p, dn, exposure)
-        saturated = result.gray8[i] >= 255
+        saturated = stack.frames_dn[i] >= 255
         under = signal < max(_noise_floor_electrons(p, exposure), (1 << shift) / p.system_gain_dn_per_e)
-        out.append(Estimate(lux, saturated, under, (float(starts[i]), float(result.frame_times_s[i]))))
+        out.append(Estimate(lux, saturated, under, (float(starts[i]), float(ends[i]))))
     return out
+
+
+def gated_estimates(sensor, stack, instants_s) -> list:
+    """The gated camera's first frame, in electrons (laser returns: not an image of the light in lux),
+    at every instant (its scene is static)."""
+    p = sensor.parameters.pixel
+    readouts = int(stack.metadata.get("readouts", 1))
+    dn = stack.frames_dn[0]
+    e = (dn - p.black_offset_dn * readouts) / p.system_gain_dn_per_e
+    est = Estimate(np.maximum(e, 0.0), dn >= p.max_dn * readouts, e < _noise_floor_electrons(p, 0.0),
+                   (0.0, sensor.frame_time_s()))
+    return [est] * len(instants_s)
+
+
+#: Output → light estimates, one way per family (viform.sensors.catalog.FAMILIES): ``(sensor, output,
+#: instants_s, duration_s, method) → [Estimate]``; ``method`` is a spike reconstruction (SPIKE_METHODS).
+ESTIMATORS = {
+    "frame": lambda sensor, out, t, duration_s, method: frame_estimates(sensor, out, t, "linear", duration_s),
+    "segmented": lambda sensor, out, t, duration_s, method: frame_estimates(sensor, out, t, "segmented", duration_s),
+    "overflow": lambda sensor, out, t, duration_s, method: frame_estimates(sensor, out, t, "overflow", duration_s),
+    "highspeed": lambda sensor, out, t, duration_s, method: highspeed_estimates(sensor, out, t),
+    "gated": lambda sensor, out, t, duration_s, method: gated_estimates(sensor, out, t),
+    "spike": lambda sensor, out, t, duration_s, method: spike_estimates(out, t, method or "interval"),
+}
+
+
+def light_estimates(family: str, sensor, output, instants_s, *, duration_s: float | None = None,
+                    method: str | None = None) -> list:
+    """The light a sensor's ``output`` (its ``capture``) shows at ``instants_s``, by the sensor's family."""
+    return ESTIMATORS[family](sensor, output, list(instants_s), duration_s, method)
+
+
+def frames_in_lux(shot: Shot, duration_s: float):
+    """(light images, report instants) of a frame camera's shot: each frame that ends in the clip, in lux,
+    reported at the end of its exposure (the earliest it exists); None for other outputs."""
+    raw = shot.raw
+    if shot.family not in ("frame", "segmented", "overflow", "highspeed") or not hasattr(raw, "frames_dn"):
+        return None
+    n = complete_frames(raw, duration_s)
+    if n == 0:
+        return None
+    mids = raw.start_times_s[:n] + raw.exposure_s[:n] / 2
+    ests = light_estimates(shot.family, shot.sensor, raw, mids, duration_s=duration_s)
+    return [e.lux for e in ests], raw.start_times_s[:n] + raw.exposure_s[:n]
 
 
 def data_rate_mb_per_s(height: int, width: int, bits_per_pixel: float, rate_hz: float) -> float:
@@ -364,114 +371,112 @@ def data_rate_mb_per_s(height: int, width: int, bits_per_pixel: float, rate_hz: 
 
 def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sensor=None,
           spike_methods=None) -> list:
-    """Shoot ``scene`` with sensor ``key``; return its :class:`Shot` (several for the spike camera).
+    """Shoot ``scene`` with the catalogue's sensor ``key``; return its :class:`Shot` (one per
+    reconstruction for a spike camera).
 
-    ``sensor`` replaces the comparison's own sensor of that key (the same model at other settings,
-    as :mod:`viform.measure.sweep` builds it; a ``HighSpeedConfig`` for "highspeed");
-    ``spike_methods`` limits the spike reconstructions (default: every one of :data:`SPIKE_METHODS`).
+    ``sensor`` replaces the comparison's own sensor of that name (the same model at other settings,
+    as :mod:`viform.measure.sweep` builds it); ``spike_methods`` limits the spike reconstructions
+    (default: every one of :data:`SPIKE_METHODS`). The sensor's ``capture`` gives its output; its
+    family turns the output into light (:data:`ESTIMATORS`) and says how fast it is (:data:`SHOTS`).
     """
-    override = sensor
-    h, w = scene.shape
-    desc = SENSOR_DESCRIPTIONS[key]
-    if key == "gated":
-        active = getattr(scene, "active", None)
-        if active is None:
-            return [Shot(key, SENSOR_LABELS[key], desc, skipped="the scene has no range (the gated camera needs a "
-                                                   "laser-lit scene with distances, e.g. night-road-fog)")]
-        sensor = override if override is not None else make_compare_sensor(key)
-        frame = sensor.capture_frame(active, seed=seed)
-        e = frame.electrons
-        p = sensor.parameters.pixel
-        est = Estimate(np.maximum(e, 0.0), frame.dn >= p.max_dn * frame.readouts,
-                       e < _noise_floor_electrons(p, 0.0), (0.0, sensor.frame_time_s()))
-        shot = Shot(key, SENSOR_LABELS[key], desc, [est] * len(instants_s), sensor.describe(),
-                    time_resolution_s=sensor.pulses * sensor.timing.width_s,
-                    latency_s=1.0 / sensor.frame_rate_hz + sensor.frame_time_s(),
-                    data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
-                    frame_rate_hz=sensor.frame_rate_hz, lux_units=False, raw=frame)
-        return [shot]
-    if key == "spike":
-        sensor, preset = spike_preset()
-        sensor = override if override is not None else sensor
-        stream = sensor.capture(scene, duration_s, seed=seed)
-        par = sensor.parameters
-        rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
-        shots = []
-        methods = [m for m in (spike_methods or SPIKE_METHODS) if m != "best" or best_spike_method_name() is not None]
-        head = spike_label(sensor, preset)
-        note = spike_exposure_note(sensor, preset, duration_s)
-        from viform.measure.dynamic_range import clip_limited_dynamic_range_db, dynamic_range_db
-
-        # the range this clip can show (no interval longer than the clip) beside the formula's (Q / dark current)
-        longest = par.threshold_electrons / par.dark_current_e_per_s if par.dark_current_e_per_s > 0 else math.inf
-        range_limits = {"clip_s": duration_s, "longest_interval_s": longest,
-                        "formula_dr_db": dynamic_range_db(1 / par.clock_hz, longest),
-                        "clip_limited_dr_db": clip_limited_dynamic_range_db(1 / par.clock_hz, longest, duration_s)}
-        for method in methods:
-            label = {"accumulation": f"{head} · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
-                     "interval": f"{head} · interval", "best": f"{head} · {best_spike_method_name()}"}[method]
-            ests = spike_estimates(stream, instants_s, method)
-            if method == "accumulation":
-                tres = ACCUMULATION_WINDOW_S
-                lat = ACCUMULATION_WINDOW_S + 1 / par.clock_hz
-            else:
-                # Each pixel integrates its own time: report the median where the scene moves (all
-                # pixels if it does not); a pixel shows a change at its next spike.
-                from viform.imaging import interval_image
-
-                taus = []
-                for t, est in zip(instants_s, ests, strict=True):
-                    tau = est.integration_s
-                    if tau is None:
-                        tau = interval_image(stream, t).info["tau_ticks"] / par.clock_hz
-                        est.integration_s = tau  # the intervals its light is measured over
-                    mask = scene.moving_mask(t) if hasattr(scene, "moving_mask") else np.ones(tau.shape, bool)
-                    taus.append(np.median(tau[mask] if mask.any() else tau))
-                tres = float(np.median(taus))
-                lat = tres + 1 / par.clock_hz
-            shots.append(Shot(f"spike-{method}", label, f"{desc}, {preset}", ests,
-                              {**sensor.describe(), "preset": preset, "reconstruction": method,
-                               "exposure_note": note, **range_limits},
-                              time_resolution_s=tres, latency_s=lat, data_rate_mb_per_s=rate,
-                              frame_rate_hz=par.clock_hz, raw=stream))
-        return shots
-    if key == "highspeed":
-        from dataclasses import replace
-
-        from viform.isp.highspeed_pipeline import HighSpeedConfig, run_highspeed
-
-        base = override if override is not None else HighSpeedConfig()
-        from viform.sensors.highspeed_timing import lux13hs_timing
-
-        timing = lux13hs_timing(base.mode, base.pixel_clock_hz)
-        period = timing.frame_period_s(timing.window(base.roi))
-        n = max(1, int(math.floor(duration_s / period + 1e-9)))
-        config = replace(base, n_frames=n, seed=seed, scene_samples=8)
-        result = run_highspeed(scene, config)
-        ests = highspeed_estimates(result, config, instants_s)
-        return [Shot(key, SENSOR_LABELS[key], desc, ests,
-                     {**result.config, "timing": result.timing, "link": result.plan},
-                     time_resolution_s=float(np.median(result.exposure_s)), latency_s=period,
-                     data_rate_mb_per_s=data_rate_mb_per_s(h, w, config.pixel_parameters.adc_bits, 1 / period),
-                     frame_rate_hz=1 / period, raw=result)]
-    sensor = override if override is not None else make_compare_sensor(key)
+    entry = compare_entry(key)
+    sensor = sensor if sensor is not None else make_compare_sensor(key)
     try:
-        stack = sensor.capture(scene, duration_s, seed=seed)
-    except ViformError as exc:
-        return [Shot(key, SENSOR_LABELS[key], desc, skipped=str(exc))]
+        output = sensor.capture(scene, duration_s, seed=seed)
+    except ViformError as exc:  # this sensor cannot shoot this scene (a scene without range for the gated CCD …)
+        return [Shot(key, entry.label, entry.description, skipped=one_line(exc), name=key, family=entry.family,
+                     sensor=sensor)]
+    shots = SHOTS[entry.family](entry, sensor, output, scene, duration_s, list(instants_s), spike_methods)
+    for shot in shots:
+        shot.name, shot.family, shot.sensor = key, entry.family, sensor
+    return shots
+
+
+def _frame_shots(entry, sensor, stack, scene, duration_s, instants_s, spike_methods) -> list:
+    h, w = scene.shape
     if complete_frames(stack, duration_s) == 0:  # its first frame integrates light beyond the clip's end
         frame_s = float(stack.exposure_s[0])
-        return [Shot(key, SENSOR_LABELS[key], desc,
+        return [Shot(entry.name, entry.label, entry.description,
                      skipped=f"its frame ({frame_s * 1e3:.3g} ms of exposure) is longer than the clip "
                              f"({duration_s * 1e3:.3g} ms); give --duration {frame_s:.4g} or more")]
-    kind = {"seed001-2seg": "segmented", "seed001-3seg": "segmented", "seed003-overflow": "overflow"}.get(key,
-                                                                                                         "linear")
-    ests = frame_estimates(sensor, stack, instants_s, kind, duration_s)
+    ests = light_estimates(entry.family, sensor, stack, instants_s, duration_s=duration_s)
     p = sensor.parameters
-    return [Shot(key, SENSOR_LABELS[key], desc, ests, sensor.describe(), time_resolution_s=sensor.exposure_s,
-                 latency_s=1.0 / sensor.frame_rate_hz,
+    return [Shot(entry.name, entry.label, entry.description, ests, sensor.describe(),
+                 time_resolution_s=sensor.exposure_s, latency_s=1.0 / sensor.frame_rate_hz,
                  data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
                  frame_rate_hz=sensor.frame_rate_hz, raw=stack)]
+
+
+def _highspeed_shots(entry, sensor, stack, scene, duration_s, instants_s, spike_methods) -> list:
+    h, w = scene.shape
+    period = sensor.frame_period_s
+    ests = light_estimates("highspeed", sensor, stack, instants_s)
+    return [Shot(entry.name, entry.label, entry.description, ests, sensor.describe(),
+                 time_resolution_s=float(np.median(stack.exposure_s)), latency_s=period,
+                 data_rate_mb_per_s=data_rate_mb_per_s(h, w, sensor.parameters.adc_bits, 1 / period),
+                 frame_rate_hz=1 / period, raw=stack)]
+
+
+def _gated_shots(entry, sensor, stack, scene, duration_s, instants_s, spike_methods) -> list:
+    h, w = scene.shape
+    p = sensor.parameters.pixel
+    return [Shot(entry.name, entry.label, entry.description, light_estimates("gated", sensor, stack, instants_s),
+                 sensor.describe(), time_resolution_s=sensor.pulses * sensor.timing.width_s,
+                 latency_s=1.0 / sensor.frame_rate_hz + sensor.frame_time_s(),
+                 data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
+                 frame_rate_hz=sensor.frame_rate_hz, lux_units=False, raw=stack)]
+
+
+def _spike_shots(entry, sensor, stream, scene, duration_s, instants_s, spike_methods) -> list:
+    from viform.imaging import interval_image
+    from viform.measure.dynamic_range import clip_limited_dynamic_range_db, dynamic_range_db
+
+    h, w = scene.shape
+    preset = entry.name
+    par = sensor.parameters
+    rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
+    methods = [m for m in (spike_methods or SPIKE_METHODS) if m != "best" or best_spike_method_name() is not None]
+    head = spike_label(sensor, preset)
+    note = spike_exposure_note(sensor, preset, duration_s)
+    # the range this clip can show (no interval longer than the clip) beside the formula's (Q / dark current)
+    longest = par.threshold_electrons / par.dark_current_e_per_s if par.dark_current_e_per_s > 0 else math.inf
+    range_limits = {"clip_s": duration_s, "longest_interval_s": longest,
+                    "formula_dr_db": dynamic_range_db(1 / par.clock_hz, longest),
+                    "clip_limited_dr_db": clip_limited_dynamic_range_db(1 / par.clock_hz, longest, duration_s)}
+    shots = []
+    for method in methods:
+        label = {"accumulation": f"{head} · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
+                 "interval": f"{head} · interval", "best": f"{head} · {best_spike_method_name()}"}[method]
+        ests = light_estimates("spike", sensor, stream, instants_s, method=method)
+        if method == "accumulation":
+            tres = ACCUMULATION_WINDOW_S
+            lat = ACCUMULATION_WINDOW_S + 1 / par.clock_hz
+        else:
+            # Each pixel integrates its own time: report the median where the scene moves (all
+            # pixels if it does not); a pixel shows a change at its next spike.
+            taus = []
+            for t, est in zip(instants_s, ests, strict=True):
+                tau = est.integration_s
+                if tau is None:
+                    tau = interval_image(stream, t).info["tau_ticks"] / par.clock_hz
+                    est.integration_s = tau  # the intervals its light is measured over
+                mask = scene.moving_mask(t) if hasattr(scene, "moving_mask") else np.ones(tau.shape, bool)
+                taus.append(np.median(tau[mask] if mask.any() else tau))
+            tres = float(np.median(taus))
+            lat = tres + 1 / par.clock_hz
+        shots.append(Shot(f"{entry.name}-{method}", label, f"{entry.description}, {preset}", ests,
+                          {**sensor.describe(), "preset": preset, "reconstruction": method,
+                           "exposure_note": note, **range_limits},
+                          time_resolution_s=tres, latency_s=lat, data_rate_mb_per_s=rate,
+                          frame_rate_hz=par.clock_hz, raw=stream))
+    return shots
+
+
+#: Per family: the shots of one capture, with what the sensor's timing and data say (time resolution,
+#: latency, data rate): ``(entry, sensor, output, scene, duration_s, instants_s, spike_methods) → [Shot]``.
+SHOTS = {"frame": _frame_shots, "segmented": _frame_shots, "overflow": _frame_shots, "highspeed": _highspeed_shots,
+         "gated": _gated_shots, "spike": _spike_shots}
+assert set(SHOTS) == set(ESTIMATORS) == set(catalog.FAMILIES)
 
 
 # ------------------------------------------------------------------ metrics
@@ -668,7 +673,7 @@ def _timing(shot) -> str:
 
 def _blur_cause(shot) -> str:
     dark = shot.metrics.get("edge_dark_integration_s")
-    if shot.key.startswith("spike-") and isinstance(dark, float) and math.isfinite(dark):
+    if shot.family == "spike" and isinstance(dark, float) and math.isfinite(dark):
         return (f"its pixels on the dark side of the edge fire only every {_ms(dark)} (dim light, long intervals) "
                 f"and each image spans a whole interval, although the median integration where the scene moves "
                 f"is {_ms(shot.time_resolution_s)}")
@@ -715,7 +720,7 @@ def verdict(shots, demand: dict | None) -> list[str]:
         lines.append(text + ".")
     for s in image_rows:  # a spike image's blur comes from its dimmest pixels' long intervals: say so
         dark = s.metrics.get("edge_dark_integration_s")
-        if s.key.startswith("spike-") and isinstance(dark, float) and math.isfinite(s.metrics.get("edge_width_px",
+        if s.family == "spike" and isinstance(dark, float) and math.isfinite(s.metrics.get("edge_width_px",
                                                                                                   math.nan)) \
                 and dark > 2 * s.time_resolution_s and s not in (found[2] if found else []):
             lines.append(f"{s.label}: {VERDICT_FORMATS['edge_width_px'](s.metrics['edge_width_px'])} of edge blur, "

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import inspect
 import itertools
 import json
 import math
@@ -51,6 +50,7 @@ from viform._io import atomic_path, write_json
 from viform._parallel import open_client, parse_memory
 from viform._validate import ViformError, check_int, check_positive, one_line
 from viform.measure import comparison as cmp
+from viform.sensors.catalog import Parameter
 
 #: Metrics a sweep scores, with their direction (True: higher is better). The comparison's metrics;
 #: scores added to :func:`viform.measure.comparison.score` later (flow, tracking) are stored as
@@ -67,7 +67,7 @@ METRIC_DIRECTIONS = {
 SEEN_CNR = 3.0
 #: Spike reconstructions a sweep can score (compare's names).
 SPIKE_IMAGES = ("best", "interval", "accumulation")
-#: Sensor keys a sweep can vary (every comparison sensor).
+#: Sensors a sweep shoots when none is named (compare's); any sensor of the catalogue can be swept.
 SWEEP_SENSORS = cmp.DEFAULT_SENSORS
 #: Default objective: the best point per sensor is the one closest to the truth.
 DEFAULT_OBJECTIVE = "psnr_log_db"
@@ -83,110 +83,10 @@ _OPS = {">=": lambda v, b: v >= b, "<=": lambda v, b: v <= b}
 
 
 # ---------------------------------------------------------------------- parameters
-@dataclass(frozen=True)
-class SweepParameter:
-    """One parameter a sweep can vary: its name, kind ("float", "int" or "bool") and default value."""
-
-    name: str
-    kind: str
-    default: object
-    where: str  # "pixel", "optics", "camera" or "shorthand" (how it is applied)
-    doc: str = ""
-
-
-def _scalar_kind(value) -> str | None:
-    if isinstance(value, bool):
-        return "bool"
-    if isinstance(value, (int, np.integer)):
-        return "int"
-    if isinstance(value, (float, np.floating)):
-        return "float"
-    return None
-
-
-def _dataclass_scalars(obj, where: str, skip=()) -> dict[str, SweepParameter]:
-    out = {}
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        kind = _scalar_kind(value)
-        if kind is not None and f.name not in skip:
-            out[f.name] = SweepParameter(f.name, kind, value, where)
-    return out
-
-
-def _constructor_scalars(sensor, skip=()) -> dict[str, SweepParameter]:
-    """Scalar arguments of the sensor's constructor that the object keeps under the same name."""
-    out = {}
-    for name in inspect.signature(type(sensor).__init__).parameters:
-        if name in ("self", "parameters", "height", "width") or name in skip or not hasattr(sensor, name):
-            continue
-        value = getattr(sensor, name)
-        kind = _scalar_kind(value)
-        if kind is not None:
-            out[name] = SweepParameter(name, kind, value, "camera")
-    return out
-
-
-def _family(key: str) -> str:
-    return {"spike": "spike", "highspeed": "highspeed", "gated": "gated", "seed001-2seg": "segmented",
-            "seed001-3seg": "segmented", "seed003-overflow": "overflow"}.get(key, "frame")
-
-
-def _base_sensor(key: str):
-    from viform.measure.comparison import make_compare_sensor
-
-    return make_compare_sensor(key)
-
-
-def sweep_parameters(key: str) -> dict[str, SweepParameter]:
-    """The parameters sensor ``key`` can be swept over, with their defaults (see the module notes)."""
-    if key not in SWEEP_SENSORS:
-        raise ViformError(f"--sensor: {key!r} is not allowed: choose from {', '.join(SWEEP_SENSORS)}")
-    base = _base_sensor(key)
-    fam = _family(key)
-    params: dict[str, SweepParameter] = {}
-    if fam == "spike":
-        from viform.sensors.spike_presets import N_THRESHOLD_LEVELS, threshold_levels_electrons
-
-        p = base.parameters
-        levels = threshold_levels_electrons()
-        default_level = next((k for k, q in enumerate(levels) if q == p.threshold_electrons), None)
-        params["threshold_level"] = SweepParameter(
-            "threshold_level", "int", default_level, "shorthand",
-            f"the chip's threshold level 0…{N_THRESHOLD_LEVELS - 1} (Q = (level + 1)·1 250 e⁻)")
-        params.update(_dataclass_scalars(p, "pixel"))
-        params.update(_dataclass_scalars(p.optics, "optics"))
-        return params
-    if fam == "highspeed":
-        params.update(_dataclass_scalars(base, "camera", skip=("n_frames", "seed", "scene_samples")))
-        params.update(_dataclass_scalars(base.pixel_parameters, "pixel"))
-        params.update(_dataclass_scalars(base.pixel_parameters.optics, "optics"))
-        return params
-    if fam == "gated":
-        params["pulses"] = SweepParameter("pulses", "int", base.pulses, "camera")
-        params["gate_range_m"] = SweepParameter("gate_range_m", "float", cmp.GATED_RANGE_M, "camera")
-        params["frame_rate_hz"] = SweepParameter("frame_rate_hz", "float", base.frame_rate_hz, "camera")
-        return params
-    params.update(_constructor_scalars(base))
-    if fam in ("frame", "segmented"):
-        params["exposure_s"] = SweepParameter("exposure_s", "float", base.exposure_s,
-                                              "camera" if fam == "frame" else "shorthand",
-                                              "total exposure, s" + (" (segments scaled, ratios kept)"
-                                                                     if fam == "segmented" else ""))
-    if fam == "segmented" and len(base.segment_times_s) == 2:
-        t = base.segment_times_s
-        params["first_segment_fraction"] = SweepParameter(
-            "first_segment_fraction", "float", t[0] / sum(t), "shorthand", "T1 / (T1 + T2)")
-        params["barrier_fraction"] = SweepParameter(
-            "barrier_fraction", "float", base.clamp_levels_electrons[0] / base.parameters.full_well_electrons,
-            "shorthand", "barrier B1 / full well")
-    if fam == "overflow":
-        for name, value in zip(("long_integration_s", "medium_integration_s", "short_integration_s"),
-                               base.integration_times_s, strict=True):
-            params[name] = SweepParameter(name, "float", value, "shorthand", "one of the three integrations, s")
-    params.update(_dataclass_scalars(base.parameters, "pixel"))
-    params.update(_dataclass_scalars(base.parameters.optics, "optics"))
-    return params
+def sweep_parameters(key: str) -> dict[str, Parameter]:
+    """The parameters sensor ``key`` can be swept over, with their defaults: its catalogue entry's
+    (:mod:`viform.sensors.catalog`)."""
+    return cmp.compare_entry(key, what="--sensor").parameters
 
 
 def make_point_sensor(key: str, settings: dict):
@@ -196,71 +96,11 @@ def make_point_sensor(key: str, settings: dict):
     if unknown:
         raise ViformError(f"--vary: {unknown[0]!r} is not a parameter of sensor {key!r}; allowed: "
                           f"{', '.join(sorted(space))}")
-    by = {w: {n: v for n, v in settings.items() if space[n].where == w}
-          for w in ("pixel", "optics", "camera", "shorthand")}
-    base = _base_sensor(key)
-    fam = _family(key)
     try:
-        return _build(key, fam, base, by)
+        return cmp.make_compare_sensor(key, **settings)
     except (ViformError, ValueError, TypeError) as exc:
         text = ", ".join(f"{n}={v!r}" for n, v in settings.items())
         raise ViformError(f"--vary: sensor {key!r} at {text} is not a valid setting: {one_line(exc)}") from None
-
-
-def _with_pixel(pixel, by):
-    optics = dataclasses.replace(pixel.optics, **by["optics"]) if by["optics"] else pixel.optics
-    return dataclasses.replace(pixel, optics=optics, **by["pixel"])
-
-
-def _build(key, fam, base, by):
-    from viform.sensors.spike import SpikeSensor
-
-    if fam == "spike":
-        short = dict(by["shorthand"])
-        pixel = dict(by["pixel"])
-        if "threshold_level" in short:
-            if "threshold_electrons" in pixel:
-                raise ViformError("give either threshold_level or threshold_electrons, not both")
-            from viform.sensors.spike_presets import threshold_level_electrons
-
-            pixel["threshold_electrons"] = threshold_level_electrons(short["threshold_level"])
-        params = _with_pixel(base.parameters, {**by, "pixel": pixel})
-        return SpikeSensor(params, base.height, base.width)
-    if fam == "highspeed":
-        pixel = _with_pixel(base.pixel_parameters, by)
-        return dataclasses.replace(base, pixel_parameters=pixel, **by["camera"])
-    if fam == "gated":
-        from viform.sensors.gated_ccd import GatedInterlineCCD
-
-        kw = {"pulses": base.pulses, "gate_range_m": cmp.GATED_RANGE_M, "frame_rate_hz": base.frame_rate_hz}
-        return GatedInterlineCCD(**{**kw, **by["camera"]})
-    pixel = _with_pixel(base.parameters, by)
-    kw = {n: getattr(base, n) for n in inspect.signature(type(base).__init__).parameters
-          if n not in ("self", "parameters", "height", "width") and hasattr(base, n)}
-    kw.update(by["camera"])
-    short = by["shorthand"]
-    if fam == "segmented":
-        times = np.asarray(base.segment_times_s, dtype=np.float64)
-        levels = np.asarray(base.clamp_levels_electrons, dtype=np.float64) / base.parameters.full_well_electrons
-        total = float(short.get("exposure_s", times.sum()))
-        check_positive("exposure_s", total)
-        if "first_segment_fraction" in short:
-            f = float(short["first_segment_fraction"])
-            if not 0 < f < 1:
-                raise ViformError(f"first_segment_fraction = {f!r} must lie strictly between 0 and 1")
-            times = np.array([f, 1 - f])
-        if "barrier_fraction" in short:
-            levels = np.array([float(short["barrier_fraction"])])
-        times = times / times.sum() * total
-        kw["segment_times_s"] = tuple(times.tolist())
-        kw["clamp_levels_electrons"] = tuple((levels * pixel.full_well_electrons).tolist())
-    if fam == "overflow":
-        times = list(base.integration_times_s)
-        for i, name in enumerate(("long_integration_s", "medium_integration_s", "short_integration_s")):
-            if name in short:
-                times[i] = float(short[name])
-        kw["integration_times_s"] = tuple(times)
-    return type(base)(pixel, **kw)
 
 
 # ---------------------------------------------------------------------- specs
@@ -287,7 +127,7 @@ def _bool(option: str, text: str) -> bool:
     raise ViformError(f"{option}: {text!r} is not on/off (give true,false)")
 
 
-def parse_values(option: str, param: SweepParameter, spec: str) -> list:
+def parse_values(option: str, param: Parameter, spec: str) -> list:
     """The values of one ``--vary PARAM=SPEC`` (see the module notes); errors name ``option``."""
     spec = spec.strip()
     if not spec:
@@ -295,6 +135,8 @@ def parse_values(option: str, param: SweepParameter, spec: str) -> list:
                           "PARAM=log:start:stop:n")
     if param.kind == "bool":
         values = [_bool(option, v) for v in spec.split(",") if v.strip()]
+    elif param.kind in ("choice", "text"):
+        values = [v.strip() for v in spec.split(",") if v.strip()]
     elif spec == "all" and param.name == "threshold_level":
         from viform.sensors.spike_presets import N_THRESHOLD_LEVELS
 
@@ -331,6 +173,10 @@ def parse_values(option: str, param: SweepParameter, spec: str) -> list:
         values = [_number(option, v.strip(), param.kind) for v in spec.split(",") if v.strip()]
     if not values:
         raise ViformError(f"{option}: {spec!r} gives no points")
+    try:
+        values = [param.check(v) for v in values]
+    except ViformError as exc:
+        raise ViformError(f"{option}: {exc}") from None
     return list(dict.fromkeys(values))
 
 
@@ -424,7 +270,7 @@ def check_objective(name: str) -> str:
 
 # ---------------------------------------------------------------------- points
 def _canonical(value):
-    if isinstance(value, bool):
+    if value is None or isinstance(value, (bool, str)):
         return value
     if isinstance(value, (int, np.integer)):
         return int(value)
@@ -543,7 +389,7 @@ def run_point(context: SweepContext, point: Point) -> dict:
         scene = context.make_scene()
         sensor = make_point_sensor(point.sensor, dict(point.settings))
         seed = point_seed(context.seed, point)
-        methods = [context.spike_image] if point.sensor == "spike" else None
+        methods = [context.spike_image] if cmp.compare_entry(point.sensor).family == "spike" else None
         try:
             shots = cmp.shoot(point.sensor, scene, context.duration_s, list(context.instants_s), seed=seed,
                               sensor=sensor, spike_methods=methods)
@@ -580,7 +426,7 @@ def tracking_scores(scene, duration_s: float, shot) -> dict:
     its default pixel parameters (exposure and frame times are the shot's own).
     """
     kinds = scene.truth_kinds() if hasattr(scene, "truth_kinds") else ()
-    if "objects" not in kinds or shot.key == "gated":
+    if "objects" not in kinds or shot.family == "gated":
         return {}
     from viform.measure.vision_comparison import vision_scores, vision_table
 
@@ -812,7 +658,7 @@ def standard_vary(scene) -> tuple[list[str], dict[str, dict[str, list]]]:
         return [float(f"{v:.4g}") for v in np.geomspace(a, b, 20)]
 
     vary = {
-        "spike": {"threshold_level": list(range(16)), "clock_hz": [CLOCK_20KHZ, CLOCK_40KHZ]},
+        "spikeone": {"threshold_level": list(range(16)), "clock_hz": [CLOCK_20KHZ, CLOCK_40KHZ]},
         "cmos": {"exposure_s": log20(20e-6, 33e-3)},
         "seed001-2seg": {"exposure_s": log20(20e-6, 16e-3)},
         "seed001-3seg": {"exposure_s": log20(20e-6, 16e-3)},
@@ -967,7 +813,7 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
         sensors, vary = standard_vary(scene_obj)
     sensors = list(dict.fromkeys(sensors or (list(vary) if vary else [])))
     if not sensors:
-        raise ViformError("--sensor: give at least one sensor, e.g. --sensor spike")
+        raise ViformError("--sensor: give at least one sensor, e.g. --sensor spikeone")
     for k in sensors:
         sweep_parameters(k)
     if "gated" in sensors and getattr(scene_obj, "active", None) is None:
@@ -982,8 +828,10 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
                 if n not in spaces.get(k, {}):
                     raise ViformError(f"--vary: {n!r} is not a parameter of sensor {k!r}; allowed: "
                                       f"{', '.join(sorted(spaces.get(k, {})))}")
-    if "spike" in sensors:
-        clocks = vary.get("spike", {}).get("clock_hz", [cmp.spike_preset()[0].parameters.clock_hz])
+    for k in sensors:
+        if cmp.compare_entry(k).family != "spike":
+            continue
+        clocks = vary.get(k, {}).get("clock_hz", [sweep_parameters(k)["clock_hz"].default])
         need = height * width * duration_s * max(clocks)
         if need > MAX_SPIKE_BYTES:
             raise ViformError(f"--duration {duration_s:g} s of a {height}×{width} spike clip needs {need / 1e9:.3g} GB "

@@ -23,7 +23,7 @@ def run_demo(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = 
 
 #: The demo's closing sweep: the spike chip's 16 threshold levels (at its 40 kHz clock), and the main
 #: knob of the CMOS (exposure) and of the overflow pixel (its capacitor), 10 settings each.
-DEMO_SWEEP = {"spike": ["spike:threshold_level=all"], "cmos": ["cmos:exposure_s=log:2e-5:3.3e-2:10"],
+DEMO_SWEEP = {"spikeone": ["spikeone:threshold_level=all"], "cmos": ["cmos:exposure_s=log:2e-5:3.3e-2:10"],
               "seed003-overflow": ["seed003-overflow:overflow_capacitance_f=log:2e-14:2e-11:10"]}
 
 
