@@ -110,7 +110,7 @@ def _dataset(tmp, preset):
 
 # ---------------------------------------------------------------------- library
 def _scene(name, h, w):
-    from viform.light.scenes import load_scene
+    from viform.light.catalog import load_scene
 
     return load_scene(name, h, w)
 

@@ -7,9 +7,8 @@ Layers, lowest first (README, docs/CONTRIBUTING.md)::
     → vision → datasets → measure → report → cli
 
 Modules of one layer may import each other (a module of ``imaging`` one of ``coding``), as
-long as no circle forms. Circles still in the code while their split is under way are listed
-in :data:`KNOWN_CIRCLES`, each an expected failure of its own: the day the split lands, its
-test passes, fails as an unexpected pass, and its entry is removed.
+long as no circle forms. A circle found while its split is under way may be listed in
+:data:`KNOWN_CIRCLES` (none is now).
 """
 
 from __future__ import annotations
@@ -17,8 +16,6 @@ from __future__ import annotations
 import ast
 import functools
 from pathlib import Path
-
-import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 PACKAGE = SRC / "viform"
@@ -41,12 +38,9 @@ LAYERS = (
 #: that would import it back.
 TOP = "viform"
 
-#: Circles known to be in the code, by the work that removes them, with the modules that form them.
-KNOWN_CIRCLES = {
-    "spike kernels in their own module (sensors/_spike_kernels.py)": {"viform.sensors.spike",
-                                                                      "viform.sensors.spike_cuda"},
-    "scene catalogue (light/catalog.py)": {"viform.light.scenes", "viform.light.dilemma"},
-}
+#: Circles known to be in the code, by the work that removes them, with the modules that form them
+#: (none now: the spike kernels and the scene catalogue have their own modules).
+KNOWN_CIRCLES: dict[str, set[str]] = {}
 
 
 def module_name(path: Path) -> str:
@@ -152,14 +146,6 @@ def test_no_import_points_up():
 def test_no_circle_but_the_known_ones():
     unknown = [c for c in circles() if not any(known <= c for known in KNOWN_CIRCLES.values())]
     assert not unknown, "import circles: " + "; ".join(" <-> ".join(sorted(c)) for c in unknown)
-
-
-@pytest.mark.parametrize("work", [pytest.param(w, marks=pytest.mark.xfail(strict=True, reason=f"waits for: {w}"))
-                                  for w in KNOWN_CIRCLES])
-def test_known_circle_is_gone(work):
-    members = KNOWN_CIRCLES[work]
-    still = [c for c in circles() if members <= c]
-    assert not still, f"still a circle: {' <-> '.join(sorted(still[0]))}"
 
 
 def test_the_reader_sees_function_level_imports():

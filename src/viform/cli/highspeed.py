@@ -16,6 +16,7 @@ import click
 
 from viform._validate import ViformError, check_choice, check_int, check_positive, check_range
 from viform.cli._common import parse_settings
+from viform.cli._scenes import with_scene_list
 from viform.cli.app import cli
 
 
@@ -85,13 +86,13 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None,
               help="Also write the report JSON to this file (OUT/report.json is always written).")
 @click.pass_context
+@with_scene_list
 def highspeed(ctx, scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray,
               band_gray, ae_saturated_cut, equalize, eq_source, eq_method, duration_s, n_frames, exposure_us, render,
               lux, steps, scene_fps, video_format, seed, settings, out_dir, as_json, json_file):
     """Shoot SCENE with a LUX13HS-like high-speed camera (1280x864, up to 3 500 fps).
 
-    SCENE is a built-in scene (translating, moving-edge, rotating, hdr, step, flicker), an
-    image or a video. Writes OUT/video.gif|mp4 (the frames leaving the link), OUT/exposure.png
+    SCENE: {scenes} Writes OUT/video.gif|mp4 (the frames leaving the link), OUT/exposure.png
     and OUT/report.json (frames captured, buffered, transmitted, dropped).
     """
     from tqdm import tqdm
@@ -105,7 +106,7 @@ def highspeed(ctx, scene, roi, mode, clock_mhz, interface, decimation, max_decim
         write_outputs,
     )
     from viform.isp.link import INTERFACES, link_plan
-    from viform.light.scenes import load_scene
+    from viform.light.catalog import load_scene
     from viform.sensors.catalog import entry
 
     check_choice("interface", interface, tuple(INTERFACES))
@@ -135,7 +136,7 @@ def highspeed(ctx, scene, roi, mode, clock_mhz, interface, decimation, max_decim
     timing, window = camera.timing, camera.window
     rh, rw = _parse_size(render, "render")
     rh, rw = min(rh, window.height), min(rw, window.width)
-    from viform.light.scenes import BUILTIN_SCENES
+    from viform.light.catalog import BUILTIN_SCENES
 
     if scene in BUILTIN_SCENES:
         base = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps)

@@ -332,6 +332,9 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
                            reuse_buffer=True)
     truth = write_truth(out, clip.name, scene, source.n_ticks, s.truth_every_ticks, source.clock_hz, s.max_lux)
     spikes, digest = _write_dat(task, dat, source)
+    from viform.datasets.scene_clips import too_dark
+
+    darkness = too_dark(spikes, source.n_ticks, s.height * s.width, s.truth_every_ticks)
     full_scale_rate = float(sensor.expected_firing_rate_per_tick(np.array(s.max_lux)))
     record = {
         "clip": clip.name, "source": clip.path, "seed": seed, "ticks": source.n_ticks,
@@ -339,7 +342,7 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
         "height": s.height, "width": s.width, "clock_hz": source.clock_hz, "n_frames": len(truth["frames"]),
         "frame_rate_hz": source.clock_hz / s.truth_every_ticks, "rate": full_scale_rate,
         "gt_frames": truth["frames"], "settings_sha256": s.fingerprint(),
-        "scene": spec["scene"], "scene_parameters": spec["parameters"], "clean": spec["clean"],
+        "scene": spec["scene"], "scene_parameters": spec["parameters"], "clean": spec["clean"], **darkness,
         "truth": {"kinds": truth["kinds"], "step_ticks": s.truth_every_ticks, "mot": truth["mot"],
                   "frame_time": "frame k: the end of step k, t = k·step_ticks / clock_hz (s)",
                   "flow": "forward flow from frame k to frame k + 1, px, Middlebury .flo (unknown = 1e10)",
@@ -456,7 +459,7 @@ def _label_types(clips) -> list:
     types = [1]
     scenes = [c for c in clips if c.kind == "scene"]
     if scenes:
-        from viform.light.scenes import builtin_scene
+        from viform.light.catalog import builtin_scene
 
         kinds = set()
         for name in {json.loads(c.path)["scene"] for c in scenes}:
@@ -623,7 +626,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
 
 
 #: Manifest keys of scene clips: what was drawn, and where the truth is.
-_SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth")
+_SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth", "too_dark", "spikes_per_pixel_per_truth_step")
 
 
 def _write_manifest(out: Path, settings: DatasetSettings, rows: dict, failed: dict) -> None:
@@ -657,6 +660,7 @@ def _summary(out, clips, rows, failed, seconds, workers) -> dict:
         "pixel_ticks_per_s": pixel_ticks / seconds if seconds > 0 else 0.0,
         "workers": workers,
         "manifest": str(Path(out) / MANIFEST_NAME),
+        "too_dark": sorted(c for c, r in rows.items() if r.get("too_dark")),
         # how the source frames were fitted to the sensor (scaled, centre-cropped: never stretched)
         "fits": sorted({describe_fit(r["fit"]) for r in rows.values() if r.get("fit")}),
     }

@@ -365,11 +365,12 @@ class SweepContext:
         return hashlib.sha256(json.dumps(self.describe(), sort_keys=True).encode()).hexdigest()
 
     def make_scene(self):
-        from viform.light.scenes import BUILTIN_SCENES, builtin_scene, load_scene
+        from viform.light.catalog import BUILTIN_SCENES, builtin_scene, load_scene
 
         if self.scene in BUILTIN_SCENES:
             return builtin_scene(self.scene, self.height, self.width, **dict(self.scene_options))
-        return load_scene(self.scene, self.height, self.width, resize=True)
+        return load_scene(self.scene, self.height, self.width, resize=True,
+                          settings={k: list(v) if isinstance(v, tuple) else v for k, v in self.scene_options} or None)
 
 
 def run_point(context: SweepContext, point: Point) -> dict:
