@@ -95,7 +95,7 @@ _NAME_UNITS = {
 }
 _BARE = object()
 #: Allowed ranges that differ from "a finite number > 0" (float) or "≥ 0" (int): (low, high, low_open, high_open);
-#: None for no bound. The model's own validation stays in force (cross-parameter limits, e.g. an
+#: None for no bound; by name, or by (part, name) where two parts use one name differently. The model's own validation stays in force (cross-parameter limits, e.g. an
 #: exposure within the frame period); a test checks that each bound here is one the model enforces.
 _RANGES = {
     "quantum_efficiency": (0.0, 1.0, True, False), "fill_factor": (0.0, 1.0, True, False),
@@ -112,8 +112,10 @@ _RANGES = {
     "overflow_capacitance_spread": (0.0, 0.3, False, False),
     "charge_injection_electrons": (-1e7, 1e7, False, False), "column_bus_capacitance_f": (0.0, None, False, False),
     "junction_grading_m": (0.0, 0.9, False, False),
-    "threshold_spread_fraction": (0.0, None, False, False), "gain_spread_fraction": (0.0, None, False, False),
-    "dark_current_spread_fraction": (0.0, None, False, False), "hot_pixel_fraction": (0.0, 1.0, False, False),
+    "threshold_spread_fraction": (0.0, 0.5, False, True), "gain_spread_fraction": (0.0, 1.0, False, True),
+    "dark_current_spread_fraction": (0.0, 10.0, False, False), "hot_pixel_fraction": (0.0, 1.0, False, False),
+    "threshold_electrons": (0.5, float(2**26), True, False),  # whole electrons: round(Q) in [1, 2^26]
+    ("ccd", "readout_time_s"): (0.0, None, True, False),
     "hot_pixel_dark_current_e_per_s": (0.0, None, False, False), "dead_time_s": (0.0, None, False, False),
     "threshold_level": (0, N_THRESHOLD_LEVELS - 1, False, False),
     "target_gray": (0.0, 255.0, False, False), "band_gray": (0.0, None, False, False),
@@ -292,7 +294,7 @@ def _parameter(name: str, default, where: str, field_name: str | None = None, do
             kind = "choice" if (field_name or name) in _CHOICES else "text"
         else:
             kind = "float"
-    rng = _RANGES.get(name)
+    rng = _RANGES.get((where, name), _RANGES.get(name))
     if rng is None:
         rng = (0.0, None, True, False) if kind == "float" else (0, None, False, False) if kind == "int" else \
             (None, None, False, False)
@@ -566,7 +568,9 @@ def _highspeed_entry() -> SensorEntry:
         p = lux13hs_pixel_parameters()
         out = _arguments(HighSpeedCamera, {})
         out["mode"] = dataclasses.replace(out["mode"], kind="choice", choices=("reduced", "normal"))
-        return _merge(out, _fields(p, "pixel"), _fields(p.optics, "optics"))
+        pixel = _fields(p, "pixel")
+        pixel["adc_bits"] = dataclasses.replace(pixel["adc_bits"], low=8)  # its output is the high 8 bits
+        return _merge(out, pixel, _fields(p.optics, "optics"))
 
     return SensorEntry("highspeed", "high-speed 1 667 fps, AE (highspeed)",
                        "high-speed camera (LUX13HS-like, 1 667 fps at 1280×720) with auto-exposure, 8-bit frames",

@@ -98,6 +98,7 @@ class HighSpeedCamera(Sensor):
                  target_gray: float = 128.0, band_gray: float = 15.0, ae_latency_frames: int = 1,
                  ae_saturated_cut: float | None = None, exposure_s: float = 100e-6, scene_samples: int = 4):
         self.parameters = parameters or lux13hs_pixel_parameters()
+        check_int("adc_bits", self.parameters.adc_bits, 8, 16)  # the 8-bit output keeps the high 8 bits
         self.timing = lux13hs_timing(mode, pixel_clock_hz)
         self.mode = mode
         self.pixel_clock_hz = self.timing.pixel_clock_hz
