@@ -307,9 +307,16 @@ def _fmt_value(v) -> str:
     return str(v) if isinstance(v, (bool, int)) else f"{v:.4g}"
 
 
+#: Cameras that a sweep knew under another name, by the name that seeds their points: a renamed
+#: camera keeps the noise of every point (the same bits at the same settings and sweep seed).
+SEEDED_AS = {"spikeone": "spike"}
+
+
 def point_seed(sweep_seed: int, point: Point) -> int:
-    """Noise seed of one point: the first 63 bits of SHA-256("<sweep seed>/<point>") (as dataset clips)."""
-    digest = hashlib.sha256(f"{int(sweep_seed)}/{point.key}".encode()).digest()
+    """Noise seed of one point: the first 63 bits of SHA-256("<sweep seed>/<point>") (as dataset clips),
+    the point written with its sensor's seeding name (:data:`SEEDED_AS`)."""
+    key = Point(SEEDED_AS.get(point.sensor, point.sensor), point.settings).key
+    digest = hashlib.sha256(f"{int(sweep_seed)}/{key}".encode()).digest()
     return int.from_bytes(digest[:8], "little") & ((1 << 63) - 1)
 
 
