@@ -237,6 +237,36 @@ def characterized_entry(sensor: str):
     return entry(sensor, choices=sensor_names(*CHARACTERIZED))
 
 
+def _characterize_spike(sensor: str, dev, size: int, seed: int, result: dict, figures: dict) -> list[str]:
+    """The spike camera's interval dynamic range and SNR (into ``result["spike"]`` and ``figures``);
+    returns the lines ``characterize`` prints."""
+    from viform.measure.dynamic_range import CLIP_LENGTHS_S, clip_limited_dynamic_range_db, clip_limited_lines
+    from viform.measure.spike_characterization import characterize_spike_sensor
+    from viform.report import response_plots as plots
+
+    # 2·τ̂ of dark on 16×16 pixels: ~500 dark spikes, τ̂ to ±5 % (0.4 dB).
+    dark_s = 2 * dev.parameters.longest_signal_interval_s
+    ticks = dark_s * dev.parameters.clock_hz
+    click.echo(f"{sensor}: simulating {dark_s:.3g} s of darkness ({ticks:.3g} ticks on "
+               f"{min(size, 16)}×{min(size, 16)} pixels) to find the longest interval, then an "
+               "illuminance sweep; long dark intervals take minutes", err=True)
+    r = characterize_spike_sensor(dev, height=min(size, 16), width=min(size, 16), seed=seed, dark_duration_s=dark_s)
+    result["spike"] = r
+    c = r["snr_curve"]
+    figures["snr.png"] = plots.snr_figure({"spike (interval SNR)": {"lux": c["lux"], "snr": c["snr"]}})
+    lines = [
+        f"interval DR  {r['dynamic_range_db']:.4g} dB (expected "
+        f"{r['expected']['dynamic_range_db']:.4g} dB: longest interval = threshold / dark current = "
+        f"{r['longest_interval_s']:.3g} s, shortest = one tick = {r['shortest_interval_s'] * 1e6:.3g} µs)"
+    ]
+    r["clip_limited_dr_db"] = {f"{t:g} s": clip_limited_dynamic_range_db(r["shortest_interval_s"],
+                                                                        r["longest_interval_s"], t)
+                               for t in CLIP_LENGTHS_S}
+    lines += [f"  {line}" for line in clip_limited_lines(r["shortest_interval_s"], r["longest_interval_s"],
+                                                         r["dynamic_range_db"])]
+    return lines
+
+
 @cli.command("characterize", cls=CatalogHelp)
 @click.argument("sensor")
 @click.option(
@@ -290,37 +320,8 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed, settings):
         result["settings"] = overrides
     figures = {}
     if kind.family == "spike":
-        from viform.measure.spike_characterization import characterize_spike_sensor
-
         dev = kind.build(height=None, width=None, **overrides)  # any test size
-        # 2·τ̂ of dark on 16×16 pixels: ~500 dark spikes, τ̂ to ±5 % (0.4 dB).
-        dark_s = 2 * dev.parameters.longest_signal_interval_s
-        ticks = dark_s * dev.parameters.clock_hz
-        click.echo(f"{sensor}: simulating {dark_s:.3g} s of darkness ({ticks:.3g} ticks on "
-                   f"{min(size, 16)}×{min(size, 16)} pixels) to find the longest interval, then an "
-                   "illuminance sweep; long dark intervals take minutes", err=True)
-        r = characterize_spike_sensor(
-            dev,
-            height=min(size, 16),
-            width=min(size, 16),
-            seed=seed,
-            dark_duration_s=dark_s,
-        )
-        result["spike"] = r
-        c = r["snr_curve"]
-        figures["snr.png"] = plots.snr_figure({"spike (interval SNR)": {"lux": c["lux"], "snr": c["snr"]}})
-        lines = [
-            f"interval DR  {r['dynamic_range_db']:.4g} dB (expected "
-            f"{r['expected']['dynamic_range_db']:.4g} dB: longest interval = threshold / dark current = "
-            f"{r['longest_interval_s']:.3g} s, shortest = one tick = {r['shortest_interval_s'] * 1e6:.3g} µs)"
-        ]
-        from viform.measure.dynamic_range import CLIP_LENGTHS_S, clip_limited_dynamic_range_db, clip_limited_lines
-
-        r["clip_limited_dr_db"] = {f"{t:g} s": clip_limited_dynamic_range_db(r["shortest_interval_s"],
-                                                                            r["longest_interval_s"], t)
-                                   for t in CLIP_LENGTHS_S}
-        lines += [f"  {line}" for line in clip_limited_lines(r["shortest_interval_s"], r["longest_interval_s"],
-                                                             r["dynamic_range_db"])]
+        lines = _characterize_spike(sensor, dev, size, seed, result, figures)
     else:
         kw = {"height": min(size, 64), "width": min(size, 64)} if kind.family == "overflow" else {}
         dev = kind.build(**kw, **overrides)

@@ -36,7 +36,7 @@ def run_gated(
     ``laser``, ``receiver``, ``noise``, ``fixed_pattern_seed``) go to every
     :class:`~viform.sensors.gated_ccd.GatedInterlineCCD` of the run (field test, pulse counts,
     sweep, depth, fog)."""
-    from viform.light.active import Medium, field_test_scene, fog_scene
+    from viform.light.active import field_test_scene
     from viform.light.laser import Receiver
     from viform.measure.gated_metrics import (
         expected_glint_visibility,
@@ -122,76 +122,91 @@ def run_gated(
     result["seed_figures"] = seed_figure_status(result)
 
     # 3. fog: gated vs un-gated
+    result["fog"], fog_imgs = fog_comparison(fog_visibility_m, ambient_lux, pulses, seed, **sensor_kw)
+
+    if out is not None:
+        _write_figures(Path(out), result, ccd, frames, fog_imgs, gate_m, pulses, ambient_lux, fog_visibility_m,
+                       threshold, seed, **sensor_kw)
+    return result
+
+
+def _write_figures(out: Path, result: dict, ccd, frames: dict, fog_imgs: dict, gate_m: float, pulses: int,
+                   ambient_lux: float, fog_visibility_m: float, threshold: float, seed: int, **sensor_kw) -> None:
+    """The figures of ``viform gated --out`` (range profile, fog, modes, CNR, gate sweep, depth) into ``out``;
+    adds the depth figures and the list of figures to ``result``."""
+    from viform.light.active import Medium, depth_scene
+    from viform.measure.gated_metrics import depth_from_sweep
+    from viform.report import gated_plots as gp
+    from viform.sensors.gated_ccd import MODES
+
+    modes = result["modes"]
+    prof = gp.range_intensity_profile(ccd, Medium.from_visibility(fog_visibility_m))
+    gp.plot_range_intensity(
+        out / "range_intensity.png",
+        prof,
+        f"gate {gate_m:g} m: window {prof['gate_window_m'][0]:.0f}–"
+        f"{prof['gate_window_m'][1]:.0f} m (fog V = {fog_visibility_m:g} m)",
+    )
+    gp.plot_images(
+        out / "fog_gated_vs_ungated.png",
+        fog_imgs,
+        f"signs at {', '.join(f'{r:g}' for r in (60, 90, 120))} m in fog V = {fog_visibility_m:g} m"
+        " (one grey scale for both)",
+        shared_scale=True,
+    )
+    gp.plot_modes(
+        out / "modes.png",
+        {f"{m}, X={pulses}": im for m, im in frames.items()},
+        ccd.parameters.pixel.full_well_electrons,
+        f"reflectors 50/100/200/300 m, gate {gate_m:g} m, {ambient_lux:g} lx",
+    )
+    gp.plot_cnr(
+        out / "cnr.png",
+        [{"target": r["label"], "mode": m, "cnr": r["cnr"], "saturated": r["saturated"]}
+         for m in MODES for r in modes[m]["targets"]],
+        threshold,
+        f"glint contrast-to-noise ratio per reflector and mode, X = {pulses} pulses, gate {gate_m:g} m",
+    )
+    sweep = result["gate_sweep"]
+    gp.plot_gate_sweep(out / "gate_sweep.png", sweep)
+    dscene = depth_scene()
+    depth = depth_from_sweep(dscene, np.arange(10.0, 101.0, 2.0), pulses=250, seed=seed, **sensor_kw)
+    gp.plot_depth(out / "depth.png", depth, "depth from a gate sweep (10–100 m in 2 m steps, X = 250, "
+                  "night): ground, boards at 45/52/58 m, reflectors")
+    ok = depth["valid"] & np.isfinite(dscene.range_m)
+    err = np.abs(depth["depth_m"][ok] - dscene.range_m[ok])
+    result["depth_from_sweep"] = {"valid_fraction": float(ok.mean()),
+                                  "median_abs_error_m": float(np.median(err)) if err.size else None,
+                                  "p95_abs_error_m": float(np.percentile(err, 95)) if err.size else None}
+    result["figures"] = sorted(str(p) for p in out.glob("*.png"))
+
+
+def fog_comparison(fog_visibility_m: float, ambient_lux: float, pulses: int, seed: int = 0,
+                   **sensor_kw) -> tuple[dict, dict]:
+    """Signs in fog (seed 004's motivation), un-gated against gated (accumulate) from 10 m before the
+    nearest surface: expected electrons of signs, background and backscatter, and the simulated signs'
+    contrast; returns (the figures, the two images in electrons)."""
+    from viform.light.active import Medium, fog_scene
+    from viform.sensors.gated_ccd import GatedInterlineCCD
+
     fog = fog_scene(visibility_m=fog_visibility_m, ambient_lux=min(ambient_lux, 1.0))
-    first = min(float(fog.range_m.min()), 1e9)
-    fog_gate = max(0.0, first - 10.0)
+    fog_gate = max(0.0, min(float(fog.range_m.min()), 1e9) - 10.0)
     fog_x = min(pulses, 200)
-    fog_rows, fog_imgs = {}, {}
+    rows, images = {}, {}
+    signs = fog.retro_coefficient_per_sr > 0
+    bg = ~signs
     for mode in ("ungated", "accumulate"):
         sensor = GatedInterlineCCD(pulses=fog_x, gate_range_m=fog_gate, mode=mode, frame_rate_hz=25.0,
                                    **sensor_kw)
-        fimg = sensor.capture_frame(fog, seed=seed).electrons
-        fog_imgs[f"{mode}, X={fog_x}"] = fimg
-        budget = sensor.electron_budget(fog)
-        signs = fog.retro_coefficient_per_sr > 0
-        bg = ~signs
-        fog_rows[mode] = {
-            "sign_mean_electrons": float(budget["photo"][signs].mean()),
-            "background_mean_electrons": float(budget["photo"][bg].mean()),
-            "backscatter_electrons": float(
-                (budget["photo"] - sensor.electron_budget(fog.with_(medium=Medium(0.0)))["photo"])[bg].mean()
-            ),
-            "sign_contrast": float((fimg[signs].mean() - fimg[bg].mean()) / max(fimg[bg].std(ddof=1), 1e-9)),
-        }
-    result["fog"] = {"visibility_m": fog_visibility_m, "gate_range_m": fog_gate, "pulses": fog_x, "modes": fog_rows}
-
-    if out is not None:
-        from viform.report import gated_plots as gp
-
-        out = Path(out)
-        prof = gp.range_intensity_profile(ccd, Medium.from_visibility(fog_visibility_m))
-        gp.plot_range_intensity(
-            out / "range_intensity.png",
-            prof,
-            f"gate {gate_m:g} m: window {prof['gate_window_m'][0]:.0f}–"
-            f"{prof['gate_window_m'][1]:.0f} m (fog V = {fog_visibility_m:g} m)",
-        )
-        gp.plot_images(
-            out / "fog_gated_vs_ungated.png",
-            fog_imgs,
-            f"signs at {', '.join(f'{r:g}' for r in (60, 90, 120))} m in fog V = {fog_visibility_m:g} m"
-            " (one grey scale for both)",
-            shared_scale=True,
-        )
-        gp.plot_modes(
-            out / "modes.png",
-            {f"{m}, X={pulses}": im for m, im in frames.items()},
-            ccd.parameters.pixel.full_well_electrons,
-            f"reflectors 50/100/200/300 m, gate {gate_m:g} m, {ambient_lux:g} lx",
-        )
-        gp.plot_cnr(
-            out / "cnr.png",
-            [{"target": r["label"], "mode": m, "cnr": r["cnr"], "saturated": r["saturated"]}
-             for m in MODES for r in modes[m]["targets"]],
-            threshold,
-            f"glint contrast-to-noise ratio per reflector and mode, X = {pulses} pulses, gate {gate_m:g} m",
-        )
-        sweep = result["gate_sweep"]
-        gp.plot_gate_sweep(out / "gate_sweep.png", sweep)
-        from viform.light.active import depth_scene
-        from viform.measure.gated_metrics import depth_from_sweep
-
-        dscene = depth_scene()
-        depth = depth_from_sweep(dscene, np.arange(10.0, 101.0, 2.0), pulses=250, seed=seed, **sensor_kw)
-        gp.plot_depth(out / "depth.png", depth, "depth from a gate sweep (10–100 m in 2 m steps, X = 250, "
-                      "night): ground, boards at 45/52/58 m, reflectors")
-        ok = depth["valid"] & np.isfinite(dscene.range_m)
-        err = np.abs(depth["depth_m"][ok] - dscene.range_m[ok])
-        result["depth_from_sweep"] = {"valid_fraction": float(ok.mean()),
-                                      "median_abs_error_m": float(np.median(err)) if err.size else None,
-                                      "p95_abs_error_m": float(np.percentile(err, 95)) if err.size else None}
-        result["figures"] = sorted(str(p) for p in out.glob("*.png"))
-    return result
+        image = images[f"{mode}, X={fog_x}"] = sensor.capture_frame(fog, seed=seed).electrons
+        photo = sensor.electron_budget(fog)["photo"]
+        clear = sensor.electron_budget(fog.with_(medium=Medium(0.0)))["photo"]
+        rows[mode] = {"sign_mean_electrons": float(photo[signs].mean()),
+                      "background_mean_electrons": float(photo[bg].mean()),
+                      "backscatter_electrons": float((photo - clear)[bg].mean()),
+                      "sign_contrast": float((image[signs].mean() - image[bg].mean())
+                                             / max(image[bg].std(ddof=1), 1e-9))}
+    return {"visibility_m": fog_visibility_m, "gate_range_m": fog_gate, "pulses": fog_x, "modes": rows}, images
 
 
 def seed_figure_status(res: dict) -> list[dict]:
