@@ -40,8 +40,8 @@ def test_value_specs():
                                           ("1:2:0", "step"), ("log:0:1:3", "> 0"), ("abc", "not a number")])
 def test_bad_value_specs(spec, needle):
     with pytest.raises(ViformError, match=needle) as err:
-        sw.parse_values("--vary exposure_s=" + spec, sw.sweep_parameters("cmos")["exposure_s"], spec)
-    assert str(err.value).startswith("--vary")
+        sw.parse_values("vary_texts exposure_s=" + spec, sw.sweep_parameters("cmos")["exposure_s"], spec)
+    assert str(err.value).startswith("vary_texts")
 
 
 def test_require_parsing_and_checks():
@@ -52,16 +52,18 @@ def test_require_parsing_and_checks():
     with pytest.raises(ViformError, match="'blur' is not a metric; allowed: psnr_log_db"):
         sw.parse_require("blur<=2")
     for bad in ("dr_captured_db>>3", "dr_captured_db>=abc", "dr_captured_db>=nan", "dr_captured_db"):
-        with pytest.raises(ViformError, match="--require"):
+        with pytest.raises(ViformError, match="^require"):
             sw.parse_require(bad)
 
 
 def test_unknown_parameter_names_the_allowed_ones():
     with pytest.raises(ViformError, match=r"'exposure' is not a parameter of cmos; allowed: .*exposure_s"):
         sw.parse_vary(["exposure=1e-3"], ["cmos"])
-    # a setting the sensor refuses is refused before any work, naming --vary and the value
-    with pytest.raises(ViformError, match=r"--vary: sensor 'cmos' at exposure_s=0.05"):
+    # a setting the sensor refuses is refused before any work, naming the parameter and the value
+    with pytest.raises(ViformError, match=r"^settings: sensor 'cmos' at exposure_s=0.05"):
         sw.make_point_sensor("cmos", {"exposure_s": 0.05})  # longer than the 30 fps frame period
+    with pytest.raises(ViformError, match=r"^vary: sensor 'cmos' at exposure_s=0.05"):
+        sw.make_plan("dilemma", ["cmos"], ["exposure_s=0.05"], **TINY)
 
 
 def test_points_default_once_and_seeds_are_per_point():

@@ -17,6 +17,16 @@ from viform.cli.app import cli
 
 #: Largest --speed factor of the dilemma scene a sweep accepts.
 MAX_SPEED = 100.0
+#: The library's parameter names (:func:`viform.measure.sweep.make_plan`, :func:`~viform.measure.sweep.sweep`,
+#: their helpers) → this command's flags: an error about a parameter names the flag the user typed
+#: (the one place the command's flags meet the library's names; see ``cli._types.flag_message``).
+SWEEP_FLAGS = {
+    "scene": "SCENE", "sensors": "--sensor", "key": "--sensor", "vary_texts": "--vary", "vary": "--vary",
+    "settings": "--vary", "require": "--require", "objective": "--objective", "spike_image": "--spike-image",
+    "duration_s": "--duration", "instants_s": "--at", "height": "--height", "width": "--width", "seed": "--seed",
+    "out": "--out", "workers": "--workers", "scheduler": "--scheduler", "memory_limit": "--worker-memory",
+    "tracking": "--tracking", "scene_options": "--scene-set",
+}
 
 
 @cli.command("sweep")
@@ -94,6 +104,8 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
     from viform.cli.compare import announce_preparation, check_outputs, parse_instants
     from viform.report.sweep_report import console_lines, run_sweep_report
 
+    if workers is not None and scheduler is not None:
+        raise ViformError("--workers and --scheduler exclude each other: a scheduler brings its own workers")
     instants = parse_instants(at)
     options = {k: v for k, v in (("brightness", brightness), ("speed", speed), ("visibility_m", visibility_m))
                if v is not None}
@@ -110,13 +122,17 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
                         spike_image=spike_image, scene_options=options, tracking=tracking)
     check_outputs(out_dir, json_file)
     check_json_file(json_file)
-    if workers is not None and scheduler is not None:
-        raise click.UsageError("--workers and --scheduler exclude each other: a scheduler brings its own workers")
     if "spike" in plan.sensors:
         announce_preparation()
-    doc = run_sweep_report(plan, out_dir, workers=workers, scheduler=scheduler, memory_limit=worker_memory,
-                           progress=not no_progress, command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "",
-                           started_s=started)
+    try:
+        doc = run_sweep_report(plan, out_dir, workers=workers, scheduler=scheduler, memory_limit=worker_memory,
+                               progress=not no_progress,
+                               command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "", started_s=started)
+    except sw.ContextMismatch as exc:
+        what = SWEEP_FLAGS.get(exc.field, exc.field)
+        raise ViformError(f"--out {exc.out!r} holds a sweep made with other options ({what}: {exc.stored!r} there, "
+                          f"{exc.wanted!r} now); give a new --out, or the same options to extend or resume it"
+                          ) from None
     summary = {"report": doc["report"], "table": str(Path(out_dir) / "sweep.zarr"),
                "sweep": str(Path(out_dir) / "sweep.json"), "n_points": doc["n_points"], "computed": doc["computed"],
                "reused": doc["reused"], "seconds": doc["seconds"], "cpu_seconds": doc["cpu_seconds"],
@@ -131,3 +147,6 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
     for line in console_lines(doc):
         click.echo(line)
     click.echo(f"\nwrote {summary['report']} and {summary['table']} in {summary['wall_s']:.1f} s")
+
+
+sweep.viform_flags = SWEEP_FLAGS

@@ -1,0 +1,203 @@
+"""Running a sweep: one point shot and scored as ``viform compare`` does it, the points on dask
+workers or in this process, the results stored as they finish."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+
+from viform._io import write_json
+from viform._parallel import open_client, parse_memory
+from viform._validate import ViformError, check_int, one_line
+from viform.measure import comparison as cmp
+from viform.measure.sweep.answer import answer
+from viform.measure.sweep.parameters import make_point_sensor
+from viform.measure.sweep.plan import Point, SweepContext, SweepPlan, point_seed
+from viform.measure.sweep.store import (
+    POINTS_DIR,
+    _finite,
+    _restore,
+    check_context,
+    load_point,
+    store_point,
+    write_table,
+)
+
+#: Contrast-to-noise at which a target counts as seen (as compare's verdict counts it).
+SEEN_CNR = 3.0
+
+
+def run_point(context: SweepContext, point: Point) -> dict:
+    """Shoot and score one point (runs on a worker); returns its record and its images.
+
+    The record holds the metrics of :func:`viform.measure.comparison.score`; ``images`` holds the
+    light estimate (lux, float32; NaN where under-exposed) at each instant, for the report.
+    """
+    from numba import get_num_threads, set_num_threads
+
+    # CPU of the whole process (numba may run a kernel on its own pool thread): one point at a time per
+    # worker process, so this is the point's CPU time (an overestimate when threads share a process)
+    started, cpu = time.perf_counter(), time.process_time()
+    threads = get_num_threads()
+    set_num_threads(1)  # one point per worker: parallelism comes from the workers
+    try:
+        scene = context.make_scene()
+        sensor = make_point_sensor(point.sensor, dict(point.settings))
+        seed = point_seed(context.seed, point)
+        methods = [context.spike_image] if point.sensor == "spike" else None
+        try:
+            shots = cmp.shoot(point.sensor, scene, context.duration_s, list(context.instants_s), seed=seed,
+                              sensor=sensor, spike_methods=methods)
+        except (ViformError, ValueError) as exc:  # this setting cannot shoot this scene (light beyond its range …)
+            why = one_line(exc) if isinstance(exc, ViformError) else f"the model refused this light ({one_line(exc)})"
+            shots = [cmp.Shot(point.sensor, point.label(), "", skipped=why)]
+        shot = shots[0]
+        shot.metrics = cmp.score(shot, scene, list(context.instants_s))
+    finally:
+        set_num_threads(threads)
+    metrics = {k: (float(v) if isinstance(v, (int, float, np.floating, np.integer)) else v)
+               for k, v in shot.metrics.items()}
+    if isinstance(metrics.get("target_cnr"), dict):  # scenes with targets (night-road-fog): how many are seen
+        metrics["targets_seen"] = float(sum(v >= SEEN_CNR for v in metrics["target_cnr"].values()))
+    if context.tracking and not shot.skipped:
+        metrics.update(tracking_scores(scene, context.duration_s, shot))
+    images = None
+    if not shot.skipped:
+        images = np.stack([np.where(e.underexposed, np.nan, np.nan_to_num(np.asarray(e.lux, np.float64)))
+                           for e in shot.estimates]).astype(np.float32)
+    record = {"point_id": point.point_id, "sensor": point.sensor, "settings": dict(point.settings),
+              "swept": dict(point.swept), "default": point.is_default, "label": point.label(),
+              "shot_label": shot.label, "skipped": shot.skipped, "seed": seed, "metrics": metrics,
+              "context_sha256": context.fingerprint(),
+              "seconds": time.perf_counter() - started, "cpu_seconds": time.process_time() - cpu}
+    return {"record": record, "images": images}
+
+
+def tracking_scores(scene, duration_s: float, shot) -> dict:
+    """HOTA, MOTA, IDF1, ID switches, median latency and objects never found of the comparison's tracker
+    on this shot (:func:`viform.measure.vision_comparison.vision_scores`); {} without object truth.
+
+    Frame cameras' frames are turned into lux with the comparison's inverse response of the sensor at
+    its default pixel parameters (exposure and frame times are the shot's own).
+    """
+    kinds = scene.truth_kinds() if hasattr(scene, "truth_kinds") else ()
+    if "objects" not in kinds or shot.key == "gated":
+        return {}
+    from viform.measure.vision_comparison import vision_scores, vision_table
+
+    rows = [r for r in vision_table(vision_scores({"scene": scene, "duration_s": duration_s, "shots": [shot]}))
+            if "skipped" not in r]
+    if not rows:
+        return {}
+    r = rows[0]
+    lat = r["median_latency_ms"]
+    return {"tracking_hota": float(r["hota"]), "tracking_mota": float(r["mota"]), "tracking_idf1": float(r["idf1"]),
+            "tracking_id_switches": float(r["id_switches"]),
+            "tracking_latency_s": math.nan if lat is None else lat / 1e3,
+            "tracking_objects_missed": float(len(r["never_found"]))}
+
+
+def _open(workers, scheduler, memory_limit):
+    return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"))
+
+
+def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,
+              client=None, memory_limit="auto", progress: bool = True, crash_after_points: int | None = None) -> dict:
+    """Run every point not already stored in ``out``; return the records (plan order) and run figures.
+
+    ``workers=0`` runs the points in this process, one after the other (no dask); otherwise on a
+    dask LocalCluster of ``workers`` processes (default: the CPU count), on ``scheduler``, or on
+    an open ``client``. ``crash_after_points`` (testing aid) ends this process abruptly after
+    storing that many new points, as a kill would.
+    """
+    out = Path(out)
+    stored = {p.point_id: load_point(out, p, context) for p in points}
+    todo = [p for p in points if stored[p.point_id] is None]
+    records = {pid: r for pid, r in stored.items() if r is not None}
+    started = time.perf_counter()
+    computed = 0
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(points), initial=len(records), unit="point", desc="sweep", leave=False)
+
+    def take(result):
+        nonlocal computed
+        store_point(out, result)
+        rec = _restore(json.loads(json.dumps(_finite(result["record"]))))
+        records[rec["point_id"]] = rec
+        computed += 1
+        if bar is not None:
+            bar.update(1)
+        if crash_after_points is not None and computed >= crash_after_points:
+            os._exit(70)
+
+    n_workers = 0
+    own_client = own_cluster = None
+    if todo and client is None and workers != 0:  # a scheduler that cannot be reached: nothing written yet
+        n = max(1, min(os.cpu_count() or 1, len(todo))) if workers is None else workers
+        own_client, own_cluster = _open(n, scheduler, memory_limit)
+        client = own_client
+    (out / POINTS_DIR).mkdir(parents=True, exist_ok=True)
+    try:
+        if todo and client is None and workers == 0:
+            for p in todo:
+                take(run_point(context, p))
+        elif todo:
+            from distributed import as_completed
+
+            n_workers = len(client.scheduler_info().get("workers", {}))
+            token = uuid.uuid4().hex[:8]
+            futures = [client.submit(run_point, context, p, key=f"viform-sweep-{p.point_id}-{token}", pure=False)
+                       for p in todo]
+            for fut in as_completed(futures):
+                take(fut.result())
+    finally:
+        if bar is not None:
+            bar.close()
+        if own_client is not None:
+            own_client.close()
+        if own_cluster is not None:
+            own_cluster.close()
+    ordered = [records[p.point_id] for p in points]
+    new = [r for r in ordered if r["point_id"] in {p.point_id for p in todo}]
+    return {"records": ordered, "computed": computed, "reused": len(points) - computed,
+            "seconds": time.perf_counter() - started, "workers": n_workers,
+            "cpu_seconds": sum(r.get("cpu_seconds", 0.0) for r in new)}
+
+
+def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | None = None, client=None,
+          memory_limit="auto", progress: bool = True, crash_after_points: int | None = None) -> dict:
+    """Run a planned sweep into ``out``: points, ``sweep.zarr`` and ``sweep.json``; returns the sweep document."""
+    from viform._io import check_output_folder
+
+    out = Path(out)
+    check_output_folder("out", out)
+    if out.exists() and not out.is_dir():
+        raise ViformError(f"out = {str(out)!r} is a file, not a folder")
+    if scheduler is not None and workers is not None:
+        raise ViformError(f"scheduler = {scheduler!r} excludes workers = {workers!r}: a scheduler brings its own "
+                          "workers")
+    if workers is not None:
+        workers = check_int("workers", workers, 0, 1024)
+    check_context(out, plan.context)
+    run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
+                    memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points)
+    records = run["records"]
+    result = answer(records, plan.demands, plan.objective)
+    write_table(out / "sweep.zarr", records, plan.context)
+    doc = {"context": plan.context.describe(), "sensors": plan.sensors,
+           "vary": {k: v for k, v in plan.vary.items() if v}, "n_points": len(records),
+           "computed": run["computed"], "reused": run["reused"], "seconds": run["seconds"],
+           "cpu_seconds": run["cpu_seconds"], "workers": run["workers"], "answer": result,
+           "pareto": [list(p) for p in plan.pareto], "points": [_finite(r) for r in records]}
+    write_json(out / "sweep.json", _finite(doc))
+    doc["records"] = records
+    return doc
