@@ -142,6 +142,13 @@ def test_table_and_physics(serial):
     # end for the "rendered within a factor of 2" rule of the metric
     bound = 20 * math.log10(40e3 * TINY["duration_s"]) + 20 * math.log10(4)
     assert all(m["dr_captured_db"] <= bound for m in spike.values())
+    # the integration time is each pixel's interval (Q/(η·E), seed 000 §3.3) where the scene moves: it
+    # grows with the threshold (Q = (level + 1)·1 250 e⁻), by about the ratio of Q (16 from level 0 to 15,
+    # less where level 15's dim intervals are cut by the 12 ms clip), and the latency is one tick more
+    res = [spike[level]["time_resolution_s"] for level in (0, 12, 15)]
+    assert res[0] < res[1] < res[2] and res[2] / res[0] > 8
+    assert all(spike[lv]["latency_s"] == pytest.approx(spike[lv]["time_resolution_s"] + 1 / 40e3)
+               for lv in (0, 12, 15))
     assert doc["answer"]["per_sensor"]["spike"]["meets"]  # level 0 sees most of the scene
     assert doc["answer"]["per_sensor"]["spike"]["settings"] == {"threshold_level": 0}
 

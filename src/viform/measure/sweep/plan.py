@@ -30,7 +30,7 @@ MAX_DURATION_S = 10.0
 MAX_SPIKE_BYTES = 2e9
 #: Format tag of sweep.json and point records; a change of the scoring bumps the version so old
 #: stored points are not reused.
-SWEEP_FORMAT, SWEEP_VERSION = "viform-sweep", 1
+SWEEP_FORMAT, SWEEP_VERSION = "viform-sweep", 2
 
 
 def _canonical(value):
