@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -91,6 +92,59 @@ def test_answer_best_and_nearest_miss():
     assert [m["demand"] for m in b["misses"]] == ["dr_captured_db>=120"] and b["misses"][0]["shortfall"] == 20.0
     assert ans["meeting"] == ["0", "1"]
     assert "a meets" in ans["sentences"][0]
+
+
+def test_no_demands_means_nothing_meets():
+    """Without demands the answer names each sensor's best point by the objective and says nothing was
+    demanded: no point "meets", and an objective a sensor does not define is said so (not "-inf")."""
+    recs = [{"point_id": "1", "sensor": "cmos", "settings": {"exposure_s": 1e-3}, "label": "cmos 1",
+             "metrics": {"psnr_log_db": 22.0}},
+            {"point_id": "2", "sensor": "cmos", "settings": {}, "label": "cmos (default)",
+             "metrics": {"psnr_log_db": 19.0}},
+            {"point_id": "3", "sensor": "gated", "settings": {}, "label": "gated (default)",
+             "metrics": {"psnr_log_db": math.nan}},
+            {"point_id": "4", "sensor": "seed003-overflow", "settings": {}, "label": "overflow", "metrics": {},
+             "skipped": "its frame is longer than the clip"}]
+    ans = sw.answer(recs, [])
+    assert ans["meeting"] == [] and all(v["meets"] is None for v in ans["per_sensor"].values())
+    assert ans["per_sensor"]["cmos"]["best"] == "1" and math.isnan(ans["per_sensor"]["gated"]["objective"])
+    text = " ".join(ans["sentences"])
+    assert ans["sentences"][0].startswith("No demands were given") and " meets " not in text
+    assert "psnr_log_db is not defined for it here" in text and "inf" not in text
+    assert ans["not_scored"] == {"seed003-overflow": "its frame is longer than the clip"}
+    assert "seed003-overflow: not scored on this scene" in text
+
+
+def test_tracking_needs_objects_in_the_clip():
+    """A scene whose object truth is empty over the clip (translating) is refused for tracking, naming the
+    parameter; one with objects is planned."""
+    with pytest.raises(ViformError, match=r"^tracking: scene 'translating' has no objects to track"):
+        sw.make_plan("translating", ["cmos"], ["exposure_s=1e-3"], tracking=True, **TINY)
+    sw.make_plan("multi-object", ["cmos"], ["exposure_s=1e-3"], tracking=True, **TINY)
+
+
+def test_library_errors_name_the_parameter():
+    """The library speaks its parameter names, never a command's flags."""
+    cases = [(dict(duration_s=20.0), "duration_s = 20 s is not allowed"), (dict(height=8), "height = 8"),
+             (dict(instants_s=[0.5]), "instants_s: instant 0.5"), (dict(spike_image="x"), "spike_image = 'x'"),
+             (dict(objective="blur"), "objective: 'blur'"), (dict(require="blur<=2"), "require: 'blur'")]
+    for kw, needle in cases:
+        with pytest.raises(ViformError) as err:
+            sw.make_plan("dilemma", ["cmos"], None, **{**TINY, **kw})
+        assert str(err.value).startswith(needle) and "--" not in str(err.value), str(err.value)
+    with pytest.raises(ViformError, match=r"^sensors: 'nosuch' is not a sensor a sweep can vary"):
+        sw.make_plan("dilemma", ["nosuch"], None, **TINY)
+    with pytest.raises(ViformError, match=r"^vary_texts exposure=1e-3: 'exposure' is not a parameter"):
+        sw.make_plan("dilemma", ["cmos"], ["exposure=1e-3"], **TINY)
+    plan = sw.make_plan("dilemma", ["cmos"], None, **TINY)
+    with pytest.raises(ViformError, match=r"^workers = -1 is not allowed"):
+        sw.sweep(plan, "/tmp/never-written", workers=-1, progress=False)
+    with pytest.raises(ViformError, match=r"^memory_limit = 'lots' is not allowed"):
+        sw.sweep(plan, "/tmp/never-written", workers=1, memory_limit="lots", progress=False)
+    assert not Path("/tmp/never-written").exists()
+    # no string in the package's source names a flag
+    for path in Path(sw.__file__).parent.glob("*.py"):
+        assert not re.search(r"[\"'](?:[^\"'\n]*\s)?--[a-z]", path.read_text()), path
 
 
 # ---------------------------------------------------------------------- running

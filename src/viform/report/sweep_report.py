@@ -269,7 +269,7 @@ def figure_best(doc, scene, out: Path):
     by_id = {r["point_id"]: r for r in doc["records"]}
     for key, v in doc["answer"]["per_sensor"].items():
         images = sw.load_images(out, v["best"])
-        if images is None or key == "gated":
+        if images is None or v.get("sensor", key) == "gated":
             continue
         what = "best meeting the demands" if v["meets"] else ("nearest miss" if doc["answer"]["demands"]
                                                               else f"best by {doc['answer']['objective']}")
@@ -338,9 +338,11 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
                  f"<th>{e(metric_label(ans['objective']))}</th><th>points meeting / swept</th><th>misses</th></tr>")
     for key, v in ans["per_sensor"].items():
         misses = "; ".join(sw._miss_text(m) for m in v.get("misses", [])) or "—"
-        parts.append(f"<tr data-sensor='{e(key)}'><td>{e(key)}</td><td>{'yes' if v['meets'] else 'no'}</td>"
+        meets = "— (no demands)" if v["meets"] is None else ("yes" if v["meets"] else "no")
+        counted = f"— / {v['n_points']}" if v["meets"] is None else f"{v['n_meeting']} / {v['n_points']}"
+        parts.append(f"<tr data-sensor='{e(key)}'><td>{e(key)}</td><td>{meets}</td>"
                      f"<td>{e(sw._settings_text(v))}</td><td>{_fmt(_shown(ans['objective'], v['objective']))}</td>"
-                     f"<td>{v['n_meeting']} / {v['n_points']}</td><td>{e(misses)}</td></tr>")
+                     f"<td>{counted}</td><td>{e(misses)}</td></tr>")
     parts.append("</table></section>")
     parts.append("<section id='pareto'><h2>Trade-offs</h2><p class='note'>Each dot is one setting of one sensor; "
                  "the star is the sensor's default setting (what <code>viform compare</code> uses); green rings "
@@ -387,7 +389,11 @@ def console_lines(doc) -> list[str]:
              f"{doc['seconds']:.1f} s on {doc['workers'] or 'no'} dask workers, {doc['cpu_seconds']:.1f} CPU-s"]
     width = max([len(k) for k in ans["per_sensor"]] + [6])
     for key, v in ans["per_sensor"].items():
-        lines.append(f"  {key:<{width}}  {'meets' if v['meets'] else 'misses'}  {sw._settings_text(v)}  "
+        if v["meets"] is None:  # no demands: nothing "meets"; the best by the objective
+            lines.append(f"  {key:<{width}}  best    {sw._settings_text(v)}  "
+                         f"({ans['objective']} {_fmt(v['objective'])}; of {v['n_points']} points, no demands)")
+            continue
+        lines.append(f"  {key:<{width}}  {'meets ' if v['meets'] else 'misses'}  {sw._settings_text(v)}  "
                      f"({ans['objective']} {_fmt(v['objective'])}; {v['n_meeting']}/{v['n_points']} meet)")
     lines += [f"- {s}" for s in ans["sentences"]]
     return lines

@@ -179,6 +179,19 @@ def validate_inputs(scene: str, height: int, width: int, duration_s: float, seed
     return height, width, seed, instants
 
 
+def check_objects(scene_obj, scene: str, duration_s: float, instants_s=(), name: str = "tracking") -> None:
+    """Refuse to score tracking on a scene without objects to track in the clip: no object truth, or an
+    object truth that is empty at 16 instants spread over the clip and at ``instants_s``."""
+    if "objects" not in (scene_obj.truth_kinds() if hasattr(scene_obj, "truth_kinds") else ()):
+        raise ViformError(f"{name}: scene {scene!r} has no object truth to score tracking against; give a scene "
+                          "with objects (e.g. multi-object)")
+    times = sorted({*(float(t) for t in np.linspace(0.0, duration_s, 16, endpoint=False)), *map(float, instants_s)})
+    if not any(len(scene_obj.objects(t)) for t in times):
+        raise ViformError(f"{name}: scene {scene!r} has no objects to track in the {duration_s * 1e3:g} ms clip (its "
+                          "object truth is empty), so every tracking score would be 0 of nothing; give a scene "
+                          "with objects (e.g. multi-object, dilemma, waving-hand)")
+
+
 @dataclass
 class SweepPlan:
     """A validated sweep: its context, sensors, varied parameters, points and demands."""
@@ -208,9 +221,8 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
     context = SweepContext(scene, height, width, float(duration_s), tuple(float(t) for t in instants), seed,
                            spike_image, tuple(sorted((scene_options or {}).items())), bool(tracking))
     scene_obj = context.make_scene()
-    if tracking and "objects" not in (scene_obj.truth_kinds() if hasattr(scene_obj, "truth_kinds") else ()):
-        raise ViformError(f"tracking: scene {scene!r} has no object truth to score tracking against "
-                          "(the built-in scenes have)")
+    if tracking:
+        check_objects(scene_obj, scene, context.duration_s, context.instants_s)
     if sensors is None and not vary_texts and vary is None:
         sensors, vary = standard_vary(scene_obj)
     sensors = list(dict.fromkeys(sensors or (list(vary) if vary else [])))

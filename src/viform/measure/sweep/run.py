@@ -187,6 +187,7 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
                           "workers")
     if workers is not None:
         workers = check_int("workers", workers, 0, 1024)
+    memory_limit = parse_memory(memory_limit, "memory_limit")
     check_context(out, plan.context)
     run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
                     memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points)
