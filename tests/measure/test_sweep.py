@@ -147,6 +147,90 @@ def test_library_errors_name_the_parameter():
         assert not re.search(r"[\"'](?:[^\"'\n]*\s)?--[a-z]", path.read_text()), path
 
 
+def test_scene_parameters_are_varied_like_a_sensors():
+    """scene:PARAM=SPEC multiplies every sensor's points by the scene's values; each point records its scene
+    setting (label, seed, table column); a parameter the scene lacks, a value it refuses and one set twice
+    are refused before any work."""
+    space = sw.scene_parameters("dilemma")
+    assert {"brightness", "speed", "lamp_lux"} <= set(space) and space["brightness"].default == 1.0
+    assert sw.scene_parameters("not-a-scene.png") == {}
+    plan = sw.make_plan("dilemma", ["cmos"], ["cmos:exposure_s=1e-4", "scene:brightness=0.1,10"], **TINY)
+    assert plan.vary["scene"] == {"brightness": [0.1, 10.0]} and len(plan.points) == 4  # (1e-4, default) × 2
+    assert len({p.point_id for p in plan.points}) == 4 and len({sw.point_seed(3, p) for p in plan.points}) == 4
+    dim = [p for p in plan.points if dict(p.scene) == {"brightness": 0.1}]
+    assert len(dim) == 2 and all(p.label().endswith("· scene brightness=0.1") for p in dim)
+    assert all(dict(p.swept)["scene.brightness"] == 0.1 for p in dim)
+    # without scene:…, points keep the ids (and seeds) they always had
+    plain = sw.make_plan("dilemma", ["cmos"], ["cmos:exposure_s=1e-4"], **TINY)
+    assert {p.point_id for p in plain.points} == {sw.Point(p.sensor, p.settings).point_id for p in plain.points}
+    bad = [(["scene:nosuch=1"], {}, r"^vary_texts scene:nosuch=1: 'nosuch' is not a numeric parameter of the scene"),
+           (["scene:brightness=-1"], {}, r"^vary: the scene at brightness=-1 cannot be made"),
+           (["scene:brightness=1,2"], {"scene_options": {"brightness": 2.0}}, r"^vary: the scene's 'brightness' is"),
+           (["nosuch:brightness=1"], {}, r"sensor 'nosuch' is not in this sweep")]
+    for texts, kw, needle in bad:
+        with pytest.raises(ViformError, match=needle):
+            sw.make_plan("dilemma", ["cmos"], texts, **TINY, **kw)
+
+
+def test_a_scene_sweep_answers_per_scene_setting(tmp_path):
+    """Ten times more light leaves fewer pixels under the noise floor of the same camera; each scene setting
+    gets its own answer, and the table has a column per varied scene parameter."""
+    plan = sw.make_plan("dilemma", ["cmos"], ["scene:brightness=0.1,10"], require="underexposed_fraction<=0.1",
+                        **TINY)
+    doc = sw.sweep(plan, tmp_path, workers=0, progress=False)
+    under = {r["scene"]["brightness"]: r["metrics"]["underexposed_fraction"] for r in doc["records"]}
+    assert under[0.1] > under[10.0]
+    per = doc["answer"]["per_sensor"]
+    assert set(per) == {"cmos · scene brightness = 0.1", "cmos · scene brightness = 10"}
+    assert per["cmos · scene brightness = 0.1"]["scene"] == {"brightness": 0.1}
+    assert [s for s in doc["answer"]["sentences"] if s.startswith("At scene brightness = ")]
+    table = sw.read_table(tmp_path / "sweep.zarr")
+    assert sorted(table["parameter/scene.brightness"]) == [0.1, 10.0]
+
+
+def test_device_is_checked_before_any_work(tmp_path):
+    """device: cpu or cuda; cuda only for a sweep with a spike sensor, and only where a GPU is found."""
+    with pytest.raises(ViformError, match=r"^device = 'gpu' is not allowed: choose one of cpu, cuda"):
+        sw.check_device("gpu", ["spike"])
+    with pytest.raises(ViformError, match=r"^device = 'cuda' runs the spike camera's simulation on a GPU; this "
+                                          r"sweep has no spike sensor"):
+        sw.check_device("cuda", ["cmos"])
+    assert sw.check_device("cpu", ["cmos"]) == "cpu"
+    from viform.sensors.spike_cuda import cuda_available
+
+    if not cuda_available():
+        plan = sw.make_plan("dilemma", ["spike"], None, **TINY)
+        with pytest.raises(ViformError, match=r"^device = 'cuda'"):
+            sw.sweep(plan, tmp_path / "never", device="cuda", workers=0, progress=False)
+        assert not (tmp_path / "never").exists()
+
+
+CUDA_CHILD = """
+import json, warnings
+import numpy as np
+warnings.simplefilter("ignore")  # uint64 hash arithmetic wraps in the simulator's NumPy scalars
+from viform.measure import sweep as sw
+context = sw.SweepContext("translating", 8, 12, 0.001, (0.0005,), 3, "interval")
+point = sw.Point("spike", (("threshold_level", 0),))
+gpu, cpu = (sw.run_point(context, point, device=d) for d in ("cuda", "cpu"))
+print(json.dumps({"metrics": gpu["record"]["metrics"] == cpu["record"]["metrics"],
+                  "images": bool(np.array_equal(gpu["images"], cpu["images"], equal_nan=True)),
+                  "device": gpu["record"].get("device"), "cpu_device": cpu["record"].get("device", "cpu")}))
+"""
+
+
+def test_cuda_device_gives_the_cpu_points_in_the_simulator():
+    """A point shot with device='cuda' (numba-cuda's simulator, no GPU needed) scores exactly as on the CPU
+    and records its device."""
+    pytest.importorskip("numba.cuda", reason="numba-cuda is not installed")
+    env = {**__import__("os").environ, "NUMBA_ENABLE_CUDASIM": "1",
+           "PYTHONPATH": str(Path(sw.__file__).parents[3])}
+    run = subprocess.run([sys.executable, "-c", CUDA_CHILD], env=env, capture_output=True, text=True, timeout=1800)
+    assert run.returncode == 0, run.stderr[-3000:]
+    result = json.loads(run.stdout.strip().splitlines()[-1])
+    assert result == {"metrics": True, "images": True, "device": "cuda", "cpu_device": "cpu"}
+
+
 # ---------------------------------------------------------------------- running
 @pytest.fixture(scope="module")
 def serial(tmp_path_factory):
@@ -215,7 +299,7 @@ def test_resume_after_kill_and_extend(serial, tmp_path):
             f"plan = sw.make_plan('dilemma', ['cmos'], {vary!r}, **{TINY!r})\n"
             f"sw.sweep(plan, {str(tmp_path)!r}, workers=0, progress=False, crash_after_points=2)\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
-                         env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[2])})
+                         env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[3])})
     assert run.returncode == 70, run.stderr[-2000:]
     assert len(list((tmp_path / "points").glob("*.json"))) == 2 and not (tmp_path / "sweep.json").exists()
     plan2 = sw.make_plan("dilemma", ["cmos"], vary, **TINY)

@@ -90,6 +90,10 @@ def test_report_renders_in_chromium(swept, tmp_path):
     (["--sensor", "cmos", "--objective", "blur"], "--objective: 'blur' is not a metric"),
     (["--sensor", "cmos", "--workers", "-1"], "--workers = -1 is not allowed"),
     (["--sensor", "cmos", "--worker-memory", "lots"], "--worker-memory = 'lots' is not allowed"),
+    (["--sensor", "spike", "--device", "gpu"], "--device"),
+    (["--sensor", "cmos", "--device", "cuda"], "--device = 'cuda' runs the spike camera's simulation on a GPU"),
+    (["--sensor", "cmos", "--vary", "scene:nosuch=1"], "--vary scene:nosuch=1: 'nosuch' is not a numeric parameter"),
+    (["--sensor", "cmos", "--vary", "scene:brightness=-1"], "--vary: the scene at brightness=-1 cannot be made"),
 ])
 def test_bad_input_one_line_exit_2_nothing_left(tmp_path, capsys, extra, needle):
     out = tmp_path / "r"
@@ -159,3 +163,28 @@ def test_no_require_prints_no_meets(tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0
     assert "meets" not in out and "No demands were given" in out and "cmos    best" in out
+
+
+def test_cuda_without_a_gpu_is_one_line(tmp_path, capsys):
+    from viform.sensors.spike_cuda import cuda_available
+
+    if cuda_available():
+        pytest.skip("this machine has a CUDA GPU")
+    out = tmp_path / "r"
+    code = main([*ARGS, "--sensor", "spike", "--device", "cuda", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and err.count("--device = 'cuda'") == 1, err
+    assert not out.exists()
+
+
+def test_scene_parameters_from_the_command_line(tmp_path, capsys):
+    """--vary scene:brightness=… shoots every point at each light level and answers per level; --list-parameters
+    names the scene's parameters."""
+    code = main([*ARGS, "--workers", "0", "--sensor", "cmos", "--vary", "scene:brightness=0.5,2", "--require",
+                 "underexposed_fraction<=0.5", "--out", str(tmp_path / "sw")])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "At scene brightness = 0.5:" in out and "At scene brightness = 2:" in out
+    assert main(["sweep", "dilemma", "--sensor", "cmos", "--list-parameters"]) == 0
+    listed = capsys.readouterr().out
+    assert "scene (dilemma; vary as scene:PARAM): brightness=1.0" in listed

@@ -415,8 +415,11 @@ def data_rate_mb_per_s(height: int, width: int, bits_per_pixel: float, rate_hz: 
 
 
 def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sensor=None,
-          spike_methods=None) -> list:
+          spike_methods=None, device: str = "cpu") -> list:
     """Shoot ``scene`` with sensor ``key``; return its :class:`Shot` (several for the spike camera).
+
+    ``device`` ("cpu" or "cuda") runs the spike camera's simulation there (the same algorithm and
+    bits, :mod:`viform.sensors.spike_cuda`); the other sensors run on the CPU.
 
     ``sensor`` replaces the comparison's own sensor of that key (the same model at other settings,
     as :mod:`viform.measure.sweep` builds it; a ``HighSpeedConfig`` for "highspeed");
@@ -445,7 +448,7 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sens
     if key == "spike":
         sensor, preset = spike_preset()
         sensor = override if override is not None else sensor
-        stream = sensor.capture(scene, duration_s, seed=seed)
+        stream = sensor.capture(scene, duration_s, seed=seed, **({"device": device} if device != "cpu" else {}))
         par = sensor.parameters
         rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
         shots = []

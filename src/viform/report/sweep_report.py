@@ -39,7 +39,10 @@ PARAMETER_UNITS = (("_electrons", "e⁻"), ("_e_per_s", "e⁻/s"), ("_hz", "Hz")
 
 
 def parameter_label(name: str) -> str:
-    """A parameter's axis label with its unit (``exposure_s`` → "exposure (s)")."""
+    """A parameter's axis label with its unit (``exposure_s`` → "exposure (s)"; a varied scene parameter
+    ``scene.brightness`` → "scene brightness")."""
+    if name.startswith(sw.SCENE_PREFIX):
+        return "scene " + parameter_label(name[len(sw.SCENE_PREFIX):])
     for suffix, unit in PARAMETER_UNITS:
         if name.endswith(suffix):
             stem = name[: -len(suffix)] if unit != "fraction" else name
@@ -158,8 +161,10 @@ def _split_demand(text: str):
 
 
 def _axes_of(doc, key):
-    """(x parameter, [other swept parameters]) of a sensor's curves: x is the one with most values."""
-    grid = doc["vary"].get(key, {})
+    """(x parameter, [other swept parameters]) of a sensor's curves: x is the one with most values (the
+    varied scene parameters count as the sensor's)."""
+    grid = {**doc["vary"].get(key, {}),
+            **{sw.SCENE_PREFIX + n: v for n, v in (doc["vary"].get(sw.SCENE) or {}).items()}}
     if not grid:
         return None, []
     x = max(sorted(grid), key=lambda n: len(grid[n]))
@@ -251,29 +256,37 @@ def _fmt_param(v) -> str:
     return _fmt(v)
 
 
-def figure_best(doc, scene, out: Path):
-    """The truth and the best point of each sensor at the middle instant, one log-lux colour map."""
+def figure_best(doc, scene, out: Path, scenes=None):
+    """The truth and the best point of each sensor at the middle instant, one log-lux colour map; where
+    scene parameters are varied, a truth per scene setting (``scenes(settings)`` makes it) and its bests."""
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
 
     instants = doc["context"]["instants_s"]
     i = len(instants) // 2
     t = instants[i]
-    demand = scene.demand() if hasattr(scene, "demand") else None
-    truth = scene.illuminance_lux(t)
-    if demand:
-        norm = LogNorm(vmin=demand["min_lux"], vmax=demand["max_lux"])
-    else:
-        norm = LogNorm(vmin=max(float(truth.min()), 1e-4), vmax=float(truth.max()))
-    panels = [(_panel_title("truth", f"at {t * 1e3:.2f} ms"), truth)]
+    # one truth per varied scene setting (each answered apart), made by ``scenes(settings)``
+    groups = list(dict.fromkeys(tuple(sorted((v.get("scene") or {}).items()))
+                                for v in doc["answer"]["per_sensor"].values())) or [()]
+    truths = {g: (scene if not g or scenes is None else scenes(g)) for g in groups}
+    demands = [sc.demand() for sc in truths.values() if hasattr(sc, "demand")]
+    lows = [d["min_lux"] for d in demands] or [max(float(sc.illuminance_lux(t).min()), 1e-4) for sc in truths.values()]
+    highs = [d["max_lux"] for d in demands] or [float(sc.illuminance_lux(t).max()) for sc in truths.values()]
+    norm = LogNorm(vmin=min(lows), vmax=max(highs))
+    panels = []
     by_id = {r["point_id"]: r for r in doc["records"]}
-    for key, v in doc["answer"]["per_sensor"].items():
-        images = sw.load_images(out, v["best"])
-        if images is None or v.get("sensor", key) == "gated":
-            continue
-        what = "best meeting the demands" if v["meets"] else ("nearest miss" if doc["answer"]["demands"]
-                                                              else f"best by {doc['answer']['objective']}")
-        panels.append((_panel_title(f"{by_id[v['best']]['label']}", what), images[i].astype(np.float64)))
+    for g in groups:
+        where = f"at {t * 1e3:.2f} ms" + (f"\n{sw.scene_text(dict(g))}" if g else "")
+        panels.append((_panel_title("truth", where), truths[g].illuminance_lux(t)))
+        for key, v in doc["answer"]["per_sensor"].items():
+            if tuple(sorted((v.get("scene") or {}).items())) != g:
+                continue
+            images = sw.load_images(out, v["best"])
+            if images is None or v.get("sensor", key) == "gated":
+                continue
+            what = "best meeting the demands" if v["meets"] else ("nearest miss" if doc["answer"]["demands"]
+                                                                  else f"best by {doc['answer']['objective']}")
+            panels.append((_panel_title(f"{by_id[v['best']]['label']}", what), images[i].astype(np.float64)))
     titles = [p[0] for p in panels]
     fig, axes, cax = _image_grid(len(panels), scene.shape, max(tt.count("\n") + 1 for tt in titles))
     cmap = plt.get_cmap(LUX_CMAP).with_extremes(bad=UNDER_COLOUR)
@@ -290,10 +303,11 @@ def figure_best(doc, scene, out: Path):
 
 # ------------------------------------------------------------------ HTML
 def write_sweep_report(doc, scene, out, command: str = "", started_s: float | None = None,
-                       demand_notes: list[str] | None = None) -> Path:
+                       demand_notes: list[str] | None = None, scenes=None) -> Path:
     """Write ``out/report.html`` (figures under ``out/figures``); returns its path.
 
-    ``demand_notes`` say where the demands come from (printed under them)."""
+    ``demand_notes`` say where the demands come from (printed under them); ``scenes(settings)`` makes
+    the scene at varied scene settings (for their truths)."""
     out = Path(out)
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
@@ -307,7 +321,7 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
             save_figure(figs / f"curves_{key}.png", fig)
             paths[f"curves_{key}"] = (figs / f"curves_{key}.png", f"metrics of {key} over its settings")
     if any(not r.get("skipped") for r in doc["records"]):
-        save_figure(figs / "best.png", figure_best(doc, scene, out))
+        save_figure(figs / "best.png", figure_best(doc, scene, out, scenes))
         paths["best"] = (figs / "best.png", "best setting of each sensor beside the truth")
     e = html.escape
     ctx = doc["context"]
@@ -401,11 +415,13 @@ def console_lines(doc) -> list[str]:
 
 def run_sweep_report(plan, out, *, workers=None, scheduler=None, client=None, memory_limit="auto",
                      progress: bool = True, command: str = "", started_s: float | None = None,
-                     crash_after_points: int | None = None, demand_notes: list[str] | None = None) -> dict:
+                     crash_after_points: int | None = None, demand_notes: list[str] | None = None,
+                     device: str = "cpu") -> dict:
     """Run a planned sweep into ``out`` and write its report; returns the sweep document."""
     started = time.perf_counter() if started_s is None else started_s
     doc = sw.sweep(plan, out, workers=workers, scheduler=scheduler, client=client, memory_limit=memory_limit,
-                   progress=progress, crash_after_points=crash_after_points)
-    write_sweep_report(doc, plan.context.make_scene(), out, command, started, demand_notes)
+                   progress=progress, crash_after_points=crash_after_points, device=device)
+    write_sweep_report(doc, plan.context.make_scene(), out, command, started, demand_notes,
+                       scenes=plan.context.make_scene)
     doc["report"] = str(Path(out) / "report.html")
     return doc

@@ -28,33 +28,49 @@ every metric), ``sweep.json`` (the plan, the demands and the answer) and the rep
 (:mod:`viform.report.sweep_report`).
 """
 
-from viform.measure.sweep.answer import _miss_text, _settings_text, answer, answer_sentences
+from viform.measure.sweep.answer import _miss_text, _settings_text, answer, answer_sentences, scene_text
 from viform.measure.sweep.parameters import (
     SWEEP_SENSORS,
     SweepParameter,
     check_sensor,
     make_point_sensor,
+    scene_parameters,
     sweep_parameters,
 )
 from viform.measure.sweep.plan import (
     MAX_DURATION_S,
     MAX_SPIKE_BYTES,
+    SCENE_PREFIX,
     SPIKE_IMAGES,
     SWEEP_FORMAT,
     SWEEP_VERSION,
     Point,
     SweepContext,
     SweepPlan,
+    check_objects,
     make_plan,
     plan_points,
     point_seed,
+    scene_settings,
     standard_vary,
     validate_inputs,
 )
-from viform.measure.sweep.run import SEEN_CNR, run_point, run_sweep, sweep, tracking_scores
+from viform.measure.sweep.run import (
+    DEVICES,
+    SEEN_CNR,
+    TASKS_PER_WORKER,
+    batches,
+    check_device,
+    run_point,
+    run_points,
+    run_sweep,
+    sweep,
+    tracking_scores,
+)
 from viform.measure.sweep.specs import (
     DEFAULT_OBJECTIVE,
     METRIC_DIRECTIONS,
+    SCENE,
     Demand,
     check_objective,
     parse_require,
@@ -75,11 +91,13 @@ from viform.measure.sweep.store import (
 )
 
 __all__ = [
-    "DEFAULT_OBJECTIVE", "MAX_DURATION_S", "MAX_SPIKE_BYTES", "METRIC_DIRECTIONS", "POINTS_DIR", "SEEN_CNR",
-    "SPIKE_IMAGES", "SWEEP_FORMAT", "SWEEP_SENSORS", "SWEEP_VERSION", "ContextMismatch", "Demand", "Point",
-    "SweepContext", "SweepParameter", "SweepPlan", "_finite", "_miss_text", "_settings_text", "answer",
-    "answer_sentences", "check_context", "check_objective", "check_sensor", "load_images", "load_point",
-    "make_plan", "make_point_sensor", "metric_columns", "parse_require", "parse_values", "parse_vary",
-    "plan_points", "point_seed", "read_table", "run_point", "run_sweep", "standard_vary", "store_point",
-    "sweep", "sweep_parameters", "tracking_scores", "validate_inputs", "write_table",
+    "ContextMismatch", "DEFAULT_OBJECTIVE", "DEVICES", "Demand", "MAX_DURATION_S", "MAX_SPIKE_BYTES",
+    "METRIC_DIRECTIONS", "POINTS_DIR", "Point", "SCENE", "SCENE_PREFIX", "SEEN_CNR", "SPIKE_IMAGES", "SWEEP_FORMAT",
+    "SWEEP_SENSORS", "SWEEP_VERSION", "SweepContext", "SweepParameter", "SweepPlan", "TASKS_PER_WORKER", "_finite",
+    "_miss_text", "_settings_text", "answer", "answer_sentences", "batches", "check_context", "check_device",
+    "check_objective", "check_objects", "check_sensor", "load_images", "load_point", "make_plan",
+    "make_point_sensor", "metric_columns", "parse_require", "parse_values", "parse_vary", "plan_points",
+    "point_seed", "read_table", "run_point", "run_points", "run_sweep", "scene_parameters", "scene_settings",
+    "scene_text", "standard_vary", "store_point", "sweep", "sweep_parameters", "tracking_scores", "validate_inputs",
+    "write_table",
 ]

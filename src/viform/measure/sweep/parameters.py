@@ -210,3 +210,43 @@ def _build(key, fam, base, by):
                 times[i] = float(short[name])
         kw["integration_times_s"] = tuple(times)
     return type(base)(pixel, **kw)
+
+
+def _scene_parameter(name: str, default, doc: str) -> SweepParameter | None:
+    kind = _scalar_kind(default)
+    return None if kind is None else SweepParameter(name, kind, default, "scene", doc)
+
+
+def scene_parameters(scene: str) -> dict[str, SweepParameter]:
+    """The numeric and on/off parameters of ``scene`` a sweep can vary (``scene:NAME=SPEC``), with defaults.
+
+    A built-in scene: its constructor's parameters (:data:`viform.light.catalog.SCENES`) and the
+    settings every scene takes where it maps them — ``brightness`` (a factor on its light),
+    ``peak_lux`` (its brightest level, lux) and ``speed`` (a factor on its motion). A scene
+    description: its declared parameters and those three. An image or video: none.
+    """
+    from viform.light.catalog import BUILTIN_SCENES, SCENES
+    from viform.light.description import UNIVERSAL_SETTINGS, is_description_file, load_description
+
+    out: dict[str, SweepParameter] = {}
+    if scene in BUILTIN_SCENES:
+        entry = SCENES[scene]
+        universal = {"brightness": entry.brightness is not None, "peak_lux": entry.brightness is not None,
+                     "speed": entry.speed is not None}
+        declared = {n: (v, "") for n, v in entry.parameters.items()}
+    elif is_description_file(scene):
+        universal = dict.fromkeys(UNIVERSAL_SETTINGS, True)
+        params = load_description(scene).get("parameters") or {}
+        declared = {n: (spec.get("value", spec.get("default")), spec.get("description", ""))
+                    for n, spec in params.items() if isinstance(spec, dict)}
+    else:
+        return out
+    for name, ok in universal.items():
+        if ok:
+            out[name] = SweepParameter(name, "float", None if name == "peak_lux" else 1.0, "scene",
+                                       UNIVERSAL_SETTINGS[name])
+    for name, (default, doc) in declared.items():
+        p = _scene_parameter(name, default, doc)
+        if p is not None and name not in out:
+            out[name] = p
+    return out

@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from viform._validate import ViformError, check_int, check_positive
+from viform._validate import ViformError, check_int, check_positive, one_line
 from viform.measure import comparison as cmp
-from viform.measure.sweep.parameters import check_sensor, make_point_sensor, sweep_parameters
-from viform.measure.sweep.specs import DEFAULT_OBJECTIVE, check_objective, parse_require, parse_vary
+from viform.measure.sweep.parameters import check_sensor, make_point_sensor, scene_parameters, sweep_parameters
+from viform.measure.sweep.specs import DEFAULT_OBJECTIVE, SCENE, check_objective, parse_require, parse_vary
 
 #: Spike reconstructions a sweep can score (compare's names).
 SPIKE_IMAGES = ("best", "interval", "accumulation")
@@ -49,17 +49,26 @@ def _fmt_value(v) -> str:
     return str(v) if isinstance(v, (bool, int)) else f"{v:.4g}"
 
 
+#: Prefix of a varied scene parameter among a point's swept parameters and the table's columns.
+SCENE_PREFIX = "scene."
+
+
 @dataclass(frozen=True)
 class Point:
-    """One sensor at one setting: ``settings`` holds only the parameters that differ from its default."""
+    """One sensor at one setting (``settings``: only the parameters that differ from its default), on
+    the scene at ``scene`` (the varied scene parameters, every value kept; empty when none is varied)."""
 
     sensor: str
     settings: tuple  # ((name, value), ...) sorted by name
     swept: tuple = ()  # ((name, value), ...) every parameter this sensor's sweep varies, defaults filled in
+    scene: tuple = ()  # ((name, value), ...) sorted by name: the scene's varied parameters
 
     @property
     def key(self) -> str:
-        return json.dumps([self.sensor, [[n, v] for n, v in self.settings]], separators=(",", ":"))
+        parts = [self.sensor, [[n, v] for n, v in self.settings]]
+        if self.scene:  # a point on the sweep's own scene keeps the key (and the seed) it always had
+            parts.append([[n, v] for n, v in self.scene])
+        return json.dumps(parts, separators=(",", ":"))
 
     @property
     def point_id(self) -> str:
@@ -70,9 +79,11 @@ class Point:
         return not self.settings
 
     def label(self) -> str:
-        if not self.settings:
-            return f"{self.sensor} (default)"
-        return f"{self.sensor} " + ", ".join(f"{n}={_fmt_value(v)}" for n, v in self.settings)
+        text = (f"{self.sensor} (default)" if not self.settings
+                else f"{self.sensor} " + ", ".join(f"{n}={_fmt_value(v)}" for n, v in self.settings))
+        if self.scene:
+            text += " · scene " + ", ".join(f"{n}={_fmt_value(v)}" for n, v in self.scene)
+        return text
 
 
 def point_seed(sweep_seed: int, point: Point) -> int:
@@ -90,20 +101,33 @@ def plan_points(sensors, vary: dict[str, dict[str, list]], name: str = "vary") -
     any work; the error begins with ``name``.
     """
     points: dict[str, Point] = {}
-    for key in sensors:
-        space = sweep_parameters(key)
-        grid = vary.get(key, {})
-        names = sorted(grid)
-        for combo in itertools.product(*(grid[n] for n in names)) if names else [()]:
-            settings = {n: _canonical(v) for n, v in zip(names, combo, strict=True)
-                        if _canonical(v) != _canonical_default(space[n].default)}
-            swept = tuple((n, _canonical(v)) for n, v in zip(names, combo, strict=True))
-            p = Point(key, tuple(sorted(settings.items())), swept)
-            make_point_sensor(key, settings, name)
-            points.setdefault(p.point_id, p)
-        default = Point(key, (), tuple((n, _canonical_default(space[n].default)) for n in names))
-        points.setdefault(default.point_id, default)
+    for scene in scene_settings(vary):
+        scene_swept = tuple((SCENE_PREFIX + n, v) for n, v in scene)
+        for key in sensors:
+            space = sweep_parameters(key)
+            grid = vary.get(key, {})
+            names = sorted(grid)
+            for combo in itertools.product(*(grid[n] for n in names)) if names else [()]:
+                settings = {n: _canonical(v) for n, v in zip(names, combo, strict=True)
+                            if _canonical(v) != _canonical_default(space[n].default)}
+                swept = tuple((n, _canonical(v)) for n, v in zip(names, combo, strict=True))
+                p = Point(key, tuple(sorted(settings.items())), swept + scene_swept, scene)
+                if p.point_id not in points:
+                    make_point_sensor(key, settings, name)
+                points.setdefault(p.point_id, p)
+            default = Point(key, (), tuple((n, _canonical_default(space[n].default)) for n in names) + scene_swept,
+                            scene)
+            points.setdefault(default.point_id, default)
     return list(points.values())
+
+
+def scene_settings(vary: dict) -> list[tuple]:
+    """Every combination of the varied scene parameters (``vary["scene"]``), each ((name, value), ...)
+    sorted by name; [()] when the scene is not varied."""
+    grid = vary.get(SCENE, {}) or {}
+    names = sorted(grid)
+    return [tuple(zip(names, (_canonical(v) for v in combo), strict=True))
+            for combo in itertools.product(*(grid[n] for n in names))] if names else [()]
 
 
 @dataclass(frozen=True)
@@ -127,13 +151,18 @@ class SweepContext:
     def fingerprint(self) -> str:
         return hashlib.sha256(json.dumps(self.describe(), sort_keys=True).encode()).hexdigest()
 
-    def make_scene(self):
-        from viform.light.catalog import BUILTIN_SCENES, builtin_scene, load_scene
+    def make_scene(self, settings=()):
+        """The scene, with ``settings`` (varied scene parameters, name → value) on top of its options."""
+        from viform.light.catalog import BUILTIN_SCENES, builtin_scene, entry_settings, load_scene
 
+        varied = dict(settings)
         if self.scene in BUILTIN_SCENES:
-            return builtin_scene(self.scene, self.height, self.width, **dict(self.scene_options))
-        return load_scene(self.scene, self.height, self.width, resize=True,
-                          settings={k: list(v) if isinstance(v, tuple) else v for k, v in self.scene_options} or None)
+            options = dict(self.scene_options)
+            if varied:  # the options are the scene's own keywords; the varied settings apply on top of them
+                options = entry_settings(self.scene, {**options, **varied}, "scene setting")
+            return builtin_scene(self.scene, self.height, self.width, **options)
+        base = {k: list(v) if isinstance(v, tuple) else v for k, v in self.scene_options}
+        return load_scene(self.scene, self.height, self.width, resize=True, settings={**base, **varied} or None)
 
 
 def standard_vary(scene) -> tuple[list[str], dict[str, dict[str, list]]]:
@@ -177,6 +206,28 @@ def validate_inputs(scene: str, height: int, width: int, duration_s: float, seed
         if not 0 <= t < duration_s:
             raise ViformError(f"instants_s: instant {t!r} s is outside the clip [0, {duration_s:g}) s")
     return height, width, seed, instants
+
+
+def check_scene_settings(context: SweepContext, vary: dict, tracking: bool = False, name: str = "vary") -> None:
+    """Build the scene at every combination of its varied parameters, so a value it refuses is refused
+    before any work (and, with ``tracking``, one without objects); a parameter also set in the
+    context's scene options is refused (give it in one place)."""
+    grid = vary.get(SCENE) or {}
+    both = sorted(set(grid) & {k for k, _ in context.scene_options})
+    if both:
+        raise ViformError(f"{name}: the scene's {both[0]!r} is both varied and set in scene_options; give it in "
+                          "one place")
+    for settings in scene_settings(vary) if grid else ():
+        text = ", ".join(f"{n}={_fmt_value(v)}" for n, v in settings)
+        try:
+            scene_obj = context.make_scene(settings)
+        except (ViformError, ValueError, TypeError) as exc:
+            raise ViformError(f"{name}: the scene at {text} cannot be made: {one_line(exc)}") from None
+        if tracking:
+            try:
+                check_objects(scene_obj, context.scene, context.duration_s, context.instants_s, name)
+            except ViformError as exc:
+                raise ViformError(f"{exc} (at {text})") from None
 
 
 def check_objects(scene_obj, scene: str, duration_s: float, instants_s=(), name: str = "tracking") -> None:
@@ -232,15 +283,21 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
         check_sensor(k, "sensors")
     if "gated" in sensors and getattr(scene_obj, "active", None) is None:
         raise ViformError(f"sensors: 'gated' needs a scene with range (night-road-fog); scene {scene!r} has none")
+    scene_space = scene_parameters(scene)
     if vary is None:
-        vary = parse_vary(vary_texts, sensors)
+        vary = parse_vary(vary_texts, sensors, scene_space)
     else:
         spaces = {k: sweep_parameters(k) for k in sensors}
+        spaces[SCENE] = scene_space
         for k, grid in vary.items():
+            if k not in spaces:
+                raise ViformError(f"vary: {k!r} is not a sensor of this sweep (its sensors: {', '.join(sensors)}) "
+                                  f"nor {SCENE!r}")
             for n in grid:
-                if n not in spaces.get(k, {}):
-                    raise ViformError(f"vary: {n!r} is not a parameter of sensor {k!r}; allowed: "
-                                      f"{', '.join(sorted(spaces.get(k, {})))}")
+                if n not in spaces[k]:
+                    raise ViformError(f"vary: {n!r} is not a parameter of {'the scene' if k == SCENE else k!r}; "
+                                      f"allowed: {', '.join(sorted(spaces[k])) or 'none'}")
+    check_scene_settings(context, vary, tracking)
     if "spike" in sensors:
         clocks = vary.get("spike", {}).get("clock_hz", [cmp.spike_preset()[0].parameters.clock_hz])
         need = height * width * duration_s * max(clocks)

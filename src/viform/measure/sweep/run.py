@@ -33,11 +33,13 @@ from viform.measure.sweep.store import (
 SEEN_CNR = 3.0
 
 
-def run_point(context: SweepContext, point: Point) -> dict:
+def run_point(context: SweepContext, point: Point, scene=None, device: str = "cpu") -> dict:
     """Shoot and score one point (runs on a worker); returns its record and its images.
 
     The record holds the metrics of :func:`viform.measure.comparison.score`; ``images`` holds the
     light estimate (lux, float32; NaN where under-exposed) at each instant, for the report.
+    ``scene`` is the point's scene when the caller has made it already (points of one task share
+    it); ``device`` runs a spike sensor's simulation there ("cpu" or "cuda"; others run on the CPU).
     """
     from numba import get_num_threads, set_num_threads
 
@@ -47,13 +49,13 @@ def run_point(context: SweepContext, point: Point) -> dict:
     threads = get_num_threads()
     set_num_threads(1)  # one point per worker: parallelism comes from the workers
     try:
-        scene = context.make_scene()
+        scene = context.make_scene(point.scene) if scene is None else scene
         sensor = make_point_sensor(point.sensor, dict(point.settings))
         seed = point_seed(context.seed, point)
         methods = [context.spike_image] if point.sensor == "spike" else None
         try:
             shots = cmp.shoot(point.sensor, scene, context.duration_s, list(context.instants_s), seed=seed,
-                              sensor=sensor, spike_methods=methods)
+                              sensor=sensor, spike_methods=methods, device=device)
         except (ViformError, ValueError) as exc:  # this setting cannot shoot this scene (light beyond its range …)
             why = one_line(exc) if isinstance(exc, ViformError) else f"the model refused this light ({one_line(exc)})"
             shots = [cmp.Shot(point.sensor, point.label(), "", skipped=why)]
@@ -76,7 +78,23 @@ def run_point(context: SweepContext, point: Point) -> dict:
               "shot_label": shot.label, "skipped": shot.skipped, "seed": seed, "metrics": metrics,
               "context_sha256": context.fingerprint(),
               "seconds": time.perf_counter() - started, "cpu_seconds": time.process_time() - cpu}
+    if point.scene:
+        record["scene"] = dict(point.scene)
+    if device != "cpu" and point.sensor == "spike":
+        record["device"] = device
     return {"record": record, "images": images}
+
+
+def run_points(context: SweepContext, points, device: str = "cpu") -> list[dict]:
+    """Shoot and score several points in one task, in order (:func:`run_point` each); points on the same
+    scene setting share one scene object (its light caches included)."""
+    scenes: dict = {}
+    out = []
+    for p in points:
+        if p.scene not in scenes:
+            scenes[p.scene] = context.make_scene(p.scene)
+        out.append(run_point(context, p, scenes[p.scene], device))
+    return out
 
 
 def tracking_scores(scene, duration_s: float, shot) -> dict:
@@ -107,13 +125,44 @@ def _open(workers, scheduler, memory_limit):
     return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"))
 
 
+#: Tasks per dask worker a sweep's points are grouped into: several points per task cut the per-task
+#: overhead (scheduling, transfer, the scene made once), and several tasks per worker keep the
+#: workers busy to the end when points cost unequally.
+TASKS_PER_WORKER = 4
+#: Devices a sweep runs its spike simulations on.
+DEVICES = ("cpu", "cuda")
+
+
+def batches(points, n_workers: int, tasks_per_worker: int = TASKS_PER_WORKER) -> list[list]:
+    """``points`` dealt round-robin into at most ``n_workers × tasks_per_worker`` tasks (each non-empty), so
+    each task holds a mix of cheap and costly points. Results do not depend on the grouping."""
+    n = max(1, min(len(points), max(1, n_workers) * tasks_per_worker))
+    return [b for b in (list(points[i::n]) for i in range(n)) if b]
+
+
+def check_device(device: str, sensors, name: str = "device") -> str:
+    """``device`` ("cpu" or "cuda", checked for a GPU) for a sweep of ``sensors``; "cuda" needs a spike sensor."""
+    if device not in DEVICES:
+        raise ViformError(f"{name} = {device!r} is not allowed: choose one of {', '.join(DEVICES)}")
+    if device == "cuda":
+        if "spike" not in sensors:
+            raise ViformError(f"{name} = 'cuda' runs the spike camera's simulation on a GPU; this sweep has no spike "
+                              f"sensor ({', '.join(sensors)})")
+        from viform.sensors.spike_cuda import resolve_device
+
+        resolve_device("cuda", name)
+    return device
+
+
 def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,
-              client=None, memory_limit="auto", progress: bool = True, crash_after_points: int | None = None) -> dict:
+              client=None, memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
+              device: str = "cpu") -> dict:
     """Run every point not already stored in ``out``; return the records (plan order) and run figures.
 
     ``workers=0`` runs the points in this process, one after the other (no dask); otherwise on a
     dask LocalCluster of ``workers`` processes (default: the CPU count), on ``scheduler``, or on
-    an open ``client``. ``crash_after_points`` (testing aid) ends this process abruptly after
+    an open ``client``, several points per task (:func:`batches`). Each point is stored as soon as
+    its task returns. ``crash_after_points`` (testing aid) ends this process abruptly after
     storing that many new points, as a kill would.
     """
     out = Path(out)
@@ -148,17 +197,22 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
     (out / POINTS_DIR).mkdir(parents=True, exist_ok=True)
     try:
         if todo and client is None and workers == 0:
+            scenes: dict = {}
             for p in todo:
-                take(run_point(context, p))
+                if p.scene not in scenes:
+                    scenes[p.scene] = context.make_scene(p.scene)
+                take(run_point(context, p, scenes[p.scene], device))
         elif todo:
             from distributed import as_completed
 
             n_workers = len(client.scheduler_info().get("workers", {}))
             token = uuid.uuid4().hex[:8]
-            futures = [client.submit(run_point, context, p, key=f"viform-sweep-{p.point_id}-{token}", pure=False)
-                       for p in todo]
+            futures = [client.submit(run_points, context, batch, device, pure=False,
+                                     key=f"viform-sweep-{batch[0].point_id}-{len(batch)}-{token}")
+                       for batch in batches(todo, n_workers)]
             for fut in as_completed(futures):
-                take(fut.result())
+                for result in fut.result():
+                    take(result)
     finally:
         if bar is not None:
             bar.close()
@@ -174,8 +228,15 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
 
 
 def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | None = None, client=None,
-          memory_limit="auto", progress: bool = True, crash_after_points: int | None = None) -> dict:
-    """Run a planned sweep into ``out``: points, ``sweep.zarr`` and ``sweep.json``; returns the sweep document."""
+          memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
+          device: str = "cpu") -> dict:
+    """Run a planned sweep into ``out``: points, ``sweep.zarr`` and ``sweep.json``; returns the sweep document.
+
+    ``device`` ("cpu" or "cuda") runs the spike sensor's simulations there; it is recorded with each
+    spike point and in ``sweep.json``, and is not part of the context (a sweep started on a GPU may be
+    resumed on a CPU: the two give the same bits except in rare last-bit roundings, see
+    :mod:`viform.sensors.spike_cuda`).
+    """
     from viform._io import check_output_folder
 
     out = Path(out)
@@ -188,16 +249,18 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
     if workers is not None:
         workers = check_int("workers", workers, 0, 1024)
     memory_limit = parse_memory(memory_limit, "memory_limit")
+    device = check_device(device, plan.sensors)
     check_context(out, plan.context)
     run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
-                    memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points)
+                    memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points,
+                    device=device)
     records = run["records"]
     result = answer(records, plan.demands, plan.objective)
     write_table(out / "sweep.zarr", records, plan.context)
     doc = {"context": plan.context.describe(), "sensors": plan.sensors,
            "vary": {k: v for k, v in plan.vary.items() if v}, "n_points": len(records),
            "computed": run["computed"], "reused": run["reused"], "seconds": run["seconds"],
-           "cpu_seconds": run["cpu_seconds"], "workers": run["workers"], "answer": result,
+           "cpu_seconds": run["cpu_seconds"], "workers": run["workers"], "device": device, "answer": result,
            "pareto": [list(p) for p in plan.pareto], "points": [_finite(r) for r in records]}
     write_json(out / "sweep.json", _finite(doc))
     doc["records"] = records
