@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from viform.measure.sweep import load_images, make_plan, sweep
+from viform.measure.sweep import load_images, make_plan, run, sweep
 
 
 def load() -> str:
@@ -47,7 +47,12 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--duration", type=float, default=0.04)
     ap.add_argument("--standard", action="store_true", help="the standard sweep of every sensor (158 points)")
+    ap.add_argument("--tasks-per-worker", type=int, default=None,
+                    help=f"points are grouped into this many tasks per worker (default {run.TASKS_PER_WORKER}); "
+                         "a large number gives one task per point")
     args = ap.parse_args()
+    if args.tasks_per_worker is not None:
+        run.TASKS_PER_WORKER = args.tasks_per_worker
     size = dict(height=args.height, width=args.width, duration_s=args.duration)
     if args.standard:
         plan = make_plan("dilemma", require="dr_captured_db>=122,edge_width_px<=2", **size)
@@ -55,7 +60,7 @@ def main() -> None:
         plan = make_plan("dilemma", ["spike"], ["spike:threshold_level=all", "spike:clock_hz=20e3,40e3"],
                          require="dr_captured_db>=60,time_resolution_s<=0.000333", **size)
     print(f"sweep: {len(plan.points)} points on dilemma {args.height}×{args.width}, {args.duration * 1e3:g} ms; "
-          f"{os.cpu_count()} CPUs; load {load()}", flush=True)
+          f"{run.TASKS_PER_WORKER} tasks per worker; {os.cpu_count()} CPUs; load {load()}", flush=True)
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for workers in map(int, args.workers.split(",")):

@@ -130,7 +130,7 @@ def _pareto_panel(ax, doc, records, colours, meeting, x_key, y_key):
         # the front's points are outlined, so a front of one point (or of two close ones) is still seen
         ax.plot(xs[ok][front], ys[ok][front], color="0.35", lw=1.2, ls="--", zorder=2)
         ax.scatter(xs[ok][front], ys[ok][front], marker="s", s=95, facecolor="none", edgecolor="0.25",
-                   linewidth=1.2, zorder=4, label="Pareto front: no point beats these on both metrics "
+                   linewidth=1.2, zorder=4, label="Pareto front: no point beats these\non both metrics "
                                                   "(grey squares, dashed line)")
     for d in doc["answer"]["demands"]:
         metric, op, bound = _split_demand(d)
@@ -186,6 +186,7 @@ def figure_curves(doc, key: str):
     fig, axes = plt.subplots(rows, cols, figsize=(13, 2.55 * rows + 0.9), squeeze=False)
     fig.subplots_adjust(left=0.06, right=0.985, bottom=0.1 if rows == 1 else 0.07, top=1 - 0.75 / (2.55 * rows + 0.9),
                         wspace=0.38, hspace=0.62)
+    xs_raw = [r["swept"].get(x_name) for r in records if r["swept"].get(x_name) is not None]
     xs_all = np.array([float(r["swept"].get(x_name, math.nan)) for r in records])
     logx = np.all(xs_all[np.isfinite(xs_all)] > 0) and np.nanmax(xs_all) / np.nanmin(xs_all) > 30
     meeting = set(doc["answer"]["meeting"])
@@ -212,6 +213,10 @@ def figure_curves(doc, key: str):
                        edgecolor="black", linewidth=0.7, zorder=6)
         if logx:
             ax.set_xscale("log")
+        elif all(isinstance(v, int) and not isinstance(v, bool) for v in xs_raw):
+            from matplotlib.ticker import MaxNLocator
+
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # a count (threshold level): no 2.5
         flat = _floor_span(ax, [_value(r, metric) for r in records])
         ax.set_title(metric_label(metric) + (f"\nflat: every point within ±{flat:.2g}" if flat is not None else ""),
                      fontsize=9)

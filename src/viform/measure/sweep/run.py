@@ -121,8 +121,18 @@ def tracking_scores(scene, duration_s: float, shot) -> dict:
             "tracking_objects_missed": float(len(r["never_found"]))}
 
 
+#: dask settings of the local cluster a sweep starts: no statistical profiler in the workers (it samples
+#: the running task's stack every 10 ms: a few % of each worker's CPU, for a dashboard nobody watches
+#: here) and no work stealing (the tasks are independent and queued at the scheduler, which hands
+#: each to the next free worker; stealing would only poll).
+CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.work-stealing": False}
+
+
 def _open(workers, scheduler, memory_limit):
-    return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"))
+    import dask
+
+    with dask.config.set(CLUSTER_CONFIG if scheduler is None else {}):
+        return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"))
 
 
 #: Tasks per dask worker a sweep's points are grouped into: several points per task cut the per-task
@@ -133,10 +143,12 @@ TASKS_PER_WORKER = 4
 DEVICES = ("cpu", "cuda")
 
 
-def batches(points, n_workers: int, tasks_per_worker: int = TASKS_PER_WORKER) -> list[list]:
-    """``points`` dealt round-robin into at most ``n_workers × tasks_per_worker`` tasks (each non-empty), so
-    each task holds a mix of cheap and costly points. Results do not depend on the grouping."""
-    n = max(1, min(len(points), max(1, n_workers) * tasks_per_worker))
+def batches(points, n_workers: int, tasks_per_worker: int | None = None) -> list[list]:
+    """``points`` dealt round-robin into at most ``n_workers × tasks_per_worker`` tasks (default
+    :data:`TASKS_PER_WORKER`; each non-empty), so each task holds a mix of cheap and costly points.
+    Results do not depend on the grouping."""
+    per = TASKS_PER_WORKER if tasks_per_worker is None else tasks_per_worker
+    n = max(1, min(len(points), max(1, n_workers) * per))
     return [b for b in (list(points[i::n]) for i in range(n)) if b]
 
 
