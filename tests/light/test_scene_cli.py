@@ -93,3 +93,21 @@ def test_dataset_truth_in_lux_beside_a_visible_png(run, tmp_path):
     v = np.clip(lux / white, 0, 1)
     expected = np.rint(255 * np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055))
     assert np.abs(png.astype(float) - expected).max() <= 1
+
+
+def test_scenes_json_and_json_file(tmp_path, capsys):
+    """`viform scenes` and `scenes show` print JSON and write it with --json-file, as every command does."""
+    import json
+
+    from viform.cli import main
+
+    assert main(["scenes", "--json", "--json-file", str(tmp_path / "a" / "s.json")]) == 0
+    out = capsys.readouterr().out
+    assert json.loads(out) == json.loads((tmp_path / "a" / "s.json").read_text())
+    assert any(row["name"] == "multi-object" for row in json.loads(out))
+    assert main(["scenes", "show", "multi-object", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["name"] == "multi-object"
+    (tmp_path / "d.json").mkdir()
+    assert main(["scenes", "--json-file", str(tmp_path / "d.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--json-file" in err
