@@ -266,6 +266,27 @@ def test_identical_results_with_one_and_two_workers(serial, tmp_path):
                                           sw.load_images(tmp_path / f"w{n}", r["point_id"]))
 
 
+def test_own_local_cluster_gives_the_same_points(serial, tmp_path):
+    """workers=2 starts the sweep's own LocalCluster (its settings: no profiler, no work stealing), in
+    round-robin batches of points; the points equal the in-process ones, and this process's dask settings
+    are left as they were."""
+    plan, out, ref = serial
+    # a fresh process, where distributed is not imported yet (as on the command line)
+    code = (f"import dask, json\nfrom viform.measure import sweep as sw\n"
+            f"plan = sw.make_plan('dilemma', ['cmos'], ['cmos:exposure_s=1e-4,1e-3'], **{TINY!r})\n"
+            f"doc = sw.sweep(plan, {str(tmp_path)!r}, workers=2, progress=False)\n"
+            f"print(json.dumps([doc['workers'], doc['computed'], "
+            f"dask.config.get('distributed.scheduler.work-stealing')]))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800,
+                         env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[3])})
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert json.loads(run.stdout.strip().splitlines()[-1]) == [2, 3, True]
+    doc = json.loads((tmp_path / "sweep.json").read_text())
+    _same([r for r in ref["records"] if r["sensor"] == "cmos"], [sw._restore(r) for r in doc["points"]])
+    assert sw.batches(list(range(7)), 1, 3) == [[0, 3, 6], [1, 4], [2, 5]]
+    assert sw.batches(list(range(2)), 2) == [[0], [1]]
+
+
 def test_table_and_physics(serial):
     """sweep.zarr holds one row per point; a lower threshold sees darker light in the same clip (fewer pixels
     under-exposed) and the spike camera's range in a clip stays within its 20·lg(clock · clip) bound."""

@@ -130,6 +130,7 @@ CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.sche
 
 def _open(workers, scheduler, memory_limit):
     import dask
+    import distributed  # noqa: F401 -- its defaults join dask's config first (set() would drop them on exit)
 
     with dask.config.set(CLUSTER_CONFIG if scheduler is None else {}):
         return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"))
