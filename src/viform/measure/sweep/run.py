@@ -121,11 +121,22 @@ def tracking_scores(scene, duration_s: float, shot) -> dict:
             "tracking_objects_missed": float(len(r["never_found"]))}
 
 
-#: dask settings of the local cluster a sweep starts: no statistical profiler in the workers (it samples
-#: the running task's stack every 10 ms: a few % of each worker's CPU, for a dashboard nobody watches
-#: here) and no work stealing (the tasks are independent and queued at the scheduler, which hands
-#: each to the next free worker; stealing would only poll).
-CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.work-stealing": False}
+#: dask settings of the local cluster a sweep starts. No statistical profiler in the workers: it samples
+#: the running task's stack every 10 ms, and with dask's ``MALLOC_TRIM_THRESHOLD_`` its frees trim the
+#: heap that the point's arrays then grow again — 12–15 % more CPU per point than in this process,
+#: measured point by point alternately (0.95–0.99× without). The workers' environment keeps dask's
+#: one-thread BLAS/OpenMP settings but not ``MALLOC_TRIM_THRESHOLD_`` (setting it also switches off
+#: glibc's adaptive mmap threshold, so every large temporary array is mapped and unmapped anew: 5×
+#: the page faults; a sweep's workers live for one sweep). No work stealing: the tasks are
+#: independent and queued at the scheduler, which hands each to the next free worker. The event
+#: loops' latency tick every 1 s (not 20 ms) and the system monitor every 5 s (not 0.5 s): an idle
+#: 2-worker cluster then costs 0.75 CPU-s per 20 s instead of 2.8 (this process and its children,
+#: measured), CPU taken from the points on a 2-core machine. The workers' memory monitor (which
+#: enforces the memory limit) keeps its own interval.
+CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.work-stealing": False,
+                  "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
+                                                          "OPENBLAS_NUM_THREADS": 1},
+                  "distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s"}
 
 
 def _open(workers, scheduler, memory_limit):
