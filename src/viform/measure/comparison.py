@@ -317,7 +317,7 @@ def moving_pixels(scene, t_s: float, shape) -> np.ndarray:
     elif "motion" in (scene.truth_kinds() if hasattr(scene, "truth_kinds") else ()):
         try:
             mask = np.hypot(*np.asarray(scene.motion_px_per_s(t_s), np.float64)[:2]) > 0
-        except Exception:  # a scene whose motion truth is unavailable at t: no mask
+        except ViformError:  # a scene whose motion truth is unavailable at t (TruthUnavailable): no mask
             mask = None
     if mask is None or mask.shape != tuple(shape) or not mask.any():
         return np.ones(shape, bool)
