@@ -167,7 +167,8 @@ def _axes_of(doc, key):
             **{sw.SCENE_PREFIX + n: v for n, v in (doc["vary"].get(sw.SCENE) or {}).items()}}
     if not grid:
         return None, []
-    x = max(sorted(grid), key=lambda n: len(grid[n]))
+    # most values; on a tie the sensor's own parameter (the designer's knob) before the scene's
+    x = max(sorted(grid), key=lambda n: (len(grid[n]), not n.startswith(sw.SCENE_PREFIX)))
     return x, [n for n in sorted(grid) if n != x]
 
 
@@ -197,7 +198,7 @@ def figure_curves(doc, key: str):
         groups.setdefault(tuple(r["swept"].get(n) for n in others), []).append(r)
     cmap = plt.get_cmap("viridis")
     for ax, metric in zip(axes.flat, metrics, strict=False):
-        for gi, (combo, rs) in enumerate(sorted(groups.items(), key=lambda kv: str(kv[0]))):
+        for gi, (combo, rs) in enumerate(sorted(groups.items(), key=lambda kv: _order(kv[0]))):
             rs = sorted(rs, key=lambda r: r["swept"][x_name])
             colour = cmap(gi / max(1, len(groups) - 1)) if len(groups) > 1 else "C0"
             label = ", ".join(f"{parameter_label(n)} = {_fmt_param(v)}" for n, v in zip(others, combo, strict=True))
@@ -207,10 +208,10 @@ def figure_curves(doc, key: str):
             if ring:
                 ax.scatter([r["swept"][x_name] for r in ring], [_value(r, metric) for r in ring], s=60,
                            facecolor="none", edgecolor="green", linewidth=1.4, zorder=5)
-        default = next((r for r in records if r["default"]), None)
-        if default is not None and default["swept"].get(x_name) is not None:
-            ax.scatter([default["swept"][x_name]], [_value(default, metric)], marker="*", s=150, color="gold",
-                       edgecolor="black", linewidth=0.7, zorder=6)
+        defaults = [r for r in records if r["default"] and r["swept"].get(x_name) is not None]  # one per scene setting
+        if defaults:
+            ax.scatter([r["swept"][x_name] for r in defaults], [_value(r, metric) for r in defaults], marker="*",
+                       s=150, color="gold", edgecolor="black", linewidth=0.7, zorder=6)
         if logx:
             ax.set_xscale("log")
         elif all(isinstance(v, int) and not isinstance(v, bool) for v in xs_raw):
@@ -238,6 +239,11 @@ def figure_curves(doc, key: str):
 #: The smallest y-span a metric's panel shows, as a fraction of the metric's size: a metric that varies
 #: less than this over the sweep is drawn flat, not stretched until rounding noise looks like structure.
 MIN_SPAN_FRACTION = 0.05
+
+
+def _order(combo) -> tuple:
+    """Sort key of a line's values: numbers by value (1, 6, 12 — not "1", "12", "6"), None last."""
+    return tuple((v is None, v if isinstance(v, (int, float)) else 0, str(v)) for v in combo)
 
 
 def _floor_span(ax, values) -> float | None:
