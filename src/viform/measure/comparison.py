@@ -14,8 +14,18 @@ against the analytic truth at the same instants:
 * flicker error: |estimate − truth| of the PWM LED over its on/off swing, 0 (right) … 1 (wrong);
 * dynamic range captured: 20·lg(max/min) of the true illuminances that the sensor renders
   within a factor of 2 without saturating or dropping below its floor (0.1–99.9 percentile);
-* data rate (MB/s) of the raw output at this resolution, and latency (worst-case time from
-  a light change to an image that shows it).
+* data rate (MB/s) of the raw output at this resolution;
+* time resolution (``time_resolution_s``, "integration time"): how long the sensor's pixel
+  integrates the light behind one reading — a frame camera's exposure (the auto-exposure's
+  median for the high-speed camera, the gate's total open time for the gated camera); a spike
+  pixel integrates until it holds Q electrons, so its integration time is its own inter-spike
+  interval τ = Q/(η·E) (seed 000 §3.3), read at each scored instant (the interval containing
+  it) and reported as the median over the pixels where the scene moves at those instants
+  (:func:`spike_timing`). It is the sensor's, so every reconstruction of one spike stream
+  reports the same value; how a reconstruction combines intervals shows in its edge width;
+* latency (``latency_s``): the time from a change of light to a reading that shows it — a
+  frame camera's frame period; a spike pixel's next spike (at most its interval τ) plus the
+  readout tick, median over the same pixels as the time resolution.
 """
 
 from __future__ import annotations
@@ -169,12 +179,50 @@ def frames_in_lux(shot: Shot, duration_s: float):
     return [e.lux for e in ests], raw.start_times_s[:n] + raw.exposure_s[:n]
 
 
+def moving_pixels(scene, t_s: float, shape) -> np.ndarray:
+    """Pixels where the scene moves at ``t_s``: its ``moving_mask``, else where its motion truth is not
+    zero; every pixel when it says neither, or nothing moves."""
+    mask = None
+    if hasattr(scene, "moving_mask"):
+        mask = np.asarray(scene.moving_mask(t_s), bool)
+    elif "motion" in (scene.truth_kinds() if hasattr(scene, "truth_kinds") else ()):
+        try:
+            mask = np.hypot(*np.asarray(scene.motion_px_per_s(t_s), np.float64)[:2]) > 0
+        except ViformError:  # a scene whose motion truth is unavailable at t (TruthUnavailable): no mask
+            mask = None
+    if mask is None or mask.shape != tuple(shape) or not mask.any():
+        return np.ones(shape, bool)
+    return mask
+
+
+def spike_timing(stream, scene, instants_s) -> tuple[float, float, list]:
+    """(time resolution s, latency s, per-pixel intervals s at each instant) of a spike stream.
+
+    A spike pixel integrates its photo-charge until it reaches Q and fires: its integration time
+    is its inter-spike interval, τ = Q/(η·E) at steady light E (seed 000 §3.3), so it falls as Q
+    falls or the light rises, down to one readout tick. The interval containing each instant is
+    read from the spikes (:func:`viform.imaging.interval_image`; one cut by the clip's ends is
+    the part inside the clip); the time resolution is the median of τ over the pixels where the
+    scene moves (:func:`moving_pixels`) at each instant, then over the instants. A change of light
+    reaches the output at the pixel's next spike, at most τ later, and is read at the next tick:
+    latency = time resolution + one tick.
+    """
+    tick = 1.0 / stream.clock_hz
+    intervals, medians = [], []
+    for t in instants_s:
+        tau = interval_image(stream, t).info["tau_ticks"] * tick
+        intervals.append(tau)
+        medians.append(float(np.median(tau[moving_pixels(scene, t, tau.shape)])))
+    resolution = float(np.median(medians))
+    return resolution, resolution + tick, intervals
+
+
 def data_rate_mb_per_s(height: int, width: int, bits_per_pixel: float, rate_hz: float) -> float:
     return height * width * bits_per_pixel * rate_hz / 8e6
 
 
 def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sensor=None,
-          spike_methods=None) -> list:
+          spike_methods=None, device: str = "cpu") -> list:
     """Shoot ``scene`` with the catalogue's sensor ``key``; return its :class:`Shot` (one per
     reconstruction for a spike camera).
 
@@ -182,11 +230,14 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sens
     as :mod:`viform.measure.sweep` builds it); ``spike_methods`` limits the spike reconstructions
     (default: every one of :data:`SPIKE_METHODS`). The sensor's ``capture`` gives its output; its
     family turns the output into light (:data:`ESTIMATORS`) and says how fast it is (:data:`SHOTS`).
+    ``device`` ("cpu" or "cuda") runs a spike camera's simulation there (the same algorithm and
+    bits, :mod:`viform.sensors.spike_cuda`); the other families run on the CPU.
     """
     entry = compare_entry(key)
     sensor = sensor if sensor is not None else make_compare_sensor(key)
+    on_device = {"device": device} if device != "cpu" and entry.family == "spike" else {}
     try:
-        output = sensor.capture(scene, duration_s, seed=seed)
+        output = sensor.capture(scene, duration_s, seed=seed, **on_device)
     except ViformError as exc:  # this sensor cannot shoot this scene (a scene without range for the gated CCD …)
         return [Shot(key, entry.label, entry.description, skipped=one_line(exc), name=key, family=entry.family,
                      sensor=sensor)]
@@ -244,27 +295,15 @@ def _spike_shots(entry, sensor, stream, scene, duration_s, instants_s, spike_met
     range_limits = {"clip_s": duration_s, "longest_interval_s": longest,
                     "formula_dr_db": dynamic_range_db(1 / par.clock_hz, longest),
                     "clip_limited_dr_db": clip_limited_dynamic_range_db(1 / par.clock_hz, longest, duration_s)}
+    # the sensor's own integration time and latency, the same for every reconstruction of the stream
+    tres, lat, intervals = spike_timing(stream, scene, instants_s)
     shots = []
     for method in methods:
         label = {"accumulation": f"{head} · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
                  "interval": f"{head} · interval", "best": f"{head} · {best_spike_method_name()}"}[method]
         ests = light_estimates("spike", sensor, stream, instants_s, method=method)
-        if method == "accumulation":
-            tres = ACCUMULATION_WINDOW_S
-            lat = ACCUMULATION_WINDOW_S + 1 / par.clock_hz
-        else:
-            # Each pixel integrates its own time: report the median where the scene moves (all
-            # pixels if it does not); a pixel shows a change at its next spike.
-            taus = []
-            for t, est in zip(instants_s, ests, strict=True):
-                tau = est.integration_s
-                if tau is None:
-                    tau = interval_image(stream, t).info["tau_ticks"] / par.clock_hz
-                    est.integration_s = tau  # the intervals its light is measured over
-                mask = scene.moving_mask(t) if hasattr(scene, "moving_mask") else np.ones(tau.shape, bool)
-                taus.append(np.median(tau[mask] if mask.any() else tau))
-            tres = float(np.median(taus))
-            lat = tres + 1 / par.clock_hz
+        for est, tau in zip(ests, intervals, strict=True):
+            est.integration_s = tau  # each pixel's own integration time at the instant
         shots.append(Shot(f"{entry.name}-{method}", label, f"{entry.description}, {preset}", ests,
                           {**sensor.describe(), "preset": preset, "reconstruction": method,
                            "exposure_note": note, **range_limits},

@@ -38,7 +38,7 @@ class Estimate:
     saturated: np.ndarray
     underexposed: np.ndarray
     source_time_s: tuple  # (start, end) of the light this image integrates
-    integration_s: np.ndarray | None = None  # per pixel, where each pixel integrates its own time
+    integration_s: np.ndarray | None = None  # per pixel, s, where each pixel integrates its own time (spike: τ)
 
 
 def frame_at(starts_s, exposures_s, t_s: float) -> int:
@@ -173,10 +173,7 @@ def best_spike_image(stream, t_s: float) -> Estimate:
     else:
         sat = firing_every_tick(stream, t_s)
         under = img.censored if img.censored is not None else ~(lux > 0)
-    integration = None
-    if "reach_ticks" in img.info:  # motion-compensated: ticks accumulated before and after the instant
-        integration = (np.asarray(img.info["reach_ticks"]).sum(axis=0) + 1) / stream.clock_hz
-    return Estimate(lux, sat, under, (t_s, t_s), integration)
+    return Estimate(lux, sat, under, (t_s, t_s))
 
 
 def highspeed_estimates(sensor, stack, instants_s) -> list:
