@@ -26,8 +26,9 @@ class SchedulerLost(ViformError):  # noqa: N818 -- one line for the user, like e
     """The scheduler was lost (or has had no workers for the timeout) while tasks were pending."""
 
 
-def parse_memory(memory_limit) -> str | int:
-    """Per-worker memory limit: ``"auto"`` (or None) or a size such as ``"2GiB"``, in bytes (≥ 64 MiB)."""
+def parse_memory(memory_limit, name: str = "memory_limit") -> str | int:
+    """Per-worker memory limit: ``"auto"`` (or None) or a size such as ``"2GiB"``, in bytes (≥ 64 MiB);
+    errors begin with ``name``."""
     if memory_limit in (None, "auto"):
         return "auto"
     from dask.utils import parse_bytes
@@ -35,10 +36,10 @@ def parse_memory(memory_limit) -> str | int:
     try:
         value = parse_bytes(str(memory_limit))
     except (ValueError, TypeError):
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: give a size such as 2GiB, "
+        raise ViformError(f"{name} = {memory_limit!r} is not allowed: give a size such as 2GiB, "
                           "or auto") from None
     if value < 64 << 20:
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: at least 64MiB per worker")
+        raise ViformError(f"{name} = {memory_limit!r} is not allowed: at least 64MiB per worker")
     return value
 
 
