@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from viform._validate import ViformError
 from viform.cli import main
 from viform.light.scenes import FlickerScene, StillScene
 from viform.measure.calibration import (
@@ -109,12 +110,47 @@ def test_too_short_recording_says_so():
 @pytest.mark.parametrize("fill", [False, True])
 def test_degenerate_recordings_give_reasons_not_errors(shape, fill):
     """Dark (no spike) or saturated (a spike every tick) recordings of odd sizes: every figure
-    is None with a reason; a preset can still be written (chip defaults, listed as assumed)."""
+    is None with a reason; no preset is written from them unless the caller names the
+    threshold to assume (then listed as assumed)."""
     r = calibrate(SpikeStream(np.full(shape, fill), 40e3))
     assert r["threshold"]["q_eff_electrons"] is None and r["threshold"]["reason"]
     assert r["gain_spread"]["gain_spread_fraction"] is None and r["gain_spread"]["reason"]
-    preset = preset_from_calibration(r)
-    assert "threshold_electrons" in preset.calibration["assumed"]
+    with pytest.raises(ViformError, match="no threshold"):
+        preset_from_calibration(r)
+    preset = preset_from_calibration(r, fallback_threshold_electrons=5000.0)
+    assert preset.calibration["assumed"] == {"threshold_electrons": 5000.0}
+    assert preset.parameters.threshold_electrons == 5000.0
+
+
+def test_too_bright_recording_uses_its_recorded_threshold_or_writes_nothing(tmp_path, capsys):
+    """A recording at 1.4 ticks per interval (Q = 1,000 in its sidecar) measures no threshold
+    and bounds no gain spread (every pixel near one spike a tick reads the same whatever its
+    gain): the preset takes the Q its sidecar records and says so; without a recorded Q the
+    CLI writes no preset and exits 2 with one line naming --out."""
+    s = SpikeSensor(threshold_electrons=1000, dark_current_e_per_s=0.0, gain_spread_fraction=0.03)
+    clock = s.parameters.clock_hz
+    lux = s.parameters.optics.lux_from_electrons_per_s(np.full((32, 32), 1000 / 1.4 * clock))
+    rec = s.capture(StillScene(lux), 200 / clock, seed=3)
+    path = save_spikes(tmp_path / "bright.dat", rec)
+    out = tmp_path / "p.json"
+    code = main(["calibrate", str(path), "--out", str(out)])
+    text, err = capsys.readouterr()
+    assert code == 0, err
+    assert "1,000 e⁻" in text and "not a measurement" in text
+    preset = load_spike_preset(str(out))
+    assert preset.parameters.threshold_electrons == 1000.0
+    assert preset.calibration["recorded"] == {"threshold_electrons": 1000.0}
+    assert "threshold_electrons" not in preset.calibration["measured"]
+    assert "gain_spread_fraction" not in preset.calibration["bounds"]  # nothing bounded it
+    assert "16,250" not in preset.description and "1.625e+04" not in preset.description
+    # the same bits without a sidecar: nothing to write
+    raw = tmp_path / "raw.dat"
+    raw.write_bytes(path.read_bytes())
+    out2 = tmp_path / "q.json"
+    code = main(["calibrate", str(raw), "--height", "32", "--width", "32", "--out", str(out2)])
+    _, err = capsys.readouterr()
+    assert code == 2 and "--out" in err and "no threshold" in err and err.count("\n") == 1
+    assert not out2.exists()
 
 
 def test_hot_and_dead_pixels_found():

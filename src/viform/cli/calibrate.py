@@ -96,6 +96,10 @@ def _lines(file, r: dict, out) -> list[str]:
                          f"{'' if exp is None else format(exp, '.2f'):>12}")
     if out is not None:
         lines += ["", f"  preset written to {out} (use: viform simulate --preset {out} …)"]
+        q_file = r.get("recorded_threshold_electrons")
+        if q_file and not th.get("q_eff_electrons") and not th.get("q_eff_lower_bound_electrons"):
+            lines.append(f"  its threshold, {q_file:,.0f} e⁻, is the one the recording's metadata states, "
+                         "not a measurement")
     return lines
 
 
@@ -133,7 +137,10 @@ def calibrate(recording, out_path, name, max_ticks, height, width, no_flip, cloc
     result = run(source, max_ticks=max_ticks)
     result["source"] = str(recording)
     if out_path is not None:
-        preset = preset_from_calibration(result, name or Path(recording).stem)
+        try:
+            preset = preset_from_calibration(result, name or Path(recording).stem)
+        except ViformError as exc:
+            raise ViformError(f"--out {out_path}: {exc}") from None
         save_spike_preset(out_path, preset)
         result["preset"] = str(out_path)
     if json_file is not None:

@@ -625,12 +625,18 @@ def interval_table(iv, use_pixel: np.ndarray, edges, inv_q: float | None = None)
     return rows
 
 
+#: Shortest mean interval (ticks) of a pixel used for the flat-field spread: at one spike a tick
+#: every pixel reads the same whatever its gain.
+MIN_GAIN_INTERVAL_TICKS = 2.0
+
+
 def _gain_spread(iv: PixelIntervals, sigma2_per_mu2: float, tile: int, min_spikes: int):
     """Flat-field relative spread of the pixel rates after the finite-window noise (module notes)."""
     h, w = iv.height, iv.width
     mu = iv.mean_interval
     n = iv.n_spikes
-    valid = (n >= min_spikes) & np.isfinite(mu) & (mu > 0)
+    # a pixel near the one-bit ceiling (a spike nearly every tick) no longer follows its light
+    valid = (n >= min_spikes) & np.isfinite(mu) & (mu >= MIN_GAIN_INTERVAL_TICKS)
     rate = np.where(valid, 1.0 / np.where(valid, mu, 1.0), np.nan)
     # relative variance of 1/μ_p from its finite window (interval noise + end rounding)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -808,6 +814,8 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
     result: dict = {"height": iv.height, "width": iv.width, "n_ticks": iv.n_ticks,
                     "recording_ticks": int(source.n_ticks), "clock_hz": iv.clock_hz,
                     "duration_s": duration_s, "spikes": int(iv.n_spikes.sum()),
+                    "recorded_threshold_electrons": (None if source.threshold_electrons is None
+                                                     else float(source.threshold_electrons)),
                     "mean_firing_rate_per_tick": float(iv.n_spikes.sum() / (npx * iv.n_ticks))}
     static, sinfo = _checkerboard_static(iv, tile)
     result["static"] = sinfo
@@ -915,16 +923,15 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
 def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_threshold_electrons=None):
     """A :class:`~viform.sensors.spike_presets.SpikePreset` from :func:`calibrate`'s result.
 
-    The measured figures go into the sensor; a figure the recording could not give keeps
-    the chip preset's value (``fallback_threshold_electrons`` or the default chip level)
-    and the preset's ``calibration`` record says which.
+    The measured figures go into the sensor, bounds as their bound; a figure the recording
+    could not give keeps the chip preset's value, and the preset's ``calibration`` record
+    says which (``measured``, ``bounds``, ``recorded``, ``assumed``). The threshold, when
+    neither measured nor bounded, is the one the recording's own metadata states (a
+    simulator's sidecar: ``recorded``), else ``fallback_threshold_electrons`` (``assumed``);
+    with neither, :class:`~viform._validate.ViformError` is raised: a preset that measured
+    no threshold would silently repeat a chip default.
     """
-    from viform.sensors.spike_presets import (
-        DEFAULT_THRESHOLD_LEVEL,
-        SpikePreset,
-        _chip_parameters,
-        threshold_level_electrons,
-    )
+    from viform.sensors.spike_presets import SpikePreset, _chip_parameters
 
     # measured: an estimate with its error in the result; bounds: {field: {"value", "kind", "why"}},
     # the value the preset simulates with; assumed: the chip preset's value
@@ -933,16 +940,23 @@ def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_
     def bound(name, value, kind, why):
         bounds[name] = {"value": float(value), "kind": kind, "why": why}
 
+    recorded = {}  # figures the recording's own metadata states (a simulator's sidecar), not measured
     q = result["threshold"].get("q_eff_electrons")
     q_low = result["threshold"].get("q_eff_lower_bound_electrons")
+    q_file = result.get("recorded_threshold_electrons")
     if q:
         measured["threshold_electrons"] = float(round(q))
     elif q_low:
         # the recording bounds Q_eff from below: the least regular sensor it allows
         bound("threshold_electrons", round(q_low), "lower bound", "the recording is not steady enough for an estimate")
+    elif q_file:
+        recorded["threshold_electrons"] = float(q_file)
+    elif fallback_threshold_electrons:
+        assumed["threshold_electrons"] = float(fallback_threshold_electrons)
     else:
-        q_fb = fallback_threshold_electrons or threshold_level_electrons(DEFAULT_THRESHOLD_LEVEL)
-        assumed["threshold_electrons"] = float(q_fb)
+        raise ViformError("the recording gives no threshold (" + str(result["threshold"].get("reason") or
+                                                                  "not estimated") + ") and does not record one: "
+                          "no preset written (a preset that measured nothing would only repeat a chip default)")
     g = result["gain_spread"].get("gain_spread_fraction")
     if g is not None:
         bound("gain_spread_fraction", g, "upper bound", "scene texture at the pixel scale cannot be told from the "
@@ -967,7 +981,7 @@ def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_
     import dataclasses
 
     fields = {f.name for f in dataclasses.fields(params)}
-    values = {**measured, **assumed, **{k: v["value"] for k, v in bounds.items()}}
+    values = {**measured, **recorded, **assumed, **{k: v["value"] for k, v in bounds.items()}}
     if "hot_pixel_fraction" in bounds and "hot_pixel_fraction" not in measured:
         values["hot_pixel_fraction"] = 0.0  # simulate none: the bound only says how many could hide
     params = dataclasses.replace(params, **{k: v for k, v in values.items() if k in fields})
@@ -976,9 +990,12 @@ def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_
     if bounds:
         description += "; bounds " + ", ".join(f"{k} {'≥' if v['kind'] == 'lower bound' else '≤'} {v['value']:.4g}"
                                                for k, v in bounds.items())
+    if recorded:
+        description += "; from the recording's metadata (not measured) " + ", ".join(
+            f"{k} = {v:.4g}" for k, v in recorded.items())
     if assumed:
         description += "; assumed " + ", ".join(f"{k} = {v:.4g}" for k, v in assumed.items())
-    calibration = {"measured": measured, "assumed": assumed, "bounds": bounds,
+    calibration = {"measured": measured, "recorded": recorded, "assumed": assumed, "bounds": bounds,
                    "threshold": {k: v for k, v in result["threshold"].items()},
                    "gain_spread": result["gain_spread"], "defects": result["defects"],
                    "dark_current": result["dark_current"], "static": result["static"],
