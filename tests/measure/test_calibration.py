@@ -1,6 +1,7 @@
 """Calibration of a spike-sensor preset from a recording (issue 10 item 5; seed 000 §5.1)."""
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -422,3 +423,57 @@ def test_lag1_correlation_is_free_of_the_window(ticks):
     se = np.std(1 - d1 / d2, ddof=1) / 4
     assert abs(row["lag1_correlation"] - row["expected_lag1_correlation"]) < 5 * se + 0.01
     assert row["static_consistent"]
+
+
+def _scene_light(kind, h, w):
+    """Relative light of the texture scenes of benchmarks/bench_hot_pixels.py (0–1)."""
+    if kind == "strip":  # a 3.4-px bright strip under a dark edge, edges at sub-pixel positions
+        y = np.arange(h)[:, None].astype(float)
+        top = h * 0.4 + 0.3 * np.sin(np.arange(w)[None] / 17.0)
+
+        def inside(a, b):
+            return np.clip(np.minimum(b, y + 1) - np.maximum(a, y), 0.0, 1.0)
+
+        dark, bright = inside(-np.inf, top), inside(top, top + 3.4)
+        return 0.45 * (1 - dark - bright) + 0.03 * dark + bright
+    from skimage import data, transform
+
+    return transform.resize(getattr(data, kind)() / 255.0, (h, w), anti_aliasing=True, order=1)
+
+
+@pytest.mark.parametrize("kind", ["strip", "camera", "coins"])
+@pytest.mark.parametrize("q", [1000.0, 16250.0])
+def test_hot_pixels_on_realistic_texture(kind, q):
+    """Hot pixels on a bright strip under a dark edge and on natural images (skimage's camera, a
+    tuning scene, and coins, a report scene; 2 % PRNU; light 0.01–0.30 spikes a tick): the twin
+    without hot pixels gets no report (the old rule reported 320–1,100 per 10⁵ pixels here);
+    with 1 % hot pixels of 0.1 spikes a tick, those in the pixels the calibration says can show
+    them are found at a rate not 3 binomial σ below 90 %, ≤ 5 % of the reports are false, the dark current is within
+    5 standard errors, and the hot fraction's 95 % range holds this twin's own hot fraction."""
+    from viform.measure.calibration import _hot_dead, hot_pixel_statistics
+
+    h, w, ticks, clock, hot_rate = 96, 128, 400, 40e3, 0.1
+    rate = 0.01 + 0.29 * _scene_light(kind, h, w)
+    reports = []
+    for fraction in (0.0, 0.01):
+        s = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=20.0, gain_spread_fraction=0.02,
+                        hot_pixel_fraction=fraction, hot_pixel_dark_current_e_per_s=hot_rate * q * clock,
+                        fixed_pattern_seed=31)
+        lux = s.parameters.optics.lux_from_electrons_per_s(rate * q * clock)
+        st = interval_statistics(s.capture(StillScene(lux), ticks / clock, seed=2))
+        d, hot, dead = _hot_dead(st, q)
+        truth = s.dark_current_map_e_per_s(h, w) > 0.5 * hot_rate * q * clock
+        reports.append((d, hot, truth, st, dead))
+    d0, hot0, _, _, _ = reports[0]
+    assert d0["hot_pixels"] == 0 and hot0.sum() == 0
+    d, hot, truth, st, dead = reports[1]
+    assert (hot & ~truth).sum() <= 0.05 * hot.sum()
+    level = d["hot_pixel_dark_current_e_per_s"]
+    assert abs(level - hot_rate * q * clock) <= 5 * d["hot_pixel_dark_current_standard_error_e_per_s"]
+    searchable = (hot_pixel_statistics(st, q)["limit"] * q * clock <= 0.5 * level) & ~dead
+    n = int((truth & searchable).sum())  # found ~ Binomial(n, recall): not 3σ below a recall of 0.9
+    assert n >= 10 and (hot & truth & searchable).sum() >= 0.9 * n - 3 * math.sqrt(0.09 * n)
+    lo, hi = d["hot_pixel_fraction_range"]
+    assert lo <= truth.mean() <= hi
+    assert d["hot_pixels_with_reported_neighbour_fraction"] <= 3 * d["hot_pixels_with_reported_neighbour_if_random"] \
+        + 0.05
