@@ -1,5 +1,5 @@
 """Bias of the light (e⁻/s) that multi-interval and interval imaging give, before and after the
-unbiased estimator of ``viform.imaging.rate_law`` (issue 37 item 2).
+unbiased estimator of ``viform.imaging.rate_law``.
 
 For each case a uniform field is simulated with ``SpikeSensor`` (exact photon statistics, the
 case's Q, reset and dead time) at the light λ whose steady firing rate is the case's; images are
