@@ -183,36 +183,52 @@ _FIT_SMOOTHING = 0.02  # weight of the second differences of the c_j against the
 
 
 @njit(cache=True)
-def _tick_train(lam, q, dead_ticks, readout, noise, n, seed):
-    """Spike ticks of one pixel under steady light ``lam`` e⁻ per tick (n spikes, stationary start).
+def _ticks_from_draws(draws, phase, lam, dead_ticks, readout, n):
+    """Spike ticks of one pixel under steady light ``lam`` e⁻ per tick, from the charge each crossing
+    needs (``draws``: Gamma(Q), or Q without photon noise) and a uniform start ``phase`` in [0, 1).
 
-    Self-reset: crossings at charge times C_k = Σ (G_i + λ·d) (G ~ Gamma(Q), or Q without
-    photon noise), registered at tick ⌈C_k/λ⌉; two crossings in one tick are one spike.
-    Readout reset: the tick that reads the spike drains the charge, the pixel waits d ticks,
-    so successive spikes are ⌈d + G/λ⌉ ticks apart.
+    Self-reset: crossings at charge times C_k = Σ (G_i + λ·d), registered at tick ⌈C_k/λ⌉; two
+    crossings in one tick are one spike. Readout reset: the tick that reads the spike drains the
+    charge, the pixel waits d ticks, so successive spikes are ⌈d + G/λ⌉ ticks apart. Stops at n
+    spikes or when the draws run out (the result may be shorter). The same draws serve every
+    light (common random numbers: the fit's rows then differ only by the light).
     """
-    np.random.seed(seed)
     ticks = np.empty(n, np.int64)
+    m = draws.size
     if readout:
         t = 0
-        for i in range(n):
-            g = np.random.gamma(q) if noise else q
-            t += int(np.ceil(dead_ticks + g / lam))
+        for i in range(min(n, m)):
+            t += int(np.ceil(dead_ticks + draws[i] / lam))
             ticks[i] = t
-        return ticks
-    cycle = q + lam * dead_ticks
-    charge = np.random.uniform(0.0, cycle)  # stationary phase (burn-in below removes the rest)
+        return ticks[:min(n, m)]
+    charge = phase * (draws[0] + lam * dead_ticks)  # stationary phase (burn-in removes the rest)
     last = np.int64(-1)
     i = 0
-    while i < n:
-        charge += np.random.gamma(q) if noise else q
+    j = 0
+    while i < n and j < m:
+        charge += draws[j]
+        j += 1
         k = np.int64(np.ceil(charge / lam))
         if k != last:
             ticks[i] = k
             last = k
             i += 1
         charge += lam * dead_ticks
-    return ticks
+    return ticks[:i]
+
+
+def _draws(q: float, n: int, seed: int) -> tuple[np.ndarray, float]:
+    """n Gamma(Q) charges (a Generator's vectorized draws) and a uniform start phase."""
+    rng = np.random.default_rng(seed)
+    return rng.gamma(q, size=n), float(rng.random())
+
+
+def _tick_train(lam, q, dead_ticks, readout, noise, n, seed):
+    """n spike ticks of one pixel under steady light ``lam`` e⁻ per tick (:func:`_ticks_from_draws`),
+    drawn afresh from ``seed``; enough charges are drawn for the crossings a tick merges."""
+    per_spike = 1 if readout else 2 + int(math.ceil(lam / q))
+    draws, phase = _draws(q, n * per_spike, seed) if noise else (np.full(n * per_spike, float(q)), 0.5)
+    return _ticks_from_draws(draws, phase, float(lam), float(dead_ticks), bool(readout), int(n))
 
 
 @njit(cache=True)
@@ -364,8 +380,10 @@ def _variance_by_rate(q, d, reset, k, ceiling):
     rates = ceiling / (1 + np.exp(-np.linspace(_logit(0.003), _logit(0.997), 24)))
     lam = electrons_per_tick_from_rate(rates, q, d, reset, True)[0]
     var = np.empty(rates.size)
+    readout = reset == "readout"
+    draws, phase = _draws(q, 40_000 * (1 if readout else 2 + int(math.ceil(lam[-1] / q))), _FIT_SEED + 1)
     for i, (v, r) in enumerate(zip(lam, rates, strict=True)):
-        r_hat, w = _window_rates(_tick_train(float(v), q, d, reset == "readout", True, 40_000, _FIT_SEED + 1), k, 64)
+        r_hat, w = _window_rates(_ticks_from_draws(draws, phase, float(v), d, readout, 40_000), k, 64)
         var[i] = (w / w.sum()) @ (r_hat - r) ** 2
     return _logit(rates / ceiling), var
 
@@ -384,7 +402,7 @@ def _delta_table(q, d, reset, k, ceiling):
 
 
 #: Bumped whenever the fit changes, so that estimators cached on disk by an older version are not used.
-_ESTIMATOR_VERSION = 2
+_ESTIMATOR_VERSION = 4
 _ESTIMATOR_FIELDS = ("nodes", "coef", "ceiling_value", "grid", "residual", "ceiling_p", "u_fine", "base_fine")
 
 
@@ -445,8 +463,12 @@ def _fit_light_estimator(q: float, d: float, reset: str, k: int) -> LightEstimat
     readout = reset == "readout"
     rows, ceiling_p = [], []
     n_nodes = nodes.size
+    per_spike = 1 if readout else 2 + int(math.ceil(grid[-1] / q))
+    # few electrons and few intervals make r̂ noisy: up to 4× the spikes where Q·K < 4
+    n_spikes = int(_FIT_SPIKES * min(4.0, max(1.0, 4.0 / (q * k))))
+    draws, phase = _draws(q, n_spikes * per_spike, _FIT_SEED)
     for lam, r in zip(grid, rates, strict=True):
-        ticks = _tick_train(float(lam), q, d, readout, True, _FIT_SPIKES, _FIT_SEED)
+        ticks = _ticks_from_draws(draws, phase, float(lam), d, readout, n_spikes)
         r_hat, w = _window_rates(ticks, k, 64)
         mean, ceiling_share = _row_expectations(r_hat, w, r, ceiling, u_fine[0], u_fine[1] - u_fine[0], base_fine,
                                                 nodes[0], nodes[1] - nodes[0], n_nodes)
@@ -515,8 +537,10 @@ def _count_variance(q: float, d: float, reset: str):
     rates = ceiling / (1 + np.exp(-np.linspace(_logit(0.003), _logit(0.997), 24)))
     lam = electrons_per_tick_from_rate(rates, q, d, reset, True)[0]
     a, b = np.empty(rates.size), np.empty(rates.size)
+    readout = reset == "readout"
+    draws, phase = _draws(q, 60_000 * (1 if readout else 2 + int(math.ceil(lam[-1] / q))), _FIT_SEED + 2)
     for i, v in enumerate(lam):
-        ticks = _tick_train(float(v), q, d, reset == "readout", True, 60_000, _FIT_SEED + 2)
+        ticks = _ticks_from_draws(draws, phase, float(v), d, readout, 60_000)
         ticks = ticks[64:] - ticks[64]
         var = []
         for n in (32, 256):
