@@ -96,7 +96,8 @@ class HighSpeedCamera(Sensor):
     exposure_s : float
         Initial exposure (fixed without AE), s; a whole number of clock periods.
     scene_samples : int
-        Points of the midpoint rule for the light during one exposure.
+        Points of the midpoint rule for the light during one exposure, and looks at the light
+        while the rows wait to be read (:meth:`~viform.sensors.frame.FramePixelArray.storage_light_lux`).
     """
 
     name = "highspeed"
@@ -179,7 +180,7 @@ class HighSpeedCamera(Sensor):
             rng = pixels.rng(seed, k)
             electrons = pixels.collect_electrons(lux, t_exp, rng)
             # the global shutter's storage node waits for its row to be read, under parasitic light
-            electrons = electrons + pixels.storage_electrons(scene, ends[k], rng)
+            electrons = electrons + pixels.storage_electrons(scene, ends[k], rng, samples=self.scene_samples)
             dn = pixels.digitize(electrons, rng)
             gray[k] = to_gray8(dn, p.adc_bits)
             metered[k], nxt = controller.update(gray[k], n_cycles)
