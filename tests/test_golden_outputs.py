@@ -131,20 +131,23 @@ def _shoot(key, scene, h, w, seed, duration_s, settings=None):
     instants = [duration_s * f for f in (0.3, 0.5, 0.7)]
     shot = cmp.shoot(key, sc, duration_s, instants, seed=seed, sensor=sensor, spike_methods=["interval"])[0]
     raw = shot.raw
-    if hasattr(raw, "gray8"):  # the high-speed camera's run
-        return {"gray8": raw.gray8, "exposure_cycles": raw.exposure_cycles, "output_frames": raw.output_frames}
+    if shot.family == "highspeed":  # the camera's 8-bit frames, and what its link sends of them
+        from viform.isp.highspeed_pipeline import process_frames
+
+        return {"gray8": raw.frames_dn, "exposure_cycles": raw.metadata["exposure_cycles"],
+                "output_frames": process_frames(raw, shot.sensor).output_frames}
+    if shot.family == "gated":  # the first frame: the one compare scores
+        return {"dn": raw.frames_dn[0]}
     if hasattr(raw, "frames_dn"):
         return _stack_arrays(raw)
-    if hasattr(raw, "dn"):  # one gated frame
-        return {"dn": raw.dn}
     return _stream_arrays(raw)
 
 
-COMPARE_KEYS = ("spike", "cmos-short", "cmos", "seed001-2seg", "seed001-3seg", "seed003-4t", "seed003-overflow",
+COMPARE_KEYS = ("spikeone", "cmos-short", "cmos", "seed001-2seg", "seed001-3seg", "seed003-4t", "seed003-overflow",
                 "highspeed", "gated")
 #: Sweep points: settings a sweep builds, one or two per sensor, shot as compare shoots them.
 SWEEP_POINTS = {
-    "spike": {"threshold_level": 3, "clock_hz": 20000.0},
+    "spikeone": {"threshold_level": 3, "clock_hz": 20000.0},
     "cmos": {"exposure_s": 0.002, "read_noise_electrons": 12.0},
     "seed001-2seg": {"exposure_s": 1e-4, "barrier_fraction": 0.3},
     "seed001-3seg": {"exposure_s": 5e-4},
@@ -156,7 +159,7 @@ SWEEP_POINTS = {
 
 
 def api_cases() -> dict:
-    from viform.sensors.presets import make_sensor
+    from viform.sensors.catalog import make_sensor
 
     cases = {}
     for name in ("cmos", "seed001-normal", "seed001-2seg", "seed001-3seg", "seed003-4t", "seed003-overflow",
@@ -173,7 +176,7 @@ def api_cases() -> dict:
                                              32, 0, 0.004))
     for key in COMPARE_KEYS:
         scene, h, w = ("night-road-fog", 32, 48) if key == "gated" else ("dilemma", 32, 48)
-        duration = 0.004 if key in ("spike", "highspeed") else 0.04
+        duration = 0.004 if key in ("spikeone", "highspeed") else 0.04
         cases[f"api/compare/{key}/{scene}/seed5"] = (
             lambda tmp, k=key, s=scene, hh=h, ww=w, d=duration: _shoot(k, s, hh, ww, 5, d))
         if key in SWEEP_POINTS:
@@ -206,16 +209,15 @@ def _api_subthreshold(tmp):
 
 def _api_gated_settings(tmp):
     """The CCD ``viform gated --set`` builds, on the field-test scene (one frame per mode)."""
-    from viform.cli.gated import ccd_parameters_from_settings
+    from viform.cli.gated import gated_sensor_kw
     from viform.light.active import field_test_scene
     from viform.sensors.gated_ccd import GatedInterlineCCD
 
-    params, _ = ccd_parameters_from_settings(["gate_jitter_s=5e-9", "read_noise_electrons=20",
-                                              "transfer_smear=true"])
+    kw, _ = gated_sensor_kw(["gate_jitter_s=5e-9", "read_noise_electrons=20", "transfer_smear=true"])
     scene = field_test_scene(ambient_lux=1e5, visibility_m=20e3)
     out = {}
     for mode in ("accumulate", "ungated"):
-        ccd = GatedInterlineCCD(pulses=20, gate_range_m=150.0, mode=mode, frame_rate_hz=25.0, parameters=params)
+        ccd = GatedInterlineCCD(pulses=20, gate_range_m=150.0, mode=mode, frame_rate_hz=25.0, **kw)
         out[mode] = ccd.capture_frame(scene, seed=1).dn
     return out
 

@@ -11,8 +11,9 @@ import logging
 from viform._validate import ViformError, one_line
 
 
-def parse_memory(memory_limit) -> str | int:
-    """Per-worker memory limit: ``"auto"`` (or None) or a size such as ``"2GiB"``, in bytes (≥ 64 MiB)."""
+def parse_memory(memory_limit, name: str = "memory_limit") -> str | int:
+    """Per-worker memory limit: ``"auto"`` (or None) or a size such as ``"2GiB"``, in bytes (≥ 64 MiB);
+    errors begin with ``name``."""
     if memory_limit in (None, "auto"):
         return "auto"
     from dask.utils import parse_bytes
@@ -20,10 +21,10 @@ def parse_memory(memory_limit) -> str | int:
     try:
         value = parse_bytes(str(memory_limit))
     except (ValueError, TypeError):
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: give a size such as 2GiB, "
+        raise ViformError(f"{name} = {memory_limit!r} is not allowed: give a size such as 2GiB, "
                           "or auto") from None
     if value < 64 << 20:
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: at least 64MiB per worker")
+        raise ViformError(f"{name} = {memory_limit!r} is not allowed: at least 64MiB per worker")
     return value
 
 
@@ -36,7 +37,7 @@ def open_client(workers: int, scheduler: str | None, memory_limit):
         try:
             return Client(scheduler, timeout="20s"), None
         except (OSError, TimeoutError) as exc:
-            raise ViformError(f"--scheduler {scheduler!r}: could not connect ({one_line(exc)})") from None
+            raise ViformError(f"scheduler = {scheduler!r}: could not connect ({one_line(exc)})") from None
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
                            dashboard_address=":0", silence_logs=logging.ERROR)
     return Client(cluster), cluster

@@ -18,8 +18,10 @@ def test_spike_and_frame_rows_table_verdict_figure():
     stream = SpikeSensor(threshold_electrons=100).capture(scene, duration, seed=1)
     cmos = cmp.make_compare_sensor("cmos-short")
     stack = cmos.capture(scene, duration, seed=1)
-    shots = [cmp.Shot("spike-interval", "spike (Q = 100 e⁻) · interval", "", raw=stream, frame_rate_hz=40e3),
-             cmp.Shot("cmos-short", "CMOS 1 ms", "", raw=stack, frame_rate_hz=30.0)]
+    shots = [cmp.Shot("spike-interval", "spike (Q = 100 e⁻) · interval", "", raw=stream, frame_rate_hz=40e3,
+                      name="spike", family="spike"),
+             cmp.Shot("cmos-short", "CMOS 1 ms", "", raw=stack, frame_rate_hz=30.0, name="cmos-short", family="frame",
+                      sensor=cmos)]
     vision = vision_scores({"scene": scene, "shots": shots, "duration_s": duration})
     assert set(vision) == {"spike", "cmos-short", "_truth"}
     assert vision["spike"]["frames"] == 160  # every 10 ticks over 1,600 ticks

@@ -11,7 +11,7 @@ from viform.report import compare_report as cr
 def small():
     """Every sensor but the slow-to-compile gated one on a tiny dilemma scene (long labels, 10 points)."""
     scene = builtin_scene("dilemma", 32, 64)
-    sensors = ["spike", "cmos-short", "cmos", "seed001-2seg", "seed003-4t", "seed003-overflow", "highspeed"]
+    sensors = ["spikeone", "cmos-short", "cmos", "seed001-2seg", "seed003-4t", "seed003-overflow", "highspeed"]
     return cr.run_comparison(scene, 0.02, sensors, [0.01], seed=1, progress=False)
 
 

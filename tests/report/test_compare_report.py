@@ -32,7 +32,7 @@ def test_metrics_json_holds_every_sensor_and_metric(report):
     out, doc = report
     saved = json.loads((out / "metrics.json").read_text())
     keys = set(saved["sensors"])
-    assert {"spike-accumulation", "spike-interval", "cmos", "cmos-short", "seed001-2seg", "seed001-3seg",
+    assert {"spikeone-accumulation", "spikeone-interval", "cmos", "cmos-short", "seed001-2seg", "seed001-3seg",
             "seed003-4t", "seed003-overflow", "highspeed", "gated"} <= keys
     assert "range" in saved["sensors"]["gated"]["skipped"]
     for key, entry in saved["sensors"].items():
@@ -43,7 +43,7 @@ def test_metrics_json_holds_every_sensor_and_metric(report):
         assert 0 <= m["saturated_fraction"] <= 1 and 0 <= m["underexposed_fraction"] <= 1
         assert m["data_rate_mb_per_s"] > 0 and m["latency_s"] > 0
     # data rates follow from the outputs: 1 bit per pixel per 40 kHz tick against 12-bit frames at 30 fps
-    assert saved["sensors"]["spike-interval"]["metrics"]["data_rate_mb_per_s"] == pytest.approx(32 * 64 * 40e3 / 8e6)
+    assert saved["sensors"]["spikeone-interval"]["metrics"]["data_rate_mb_per_s"] == pytest.approx(32 * 64 * 40e3 / 8e6)
     assert saved["sensors"]["cmos"]["metrics"]["data_rate_mb_per_s"] == pytest.approx(32 * 64 * 12 * 30 / 8e6)
     assert saved["verdict"] and all(isinstance(line, str) for line in saved["verdict"])
     assert saved["demand"]["dynamic_range_db"] >= 120

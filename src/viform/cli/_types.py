@@ -84,6 +84,7 @@ LIBRARY_NAMES = {
     ("gated", "gate_m"): ("gate_range_m",),
     ("lightcomm", "led_cd"): ("luminous_intensity_cd",),
     ("highspeed", "scene_fps"): ("frame_rate_hz",),
+    ("dataset", "worker_memory"): ("memory_limit",),
 }
 
 #: Option names that hold an output path.
@@ -218,12 +219,31 @@ def flag_of(param: click.Parameter) -> str:
     return param.opts[0] if param.opts else param.name
 
 
+def flag_message(message: str, flags: dict) -> str:
+    """``message`` with the library parameter it begins with replaced by its flag, by the explicit
+    mapping ``flags`` (parameter name → flag); unchanged when it begins with none of them.
+
+    Library errors begin with the name of the parameter they are about (``duration_s = 20 s is not
+    allowed …``); a command that declares its mapping (``command.viform_flags``) gets only this
+    exact replacement, no guessing from its option names.
+    """
+    for name in sorted(flags, key=len, reverse=True):
+        if message.startswith(name) and message[len(name):len(name) + 1] in (" ", ":", "="):
+            return flags[name] + message[len(name):]
+    return message
+
+
 def name_flags(message: str, command: click.Command) -> str:
     """Replace Python parameter names (``duration_s``) in ``message`` by the command's flags.
 
-    Only option names are replaced, only as whole words not inside quotes (file fields such
-    as ``'clock_hz'`` stay), and names without an underscore only when followed by `` = ``.
+    A command with an explicit mapping (``command.viform_flags``, parameter name → flag) gets
+    :func:`flag_message`. Otherwise only option names are replaced, only as whole words not inside
+    quotes (file fields such as ``'clock_hz'`` stay), and names without an underscore only when
+    followed by `` = ``.
     """
+    explicit = getattr(command, "viform_flags", None)
+    if explicit is not None:
+        return flag_message(message, explicit)
     names = {p.name for p in command.params if p.name}
     names_with_units = {n for n in names if any(m.startswith(n + "_") for m in names)}
     for param in sorted(command.params, key=lambda p: -len(p.name or "")):

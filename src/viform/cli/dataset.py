@@ -7,6 +7,7 @@ import json
 import click
 
 from viform._validate import ViformError
+from viform.cli._common import CatalogHelp
 from viform.cli.app import cli
 
 
@@ -14,7 +15,7 @@ def _sig(value: float) -> str:
     return f"{value:.4g}"
 
 
-@cli.command("dataset")
+@cli.command("dataset", cls=CatalogHelp)
 @click.argument("src", type=click.Path(file_okay=False), required=False)
 @click.option("--scenes", default=None, metavar="NAME[,NAME…]",
               help="Instead of SRC: make clips from built-in scenes with parameters drawn per clip (speeds, "
@@ -28,7 +29,11 @@ def _sig(value: float) -> str:
                    "no photon noise, no fixed-pattern noise) for denoising.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), required=True,
               help="Dataset folder to write (an unfinished one made with the same options is resumed).")
-@click.option("--preset", default=None, help="Spike camera: a preset name (default spikeone) or a preset .json file.")
+@click.option("--preset", default=None,
+              help="Spike camera: {sensors:spike} (default spikeone), or a preset .json file (viform calibrate).")
+@click.option("--set", "sensor_settings", multiple=True, metavar="NAME=VALUE",
+              help="Change one parameter of the spike camera by name, e.g. --set threshold_level=7 (repeatable; "
+                   "viform sensors show spikeone lists them).")
 @click.option("--height", type=int, default=None, help="Sensor rows (default: the preset's).")
 @click.option("--width", type=int, default=None, help="Sensor columns (default: the preset's).")
 @click.option("--workers", type=int, default=None,
@@ -60,7 +65,7 @@ def _sig(value: float) -> str:
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, out_dir, preset, height, width,
             workers, scheduler, worker_memory, gt_every, seed, frame_rate_hz, max_lux, interpolation,
-            light_sample_ticks, block_ticks, device, no_progress, as_json, json_file):
+            light_sample_ticks, block_ticks, device, no_progress, as_json, json_file, sensor_settings):
     """Convert SRC, a folder of videos or of frame folders, into a spike dataset in --out;
     or, with --scenes, make one from built-in scenes with exact truth.
 
@@ -91,10 +96,16 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
         for flag, value in (("--clips", clips_per_scene), ("--duration", duration_s)):
             if value is None:
                 raise ViformError(f"--scenes needs {flag}")
+    from viform.cli._common import parse_settings
+    from viform.sensors.catalog import SENSORS
+
+    camera = SENSORS.get(preset or "spikeone")
+    overrides = parse_settings(camera if camera is not None and camera.family == "spike" else SENSORS["spike"],
+                               sensor_settings, skip_build=True)
     settings = make_settings(preset, height=height, width=width, seed=seed, gt_every=gt_every,
                              frame_rate_hz=frame_rate_hz, max_lux=max_lux, interpolation=interpolation,
                              light_sample_ticks=light_sample_ticks,
-                             truth_every_ticks=truth_every_ticks if scenes is not None else None)
+                             truth_every_ticks=truth_every_ticks if scenes is not None else None, **overrides)
     _check_max_lux(settings)
     if scenes is not None:
         src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs)

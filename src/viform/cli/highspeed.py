@@ -14,7 +14,8 @@ from pathlib import Path
 
 import click
 
-from viform._validate import ViformError, check_choice, check_positive, check_range
+from viform._validate import ViformError, check_choice, check_int, check_positive, check_range
+from viform.cli._common import parse_settings
 from viform.cli._scenes import with_scene_list
 from viform.cli.app import cli
 
@@ -58,7 +59,11 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
                    "or with the previous transmitted frame's (flashes after a light step).")
 @click.option("--eq-method", type=click.Choice(["shift", "float"]), default="shift", show_default=True,
               help="Equalization arithmetic: integer bit shifts (as in the camera's FPGA) or floating point.")
-@click.option("--frames", "n_frames", type=int, default=200, show_default=True, help="Sensor frames to capture.")
+@click.option("--duration", "duration_s", type=float, default=None,
+              help="Length of the capture, s: every sensor frame that ends in it  [default: 200 frames, 0.12 s at "
+                   "the default window].")
+@click.option("--frames", "n_frames", type=int, default=None,
+              help="Sensor frames to capture, instead of --duration.")
 @click.option("--exposure-us", type=float, default=100.0, show_default=True,
               help="Initial exposure (fixed with --no-ae), µs.")
 @click.option("--render", default="320x180", show_default=True,
@@ -73,13 +78,18 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed of the simulated noise.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="highspeed_out", show_default=True,
               help="Folder for the video, exposure.png and report.json.")
+@click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
+              help="Change one parameter of the camera by name, e.g. --set read_noise_electrons=20 --set "
+                   "parasitic_light_sensitivity=0.01 (repeatable; viform sensors show highspeed lists them). The "
+                   "flags above set their own parameters (--roi: roi, --target: target_gray, …); give each once.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON instead of the summary.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None,
               help="Also write the report JSON to this file (OUT/report.json is always written).")
+@click.pass_context
 @with_scene_list
-def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray, band_gray,
-              ae_saturated_cut, equalize, eq_source, eq_method, n_frames, exposure_us, render, lux, steps, scene_fps,
-              video_format, seed, out_dir, as_json, json_file):
+def highspeed(ctx, scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray,
+              band_gray, ae_saturated_cut, equalize, eq_source, eq_method, duration_s, n_frames, exposure_us, render,
+              lux, steps, scene_fps, video_format, seed, settings, out_dir, as_json, json_file):
     """Shoot SCENE with a LUX13HS-like high-speed camera (1280x864, up to 3 500 fps).
 
     SCENE: {scenes} Writes OUT/video.gif|mp4 (the frames leaving the link), OUT/exposure.png
@@ -97,12 +107,33 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     )
     from viform.isp.link import INTERFACES, link_plan
     from viform.light.catalog import load_scene
-    from viform.sensors.highspeed_timing import lux13hs_timing
+    from viform.sensors.catalog import entry
 
     check_choice("interface", interface, tuple(INTERFACES))
     check_positive("lux", lux)
-    timing = lux13hs_timing(mode, None if clock_mhz is None else check_positive("clock_mhz", clock_mhz) * 1e6)
-    window = timing.window(roi)
+    kind = entry("highspeed")
+    # the camera's parameters: its flags (those given, and the defaults of the others), then --set
+    clock_hz = None if clock_mhz is None else check_positive("clock_mhz", clock_mhz) * 1e6
+    flags = {"roi": ("roi", roi), "mode": ("mode", mode), "clock_mhz": ("pixel_clock_hz", clock_hz),
+             "ae": ("ae", ae), "meter": ("meter", meter), "target_gray": ("target_gray", target_gray),
+             "band_gray": ("band_gray", band_gray), "ae_saturated_cut": ("ae_saturated_cut", ae_saturated_cut),
+             "exposure_us": ("exposure_s", check_positive("exposure_us", exposure_us) * 1e-6)}
+    check_range("--target", target_gray, 0, 255)
+    if ae_saturated_cut is not None:
+        check_range("ae_saturated_cut", ae_saturated_cut, 0, 1, low_open=True, high_open=True)
+    changed = parse_settings(kind, settings, skip_build=True)
+    for option, (name, _) in flags.items():
+        given = ctx.get_parameter_source(option) not in (click.core.ParameterSource.DEFAULT, None)
+        if name in changed and given:
+            flag = next(p for p in ctx.command.params if p.name == option).opts[0]
+            raise ViformError(f"--set {f'{name}={changed[name]}'!r} and {flag} set the same parameter: give one "
+                              "of them")
+    camera_settings = {name: value for name, value in flags.values() if name not in changed} | changed
+    camera = kind.build(**camera_settings)
+    if duration_s is not None and n_frames is not None:
+        raise ViformError("--duration and --frames both set the length of the capture: give one of them")
+    n_frames = camera.frames_in(duration_s) if duration_s is not None else 200 if n_frames is None else n_frames
+    timing, window = camera.timing, camera.window
     rh, rw = _parse_size(render, "render")
     rh, rw = min(rh, window.height), min(rw, window.width)
     from viform.light.catalog import BUILTIN_SCENES
@@ -124,26 +155,20 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     sc = ScaledScene(base, lux / mean0)
     if step_list:
         sc = StepsScene(sc, step_list)
-    cfg = HighSpeedConfig(roi=window, mode=mode, pixel_clock_hz=timing.pixel_clock_hz, interface=interface,
-                          decimation=decimation, max_decimation=max_decimation, ae=ae, meter=meter,
-                          target_gray=target_gray, band_gray=band_gray, ae_saturated_cut=ae_saturated_cut,
-                          equalize=equalize,
-                          eq_source=eq_source, eq_method=eq_method,
-                          exposure_s=check_positive("exposure_us", exposure_us) * 1e-6, n_frames=n_frames,
-                          seed=seed)
+    cfg = HighSpeedConfig(interface=interface, decimation=decimation, max_decimation=max_decimation,
+                          equalize=equalize, eq_source=eq_source, eq_method=eq_method, n_frames=n_frames, seed=seed)
     # Check everything before the progress bar starts, so an error is a single clean line.
-    check_range("--target", target_gray, 0, 255)
-    if ae_saturated_cut is not None:
-        check_range("ae_saturated_cut", ae_saturated_cut, 0, 1, low_open=True, high_open=True)
-    timing.exposure_cycles(cfg.exposure_s, window)
+    check_int("--frames", n_frames, 1)
     plan = link_plan(timing.frame_rate_hz(window), window.height, window.width, interface, 8, decimation,
                      max_decimation)
     if decimation is not None and decimation < plan["decimation_strict"]:
         click.echo(f"note: {decimation}:1 over {interface} is faster than the link ({plan['decimation_strict']}:1 "
                    "fits); the DDR ring will overflow and frames will be lost", err=True)
     with tqdm(total=n_frames, desc="frames", file=sys.stderr, leave=False) as bar:
-        result = run_highspeed(sc, cfg, progress=bar.update)
+        result = run_highspeed(sc, cfg, progress=bar.update, camera=camera)
     report = write_outputs(result, out_dir, video_format, [t for t, _ in step_list])
+    if changed:
+        report["settings"] = changed
     if json_file:
         from viform._io import write_json
 
@@ -152,7 +177,9 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         click.echo(json.dumps(report, indent=2, default=float))
         return
     lk = report["link"]
-    click.echo(f"sensor: {window.width}x{window.height} {mode} @ {timing.pixel_clock_hz / 1e6:g} MHz -> "
+    if changed:
+        click.echo(f"changed: {', '.join(f'{k} = {v}' for k, v in changed.items())}")
+    click.echo(f"sensor: {window.width}x{window.height} {camera.mode} @ {timing.pixel_clock_hz / 1e6:g} MHz -> "
                f"{report['sensor_frame_rate_hz']:.1f} fps ({report['timing']['cycles_per_frame']} cycles/frame)")
     click.echo(f"link: {interface} max {lk['link_max_frame_rate_hz']:.1f} fps; DDR ring "
                f"{lk['buffer_capacity_frames']} frames ({lk['buffer_record_s']:.3f} s)")

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from viform._validate import ViformError
+from viform.cli._common import CatalogHelp
 from viform.cli._scenes import scene_set_option, scene_settings, with_scene_list
 from viform.cli.app import cli
 
@@ -37,9 +38,14 @@ def _sensor_from_options(preset, threshold_level, quantum_efficiency, pixel_pitc
 
     loaded = None
     if preset is not None:
-        from viform.sensors.spike_presets import load_spike_preset
+        from viform.sensors.catalog import SENSORS
+        from viform.sensors.spike_presets import SpikePreset, load_spike_preset
 
-        loaded = load_spike_preset(preset)  # its errors name --preset and the offending key
+        camera = SENSORS.get(preset)
+        if camera is not None and camera.family == "spike":  # a spike camera of the sensor catalogue
+            loaded = SpikePreset(preset, camera.description, *camera.scene_shape, camera.build().parameters)
+        else:
+            loaded = load_spike_preset(preset)  # its errors name --preset and the offending key
     base = loaded.parameters if loaded is not None else SpikeSensorParameters()
     if threshold_level is not None:
         from viform.sensors.spike_presets import threshold_level_electrons
@@ -78,8 +84,8 @@ def _sensor_from_options(preset, threshold_level, quantum_efficiency, pixel_pitc
 
 sensor_options = [
     click.option("--preset", default=None, metavar="NAME|FILE.json",
-                 help="Start from a spike-camera preset: spikeone (400×250, 40 kHz), spiketwo (1000×1000, "
-                      "20 kHz), spiketwo-40k, or a preset file (e.g. from viform calibrate). Options given "
+                 help="Start from a spike camera of the sensor catalogue ({sensors:spike}; viform sensors "
+                      "describes them) or a preset file (e.g. from viform calibrate). Options given "
                       "below override it."),
     click.option("--threshold-level", type=int, default=None,
                  help="The chip's threshold level 0–15 (sets the threshold Q)."),
@@ -133,7 +139,7 @@ def _apply(options):
     return decorator
 
 
-@cli.command()
+@cli.command(cls=CatalogHelp)
 @click.argument("scene")
 @click.option("--duration", "duration_s", type=float, default=None,
               help="Length of the stream, seconds [default: a video's or image folder's own length; required for "

@@ -107,28 +107,28 @@ def _jsonable(value):
 # ---------------------------------------------------------------------- settings
 
 def resolve_preset(spec: str | None, height: int | None = None, width: int | None = None, **overrides):
-    """Sensor parameters and resolution from a spike preset name or JSON file.
+    """Sensor parameters and resolution from a spike camera of the sensor catalogue or a preset JSON file.
 
-    Uses :func:`viform.sensors.spike_presets.load_spike_preset`; ``height``/``width`` override
-    the preset's resolution and ``overrides`` its parameter fields.
+    ``spec``: a name of :mod:`viform.sensors.catalog` of the spike family (default
+    :data:`DEFAULT_PRESET`), or a ``.json`` preset (:func:`viform.sensors.spike_presets.load_spike_preset`).
+    ``height``/``width`` override its resolution (the catalogue's ``scene_shape`` for a name) and
+    ``overrides`` its parameters (any of ``viform sensors show spike``, e.g. ``threshold_level``).
     """
-    from dataclasses import replace
+    from viform.sensors.catalog import SENSORS, sensor_names, spike_sensor
+    from viform.sensors.spike_presets import load_spike_preset
 
     spec = spec or DEFAULT_PRESET
-    try:
-        from viform.sensors.spike_presets import load_spike_preset
-    except ImportError:  # presets not installed yet: the default chip only
-        load_spike_preset = None
-    if load_spike_preset is not None:
+    if spec in SENSORS:
+        entry = SENSORS[spec]
+        if entry.family != "spike":
+            raise ViformError(f"--preset = {spec!r} is not allowed: a dataset is recorded by a spike camera: "
+                              f"{', '.join(sensor_names('spike'))}, or a preset .json file")
+        params, (h, w) = entry.build(height=None, width=None, **overrides).parameters, entry.scene_shape
+    else:
         preset = load_spike_preset(spec)
         params, h, w = preset.parameters, preset.height, preset.width
-    else:
-        from viform.sensors.spike import SpikeSensorParameters
-
-        check_choice("--preset", spec, (DEFAULT_PRESET,))
-        params, h, w = SpikeSensorParameters(), 250, 400
-    if overrides:
-        params = replace(params, **overrides)
+        if overrides:
+            params = spike_sensor(params, **overrides).parameters
     h = check_int("--height", h if height is None else height, 1)
     w = check_int("--width", w if width is None else width, 1)
     if (h * w) % 8:

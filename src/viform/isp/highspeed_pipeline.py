@@ -120,14 +120,17 @@ class HighSpeedResult:
     config: dict
 
 
-def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None, progress=None) -> HighSpeedResult:
+def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None, progress=None,
+                  camera: HighSpeedCamera | None = None) -> HighSpeedResult:
     """Shoot ``scene`` with the LUX13HS-like camera and return every stage's output.
 
     The scene is rendered at its own resolution (the rendered grid); the window's size sets
     the timing, the link and the buffer. ``progress(1)`` is called after each sensor frame.
+    ``camera`` (e.g. the catalogue's ``highspeed`` with settings) replaces the sensor that
+    ``config``'s sensor fields describe; ``config`` still gives the frames, seed, link and ISP.
     """
     cfg = config or HighSpeedConfig()
-    camera = cfg.camera()
+    camera = camera if camera is not None else cfg.camera()
     n = check_int("n_frames", cfg.n_frames, 1)
     window = camera.window
     plan = link_plan(camera.frame_rate_hz, window.height, window.width, cfg.interface, 8, cfg.decimation,

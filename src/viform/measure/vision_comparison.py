@@ -22,26 +22,7 @@ SPIKE_STEP_TICKS = 10
 
 def _frames_of(shot, duration_s):
     """(lux frames, report instants) of a frame camera's shot, or None when it has no frames."""
-    raw = shot.raw
-    if shot.key == "highspeed":
-        from viform.isp.highspeed_pipeline import HighSpeedConfig
-
-        ends = np.asarray(raw.frame_times_s, float)
-        mids = ends - np.asarray(raw.exposure_s, float) / 2
-        keep = ends <= duration_s + 1e-12
-        ests = cmp.highspeed_estimates(raw, HighSpeedConfig(), mids[keep])
-        return [e.lux for e in ests], ends[keep]
-    if not hasattr(raw, "frames_dn"):
-        return None
-    n = cmp.complete_frames(raw, duration_s)
-    if n == 0:
-        return None
-    kind = {"seed001-2seg": "segmented", "seed001-3seg": "segmented", "seed003-overflow": "overflow"}.get(shot.key,
-                                                                                                         "linear")
-    sensor = cmp.make_compare_sensor(shot.key)
-    mids = raw.start_times_s[:n] + raw.exposure_s[:n] / 2
-    ests = cmp.frame_estimates(sensor, raw, mids, kind, duration_s)
-    return [e.lux for e in ests], raw.start_times_s[:n] + raw.exposure_s[:n]
+    return cmp.frames_in_lux(shot, duration_s)
 
 
 def vision_scores(result) -> dict | None:
@@ -64,9 +45,9 @@ def vision_scores(result) -> dict | None:
     out = {}
     done_spike = False
     for shot in result["shots"]:
-        if shot.skipped or shot.key == "gated":
+        if shot.skipped or shot.family == "gated":
             continue
-        if shot.key.startswith("spike"):
+        if shot.family == "spike":
             if done_spike:
                 continue
             done_spike = True
@@ -74,7 +55,7 @@ def vision_scores(result) -> dict | None:
             res = track_spikes(stream, SPIKE_STEP_TICKS)
             tick_s = 1.0 / stream.clock_hz
             label = shot.label.split(" · ")[0] + f", tracked every {SPIKE_STEP_TICKS} ticks"
-            key, rate = "spike", stream.clock_hz / SPIKE_STEP_TICKS
+            key, rate = shot.name or "spike", stream.clock_hz / SPIKE_STEP_TICKS
         else:
             frames = _frames_of(shot, duration_s)
             if frames is None or len(frames[1]) == 0:

@@ -24,14 +24,15 @@ def run_demo(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = 
 
 #: The demo's closing sweep: the spike chip's 16 threshold levels (at its 40 kHz clock), and the main
 #: knob of the CMOS (exposure) and of the overflow pixel (its capacitor), 10 settings each.
-DEMO_SWEEP = {"spike": ["spike:threshold_level=all"], "cmos": ["cmos:exposure_s=log:2e-5:3.3e-2:10"],
+DEMO_SWEEP = {"spikeone": ["spikeone:threshold_level=all"], "cmos": ["cmos:exposure_s=log:2e-5:3.3e-2:10"],
               "seed003-overflow": ["seed003-overflow:overflow_capacitance_f=log:2e-14:2e-11:10"]}
 
 
 def demo_demands(scene) -> str:
     """The dilemma's two demands as ``--require`` text: its range (within
     :data:`~viform.measure.comparison.RANGE_MARGIN_DB`, as compare's verdict counts it) and its speed
-    (integration no longer than one pixel of the fastest motion)."""
+    (integration time, :data:`~viform.measure.comparison.METRICS` ``time_resolution_s``, no longer than one
+    pixel of the fastest motion)."""
     from viform.measure.comparison import RANGE_MARGIN_DB
 
     d = scene.demand()
@@ -47,8 +48,9 @@ def demo_demands_explained(scene) -> list[str]:
     return [f"range: the scene spans {d['dynamic_range_db']:.0f} dB ({d['min_lux']:.3g} to {d['max_lux']:,.0f} lux); "
             f"a sensor meets it from {d['dynamic_range_db'] - RANGE_MARGIN_DB:.0f} dB (within {RANGE_MARGIN_DB:.0f} "
             "dB, a factor of 2 in light, as the verdict above counts a range)",
-            f"speed: an image integrates at most {d['time_resolution_s'] * 1e3:.3g} ms, the time its fastest motion "
-            f"({d['max_speed_px_per_s']:,.0f} px/s) takes to cross one pixel"]
+            f"speed: a pixel integrates each reading over at most {d['time_resolution_s'] * 1e3:.3g} ms, the time its "
+            f"fastest motion ({d['max_speed_px_per_s']:,.0f} px/s) takes to cross one pixel (a frame camera's "
+            "exposure; a spike pixel's interval between spikes, median where the scene moves)"]
 
 
 def run_demo_sweep(out_dir, duration_s: float = 0.04, seed: int = 0, progress: bool = True,

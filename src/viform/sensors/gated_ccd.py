@@ -475,9 +475,15 @@ class GatedInterlineCCD(Sensor):
         var = n * per * (per < p.full_well_electrons) + n * (p.read_noise_electrons**2 + 1.0 / (12 * k * k))
         return mean, var
 
-    def capture(self, scene: ActiveScene, duration_s: float, *, seed: int = 0) -> FrameStack:
-        """Frames at ``frame_rate_hz`` over ``duration_s`` (scene static), DN as float64."""
+    def capture(self, scene, duration_s: float, *, seed: int = 0) -> FrameStack:
+        """Frames at ``frame_rate_hz`` over ``duration_s`` (scene static), DN as float64.
+
+        ``scene`` is an :class:`ActiveScene` or a scene that carries one as ``scene.active`` (the
+        laser-lit scene with ranges, e.g. the built-in night-road-fog). ``metadata["readouts"]``
+        is the number of readouts summed in each frame (its black level is that many offsets).
+        """
         check_positive("duration_s", duration_s)
+        scene = active_scene(scene)
         n = max(1, int(math.floor(duration_s * self.frame_rate_hz + 1e-9)))
         b = self.electron_budget(scene)
         frames = np.stack([self.capture_frame(scene, seed=seed, frame_index=i, budget=b).dn for i in range(n)])
@@ -485,7 +491,7 @@ class GatedInterlineCCD(Sensor):
             frames,
             np.arange(n) / self.frame_rate_hz,
             np.full(n, self.pulses * self.timing.width_s),
-            {"sensor": self.describe(), "scene": scene.describe(), "seed": seed},
+            {"sensor": self.describe(), "scene": scene.describe(), "seed": seed, "readouts": b["readouts"]},
         )
 
     def describe(self) -> dict:
@@ -509,6 +515,17 @@ class GatedInterlineCCD(Sensor):
             "noise": self.noise,
             "pixel": par.pixel.to_dict(),
         }
+
+
+def active_scene(scene) -> ActiveScene:
+    """The laser-lit scene with ranges that a gated camera shoots: ``scene`` itself or ``scene.active``."""
+    if isinstance(scene, ActiveScene):
+        return scene
+    active = getattr(scene, "active", None)
+    if active is None:
+        raise ViformError("the scene has no range (the gated camera needs a laser-lit scene with distances, "
+                          "e.g. night-road-fog)")
+    return active
 
 
 def bloom_columns(electrons, capacity_electrons: float) -> np.ndarray:

@@ -107,6 +107,7 @@ class HighSpeedCamera(Sensor):
                  target_gray: float = 128.0, band_gray: float = 15.0, ae_latency_frames: int = 1,
                  ae_saturated_cut: float | None = None, exposure_s: float = 100e-6, scene_samples: int = 4):
         self.parameters = parameters or lux13hs_pixel_parameters()
+        check_int("adc_bits", self.parameters.adc_bits, 8, 16)  # the 8-bit output keeps the high 8 bits
         self.timing = lux13hs_timing(mode, pixel_clock_hz)
         self.mode = mode
         self.pixel_clock_hz = self.timing.pixel_clock_hz
@@ -179,8 +180,11 @@ class HighSpeedCamera(Sensor):
             lux = scene.mean_illuminance_lux(ends[k] - t_exp, ends[k], samples=self.scene_samples)
             rng = pixels.rng(seed, k)
             electrons = pixels.collect_electrons(lux, t_exp, rng)
-            # the global shutter's storage node waits for its row to be read, under parasitic light
-            electrons = electrons + pixels.storage_electrons(scene, ends[k], rng, samples=self.scene_samples)
+            # global shutter: the frame waits in the storage nodes while the rows are read, under
+            # parasitic light (0 when readout_time_s or both parasitic light and storage leakage are 0)
+            electrons = electrons + pixels.storage_electrons(scene, float(ends[k]), rng, samples=self.scene_samples)
+            if p.black_sun_fraction > 0:
+                electrons = pixels.black_sun_electrons(electrons, lux)
             dn = pixels.digitize(electrons, rng)
             gray[k] = to_gray8(dn, p.adc_bits)
             metered[k], nxt = controller.update(gray[k], n_cycles)
