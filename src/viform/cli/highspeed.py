@@ -235,14 +235,36 @@ def format_figures(fig: dict) -> str:
         ("equalization worst error", f"{eq['max_abs_error_uncompensated']:.1f} → "
          f"{eq['max_abs_error_compensated']:.2f} levels", "'close to 0'"),
     ]
+    status = fig.get("status", {})
+    keys = ["reduced_1280x720_100MHz", "normal_full_1280x864_133MHz", "reduced_166MHz", "reduced_2500fps_full_frame",
+            "cameralink_seed", "ddr", "decimation", "equalization_shift", "equalization_shift"]
+    sh = fig.get("shutter")
+    if sh:
+        shares = ", ".join(f"{100 * v:.3g} % at {float(t) * 1e6:g} µs" for t, v in sh["parasitic_share_at_exposure"]
+                           .items())
+        rows += [("shutter efficiency (parasitic light)", f"{100 * sh['shutter_efficiency']:g} %, readout "
+                  f"{sh['readout_time_s'] * 1e6:.0f} µs: +{sh['parasitic_exposure_equivalent_s'] * 1e6:.2f} µs "
+                  "of exposure on average", "99 %"),
+                 ("parasitic share of a frame", shares + (f" (simulated at 10 µs: "
+                  f"{100 * sh['simulated_parasitic_share_at_10us']:.3g} %)"
+                  if "simulated_parasitic_share_at_10us" in sh else ""), "-"),
+                 ("brightest light at 1 clock of exposure",
+                  f"{sh['brightest_lux_shortest_exposure']['with_parasitic_light']:.3g} lux "
+                  f"(without parasitic light {sh['brightest_lux_shortest_exposure']['without_parasitic_light']:.3g})",
+                  "-")]
+        keys += ["shutter", "shutter_consequences", "shutter_consequences"]
     for s in fig.get("ae_10x_steps_latency1", []):
         n = s["settle_frames"]
         rows.append((f"AE after 10x step at {s['step_time_s'] * 1e3:g} ms",
                      "not settled" if n is None else f"{n} frames ({s['settle_s'] * 1e3:.2f} ms)", "-"))
+        keys.append("ae_10x_steps_latency1")
+    labels = [status.get(k, "").split(":")[0].split(" (")[0] for k in keys]
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
-    head = f"{'quantity':<{w0}}  {'model':<{w1}}  published"
-    return "\n".join([head, "-" * len(head)] + [f"{a:<{w0}}  {b:<{w1}}  {c}" for a, b, c in rows])
+    w2 = max(len(r[2]) for r in rows)
+    head = f"{'quantity':<{w0}}  {'model':<{w1}}  {'published':<{w2}}  status"
+    return "\n".join([head, "-" * len(head)] + [f"{a:<{w0}}  {b:<{w1}}  {c:<{w2}}  {d}"
+                                                 for (a, b, c), d in zip(rows, labels, strict=True)])
 
 
 @cli.command("highspeed-figures")

@@ -549,6 +549,57 @@ def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", s
 
 # ----------------------------------------------------------------------------- figures
 
+def shutter_figures(timing, roi, pixel: FramePixelParameters | None = None,
+                    exposures_s=(1e-6, 10e-6, 100e-6, 590e-6)) -> dict:
+    """What the global shutter's 99 % efficiency costs (seed 002 Table 1), predicted from the pixel
+    and the readout timing.
+
+    After the frame transfer row r of H waits w_r = (r + 1)/H · T_read in its storage node (T_read
+    the window's readout, data cycles / clock), where PLS = 1 − efficiency of the photo-rate still
+    reaches it. For still light that is an extra exposure of PLS·w_r: on average PLS·T_read·(H + 1)/(2H)
+    (``parasitic_exposure_equivalent_s``), so a frame of exposure t carries the parasitic share
+    PLS·w̄/(t + PLS·w̄); and the brightest light the last row holds below its full well at the shortest
+    exposure (one clock) falls from FW/(η·Φ·T_H) to FW/(η·Φ·(T_H + PLS·T_read)).
+    """
+    p = pixel or lux13hs_pixel_parameters()
+    w = timing.window(roi)
+    read = timing.readout_time_s(w)
+    pls = p.parasitic_light_sensitivity
+    mean_wait = read * (w.height + 1) / (2 * w.height)
+    equivalent = pls * mean_wait
+    per_lux_s = p.optics.electrons_per_lux_second  # e⁻ per lux·s of the pixel
+    shortest = timing.clock_period_s
+    return {"shutter_efficiency": 1.0 - pls, "parasitic_light_sensitivity": pls, "readout_time_s": read,
+            "mean_wait_s": mean_wait, "parasitic_exposure_equivalent_s": equivalent,
+            "parasitic_share_at_exposure": {f"{t:g}": equivalent / (t + equivalent) for t in exposures_s},
+            "brightest_lux_shortest_exposure": {
+                "without_parasitic_light": p.full_well_electrons / (per_lux_s * shortest),
+                "with_parasitic_light": p.full_well_electrons / (per_lux_s * (shortest + pls * read))},
+            "seed": "99 % shutter efficiency (Table 1); readout 57 600 cycles at 100 MHz (§3.1.1)"}
+
+
+def simulated_parasitic_share(exposure_s: float, lux: float = 200.0, shape=(36, 64), seed: int = 0) -> float:
+    """The parasitic share measured on the simulated camera: one frame of still uniform light at
+    ``exposure_s``, with and without the shutter's parasitic light, mean electrons (DN above black
+    / gain) − 1 over the with-light mean, the same noise seeds."""
+    from viform.light.scenes import StillScene
+
+    scene = StillScene(np.full(shape, float(lux)))
+    means = []
+    for pls in (0.0, lux13hs_pixel_parameters().parasitic_light_sensitivity):
+        px = lux13hs_pixel_parameters(parasitic_light_sensitivity=pls, read_noise_electrons=0.0, dsnu_electrons=0.0,
+                                      dark_current_e_per_s=0.0, prnu_fraction=0.0, adc_bits=16,
+                                      adc_range_v=30_000.0 * 40e-6)
+        cam = HighSpeedCamera(px, ae=False, exposure_s=exposure_s)
+        pixels = FrameSensor(cam.parameters, exposure_s=exposure_s, frame_rate_hz=cam.frame_rate_hz).pixel_array(
+            *shape)
+        rng = pixels.rng(seed, 0)
+        e = pixels.collect_electrons(scene.mean_illuminance_lux(0.0, exposure_s), exposure_s, rng)
+        e = e + pixels.storage_electrons(scene, exposure_s, rng)
+        means.append(float(e.mean()))
+    return 1.0 - means[0] / means[1]
+
+
 def seed_figures(include_simulation: bool = True) -> dict:
     """The seed-002 numbers next to this model's (``viform highspeed-figures``)."""
     from viform.isp.histogram import shift_error
@@ -592,7 +643,14 @@ def seed_figures(include_simulation: bool = True) -> dict:
                      "reduced_2500fps_full_frame": "fitted: the pixel clock is solved from the 2,500 fps figure",
                      "cameralink_seed": "predicted", "ddr": "predicted", "decimation": "predicted",
                      "equalization_shift": "predicted"}
+    fig["shutter"] = shutter_figures(red, SEED_ROI)
+    fig["status"]["shutter"] = "input: the seed's 99 % shutter efficiency (Table 1) and its readout timing"
+    fig["status"]["shutter_consequences"] = ("predicted: the parasitic share of a frame and the brightest light "
+                                             "(no published number)")
     if include_simulation:
+        fig["shutter"]["simulated_parasitic_share_at_10us"] = simulated_parasitic_share(10e-6)
+        fig["status"]["ae_10x_steps_latency1"] = ("predicted (the seed shows the loop only in images; the "
+                                                  "exposure includes the shutter's parasitic light)")
         base = TranslatingScene(36, 64, velocity_px_per_s=(0.0, 0.0), min_lux=50.0, max_lux=400.0)
         scene = StepsScene(base, [(0.02, 10.0), (0.05, 0.1)])
         r = run_highspeed(scene, HighSpeedConfig(n_frames=130, exposure_s=200e-6, equalize=False))

@@ -15,7 +15,7 @@ noise is a real pixel's.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -40,7 +40,11 @@ def lux13hs_pixel_parameters(**overrides) -> FramePixelParameters:
     * ADC input range = full well × conversion gain = 1.2 V, so K = 40 µV/e⁻ · 1023 / 1.2 V
       = 0.0341 DN/e⁻; black offset 8 DN (2 gray levels in 8 bit) so DSNU and read noise
       are not clipped at zero;
-    * dark current 1 000 e⁻/s (not in the seed; negligible at sub-millisecond exposures).
+    * dark current 1 000 e⁻/s (not in the seed; negligible at sub-millisecond exposures);
+    * shutter efficiency 99 % (Table 1, 快门效率) → ``parasitic_light_sensitivity = 0.01``: while a
+      frame waits in the storage node SG to be read, 1 % of the photodiode's photo-rate still
+      reaches it (:meth:`~viform.sensors.frame.FramePixelArray.storage_electrons`). The wait is
+      the readout's, set by :class:`HighSpeedCamera` from its timing (``readout_time_s``).
 
     The datasheet's 25 V/(lux·s) responsivity is not imposed: our 555 nm monochromatic lux
     conversion gives 13.8 V/(lux·s) for this pixel (white light has more photons per lux).
@@ -49,7 +53,7 @@ def lux13hs_pixel_parameters(**overrides) -> FramePixelParameters:
                 full_well_electrons=30_000.0, conversion_gain_v_per_e=40e-6,
                 read_noise_electrons=15.0, dark_current_e_per_s=1_000.0,
                 dsnu_electrons=0.005 * 30_000.0, prnu_fraction=0.015, analog_gain=1.0, adc_bits=10,
-                black_offset_dn=8.0, adc_range_v=30_000.0 * 40e-6)
+                black_offset_dn=8.0, adc_range_v=30_000.0 * 40e-6, parasitic_light_sensitivity=0.01)
     base.update(overrides)
     return FramePixelParameters(**base)
 
@@ -67,7 +71,11 @@ class HighSpeedCamera(Sensor):
     Parameters
     ----------
     parameters : FramePixelParameters
-        The pixel (default :func:`lux13hs_pixel_parameters`).
+        The pixel (default :func:`lux13hs_pixel_parameters`). Its ``readout_time_s``, when 0 (the
+        default), becomes the window's readout time at the clock
+        (:meth:`~viform.sensors.highspeed_timing.ReadoutTiming.readout_time_s`): each row's charge
+        waits its share of it in the storage node, under the shutter's parasitic light; a
+        non-zero value is kept (a what-if).
     roi : str or Window
         Readout window on the 1280 × 864 array ("WxH" centred or "X,Y,W,H"); sets the frame rate.
     mode : {"reduced", "normal"}
@@ -88,7 +96,8 @@ class HighSpeedCamera(Sensor):
     exposure_s : float
         Initial exposure (fixed without AE), s; a whole number of clock periods.
     scene_samples : int
-        Points of the midpoint rule for the light during one exposure.
+        Points of the midpoint rule for the light during one exposure, and looks at the light
+        while the rows wait to be read (:meth:`~viform.sensors.frame.FramePixelArray.storage_light_lux`).
     """
 
     name = "highspeed"
@@ -103,6 +112,8 @@ class HighSpeedCamera(Sensor):
         self.mode = mode
         self.pixel_clock_hz = self.timing.pixel_clock_hz
         self.window = self.timing.window(roi)
+        if self.parameters.readout_time_s == 0:
+            self.parameters = replace(self.parameters, readout_time_s=self.timing.readout_time_s(self.window))
         self.roi = roi
         self.ae = bool(ae)
         self.meter = meter
@@ -169,9 +180,9 @@ class HighSpeedCamera(Sensor):
             lux = scene.mean_illuminance_lux(ends[k] - t_exp, ends[k], samples=self.scene_samples)
             rng = pixels.rng(seed, k)
             electrons = pixels.collect_electrons(lux, t_exp, rng)
-            # global shutter: the frame waits in the storage nodes while the rows are read (0 when
-            # readout_time_s or both parasitic light and storage leakage are 0)
-            electrons = electrons + pixels.storage_electrons(scene, float(ends[k]), rng)
+            # global shutter: the frame waits in the storage nodes while the rows are read, under
+            # parasitic light (0 when readout_time_s or both parasitic light and storage leakage are 0)
+            electrons = electrons + pixels.storage_electrons(scene, float(ends[k]), rng, samples=self.scene_samples)
             if p.black_sun_fraction > 0:
                 electrons = pixels.black_sun_electrons(electrons, lux)
             dn = pixels.digitize(electrons, rng)
