@@ -167,6 +167,14 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         raise ViformError(f"--window = {window_s:g} s is not allowed: it is longer than the stream "
                           f"({source.n_ticks / source.clock_hz:g} s, {source.n_ticks} ticks)")
     window_ticks = 41 if window_s is None else max(1, int(round(window_s * source.clock_hz)))
+    from viform.imaging.support import imaging_need, spike_support
+
+    need_window, need = imaging_need(method, source.n_ticks, window_ticks, spikes_per_side)
+    warning = spike_support(source, need_window, need, ticks[0] - need_window, ticks[-1] + need_window + 1).warning(
+        f"{method} images", "brighten the scene or lower the threshold Q (simulate -q / --threshold-level)"
+        + (", or give a longer --window" if method == "accumulation" else ", or record a longer stream"))
+    if warning:
+        click.echo(warning, err=True)
 
     # ---- reconstruct and write frame by frame
     files = []
