@@ -287,7 +287,7 @@ def main():
                 tag = name + (" *" if tuning else "")
                 print(f"{tag:<24} {label:<16} {k:<16} {moving[k]:>10.3f} {moving[k] / best:>7.2f} {rel:>6.2f} "
                       f"{still:>9.3f} {tex:>9.3f}")
-            v = rows[0]["scores"]["viform"][0]
+            seen_objects = list(dict.fromkeys(o for r in rows for o in r["scores"]["viform"][0].objects))
             if name.startswith(("multi-object", "dilemma")):
                 goals.append((f"{name}, {label}: moving EPE {moving['viform']:.3f} = {moving['viform'] / best:.2f} × "
                               f"best baseline {best:.3f}", moving["viform"] <= 0.7 * best))
@@ -301,24 +301,24 @@ def main():
                 goals.append((f"{name}, {label}: textured EPE {tex:.3f} px (before: {base} at SpikeOne; "
                               f"DIS only now {mean([r['scores']['viform DIS only'][1].epe_px for r in rows]):.3f})",
                               tex <= base * 1.05))
-            for obj in v.objects:
+            for obj in seen_objects:
                 oid = int(obj.split()[0])
-                epe = mean([r["scores"]["viform"][0].objects.get(obj, v.objects[obj]).epe_px for r in rows
-                            if obj in r["scores"]["viform"][0].objects])
-                true = mean([r["scores"]["viform"][0].objects[obj].true_flow_px for r in rows
-                             if obj in r["scores"]["viform"][0].objects])
-                best_obj = min(mean([r["scores"][k][0].objects[obj].epe_px for r in rows
-                                     if obj in r["scores"][k][0].objects]) for k in keys if "TFP" in k)
-                det = rows[0]["detectable"]
-                seen = det[oid] if det else None
+                have = [r for r in rows if obj in r["scores"]["viform"][0].objects]
+                epe = mean([r["scores"]["viform"][0].objects[obj].epe_px for r in have])
+                true = mean([r["scores"]["viform"][0].objects[obj].true_flow_px for r in have])
+                dense = mean([r["scores"]["viform DIS only"][0].objects[obj].epe_px for r in have])
+                best_obj = min(mean([r["scores"][k][0].objects[obj].epe_px for r in have]) for k in keys if "TFP" in k)
+                det = next((r["detectable"] for r in have if r["detectable"]), None)
+                seen = det.get(oid) if det else None
                 rel = epe / true if true > 0 else math.nan
                 object_lines.append(f"{name:<22} {label:<16} {obj:<16} {epe:>8.3f} {true:>8.3f} {rel:>6.2f} "
-                                    f"{best_obj:>10.3f} " + (f"{seen[1]:>9.1f}" if seen else f"{'':>9}"))
+                                    f"{dense:>9.3f} {best_obj:>9.3f} {len(have):>4} "
+                                    + (f"{seen[1]:>9.1f}" if seen else f"{'':>9}"))
                 if seen is not None and seen[0]:
                     goals.append((f"{name}, {label}, {obj}: EPE {epe:.3f} = {epe / true:.2f} × its motion "
                                   f"{true:.2f} px (≤ 0.2)", epe <= 0.2 * true))
     print(f"\n{'scene':<22} {'sensor':<16} {'object':<16} {'EPE px':>8} {'true px':>8} {'rel.':>6} "
-          f"{'best TFP':>10} {'spikes/dwell':>9}")
+          f"{'DIS only':>9} {'best TFP':>9} {'inst':>4} {'spikes/dwell':>9}")
     for line in object_lines:
         print(line)
     print("\ngoals (issue 34 item 1):")

@@ -86,48 +86,74 @@ def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolera
 @njit(cache=True)
 def _complete(ring, count, j, k_side, instant, n_after, lo_cut, hi_cut, adaptive, noise_q, tolerance,
               before, after):
-    """Rate of pixel j at ``instant`` from its ring: the n_after most recent spikes are after it."""
-    size = ring.shape[0]
+    """Rate of pixel j at ``instant`` from its ring (P, size: a power of two ≥ 2K): the n_after
+    most recent spikes are after the instant."""
+    mask = ring.shape[1] - 1
     for a in range(n_after):  # chronological: nearest to the instant first
-        after[a] = ring[(count - n_after + a) % size, j]
+        after[a] = ring[j, (count - n_after + a) & mask]
     nb = 0
     for b in range(k_side):
         idx = count - n_after - 1 - b
-        if idx < 0 or idx < count - size:
+        if idx < 0 or idx <= count - ring.shape[1] - 1:
             break
-        before[b] = ring[idx % size, j]
+        before[b] = ring[j, idx & mask]
         nb += 1
     return window_rate(before, nb, after, n_after, lo_cut, hi_cut, adaptive, noise_q, tolerance)
+
+
+#: De Bruijn multiplier and table: the index of the lowest set bit of a 64-bit word without a loop.
+_DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
+_DEBRUIJN_INDEX = np.zeros(64, np.int64)
+for _k in range(64):
+    _DEBRUIJN_INDEX[((1 << _k) * 0x03F79D71B4CB0A89 % (1 << 64)) >> 58] = _k
+del _k
 
 
 @njit(cache=True, parallel=True)
 def advance_rates(bits, first, ring, count, next_inst, instants, k_side, adaptive, noise_q, tolerance,
                   lo_cut, out_rate, out_used, out_span, out_cut):
-    """Feed ticks [first, first + n) of ``bits`` (n, P) to every pixel's ring of spike ticks.
+    """Feed ticks [first, first + n) of ``bits`` (n, P) to every pixel's ring of spike ticks
+    (``ring`` (P, size), size a power of two ≥ 2K; ``count`` the spikes seen per pixel).
 
     Whenever a pixel has K spikes after its next pending instant, that instant's rate is
-    computed and written to slot ``m % n_slots`` of the outputs (n_slots, P).
+    computed and written to slot ``m % n_slots`` of the outputs (n_slots, P). Ticks are taken
+    64 at a time: each pixel's spikes among them are packed into one word (a vectorized pass
+    over the rows), then walked lowest bit first, the pixel's ring staying in cache.
     """
     n, p = bits.shape
     m_total = instants.size
     n_slots = out_rate.shape[0]
-    size = ring.shape[0]
+    mask = ring.shape[1] - 1
     chunk = 1024
+    one = np.uint64(1)
+    shift = np.uint64(58)
     for ch in prange((p + chunk - 1) // chunk):
         before = np.empty(k_side, np.int64)
         after = np.empty(k_side, np.int64)
+        words = np.zeros(chunk, np.uint64)
         j0 = ch * chunk
-        j1 = min(j0 + chunk, p)
-        for i in range(n):
-            tick = first + i
-            for j in range(j0, j1):
-                if bits[i, j]:
-                    ring[count[j] % size, j] = tick
-                    count[j] += 1
-                    c = count[j]
-                    while (c >= k_side and next_inst[j] < m_total
-                           and ring[(c - k_side) % size, j] > instants[next_inst[j]]):
-                        m = next_inst[j]
+        width = min(j0 + chunk, p) - j0
+        for t0 in range(0, n, 64):
+            for jj in range(width):
+                words[jj] = 0
+            for i in range(t0, min(n, t0 + 64)):
+                row = bits[i]
+                bit = np.uint64(i - t0)
+                for jj in range(width):
+                    words[jj] |= np.uint64(row[j0 + jj]) << bit
+            for jj in range(width):
+                word = words[jj]
+                if word == 0:
+                    continue
+                j = j0 + jj
+                c = count[j]
+                m = next_inst[j]
+                while word != 0:
+                    low = word & (~word + one)
+                    word ^= low
+                    ring[j, c & mask] = first + t0 + _DEBRUIJN_INDEX[(low * _DEBRUIJN) >> shift]
+                    c += 1
+                    while c >= k_side and m < m_total and ring[j, (c - k_side) & mask] > instants[m]:
                         r, used, span, cut = _complete(ring, c, j, k_side, instants[m], k_side, lo_cut, 0,
                                                        adaptive, noise_q, tolerance, before, after)
                         s = m % n_slots
@@ -135,7 +161,9 @@ def advance_rates(bits, first, ring, count, next_inst, instants, k_side, adaptiv
                         out_used[s, j] = used
                         out_span[s, j] = span
                         out_cut[s, j] = cut
-                        next_inst[j] = m + 1
+                        m += 1
+                count[j] = c
+                next_inst[j] = m
 
 
 @njit(cache=True, parallel=True)
@@ -145,8 +173,11 @@ def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_
     than K after it: the search stopped at ``hi_cut``)."""
     p = count.size
     n_slots = out_rate.shape[0]
-    size = ring.shape[0]
+    size = ring.shape[1]
+    mask = size - 1
     for j in prange(p):
+        if next_inst[j] >= upto:
+            continue
         before = np.empty(k_side, np.int64)
         after = np.empty(k_side, np.int64)
         c = count[j]
@@ -154,7 +185,7 @@ def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_
             m = next_inst[j]
             k = instants[m]
             n_after = 0
-            while n_after < min(k_side, c) and n_after < size and ring[(c - 1 - n_after) % size, j] > k:
+            while n_after < min(k_side, c) and n_after < size and ring[j, (c - 1 - n_after) & mask] > k:
                 n_after += 1
             r, used, span, cut = _complete(ring, c, j, k_side, k, n_after, lo_cut, hi_cut, adaptive, noise_q,
                                            tolerance, before, after)
@@ -304,9 +335,9 @@ def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx
 @njit(cache=True)
 def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, radius, cap, unknown, exception):
     """The shift with the lowest :func:`shift_gain`: an integer grid of step 2 within ``radius``
-    on every third pixel of a region of ≥ 300, then steps 1 and 0.5 around the best on all of them
+    on at most 256 of the region's pixels (evenly strided), then steps 1 and 0.5 around the best on all of them
     (Gauss–Newton refines further). Returns (dy, dx, gain)."""
-    stride = 3 if rows.size >= 300 else 1
+    stride = max(1, rows.size // 256)
     sub_r = rows[::stride].copy()
     sub_c = cols[::stride].copy()
     best = 0.0

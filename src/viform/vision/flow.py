@@ -393,7 +393,7 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
     out_used = np.empty((n_slots, pixels), np.int16)
     out_span = np.empty((n_slots, pixels), np.int32)
     out_cut = np.empty((n_slots, pixels), np.bool_)
-    ring = np.zeros((2 * k_side, pixels), np.int64)
+    ring = np.zeros((pixels, 1 << (2 * k_side - 1).bit_length()), np.int64)  # a power of two ≥ 2K per pixel
     count = np.zeros(pixels, np.int64)
     next_inst = np.zeros(pixels, np.int64)
     emitted = 0
@@ -609,7 +609,7 @@ class LayeredOptions:
     max_region_share: float = 0.2
     min_gain: float = 25.0
     tolerance: float = 3.0
-    slack: float = 0.15
+    slack: float = 0.3
     cap: float = 9.0
     unknown: float = 3.0
     exception: float = 2.0
@@ -659,7 +659,12 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
     labels, n = segment_log_light(log0, np.sqrt(var0), o.tolerance, o.slack, 64)
     chi2 = (log1 - log0) ** 2 / (var0 + var1)
     still = np.minimum(chi2, o.cap)
-    changed = chi2 > 16.0
+    # changes the dense flow does not explain (the light at t1 is not the light at t0 it says came
+    # there): only regions near them are searched, so where the dense flow follows the motion (a
+    # moving texture) nothing is spent
+    grid_r, grid_c = np.mgrid[0:h, 0:w].astype(np.float64)
+    back = ndi.map_coordinates(log0, [grid_r - dense_px[1], grid_c - dense_px[0]], order=1, mode="nearest")
+    unexplained = (chi2 > 16.0) & ((log1 - back) ** 2 / (var0 + var1) > o.cap)
     sizes = np.bincount(labels.ravel(), minlength=n)
     boxes = ndi.find_objects(labels + 1)
     flow = np.asarray(dense_px, dtype=np.float32).copy()
@@ -670,14 +675,15 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
     # Σ g² of a 2-D Gaussian of σ px is 1/(4πσ²): the smoothed images' noise variance
     weight = (4 * np.pi * o.smooth_px ** 2) / (smooth(var0) + smooth(var1))
     inverse_var = 1.0 / (var0 + var1)
-    # 1. every region whose surroundings changed: its best motion over a still background
+    # 1. every region with changes around it that the dense flow leaves unexplained: its best motion
+    # over a still background
     candidates = []
     tested = 0
     for region in np.flatnonzero((sizes >= o.min_region_px) & (sizes <= o.max_region_share * h * w)):
         box = boxes[region]
         grown = (slice(max(0, box[0].start - 2), box[0].stop + 2), slice(max(0, box[1].start - 2), box[1].stop + 2))
-        if np.count_nonzero(changed[grown]) < 3:
-            continue  # nothing changed around it: still
+        if np.count_nonzero(unexplained[grown]) < 3:
+            continue  # still, or moving as the dense flow says
         tested += 1
         inside = labels[box] == region
         rows, cols = np.nonzero(inside)
