@@ -333,13 +333,14 @@ def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx
 
 
 @njit(cache=True)
-def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, radius, cap, unknown, exception):
+def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse_rows, coarse_cols, radius, cap,
+               unknown, exception):
     """The shift with the lowest :func:`shift_gain`: an integer grid of step 2 within ``radius``
-    on at most 256 of the region's pixels (evenly strided), then steps 1 and 0.5 around the best on all of them
+    on the ``coarse_*`` pixels (a sample weighted to the region's rim, where a uniform region's
+    motion shows), then steps 1 and 0.5 around the best on all of the region's pixels
     (Gauss–Newton refines further). Returns (dy, dx, gain)."""
-    stride = max(1, rows.size // 256)
-    sub_r = rows[::stride].copy()
-    sub_c = cols[::stride].copy()
+    sub_r = coarse_rows
+    sub_c = coarse_cols
     best = 0.0
     by = 0.0
     bx = 0.0

@@ -638,7 +638,10 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
     -------
     flow : ndarray (2, H, W), float32
     regions : list of dict
-        The moving regions kept: pixels, motion (translation px, and the affine terms), gain.
+        The moving regions kept: pixels, centre, motion (px; ``affine`` when it varies across
+        the region), gain (χ²).
+    info : dict
+        Regions tested, rejected (by reason), share of pixels set still.
     """
     from scipy import ndimage as ndi
 
@@ -659,12 +662,7 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
     labels, n = segment_log_light(log0, np.sqrt(var0), o.tolerance, o.slack, 64)
     chi2 = (log1 - log0) ** 2 / (var0 + var1)
     still = np.minimum(chi2, o.cap)
-    # changes the dense flow does not explain (the light at t1 is not the light at t0 it says came
-    # there): only regions near them are searched, so where the dense flow follows the motion (a
-    # moving texture) nothing is spent
-    grid_r, grid_c = np.mgrid[0:h, 0:w].astype(np.float64)
-    back = ndi.map_coordinates(log0, [grid_r - dense_px[1], grid_c - dense_px[0]], order=1, mode="nearest")
-    unexplained = (chi2 > 16.0) & ((log1 - back) ** 2 / (var0 + var1) > o.cap)
+    changed = chi2 > 16.0
     sizes = np.bincount(labels.ravel(), minlength=n)
     boxes = ndi.find_objects(labels + 1)
     flow = np.asarray(dense_px, dtype=np.float32).copy()
@@ -675,34 +673,41 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
     # Σ g² of a 2-D Gaussian of σ px is 1/(4πσ²): the smoothed images' noise variance
     weight = (4 * np.pi * o.smooth_px ** 2) / (smooth(var0) + smooth(var1))
     inverse_var = 1.0 / (var0 + var1)
-    # 1. every region with changes around it that the dense flow leaves unexplained: its best motion
-    # over a still background
+    # 1. every region whose surroundings changed: its best motion over a still background
     candidates = []
     tested = 0
     for region in np.flatnonzero((sizes >= o.min_region_px) & (sizes <= o.max_region_share * h * w)):
         box = boxes[region]
         grown = (slice(max(0, box[0].start - 2), box[0].stop + 2), slice(max(0, box[1].start - 2), box[1].stop + 2))
-        if np.count_nonzero(unexplained[grown]) < 3:
-            continue  # still, or moving as the dense flow says
+        if np.count_nonzero(changed[grown]) < 3:
+            continue  # nothing changed around it: still
         tested += 1
         inside = labels[box] == region
         rows, cols = np.nonzero(inside)
         rows = (rows + box[0].start).astype(np.int64)
         cols = (cols + box[1].start).astype(np.int64)
-        dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, int(region), rows, cols,
+        # the coarse search's sample: up to 384 pixels of the rim (2 px) and 128 of the interior
+        core = ndi.binary_erosion(np.pad(inside, 1), iterations=2)[1:-1, 1:-1][inside]
+        rim_i, core_i = np.flatnonzero(~core), np.flatnonzero(core)
+        sample = np.concatenate([rim_i[::max(1, rim_i.size // 384)], core_i[::max(1, core_i.size // 128)]])
+        coarse = (rows[sample].copy(), cols[sample].copy())
+        dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, int(region), rows, cols, *coarse,
                                   int(o.max_shift_px), o.cap, o.unknown, o.exception)
         if -gain > o.min_gain and not dy == dx == 0.0:
-            candidates.append((-gain, int(region), box, inside, rows, cols))
+            candidates.append((-gain, int(region), box, inside, rows, cols, coarse))
     # 2. strongest first; what a kept motion explains (where its pixels land, what they uncover) is
     # no longer a change for the others, so a region beside a moving one is not read as moving too
     regions = []
-    for _, region, box, inside, rows, cols in sorted(candidates, key=lambda c: -c[0]):
-        dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, region, rows, cols,
+    rejected = {"explained by others": 0, "unexplained landings": 0, "dense flow as good": 0}
+    for _, region, box, inside, rows, cols, coarse in sorted(candidates, key=lambda c: -c[0]):
+        dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, *coarse,
                                   int(o.max_shift_px), o.cap, o.unknown, o.exception)
         if -gain <= o.min_gain or dy == dx == 0.0:
+            rejected["explained by others"] += 1
             continue
         if unexplained_share(log0, log1, var0, var1, still, rows, cols, dy, dx, o.cap, o.exception) \
                 >= o.max_unexplained:
+            rejected["unexplained landings"] += 1
             continue
         # sub-pixel: Gauss–Newton on the rim (the interior of a uniform region tells nothing)
         core = ndi.binary_erosion(np.pad(inside, 1), iterations=o.rim_px)[1:-1, 1:-1]
@@ -736,6 +741,7 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
         fit_cost = warp_costs(log0, log1, inverse_var, rim_r, rim_c, trial[0], trial[1], o.cap)
         dense_cost = warp_costs(log0, log1, inverse_var, rim_r, rim_c, flow[0], flow[1], o.cap)
         if np.sum(dense_cost - np.minimum(fit_cost, dense_cost + o.exception)) <= o.min_gain:
+            rejected["dense flow as good"] += 1
             continue
         # rim pixels the dense flow explains clearly better, over 5×5 of the rim (another object's motion,
         # not one noisy pixel), keep it
@@ -764,7 +770,8 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
     quiet = ~moving & (ndi.uniform_filter(chi2, 5, mode="nearest") < o.still_chi2) & (
         np.hypot(flow[0], flow[1]) < o.still_below_px)
     flow[:, quiet] = 0.0
-    return flow, regions, {"regions_tested": tested, "still_share": float(quiet.mean())}
+    return flow, regions, {"regions_tested": tested, "regions_rejected": rejected,
+                           "still_share": float(quiet.mean())}
 
 
 def flow_confidence(image0: RateImage, image1: RateImage, dt_ticks: int, spikes_per_side: int) -> np.ndarray:
