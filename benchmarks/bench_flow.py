@@ -36,6 +36,11 @@ baseline; each detectable multi-object object EPE ≤ 0.2 × its motion; median 
 ≤ 0.05 px; translating and rotating no worse than before (textured EPE). Each is printed as met
 or not.
 
+Frame cameras (``--no-frame-sensors`` skips them): a conventional CMOS with 1 ms exposure at 30 fps
+and the 1,667 fps high-speed camera with its auto-exposure shoot the SpikeOne-lit scenes; the same
+dense flow (DIS ``fast`` on their log frames) between consecutive frames, scored over each
+camera's own frame interval (a 30 fps camera cannot give a 1 ms flow).
+
 Speed (issue 38 item 6): ``flow_sequence`` over a 20 ms stream, one field per 40 ticks, 400×250,
 fields per second end to end with the default images, for the default estimator and DIS only;
 the images alone (one pass) against today's imaging path
@@ -141,6 +146,40 @@ def baselines(spikes, tick0, tick1):
     a, b = tfp_8bit(spikes, tick0), tfp_8bit(spikes, tick1)
     return {"DIS-fast TFP": flow_between_images(a, b, "fast"), "DIS-medium TFP": flow_between_images(a, b, "medium"),
             "Farneback TFP": farneback(a, b)}
+
+
+def frame_rows(scene, key, pairs, height, width):
+    """DIS ``fast`` on the log frames of a frame camera (CMOS 1 ms at 30 fps, or the 1,667 fps camera with
+    its auto-exposure, after it settled), scored between the middles of consecutive exposures."""
+    from viform.vision.flow import log_light_pair_8bit
+
+    if key == "cmos-1ms":
+        from viform.sensors.frame import FramePixelParameters, FrameSensor
+
+        sensor = FrameSensor(FramePixelParameters(), exposure_s=1e-3, frame_rate_hz=30.0)
+        stack = sensor.capture(scene, (pairs + 1) / 30.0 + 1e-6, seed=11)
+        light = np.maximum(stack.frames_dn.astype(np.float64) - sensor.parameters.black_offset_dn, 0.5)
+        mids = stack.start_times_s + stack.exposure_s / 2
+    else:
+        from viform.isp.highspeed_pipeline import HighSpeedConfig, run_highspeed
+
+        result = run_highspeed(scene, dataclasses.replace(HighSpeedConfig(), n_frames=pairs + 40, seed=11))
+        gray = result.gray8.astype(np.float64)[-(pairs + 1):]
+        exposure = np.asarray(result.exposure_s, dtype=np.float64)[-(pairs + 1):]
+        light = np.maximum(gray, 0.5) / exposure[:, None, None]
+        mids = (result.frame_times_s - result.exposure_s / 2)[-(pairs + 1):]
+    out = []
+    for k in range(pairs):
+        a, b, _ = log_light_pair_8bit(light[k], light[k + 1])
+        flow = flow_between_images(a, b)
+        t0, t1 = float(mids[k]), float(mids[k + 1])
+        truth = scene.optical_flow_px(t0, t1)
+        labels = scene.object_labels(t0) if "objects" in scene.truth_kinds() else None
+        finite = truth.flow_px[:, truth.valid]
+        margin = min(int(math.ceil(np.abs(finite).max())) + 4 if finite.size else 4, min(height, width) // 3)
+        textured = textured_mask(scene.illuminance_lux(t0), margin_px=margin)
+        out.append((motion_scores(flow, truth, labels), motion_scores(flow, truth, mask=textured).all, t1 - t0))
+    return out
 
 
 # ---------------------------------------------------------------------- scores, twice
@@ -264,6 +303,8 @@ def main():
     parser.add_argument("--small", action="store_true", help="200×125 instead of 400×250")
     parser.add_argument("--no-speed", action="store_true", help="skip the speed runs")
     parser.add_argument("--scenes", default=None, help="comma-separated subset of the scenes")
+    parser.add_argument("--no-frame-sensors", dest="frame_sensors", action="store_false",
+                        help="skip the frame cameras' rows")
     args = parser.parse_args()
     height, width = (125, 200) if args.small else (250, 400)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; {width}×{height} px; flow over 1 ms")
@@ -317,6 +358,20 @@ def main():
                 if seen is not None and seen[0]:
                     goals.append((f"{name}, {label}, {obj}: EPE {epe:.3f} = {epe / true:.2f} × its motion "
                                   f"{true:.2f} px (≤ 0.2)", epe <= 0.2 * true))
+    if args.frame_sensors:
+        print(f"\nframe cameras, the same dense flow (DIS fast, log frames) over their own frame interval, "
+              f"SpikeOne-lit scenes:\n{'scene':<24} {'camera':<28} {'interval':>9} {'moving EPE':>10} {'rel.':>6} "
+              f"{'still med':>9} {'textured':>9}")
+        for name in names:
+            if name.startswith("multi-object") and SCENES[name][0] != 0:
+                continue
+            scene = scene_for(name.replace(" seed 0", ""), SPIKEONE, height, width)
+            for key, label in (("cmos-1ms", "CMOS 1 ms exposure, 30 fps"), ("highspeed", "1,667 fps camera, AE")):
+                rows = frame_rows(scene, key, 2 if args.quick else 3, height, width)
+                print(f"{name:<24} {label:<28} {mean([r[2] for r in rows]) * 1e3:>7.3g} ms "
+                      f"{mean([r[0].moving.epe_px for r in rows]):>10.3f} "
+                      f"{mean([r[0].moving.relative_error for r in rows]):>6.2f} "
+                      f"{mean([r[0].still_median_px for r in rows]):>9.3f} {mean([r[1].epe_px for r in rows]):>9.3f}")
     print(f"\n{'scene':<22} {'sensor':<16} {'object':<16} {'EPE px':>8} {'true px':>8} {'rel.':>6} "
           f"{'DIS only':>9} {'best TFP':>9} {'inst':>4} {'spikes/dwell':>9}")
     for line in object_lines:

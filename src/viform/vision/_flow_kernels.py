@@ -399,19 +399,21 @@ def unexplained_share(log0, log1, var0, var1, still, rows, cols, dy, dx, cap, ex
 
 
 @njit(cache=True)
-def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, rows, cols, params, affine, iterations, cap,
-                        ridge):
-    """Gauss–Newton (Lucas–Kanade) on Σ w·(s1(x + d(x)) − s0(x))² over the listed pixels.
+def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, rows, cols, params, affine,
+                        iterations, cap, ridge):
+    """Gauss–Newton (Lucas–Kanade) on Σ_j Σ_x w_j·(s1_j(x + f_j·d(x)) − s0(x))² over the listed pixels.
 
+    ``smooth1``, ``grad_*1`` and ``weight`` are stacks (J, H, W) of later images, their
+    gradients and weights; frame j lies at the fraction f_j = ``fractions[j]`` of the interval,
+    so a constant velocity moves a pixel by f_j·d by then (one frame at 1.0: the plain pair).
     ``params`` (tx, ty, a, b, c, e): d(x) = (tx + a·X + b·Y, ty + c·X + e·Y), X and Y the pixel's
     offset from the pixels' centroid in units of their largest offset; a translation when not
     ``affine``; the affine terms cost ``ridge``·term² (a term of 1 moves the region's far edge
     by 1 px), so directions the data leave open stay a translation. Pixels whose weighted
-    residual² exceeds ``cap`` sit out each step (and count
-    ``cap`` in the cost). Returns (params, capped cost before the last step, pixels used,
-    centroid y, centroid x, scale).
+    residual² exceeds ``cap`` sit out each step (and count ``cap`` in the cost). Returns
+    (params, capped cost before the last step, pixel-frames used, centroid y, centroid x, scale).
     """
-    h, w = smooth0.shape
+    n_frames, h, w = smooth1.shape
     n = rows.size
     cy = 0.0
     cx = 0.0
@@ -432,35 +434,37 @@ def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, rows, cols, 
         grad = np.zeros(m)
         cost = 0.0
         used = 0
-        for k in range(n):
-            r = rows[k]
-            c = cols[k]
-            xx = (c - cx) / scale
-            yy = (r - cy) / scale
-            y = r + params[1] + params[4] * xx + params[5] * yy
-            x = c + params[0] + params[2] * xx + params[3] * yy
-            if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
-                continue
-            res = bilinear(smooth1, y, x) - smooth0[r, c]
-            ww = weight[r, c]
-            if res * res * ww > cap:
-                cost += cap
-                continue
-            gx = bilinear(grad_x1, y, x)
-            gy = bilinear(grad_y1, y, x)
-            jac[0] = gx
-            jac[1] = gy
-            if affine:
-                jac[2] = gx * xx
-                jac[3] = gx * yy
-                jac[4] = gy * xx
-                jac[5] = gy * yy
-            for i in range(m):
-                grad[i] += ww * jac[i] * res
-                for j in range(m):
-                    hess[i, j] += ww * jac[i] * jac[j]
-            cost += res * res * ww
-            used += 1
+        for f in range(n_frames):
+            frac = fractions[f]
+            for k in range(n):
+                r = rows[k]
+                c = cols[k]
+                xx = (c - cx) / scale
+                yy = (r - cy) / scale
+                y = r + frac * (params[1] + params[4] * xx + params[5] * yy)
+                x = c + frac * (params[0] + params[2] * xx + params[3] * yy)
+                if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
+                    continue
+                res = bilinear(smooth1[f], y, x) - smooth0[r, c]
+                ww = weight[f, r, c]
+                if res * res * ww > cap:
+                    cost += cap
+                    continue
+                gx = frac * bilinear(grad_x1[f], y, x)
+                gy = frac * bilinear(grad_y1[f], y, x)
+                jac[0] = gx
+                jac[1] = gy
+                if affine:
+                    jac[2] = gx * xx
+                    jac[3] = gx * yy
+                    jac[4] = gy * xx
+                    jac[5] = gy * yy
+                for i in range(m):
+                    grad[i] += ww * jac[i] * res
+                    for j in range(m):
+                        hess[i, j] += ww * jac[i] * jac[j]
+                cost += res * res * ww
+                used += 1
         for i in range(2, m):
             hess[i, i] += ridge
             grad[i] += ridge * params[i]
