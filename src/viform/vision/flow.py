@@ -707,14 +707,20 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
         dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, int(region), rows, cols, *coarse,
                                   int(o.max_shift_px), o.cap, o.unknown, o.exception)
         if -gain > o.min_gain and not dy == dx == 0.0:
-            candidates.append((-gain, int(region), box, inside, rows, cols, coarse))
+            candidates.append((-gain, int(region), box, inside, rows, cols, coarse, (dy, dx, gain)))
     # 2. strongest first; what a kept motion explains (where its pixels land, what they uncover) is
     # no longer a change for the others, so a region beside a moving one is not read as moving too
     regions = []
     rejected = {"explained by others": 0, "unexplained landings": 0, "dense flow as good": 0}
-    for _, region, box, inside, rows, cols, coarse in sorted(candidates, key=lambda c: -c[0]):
-        dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, *coarse,
-                                  int(o.max_shift_px), o.cap, o.unknown, o.exception)
+    touched = np.zeros((h, w), bool)  # where kept motions changed the still costs
+    reach = int(o.max_shift_px) + 2
+    for _, region, box, inside, rows, cols, coarse, first in sorted(candidates, key=lambda c: -c[0]):
+        near = (slice(max(0, box[0].start - reach), box[0].stop + reach),
+                slice(max(0, box[1].start - reach), box[1].stop + reach))
+        if touched[near].any():  # else the search would find what it found before
+            first = best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, *coarse,
+                               int(o.max_shift_px), o.cap, o.unknown, o.exception)
+        dy, dx, gain = first
         if -gain <= o.min_gain or dy == dx == 0.0:
             rejected["explained by others"] += 1
             continue
@@ -778,6 +784,7 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
         explained[land_r[inside_field], land_c[inside_field]] = True
         explained[rows, cols] = True  # its own place: landed on, or uncovered
         still[explained] = np.minimum(still[explained], 1.0)
+        touched |= explained
         regions.append({"pixels": int(rows.size), "centre_px": [float(cols.mean()), float(rows.mean())],
                         "shift_px": [float(params[0]), float(params[1])],
                         "affine": bool(params[2:].any()), "gain": float(-gain)})
