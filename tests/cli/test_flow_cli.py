@@ -80,7 +80,7 @@ def test_headline_scores_the_moving_pixels_so_a_missed_motion_reads_missed(dilem
     assert vehicle.split()[-3] == "missed"
     assert any(line.startswith("still background") for line in lines)
     # every printed score checked against an independent computation from the written flow and the truth
-    from viform.light.scenes import builtin_scene
+    from viform.light.catalog import builtin_scene
 
     summary = json.loads((tmp_path / "f" / "metrics.json").read_text())
     flow = np.load(tmp_path / "f" / "flow.npy").astype(float)
