@@ -284,8 +284,10 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         check_output_folder("--video", Path(video).resolve().parent)
     from viform.imaging.support import imaging_need, spike_support
 
+    # the firing measured near the instants only (a damaged file's far ticks are not read for it)
     need_window, need = imaging_need(method, source.n_ticks, window_ticks, spikes_per_side)
-    warning = spike_support(source, need_window, need, ticks[0] - need_window, ticks[-1] + need_window + 1).warning(
+    near = max(window_ticks, 256)
+    warning = spike_support(source, need_window, need, ticks[0] - near, ticks[-1] + near + 1).warning(
         f"{method} images", "brighten the scene or lower the threshold Q (simulate -q / --threshold-level)"
         + (", or give a longer --window" if method == "accumulation" else ", or record a longer stream"))
     if warning:
