@@ -58,6 +58,15 @@ def test_flow_scores_a_file_with_truth(moving, tmp_path):
     assert np.load(tmp_path / "f" / "flow.npy").shape == (2, 32, 48)
 
 
+def test_a_field_with_no_still_pixels_says_so(moving, tmp_path):
+    # the whole texture translates: the still-background line says there is none rather than vanishing
+    result = _run("flow", moving, "--at", 0.002, "--dt", 0.001, "--out", tmp_path / "f")
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert any(line.startswith("moving pixels (") for line in lines)
+    assert "still background: none (every pixel with valid truth moves, as under a moving camera)" in lines
+
+
 @pytest.fixture(scope="module")
 def dilemma(tmp_path_factory):
     folder = tmp_path_factory.mktemp("flowdilemma")

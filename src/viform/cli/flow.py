@@ -154,6 +154,8 @@ def flow(file, at_s, dt_s, method, preset, refine, out_dir, score, height, width
         click.echo(f"still background ({st['pixels']:,} px): median false motion "
                    f"{st['median_false_motion_px']:.3f} px, 95th percentile {st['p95_false_motion_px']:.3f} px "
                    "(zero flow: 0)")
+    else:
+        click.echo("still background: none (every pixel with valid truth moves, as under a moving camera)")
     if s["objects"]:
         click.echo(f"{'object':<20} {'true px':>8} {'EPE px':>8} {'of motion':>10} {'verdict':>9} {'zero flow':>10} "
                    f"{'scored':>7}")
