@@ -282,6 +282,16 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         check_output_folder("--out", (out.parent if out.suffix.lower() == ".png" else out).resolve())
     if video is not None:
         check_output_folder("--video", Path(video).resolve().parent)
+    from viform.imaging.support import imaging_need, spike_support
+
+    # the firing measured near the instants only (a damaged file's far ticks are not read for it)
+    need_window, need = imaging_need(method, source.n_ticks, window_ticks, spikes_per_side)
+    near = max(window_ticks, 256)
+    warning = spike_support(source, need_window, need, ticks[0] - near, ticks[-1] + near + 1).warning(
+        f"{method} images", "brighten the scene or lower the threshold Q (simulate -q / --threshold-level)"
+        + (", or give a longer --window" if method == "accumulation" else ", or record a longer stream"))
+    if warning:
+        click.echo(warning, err=True)
 
     # ---- reconstruct and write frame by frame; on any failure no partial set of files is left
     folder = out if out is not None and out.suffix.lower() != ".png" else None

@@ -165,6 +165,10 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
         return
     for line in console_lines(doc):
         click.echo(line)
+    sparse = [r for r in doc.get("records", []) if r.get("warning")]
+    if sparse:
+        click.echo(f"warning: {len(sparse)} of {len(doc['records'])} points are scored on too few spikes; "
+                   f"{sparse[0]['label']}: {sparse[0]['warning'].removeprefix('warning: ')}", err=True)
     click.echo(f"\nwrote {summary['report']} and {summary['table']} in {summary['wall_s']:.1f} s")
 
 

@@ -135,6 +135,14 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
     for _, block in source.iter_blocks(4096):
         mean_rate += block.sum(axis=0)
     mean_rate /= max(source.n_ticks, 1)
+    from viform.imaging.support import support_from_rates
+    from viform.vision.tracking import TrackerParameters
+
+    # the tracker follows each pixel's light by its intervals: one (2 spikes) per background time constant
+    warning = support_from_rates(mean_rate, round(TrackerParameters().background_ticks), 2, source.n_ticks).warning(
+        "tracking", "brighten the scene or lower the threshold Q (simulate -q / --threshold-level)")
+    if warning:
+        click.echo(warning, err=True)
 
     summary = {"file": str(file), "every_ticks": every, "frames": n_frames, "frame_rate_hz": source.clock_hz / every,
                "tracks": int(len(np.unique(result.rows[:, 1]))) if len(result.rows) else 0,

@@ -78,6 +78,7 @@ def run_point(context: SweepContext, point: Point, scene=None, device: str = "cp
         metrics["targets_seen"] = float(sum(v >= SEEN_CNR for v in metrics["target_cnr"].values()))
     if context.tracking and not shot.skipped:
         metrics.update(tracking_scores(scene, context.duration_s, shot))
+    warning = spike_support_warning(shot.raw, context.spike_image) if spike and not shot.skipped else None
     images = None
     if not shot.skipped:
         images = np.stack([np.where(e.underexposed, np.nan, np.nan_to_num(np.asarray(e.lux, np.float64)))
@@ -91,7 +92,22 @@ def run_point(context: SweepContext, point: Point, scene=None, device: str = "cp
         record["scene"] = dict(point.scene)
     if device != "cpu" and spike:
         record["device"] = device
+    if warning:
+        record["warning"] = warning
     return {"record": record, "images": images}
+
+
+def spike_support_warning(stream, spike_image: str) -> str | None:
+    """One line when a spike point's stream is too sparse for the images it is scored on
+    (:func:`viform.imaging.support.spike_support`), else None."""
+    from viform.imaging.support import imaging_need, spike_support
+
+    if stream is None or not hasattr(stream, "read_ticks"):
+        return None
+    method = {"best": "multi-interval"}.get(spike_image, spike_image)
+    window, need = imaging_need(method, stream.n_ticks, max(1, round(cmp.ACCUMULATION_WINDOW_S * stream.clock_hz)))
+    return spike_support(stream, window, need).warning(f"its {spike_image} images",
+                                                        "more light or a lower threshold would help")
 
 
 def run_points(context: SweepContext, points, device: str = "cpu") -> list[dict]:
