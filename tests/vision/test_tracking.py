@@ -103,8 +103,12 @@ def test_higher_threshold_or_dimmer_light_finds_later():
         o = score_tracking(gt, res.rows, res.times_s, spk.clock_hz)["objects"][1]
         return math.inf if o["latency_found_ticks"] is None else o["latency_found_ticks"]
 
-    assert latency(100, 50.0) < latency(400, 50.0)
+    # (a pixel on the 50-lux square collects Q = 100 e⁻ in 0.3 ticks, 1,600 e⁻ in 4.5: the background's
+    # intervals go from 2.8 to 45 ticks; a 4× change of Q moves the first spike by about a tick, under the
+    # 5-tick reporting step)
+    assert latency(100, 50.0) < latency(1600, 50.0)
     assert latency(1000, 200.0) < latency(1000, 20.0)
+    assert latency(100, 50.0) < latency(100, 10.0)
 
 
 def test_frames_back_end_finds_it():

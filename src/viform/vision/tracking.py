@@ -47,11 +47,12 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit, prange
-from scipy.ndimage import binary_dilation, gaussian_filter, median_filter
+from numba import njit
+from scipy.ndimage import binary_closing, binary_opening, gaussian_filter, maximum_filter, median_filter
 from scipy.optimize import linear_sum_assignment
 
 from viform._validate import ViformError, check_int, check_non_negative, check_positive
+from viform.vision import _spike_front as _front
 
 
 @dataclass(frozen=True)
@@ -118,6 +119,7 @@ class TrackerParameters:
     seed_unsure: bool = True
     seed_measured_fraction: float = 0.9
     merged_keep_alive: bool = True
+    left_log: float = 0.4
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -139,158 +141,148 @@ class TrackerParameters:
 
 # --------------------------------------------------------------------------- spike front end
 
-#: Two intervals spanning fewer ticks than this are averaged over four instead (bright pixels).
-_SHORT_SPAN_TICKS = 8
+def pack_spikes(spikes: np.ndarray) -> np.ndarray:
+    """Spike bits (T, H, W) as packed words (T, ⌈H·W/64⌉) uint64: pixel r·W + c is bit k mod 64 of word k // 64."""
+    spikes = np.asarray(spikes, dtype=np.bool_)
+    t = spikes.shape[0]
+    packed = np.packbits(spikes.reshape(t, -1), axis=1, bitorder="little")
+    return _words(packed)
 
-@njit(parallel=True, cache=True)
-def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, last3, last4, ref, prev, censored,
-                        flag_since, pending, out, k_lo, k_hi, k_seed, background_ticks, hold_ticks):  # pragma: no cover
-    # Intervals in ticks, compared by ratio (k_lo = e^−threshold, k_hi = e^threshold): no logarithm
-    # per spike. The background interval follows an exponential mean with weight τ/(T + τ) per
-    # interval τ (time constant T ticks).
-    T, H, W = spikes.shape
-    for r in prange(H):
-        step = 0
-        l1, l2, l3, l4, rf, pv = last1[r], last2[r], last3[r], last4[r], ref[r], prev[r]
-        cs, fs, pd = censored[r], flag_since[r], pending[r]
-        for t in range(T):
-            tick = first_tick + t
-            row = spikes[t, r]
-            for c in range(W):
-                if not row[c]:
-                    continue
-                p1 = l1[c]
-                if p1 < 0:  # first spike: the interval is at least the stream so far (censored)
-                    rf[c] = tick + 1.0
-                    cs[c] = True
-                    l1[c] = tick
-                    continue
-                p2 = l2[c]
-                p4 = l4[c]
-                if p4 >= 0 and tick - p2 < _SHORT_SPAN_TICKS:
-                    # intervals of a few ticks: the one-tick quantization dominates, so average four of
-                    # them (a saturated object spiking every tick is told from a background every 2 ticks)
-                    n = 4.0
-                    span = float(tick - p4)
-                else:
-                    n = 2.0 if p2 >= 0 else 1.0
-                    span = float(tick - p2) if p2 >= 0 else float(tick - p1)
-                tau = span / n
-                b = rf[c]
-                # the readout knows each spike to a tick: the span of n intervals is (span − 1, span + 1)
-                # ticks, so only a change beyond that slack counts (short intervals are coarse)
-                brighter = (span + 1.0) / n < b * k_lo
-                darker = (span - 1.0) / n > b * k_hi
-                if cs[c]:
-                    flagged = brighter  # only "brighter" is known against a lower bound
-                    if not flagged:  # the first measured interval replaces the bound
-                        q = pv[c]
-                        if q > 0.0 and ((span - 1.0) / n > q * k_seed or (span + 1.0) / n < q / k_seed):
-                            # no interval yet when the background was seeded, and far from the background
-                            # seeded around it: on an object since the start (seed_background)
-                            rf[c] = q
-                            pv[c] = 0.0
-                            pd[c] = True
-                            fs[c] = tick
-                        else:
-                            rf[c] = tau
-                            fs[c] = -1
-                        cs[c] = False
-                        l4[c] = l3[c]
-                        l3[c] = p2
-                        l2[c] = p1
-                        l1[c] = tick
-                        continue
-                else:
-                    flagged = brighter or darker
-                q = pv[c]
-                if flagged and q > 0.0 and q * k_lo <= tau <= q * k_hi:
-                    # back to the background it had before something stayed on it: not an object's trail
-                    rf[c] = q
-                    pv[c] = 0.0
-                    flagged = False
-                    b = q
-                if flagged:
-                    if fs[c] < 0:
-                        fs[c] = tick
-                    if tick - fs[c] > hold_ticks:  # stayed different: it is the background now
-                        if q <= 0.0:
-                            pv[c] = b
-                        rf[c] = b + tau / (background_ticks + tau) * (tau - b)
-                        cs[c] = False
-                    pd[c] = True
-                else:
-                    fs[c] = -1
-                    rf[c] = b + tau / (background_ticks + tau) * (tau - b)
-                l4[c] = l3[c]
-                l3[c] = p2
-                l2[c] = p1
-                l1[c] = tick
-            if (tick + 1) % step_ticks == 0:  # end of an output step: darker pixels, then emit
-                for c in range(W):
-                    p1 = l1[c]
-                    if p1 >= 0 and not cs[c]:
-                        silence = float(tick - p1)  # the interval in progress is longer (one tick of slack)
-                        q = pv[c]
-                        if silence > rf[c] * k_hi and not (q > 0.0 and silence <= q * k_hi):
-                            pd[c] = True
-                            if fs[c] < 0:
-                                fs[c] = tick
-                    out[step, r, c] = pd[c]
-                    pd[c] = False
-                step += 1
+
+def _words(packed: np.ndarray) -> np.ndarray:
+    """Packed bytes (T, n_bytes) as little-endian uint64 words (T, ⌈n_bytes/8⌉), zero-padded."""
+    t, n_bytes = packed.shape
+    n_words = -(-n_bytes // 8)
+    if n_bytes != n_words * 8:
+        padded = np.zeros((t, n_words * 8), np.uint8)
+        padded[:, :n_bytes] = packed
+        packed = padded
+    return np.ascontiguousarray(packed).view("<u8").astype(np.uint64, copy=False)
 
 
 class SpikeChangeDetector:
-    """Foreground masks from a spike stream, one per output step of ``step_ticks`` ticks.
+    """Foreground from a spike stream, one mask per output step of ``step_ticks`` ticks.
 
-    Feed blocks of consecutive ticks to :meth:`feed`; it returns the masks of the steps
-    completed by the block (a step may span blocks: the state carries over), so the same
-    masks come out whatever the block size.
+    Per pixel the detector keeps its last spike, the window of intervals since the last step
+    and a background interval; per spike it touches only that pixel's window (the spikes come
+    as packed bits, 64 pixels a word); once per step each pixel's window becomes its interval
+    estimate, compared with the background (module notes). Feed consecutive blocks of ticks to
+    :meth:`feed` (bool arrays) or :meth:`feed_words` (packed): the state carries over, so the
+    same masks come out whatever the block size.
+
+    Parameters
+    ----------
+    height, width : int
+        Image size.
+    step_ticks : int
+        Output step, ticks.
+    parameters : TrackerParameters, optional
+    stored_width : int, optional
+        Pixels per row in the packed words (≥ ``width``; wider rows hold padding).
+    flip : bool
+        The packed rows are stored bottom-up (the ``.dat`` layout of the cameras).
     """
 
-    def __init__(self, height: int, width: int, step_ticks: int, parameters: TrackerParameters | None = None):
+    def __init__(self, height: int, width: int, step_ticks: int, parameters: TrackerParameters | None = None,
+                 stored_width: int | None = None, flip: bool = False):
+        from numba import get_num_threads
+
         self.parameters = parameters or TrackerParameters()
         self.step_ticks = check_int("step_ticks", step_ticks, 1)
-        shape = (check_int("height", height, 1), check_int("width", width, 1))
-        self.last1 = np.full(shape, -1, np.int64)
-        self.last2 = np.full(shape, -1, np.int64)
-        self.last3 = np.full(shape, -1, np.int64)
-        self.last4 = np.full(shape, -1, np.int64)
-        self.ref = np.zeros(shape, np.float64)  # background interval, ticks
-        self.prev = np.zeros(shape, np.float64)  # the background before the last absorption (0: none)
-        self.censored = np.zeros(shape, np.bool_)
-        self.flag_since = np.full(shape, -1, np.int64)
-        self.pending = np.zeros(shape, np.bool_)
+        self.height, self.width = check_int("height", height, 1), check_int("width", width, 1)
+        self.stored_width = self.width if stored_width is None else check_int("stored_width", stored_width, self.width)
+        self.flip = bool(flip)
+        self.n_pixels = self.height * self.stored_width
+        self.n_words = -(-self.n_pixels // 64)
+        n = self.n_words * 64
+        self.last = np.full(n, -1, np.int64)
+        self.anchor = np.full(n, -1, np.int64)
+        self.first = np.full(n, -1, np.int64)
+        self.count = np.zeros(n, np.int64)
+        self.span1 = np.zeros(n, np.int64)
+        self.n1 = np.zeros(n, np.int64)
+        self.win_span = np.zeros(n, np.int64)
+        self.win_n = np.zeros(n, np.int64)
+        self.mixed = np.zeros(n, np.bool_)  # the window is one interval during which the light fell
+        self.bg = np.zeros(n, np.float64)  # background interval, ticks
+        self.censored = np.zeros(n, np.bool_)  # bg is a lower bound
+        self.fg = np.zeros(n, np.int8)
+        self.flag_since = np.full(n, -1, np.int64)
+        self.prev = np.zeros(n, np.float64)  # the background before the last absorption, or seeded (0: none)
+        chunks = max(1, min(get_num_threads(), self.n_words))
+        edges = np.linspace(0, self.n_words, chunks + 1).round().astype(np.int64)
+        self._chunks = (edges[:-1].copy(), edges[1:].copy())
         self.next_tick = 0
         self.seeded = False
+        self._seeded_ever = None
+        self._index = None
+
+    def upright(self, flat: np.ndarray) -> np.ndarray:
+        """A per-pixel state array (stored order) as an upright (H, W) view."""
+        grid = flat[: self.n_pixels].reshape(self.height, self.stored_width)[:, : self.width]
+        return grid[::-1] if self.flip else grid
 
     def feed(self, spikes: np.ndarray) -> np.ndarray:
         """Process the next ``spikes`` block (T, H, W) bool; returns (steps completed, H, W) bool masks."""
-        spikes = np.ascontiguousarray(spikes, dtype=np.bool_)
+        if self.flip or self.stored_width != self.width:
+            raise ViformError("feed() takes upright (T, H, W) spikes; this detector reads a stored layout: "
+                              "use feed_words()")
+        bits = self.feed_words(pack_spikes(spikes))
+        return np.stack([self.mask(b) for b in bits]) if len(bits) else np.zeros((0, self.height, self.width), bool)
+
+    def mask(self, bits: np.ndarray) -> np.ndarray:
+        """One step's packed foreground as an upright (H, W) bool mask."""
+        ys, xs = self.pixels(bits)
+        m = np.zeros((self.height, self.width), bool)
+        m[ys, xs] = True
+        return m
+
+    def pixels(self, bits: np.ndarray):
+        """Rows and columns (upright, scan order) of one step's foreground pixels."""
+        return _front.foreground_pixels(bits, self.height, self.width, self.stored_width, self.flip)
+
+    def components(self, bits: np.ndarray, merge_px: int, min_pixels: int):
+        """Detections of one step: boxes (N, 4), pixel counts (N,), and the pixels (ys, xs, component)."""
+        ys, xs = self.pixels(bits)
+        if self._index is None:
+            self._index = np.full((self.height, self.width), -1, np.int64)
+        boxes, counts, labels = _front.components_of_pixels(ys, xs, self.height, self.width, 2 * merge_px + 1,
+                                                            min_pixels, self._index)
+        return boxes, counts, (ys, xs, labels)
+
+    def feed_words(self, words: np.ndarray) -> np.ndarray:
+        """Process the next block of packed ticks (T, n_words) uint64; returns (steps completed, n_words) bits."""
+        words = np.ascontiguousarray(words, dtype=np.uint64)
+        if words.ndim != 2 or words.shape[1] != self.n_words:
+            raise ViformError(f"packed spikes must have shape (T, {self.n_words}); got {words.shape}")
         outs, start = [], 0
         while True:  # split at the seeding checks: the same ticks whatever the blocks
             check = self._next_seed_check()
-            end = spikes.shape[0] if check is None else min(spikes.shape[0], start + check - self.next_tick)
-            outs.append(self._feed(spikes[start:end]))
+            end = words.shape[0] if check is None else min(words.shape[0], start + check - self.next_tick)
+            at_check = check is not None and self.next_tick + (end - start) == check
+            outs.append(self._feed(words[start:end], at_check))
             start = end
-            if check is not None and self.next_tick == check:
+            if at_check:
                 self._seed()
-            if start >= spikes.shape[0]:
+            if start >= words.shape[0]:
                 return np.concatenate(outs)
 
-    def _feed(self, spikes):
+    def _feed(self, words, evaluate_at_end=False):
         first = self.next_tick
-        n_out = (first + spikes.shape[0]) // self.step_ticks - first // self.step_ticks
-        out = np.zeros((n_out,) + self.ref.shape, np.bool_)
-        p = self.parameters
-        _spike_change_block(spikes, first, self.step_ticks, self.last1, self.last2, self.last3, self.last4, self.ref,
-                            self.prev, self.censored,
-                            self.flag_since, self.pending, out, math.exp(-p.threshold_log),
-                            math.exp(p.threshold_log), math.exp(p.seed_threshold_log), p.background_ticks,
-                            p.hold_ticks)
-        self.next_tick += spikes.shape[0]
-        return out
+        t = words.shape[0]
+        n_out = (first + t) // self.step_ticks - first // self.step_ticks
+        extra = evaluate_at_end and t > 0 and (first + t) % self.step_ticks != 0
+        out = np.zeros((n_out + extra, self.n_words), np.uint64)
+        if t:
+            p = self.parameters
+            _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
+                                     self.n_pixels, self.last, self.anchor, self.first, self.count, self.span1, self.n1,
+                                     self.win_span, self.win_n, self.mixed, self.bg, self.censored, self.fg, self.flag_since,
+                                     self.prev, out, math.exp(-p.threshold_log), math.exp(p.threshold_log),
+                                     math.exp(p.seed_threshold_log), math.exp(p.left_log),
+                                     float(p.background_ticks), int(p.hold_ticks))
+        self.next_tick += t
+        return out[:n_out]
 
     def _next_seed_check(self):
         """The next tick (``seed_ticks``·2^k) at which to try seeding the background, or None."""
@@ -303,26 +295,83 @@ class SpikeChangeDetector:
         return check if check <= self.parameters.hold_ticks else None  # past that, give up
 
     def _seed(self):
-        """Seed the background (:func:`seed_background`) once enough pixels have measured an interval."""
-        p = self.parameters
-        measured = ~self.censored & (self.last1 >= 0)
-        if measured.mean() < p.seed_measured_fraction:
-            return  # a high threshold Q or dim light: wait for more intervals
-        self.seeded = True
-        # intervals are inverse light: the same test on ln τ
-        log_ref = np.log(np.where(measured, self.ref, 1.0))
-        seeded, unsure, around, weight = seed_background(log_ref, measured, p.seed_threshold_log,
-                                                         p.seed_window_px, p.threshold_log, weights=True)
-        self.ref[seeded] = np.exp(around)[seeded]
-        self.prev[seeded] = 0.0
-        self.flag_since[seeded] = -1
-        if p.seed_unsure:
-            self.prev[unsure] = np.exp(around)[unsure]
-        # no interval yet (dim pixels): their first one is compared with the background seeded around them,
-        # where enough pixels around were measured
-        later = ~measured & (weight > 0.5)
-        self.prev[later] = np.exp(around)[later]
+        """Objects in view since the start: set the background of pixels that stand out from their surroundings.
 
+        Run at the seeding checks (the state is evaluated at the check's tick). Each pixel's
+        current interval is measured (a window of intervals) or only bounded from below (no
+        complete interval yet: at least the time since the stream started, or since its only
+        spike). A pixel whose interval is more than ×e^``seed_threshold_log`` shorter than the
+        robust median over ``seed_window_px`` around it is on a brighter object (valid even
+        where that median is only a lower bound): its background becomes the level interpolated
+        from the clear pixels around it, kept as a lower bound, so only "brighter" is tested
+        against it until its first interval after the object has gone replaces it. A pixel longer
+        by that factor than a *measured* median is on a darker object: it takes the measured
+        level around it. Repeated at every check until ``seed_measured_fraction`` of the pixels
+        are measured.
+        """
+        p = self.parameters
+        t = self.next_tick - 1  # the state was evaluated at this tick
+        up = self.upright
+        last, n_win, s_win = up(self.last), up(self.win_n), up(self.win_span)
+        bg, censored, prev, flag_since = up(self.bg), up(self.censored), up(self.prev), up(self.flag_since)
+        k_hi = math.exp(p.threshold_log)
+        tau = np.where(n_win > 0, s_win / np.maximum(n_win, 1), 0.0)
+        silence = t - last
+        measured = (n_win > 0) & (silence <= tau * k_hi + 1.0)
+        bound = np.where(last < 0, t + 1.0, np.maximum(last + 1.0, silence))  # the interval is longer than this
+        value = np.where(measured, tau, np.maximum(bound, np.where(n_win > 0, tau, 0.0)))
+        log_v = np.log(np.maximum(value, 1e-3))
+        H, W = log_v.shape
+        # the robust median around, and whether it is measured: bounds above the median do not move it
+        blocks = _blocks(log_v, np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med_b = np.nanmedian(blocks, axis=2)
+        size = max(1, p.seed_window_px // _SEED_BLOCK_PX) | 1
+        med_b = median_filter(np.where(np.isfinite(med_b), med_b, np.nanmedian(med_b)), size=size, mode="nearest")
+        low_bounds = _blocks((~measured & (log_v < _upsample(med_b, H, W))).astype(np.float64), np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            low_frac = np.nanmean(low_bounds, axis=2)
+        low_frac = median_filter(np.nan_to_num(low_frac), size=size, mode="nearest")
+        median = _upsample(med_b, H, W)
+        median_measured = _upsample(low_frac, H, W) < 0.1
+        thr = p.seed_threshold_log
+        upper = np.log((s_win + 1.0) / np.maximum(n_win, 1))  # the longest the measured interval can be
+        lower = np.log(np.maximum(np.where(measured, (s_win - 1.0) / np.maximum(n_win, 1), bound), 1e-3))
+        # objects are at least 3 px across (an opening removes thin lines of static texture)
+        bright = _opened(measured & ~up(self.mixed) & (upper < median - thr))  # not a falling transition
+        dark = _opened(median_measured & (lower > median + thr))
+        # a background learned from an object that has since moved on (its current light may agree)
+        known = ~censored & (bg > 0)
+        log_bg = np.log(np.where(known, bg, 1.0))
+        stale = known & ((log_bg < median - thr) | (median_measured & (log_bg > median + thr)))
+        # ... kept where wide enough to be an object, or at the edge of where one stood (anti-aliased edges)
+        if self._seeded_ever is None:
+            self._seeded_ever = np.zeros(stale.shape, bool)
+        self._seeded_ever |= bright | dark
+        stale &= _opened(stale) | maximum_filter(self._seeded_ever, size=5, mode="constant")
+        seeded = bright | dark | stale
+        clear = ~maximum_filter(bright | dark, size=5, mode="constant") & ~stale
+        around, weight = _interpolate_clear(log_v, clear, p.seed_window_px)
+        around_measured = _interpolate_clear(measured.astype(np.float64), clear, p.seed_window_px)[0] > 0.9
+        level = np.exp(around)
+        bg[seeded] = level[seeded]
+        # a lower bound unless measured around (only "brighter" is tested against it until the pixel's first
+        # interval replaces it), and always under a brighter object: replaced by its first interval after
+        censored[seeded] = (~around_measured | bright)[seeded]
+        prev[seeded] = 0.0
+        flag_since[seeded] = -1
+        silent = dark & ~measured  # no interval yet: darker once silent for longer than the level around allows
+        prev[silent] = level[silent]
+        if p.seed_unsure:
+            unsure = ~seeded & around_measured & ((measured & (np.abs(log_v - around) > p.threshold_log))
+                                                  | (known & (np.abs(log_bg - around) > p.threshold_log)))
+            prev[unsure] = level[unsure]
+        later = ~measured & ~seeded & around_measured & (weight > 0.5)
+        prev[later] = level[later]
+        if measured.mean() >= p.seed_measured_fraction:
+            self.seeded = True
 
 class FrameChangeDetector:
     """Foreground masks from frames (any unit proportional to light), one per frame.
@@ -367,25 +416,71 @@ class FrameChangeDetector:
 
 # --------------------------------------------------------------------------- start-up background
 
-_SEED_BLOCK_PX = 4  # the robust background is computed on blocks of 4×4 px (the background is smooth)
+_SEED_BLOCK_PX = 4  # the start-up background is computed on blocks of 4×4 px (the background is smooth)
+
+
+def _blocks(a: np.ndarray, fill) -> np.ndarray:
+    """(H, W) → (H/4, W/4, 16) blocks of 4×4 px (edges padded with ``fill``)."""
+    H, W = a.shape
+    b = _SEED_BLOCK_PX
+    hb, wb = -(-H // b), -(-W // b)
+    pad = np.full((hb * b, wb * b), fill, dtype=np.result_type(a.dtype, np.asarray(fill).dtype))
+    pad[:H, :W] = a
+    return pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
+
+
+def _upsample(blocks: np.ndarray, H: int, W: int) -> np.ndarray:
+    """Block values (hb, wb) back to pixels, bilinear between block centres."""
+    b = _SEED_BLOCK_PX
+
+    def axis(n, nb):
+        u = np.clip((np.arange(n) + 0.5) / b - 0.5, 0.0, nb - 1.0)
+        i0 = np.minimum(np.floor(u).astype(np.intp), nb - 1)
+        i1 = np.minimum(i0 + 1, nb - 1)
+        return i0, i1, u - i0
+
+    y0, y1, fy = axis(H, blocks.shape[0])
+    x0, x1, fx = axis(W, blocks.shape[1])
+    rows = blocks[y0] * (1 - fy)[:, None] + blocks[y1] * fy[:, None]
+    return rows[:, x0] * (1 - fx)[None, :] + rows[:, x1] * fx[None, :]
 
 
 def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int) -> np.ndarray:
-    """Median of ``log_light`` over valid pixels in a ``window_px`` square around each pixel (blocks of 4 px)."""
-    H, W = log_light.shape
-    b = _SEED_BLOCK_PX
-    hb, wb = -(-H // b), -(-W // b)
-    pad = np.full((hb * b, wb * b), np.nan)
-    pad[:H, :W] = np.where(valid, log_light, np.nan)
-    blocks = pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
+    """Median of ``log_light`` over valid pixels in a ``window_px`` square around each pixel, per 4×4 block."""
+    blocks = _blocks(np.where(valid, log_light, np.nan), np.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks: filled below
         med = np.nanmedian(blocks, axis=2)
     fill = np.nanmedian(med) if np.isfinite(med).any() else 0.0
     med = np.where(np.isfinite(med), med, fill)
-    size = max(1, window_px // b) | 1  # odd, in blocks
-    smooth = median_filter(med, size=size, mode="nearest")
-    return np.repeat(np.repeat(smooth, b, axis=0), b, axis=1)[:H, :W]
+    size = max(1, window_px // _SEED_BLOCK_PX) | 1  # odd, in blocks
+    return median_filter(med, size=size, mode="nearest")
+
+
+def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int):
+    """Normalised Gaussian smoothing (σ = ``window_px``/8) of ``values`` over the ``clear`` pixels.
+
+    Works on 4×4 blocks (sums and counts), so it costs a fraction of a full-resolution filter;
+    returns the smoothed values and the weight (Gaussian fraction of clear pixels, 0 … 1) per pixel.
+    """
+    H, W = values.shape
+    n = _blocks(clear.astype(np.float64), 0.0).sum(axis=2)
+    total = _blocks(np.where(clear, values, 0.0), 0.0).sum(axis=2)
+    sigma = max(window_px / 8.0 / _SEED_BLOCK_PX, 0.5)
+    weight = gaussian_filter(n, sigma, mode="nearest")
+    smooth = gaussian_filter(total, sigma, mode="nearest")
+    level = np.where(weight > 1e-3, smooth / np.maximum(weight, 1e-3), np.nan)
+    if np.isfinite(level).any():
+        level = np.where(np.isfinite(level), level, np.nanmedian(level))
+    else:
+        level = np.zeros_like(level)
+    return _upsample(level, H, W), _upsample(weight / _SEED_BLOCK_PX ** 2, H, W)
+
+
+def _opened(mask: np.ndarray) -> np.ndarray:
+    """``mask`` without the parts narrower than 3 px once its gaps are closed (lines, specks of texture)."""
+    square = np.ones((3, 3), bool)
+    return mask & binary_opening(binary_closing(mask, square), square)
 
 
 def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int,
@@ -398,8 +493,8 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
     than ``threshold_log`` from the median of ln(light) over ``window_px`` px (wider than twice
     any object) is on an object (*seeded*). The background under and near it is then
     interpolated from the pixels around that are not seeded (normalised Gaussian smoothing,
-    σ = ``window_px``/8: the local background, not the window's median), which is what the
-    pixel shows once the object has moved off.
+    σ = ``window_px``/8, on 4×4-px blocks: the local background, not the window's median),
+    which is what the pixel shows once the object has moved off.
 
     Parameters
     ----------
@@ -421,14 +516,13 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
         was interpolated from (0 … 1).
     """
     window_px = check_int("window_px", window_px, 1)
-    coarse = _robust_background(log_light, valid, window_px)
-    seeded = valid & (np.abs(log_light - coarse) > threshold_log)
+    H, W = log_light.shape
+    coarse = _upsample(_robust_background(log_light, valid, window_px), H, W)
+    seeded = _opened(valid & (np.abs(log_light - coarse) > threshold_log))  # objects are ≥ 3 px across
     # the local background from the pixels that are not on an object (their anti-aliased edges excluded)
-    clear = (valid & ~binary_dilation(seeded, iterations=2)).astype(np.float64)
-    sigma = max(window_px / 8.0, 1.0)
-    weight = gaussian_filter(clear, sigma, mode="nearest")
-    total = gaussian_filter(np.where(clear > 0, log_light, 0.0), sigma, mode="nearest")
-    background = np.where(weight > 1e-3, total / np.maximum(weight, 1e-3), coarse)
+    clear = valid & ~maximum_filter(seeded, size=5, mode="constant")
+    background, weight = _interpolate_clear(log_light, clear, window_px)
+    background = np.where(weight > 1e-3, background, coarse)
     unsure = np.zeros_like(seeded)
     if unsure_log is not None:
         unsure = valid & ~seeded & (np.abs(log_light - background) > unsure_log)
@@ -722,23 +816,49 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
     if source.n_ticks < step_ticks:
         raise ViformError(f"the stream has {source.n_ticks} ticks, fewer than one output step of {step_ticks}")
     p = parameters or TrackerParameters()
-    detector = SpikeChangeDetector(source.height, source.width, step_ticks, p)
+    layout = _packed_layout(source)
+    detector = SpikeChangeDetector(source.height, source.width, step_ticks, p, *layout)
     tracker = Tracker(p, tick_s=1.0 / source.clock_hz)
     rows, times, n_det = [], [], 0
     block = max(step_ticks, (check_int("block_ticks", block_ticks, 1) // step_ticks) * step_ticks)
     n_usable = (source.n_ticks // step_ticks) * step_ticks
-    for _, spikes in source.iter_blocks(block, 0, n_usable):
-        for mask in detector.feed(spikes):
+    for words in _packed_blocks(source, block, n_usable, layout):
+        for bits in detector.feed_words(words):
             frame = len(times) + 1
             t_s = source.start_time_s + frame * step_ticks / source.clock_hz
-            boxes, _ = detect_boxes(mask, p.merge_px, p.min_pixels)
+            boxes, _, _ = detector.components(bits, p.merge_px, p.min_pixels)
             n_det += len(boxes)
             reported = tracker.update(boxes, t_s)
             rows += _rows(frame, reported)
             times.append(t_s)
             if on_step is not None:
-                on_step(frame, t_s, mask, reported)
+                on_step(frame, t_s, detector.mask(bits), reported)
     return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det)
+
+
+def _packed_layout(source) -> tuple[int, bool]:
+    """(stored width, rows bottom-up) of the packed words :func:`_packed_blocks` hands out for ``source``."""
+    if callable(getattr(source, "read_packed", None)):
+        return int(source.stored_width), bool(source.flip)
+    return int(source.width), False
+
+
+def _packed_blocks(source, block_ticks: int, stop: int, layout):
+    """Ticks [0, stop) of ``source`` as packed words (T, n_words) uint64, ``block_ticks`` at a time.
+
+    A ``.dat`` file hands its stored bytes as they are (no unpacking); other sources are packed here.
+    """
+    from viform.stream.container import block_ticks_for
+
+    direct = callable(getattr(source, "read_packed", None))
+    # a block of packed words is an eighth of the unpacked bytes: the reader's budget allows 8× the ticks
+    block_ticks = max(1, min(block_ticks, 8 * block_ticks_for(source.height, layout[0], block_ticks)))
+    for first in range(0, stop, block_ticks):
+        last = min(first + block_ticks, stop)
+        if direct:
+            yield _words(source.read_packed(first, last))
+        else:
+            yield pack_spikes(source.read_ticks(first, last))
 
 
 def track_frames(frames, times_s, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000,
