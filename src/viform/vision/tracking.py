@@ -120,6 +120,10 @@ class TrackerParameters:
     seed_measured_fraction: float = 0.9
     merged_keep_alive: bool = True
     left_log: float = 0.4
+    report_merged: bool = True
+    acceleration_px_per_s2: float = 2e6
+    position_noise_px: float = 1.0
+    robust_velocity: bool = True
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -613,6 +617,15 @@ def detect_boxes(mask: np.ndarray, merge_px: int = 2, min_pixels: int = 4):
     return _components(mask, 2 * check_int("merge_px", merge_px, 0) + 1, check_int("min_pixels", min_pixels, 1))
 
 
+def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Area of the intersection of every box of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
+    ix = np.clip(np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2])
+                 - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
+    iy = np.clip(np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3])
+                 - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
+    return ix * iy
+
+
 def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Intersection over union of every box of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
     a = np.asarray(a, np.float64).reshape(-1, 4)
@@ -639,6 +652,7 @@ class _Track:
     hits: int = 1
     confirmed: bool = False
     trail: list = field(default_factory=list)
+    merged: bool = False
 
 
 class Tracker:
@@ -655,12 +669,11 @@ class Tracker:
         Process noise: unmodelled acceleration, px/s² (std).
     """
 
-    def __init__(self, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000,
-                 position_noise_px: float = 1.0, acceleration_px_per_s2: float = 2e6):
+    def __init__(self, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000):
         self.parameters = parameters or TrackerParameters()
         self.tick_s = check_positive("tick_s", tick_s)
-        self.r = position_noise_px ** 2
-        self.q = acceleration_px_per_s2 ** 2
+        self.r = self.parameters.position_noise_px ** 2
+        self.q = self.parameters.acceleration_px_per_s2 ** 2
         self.tracks: list[_Track] = []
         self.next_id = 1
 
@@ -678,28 +691,47 @@ class Tracker:
         (cx, cy), (w, h) = track.state[:2], track.size
         return np.array([cx - w / 2, cy - h / 2, w, h])
 
-    def update(self, boxes: np.ndarray, t_s: float) -> list[tuple[int, np.ndarray]]:
-        """One step: detections ``boxes`` (N, 4) seen at ``t_s``; returns [(track id, box)] reported now."""
+    def update(self, boxes: np.ndarray, t_s: float, pixels=None) -> list[tuple[int, np.ndarray]]:
+        """One step: detections seen at ``t_s``; returns [(track id, box)] reported now.
+
+        Parameters
+        ----------
+        boxes : ndarray (N, 4)
+            Detections (x, y, w, h), px.
+        t_s : float
+            The step's instant, s.
+        pixels : tuple (ys, xs, component), optional
+            The foreground pixels and the detection each belongs to (−1: a component smaller than
+            ``min_pixels``). With them, a detection holding the predictions of several tracks is
+            split between them, and pieces lying inside one track's prediction join it
+            (:meth:`_regroup`).
+        """
         p = self.parameters
         boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
         for track in self.tracks:
             self._predict(track, t_s)
         predicted = np.array([self._box(tr) for tr in self.tracks]).reshape(-1, 4)
-        matches = []
-        unmatched = set(range(len(boxes)))
-        if len(self.tracks) and len(boxes):
-            iou = iou_matrix(predicted, boxes)
-            pc = predicted[:, :2] + predicted[:, 2:] / 2
-            bc = boxes[:, :2] + boxes[:, 2:] / 2
+        forced, merged = {}, set()
+        if pixels is not None:
+            boxes, forced, merged = self._regroup(boxes, pixels, predicted, t_s)
+        matches = list(forced.items())
+        unmatched = set(range(len(boxes))) - set(forced.values())
+        free_tracks = [i for i in range(len(self.tracks)) if i not in forced and i not in merged]
+        free_boxes = sorted(unmatched)
+        if free_tracks and free_boxes:
+            pr, bx = predicted[free_tracks], boxes[free_boxes]
+            iou = iou_matrix(pr, bx)
+            pc = pr[:, :2] + pr[:, 2:] / 2
+            bc = bx[:, :2] + bx[:, 2:] / 2
             dist = np.hypot(pc[:, None, 0] - bc[None, :, 0], pc[:, None, 1] - bc[None, :, 1])
-            reach = (np.hypot(*predicted[:, 2:].T)[:, None] + np.hypot(*boxes[:, 2:].T)[None, :]) / 2 + p.gate_px
+            reach = (np.hypot(*pr[:, 2:].T)[:, None] + np.hypot(*bx[:, 2:].T)[None, :]) / 2 + p.gate_px
             cost = np.where(iou > 0, 1.0 - iou, 1.0 + dist / reach)
             cost = np.where(dist <= reach, cost, 1e6)
             rows, cols = linear_sum_assignment(cost)
-            for i, j in zip(rows, cols, strict=True):
-                if cost[i, j] < 1e6:
-                    matches.append((i, j))
-                    unmatched.discard(j)
+            for a, b in zip(rows, cols, strict=True):
+                if cost[a, b] < 1e6:
+                    matches.append((free_tracks[a], free_boxes[b]))
+                    unmatched.discard(free_boxes[b])
         reported = []
         matched_tracks = set()
         for i, j in matches:
@@ -710,6 +742,20 @@ class Tracker:
                 track.confirmed = True
                 if self._moving(track, t_s):
                     reported.append((track.track_id, boxes[j].copy()))
+        for i, track in enumerate(self.tracks):
+            if i in merged and not track.merged and len(track.trail) >= 3:
+                # it goes on at its prediction, with the median velocity between pairs of its measured centres
+                # (Theil–Sen: steadier than the filter's, which follows each box, and blind to a few jumps)
+                ts = np.array([t for t, _ in track.trail])
+                cs = np.array([c for _, c in track.trail])
+                a, b = np.triu_indices(ts.size, 1)
+                track.state[2:] = np.median((cs[b] - cs[a]) / (ts[b] - ts[a])[:, None], axis=0)
+            track.merged = i in merged
+        for i in sorted(merged):  # inside another object's foreground: reported where predicted
+            track = self.tracks[i]
+            track.last_seen_t = t_s
+            if p.report_merged:
+                reported.append((track.track_id, predicted[i].copy()))
         if p.merged_keep_alive and matches:
             # a confirmed track without a detection whose prediction lies inside another track's detection
             # is merged with (or hidden by) that object: it coasts on as long as that lasts
@@ -740,6 +786,101 @@ class Tracker:
                 reported.append((track.track_id, b.copy()))
         return reported
 
+    def _regroup(self, boxes, pixels, predicted, t_s):
+        """Split detections that hold several tracks' predictions; join pieces inside one track's prediction.
+
+        Only confirmed tracks seen within ``max_coast_ticks`` take part. A detection covering at
+        least half of the predicted boxes of two or more of them (an object passing in front of
+        another merges their foreground) gives each track the pixels inside its predicted box
+        (grown by ``merge_px``; pixels in none go to the nearest); pieces of foreground that lie
+        mostly (≥ 60 % of their box) inside one track's predicted box and inside no other's are
+        joined into one detection for it (a textured or partly hidden object whose foreground
+        breaks up). Returns the new boxes and {track index: detection index} for the detections
+        made for a track.
+        """
+        p = self.parameters
+        ys, xs, comp = pixels
+        coast_s = p.max_coast_ticks * self.tick_s
+        live = [i for i, tr in enumerate(self.tracks) if tr.confirmed and t_s - tr.last_seen_t <= coast_s]
+        n_comp = int(comp.max()) + 1 if comp.size else 0
+        if not live or n_comp == 0:
+            return boxes, {}, set()
+        # every component, the small ones too (boxes of their pixels)
+        keep = comp >= 0
+        order = np.argsort(comp[keep], kind="stable")
+        cy, cx, cc = ys[keep][order], xs[keep][order], comp[keep][order]
+        starts = np.searchsorted(cc, np.arange(n_comp + 1))
+        grow = float(p.merge_px)
+        pred = predicted[live].copy()
+        pred[:, :2] -= grow
+        pred[:, 2:] += 2 * grow
+        comp_boxes = np.empty((n_comp, 4))
+        for j in range(n_comp):
+            a, b = starts[j], starts[j + 1]
+            x0, y0 = cx[a:b].min(), cy[a:b].min()
+            comp_boxes[j] = (x0, y0, cx[a:b].max() - x0 + 1, cy[a:b].max() - y0 + 1)
+        inter = _intersection(comp_boxes, pred)  # (components, tracks)
+        cover = inter / np.maximum(pred[:, 2] * pred[:, 3], 1e-9)[None, :]
+        inside_strict = _intersection(comp_boxes, predicted[live]) / np.maximum(
+            comp_boxes[:, 2] * comp_boxes[:, 3], 1e-9)[:, None]
+        out_boxes, forced, used = [], {}, np.zeros(n_comp, bool)
+        taken = set()
+        merged = set()
+        for j in range(n_comp):
+            holders = np.nonzero(cover[j] >= 0.5)[0]
+            holders = [h for h in holders if live[h] not in taken]
+            if len(holders) < 2:
+                continue
+            used[j] = True
+            a, b = starts[j], starts[j + 1]
+            px, py = cx[a:b] + 0.5, cy[a:b] + 0.5
+            hb = pred[holders]
+            member = ((px[:, None] >= hb[None, :, 0]) & (px[:, None] < hb[None, :, 0] + hb[None, :, 2])
+                      & (py[:, None] >= hb[None, :, 1]) & (py[:, None] < hb[None, :, 1] + hb[None, :, 3]))
+            # the largest is the occluder (or what the others cross): measured from the blob without what lies
+            # only inside the others' predictions; the others go on at their predictions (a measurement of a
+            # partly hidden object from shared pixels would drag it along with the occluder)
+            primary = int(np.argmax(hb[:, 2] * hb[:, 3]))
+            own = member[:, primary] | ~member.any(axis=1)
+            for k, h in enumerate(holders):
+                taken.add(live[h])
+                if k != primary:
+                    merged.add(live[h])
+            if own.any():
+                x0, y0 = cx[a:b][own].min(), cy[a:b][own].min()
+                forced[live[holders[primary]]] = len(out_boxes)
+                out_boxes.append((x0, y0, cx[a:b][own].max() - x0 + 1, cy[a:b][own].max() - y0 + 1))
+        # pieces inside one track's prediction only
+        owner = np.full(n_comp, -1)
+        for j in range(n_comp):
+            if used[j]:
+                continue
+            mostly = np.nonzero(inside_strict[j] >= 0.6)[0]
+            if mostly.size == 1 and live[mostly[0]] not in taken:
+                owner[j] = mostly[0]
+        for h in np.unique(owner[owner >= 0]):
+            parts = np.nonzero(owner == h)[0]
+            counts = starts[parts + 1] - starts[parts]
+            if len(parts) < 2 and counts.sum() >= p.min_pixels:
+                owner[parts] = -1  # one piece, large enough: an ordinary detection
+                continue
+            if counts.sum() < p.min_pixels:
+                continue  # (dropped with the other small pieces)
+            pb = comp_boxes[parts]
+            g = predicted[live[h]]  # the union, within the prediction (pieces may hang over it)
+            x0, y0 = max(pb[:, 0].min(), g[0]), max(pb[:, 1].min(), g[1])
+            x1 = min((pb[:, 0] + pb[:, 2]).max(), g[0] + g[2])
+            y1 = min((pb[:, 1] + pb[:, 3]).max(), g[1] + g[3])
+            forced[live[h]] = len(out_boxes)
+            taken.add(live[h])
+            out_boxes.append((x0, y0, x1 - x0, y1 - y0))
+            used[parts] = True
+        # the rest: components large enough, as they were
+        for j in range(n_comp):
+            if not used[j] and owner[j] < 0 and starts[j + 1] - starts[j] >= p.min_pixels:
+                out_boxes.append(tuple(comp_boxes[j]))
+        return np.array(out_boxes, np.float64).reshape(-1, 4), forced, merged
+
     def _moving(self, track: _Track, t_s: float) -> bool:
         """Whether the track's measured centre moved at least ``min_speed`` over the last ``still_ticks``."""
         window_s = self.parameters.still_ticks * self.tick_s
@@ -762,6 +903,17 @@ class Tracker:
         track.hits += 1
         track.last_seen_t = t_s
         track.trail.append((t_s, z.copy()))
+        if self.parameters.robust_velocity:
+            # the measured centre, and the median velocity between pairs of measured centres over the
+            # trail (Theil–Sen, up to 24 points: a few jumps of the box, as where the object enters or
+            # the foreground grows, do not throw it)
+            trail = track.trail[-24:] if len(track.trail) <= 48 else track.trail[:: max(1, len(track.trail) // 24)]
+            ts = np.array([t for t, _ in trail])
+            cs = np.array([c for _, c in trail])
+            track.state[:2] = z
+            if ts.size >= 2:
+                a, b = np.triu_indices(ts.size, 1)
+                track.state[2:] = np.median((cs[b] - cs[a]) / (ts[b] - ts[a])[:, None], axis=0)
 
 
 # --------------------------------------------------------------------------- pipelines
@@ -826,9 +978,9 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
         for bits in detector.feed_words(words):
             frame = len(times) + 1
             t_s = source.start_time_s + frame * step_ticks / source.clock_hz
-            boxes, _, _ = detector.components(bits, p.merge_px, p.min_pixels)
-            n_det += len(boxes)
-            reported = tracker.update(boxes, t_s)
+            boxes, counts, pixels = detector.components(bits, p.merge_px, 1)
+            n_det += int(np.count_nonzero(counts >= p.min_pixels))
+            reported = tracker.update(boxes[counts >= p.min_pixels], t_s, pixels)
             rows += _rows(frame, reported)
             times.append(t_s)
             if on_step is not None:
