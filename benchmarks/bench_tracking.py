@@ -85,7 +85,7 @@ def main():
         track_s = time.perf_counter() - t0
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-        gt = mot.gt_rows(scene, res.times_s, clip_to_field=True)
+        gt = mot.gt_rows(scene, res.times_s)
         s = score_tracking(gt, res.rows, res.times_s, stream.clock_hz)
         q = sensor.parameters.threshold_electrons
         print(f"\nspike camera, {name} (Q = {q:,.0f} e⁻), {a.height}×{a.width}, {stream.n_ticks} ticks, "
@@ -122,7 +122,7 @@ def main():
     t0 = time.perf_counter()
     res = track_frames(stack.frames_dn.astype(np.float64), ends)
     frame_s = time.perf_counter() - t0
-    gt = mot.gt_rows(scene, ends, clip_to_field=True)
+    gt = mot.gt_rows(scene, ends)
     s = score_tracking(gt, res.rows, ends, 40_000.0)
     print(f"\nCMOS 1 ms at 1,000 fps: {len(stack)} frames, back end {len(stack) / frame_s:,.0f} frames/s")
     _table("  scores", s)

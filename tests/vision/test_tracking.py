@@ -64,7 +64,7 @@ def stream():
 
 def test_tracks_the_square_with_one_identity(stream):
     res = track_spikes(stream, 10, PARAMS)
-    gt = mot.gt_rows(Square(), res.times_s, clip_to_field=True)
+    gt = mot.gt_rows(Square(), res.times_s)
     s = score_tracking(gt, res.rows, res.times_s, stream.clock_hz)
     assert s["id_switches"] == 0 and s["never_found"] == []
     obj = s["objects"][1]
@@ -99,7 +99,7 @@ def test_higher_threshold_or_dimmer_light_finds_later():
         scene = Square(lux=lux, speed=800.0)
         spk = SpikeSensor(threshold_electrons=q).capture(scene, 0.02, seed=5)
         res = track_spikes(spk, 5, PARAMS)
-        gt = mot.gt_rows(scene, res.times_s, clip_to_field=True)
+        gt = mot.gt_rows(scene, res.times_s)
         o = score_tracking(gt, res.rows, res.times_s, spk.clock_hz)["objects"][1]
         return math.inf if o["latency_found_ticks"] is None else o["latency_found_ticks"]
 
@@ -115,7 +115,7 @@ def test_frames_back_end_finds_it():
     scene = Square()
     times = np.arange(1, 21) * 1e-3
     res = track_frames([scene.illuminance_lux(t) for t in times], times, PARAMS)
-    gt = mot.gt_rows(scene, times, clip_to_field=True)
+    gt = mot.gt_rows(scene, times)
     s = score_tracking(gt, res.rows, times)
     assert s["id_switches"] == 0 and s["idf1"] > 0.7
 
@@ -138,7 +138,7 @@ def test_iou_and_detections():
 def _found(scene, sensor, seed=2):
     stream = sensor.capture(scene, 0.02, seed=seed)
     res = track_spikes(stream, 10, PARAMS)
-    gt = mot.gt_rows(scene, res.times_s, clip_to_field=True)
+    gt = mot.gt_rows(scene, res.times_s)
     return score_tracking(gt, res.rows, res.times_s, stream.clock_hz)["objects"][1]["latency_found_ticks"]
 
 
@@ -166,7 +166,7 @@ def test_long_exposure_loses_the_fast_object_first():
             scene, 0.05, seed=1)
         ends = stack.start_times_s + stack.exposure_s
         res = track_frames(stack.frames_dn.astype(float), ends, TrackerParameters(min_pixels=4, min_hits=2))
-        gt = mot.gt_rows(scene, ends, clip_to_field=True)
+        gt = mot.gt_rows(scene, ends)
         scores[exposure_s] = score_tracking(gt, res.rows, ends)["objects"][1]
     short, long = scores[0.2e-3], scores[4.5e-3]
     # (the long exposure matches at most where the square enters and both boxes are cut by the border)
@@ -205,7 +205,7 @@ def test_object_in_view_at_the_start_is_tracked_and_leaves_no_ghost(lux):
     def scores(seed_ticks, block_ticks=1024):
         p = TrackerParameters(min_pixels=4, merge_px=1, min_hits=2, seed_ticks=seed_ticks)
         res = track_spikes(spk, 10, p, block_ticks=block_ticks)
-        gt = mot.gt_rows(scene, res.times_s, clip_to_field=True)
+        gt = mot.gt_rows(scene, res.times_s)
         return res, score_tracking(gt, res.rows, res.times_s, spk.clock_hz)
 
     (res, seeded), (_, unseeded) = scores(20), scores(0)

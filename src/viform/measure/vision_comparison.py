@@ -83,12 +83,12 @@ def vision_scores(result) -> dict | None:
             tick_s = 1.0 / 40_000.0  # the spike camera's tick: the same time constants in seconds
             res = track_frames(frames[0], frames[1], tick_s=tick_s)
             key, label, rate = shot.key, shot.label, shot.frame_rate_hz
-        gt = mot.gt_rows(scene, res.times_s, clip_to_field=True)
+        gt = mot.gt_rows(scene, res.times_s)
         scores = score_tracking(gt, res.rows, res.times_s, 1.0 / tick_s)
         out[key] = {"label": label, "frame_rate_hz": float(rate), "frames": int(res.times_s.size),
                     "scores": scores, "rows": res.rows, "times_s": res.times_s}
     times = np.arange(0.0, duration_s, 2.5e-4)
-    out["_truth"] = {"rows": mot.gt_rows(scene, times, clip_to_field=True), "times_s": times}
+    out["_truth"] = {"rows": mot.gt_rows(scene, times), "times_s": times}
     return out
 
 
