@@ -37,7 +37,7 @@ def _cttz(typingctx, x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always")
-def _evaluate(s, tick, last, anchor, first, count, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev,
+def _evaluate(s, tick, last, before, anchor, first, count, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev,
               k_lo, k_hi, k_seed, k_left, background_ticks, hold_ticks):  # pragma: no cover - compiled
     """One pixel at the end of tick ``tick``: update its window and background; its foreground state (−1, 0, +1)."""
     lt = last[s]
@@ -68,6 +68,13 @@ def _evaluate(s, tick, last, anchor, first, count, span1, n1, win_span, win_n, m
         # one interval far longer than the last step's: the light fell during it (an object left), so it
         # mixes two levels and says nothing of the light now
         drop = n == 1 and p_n > 0 and span * p_n > p_span * k_left
+        tail = lt - before[s]
+        if n >= 2 and (tail - 1.0) * (n - 1) > (span - tail + 1.0) * k_left:
+            # the step's last interval far longer than its others (one tick of slack each): the light fell
+            # at the end of the step
+            span = tail
+            n = 1
+            drop = True
         mixed[s] = drop
         # few short intervals: joined with the last step's, where the two agree (one tick of slack each)
         agree = p_n > 0 and (span - 1.0) * p_n <= (p_span + 1.0) * n * k_left \
@@ -163,7 +170,7 @@ def _evaluate(s, tick, last, anchor, first, count, span1, n1, win_span, win_n, m
 
 @njit(parallel=True, cache=True)
 def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, n_pixels,
-                      last, anchor, first, count, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev,
+                      last, before, anchor, first, count, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev,
                       out, k_lo, k_hi, k_seed, k_left, background_ticks, hold_ticks):  # pragma: no cover
     """Feed ticks ``first_tick`` … of ``words`` (T, n_words) uint64; write each completed step's foreground bits.
 
@@ -191,13 +198,14 @@ def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, 
                         if count[s] == 0:
                             first[s] = tick  # the end of the step's first interval
                         count[s] += 1
+                    before[s] = last[s]
                     last[s] = tick
             if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T - 1):
                 for i in range(lo, hi):
                     bits = np.uint64(0)
                     top = min(64, n_pixels - i * 64)
                     for j in range(top):
-                        if _evaluate(i * 64 + j, tick, last, anchor, first, count, span1, n1, win_span, win_n, mixed,
+                        if _evaluate(i * 64 + j, tick, last, before, anchor, first, count, span1, n1, win_span, win_n, mixed,
                                      bg, censored, fg, flag_since, prev, k_lo, k_hi, k_seed, k_left,
                                      background_ticks, hold_ticks) != 0:
                             bits |= np.uint64(1) << np.uint64(j)

@@ -104,7 +104,7 @@ class TrackerParameters:
     """
 
     threshold_log: float = 0.4
-    background_ticks: float = 80.0
+    background_ticks: float = 400.0
     hold_ticks: int = 2000
     merge_px: int = 2
     min_pixels: int = 12
@@ -113,7 +113,7 @@ class TrackerParameters:
     gate_px: float = 8.0
     min_speed_px_per_s: float = 0.0
     still_ticks: int = 400
-    seed_ticks: int = 20
+    seed_ticks: int = 8
     seed_window_px: int = 96
     seed_threshold_log: float = 0.7
     seed_unsure: bool = True
@@ -124,6 +124,7 @@ class TrackerParameters:
     acceleration_px_per_s2: float = 2e6
     position_noise_px: float = 1.0
     robust_velocity: bool = True
+    confirm_pixels: int = 48
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -200,6 +201,7 @@ class SpikeChangeDetector:
         self.n_words = -(-self.n_pixels // 64)
         n = self.n_words * 64
         self.last = np.full(n, -1, np.int64)
+        self.before = np.full(n, -1, np.int64)  # the spike before the last
         self.anchor = np.full(n, -1, np.int64)
         self.first = np.full(n, -1, np.int64)
         self.count = np.zeros(n, np.int64)
@@ -280,7 +282,7 @@ class SpikeChangeDetector:
         if t:
             p = self.parameters
             _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
-                                     self.n_pixels, self.last, self.anchor, self.first, self.count, self.span1, self.n1,
+                                     self.n_pixels, self.last, self.before, self.anchor, self.first, self.count, self.span1, self.n1,
                                      self.win_span, self.win_n, self.mixed, self.bg, self.censored, self.fg, self.flag_since,
                                      self.prev, out, math.exp(-p.threshold_log), math.exp(p.threshold_log),
                                      math.exp(p.seed_threshold_log), math.exp(p.left_log),
@@ -691,7 +693,7 @@ class Tracker:
         (cx, cy), (w, h) = track.state[:2], track.size
         return np.array([cx - w / 2, cy - h / 2, w, h])
 
-    def update(self, boxes: np.ndarray, t_s: float, pixels=None) -> list[tuple[int, np.ndarray]]:
+    def update(self, boxes: np.ndarray, t_s: float, pixels=None, counts=None) -> list[tuple[int, np.ndarray]]:
         """One step: detections seen at ``t_s``; returns [(track id, box)] reported now.
 
         Parameters
@@ -705,15 +707,19 @@ class Tracker:
             ``min_pixels``). With them, a detection holding the predictions of several tracks is
             split between them, and pieces lying inside one track's prediction join it
             (:meth:`_regroup`).
+        counts : ndarray (N,), optional
+            Foreground pixels of each detection: a new track on at least ``confirm_pixels`` of them
+            is confirmed at once (default: the box's area).
         """
         p = self.parameters
         boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+        counts = boxes[:, 2] * boxes[:, 3] if counts is None else np.asarray(counts, np.float64).ravel()
         for track in self.tracks:
             self._predict(track, t_s)
         predicted = np.array([self._box(tr) for tr in self.tracks]).reshape(-1, 4)
         forced, merged = {}, set()
         if pixels is not None:
-            boxes, forced, merged = self._regroup(boxes, pixels, predicted, t_s)
+            boxes, forced, merged, counts = self._regroup(boxes, pixels, predicted, t_s, counts)
         matches = list(forced.items())
         unmatched = set(range(len(boxes))) - set(forced.values())
         free_tracks = [i for i in range(len(self.tracks)) if i not in forced and i not in merged]
@@ -781,12 +787,12 @@ class Tracker:
             track = _Track(self.next_id, state, cov, b[2:].copy(), t_s, t_s, trail=[(t_s, state[:2].copy())])
             self.next_id += 1
             self.tracks.append(track)
-            if p.min_hits <= 1:
+            if p.min_hits <= 1 or counts[j] >= p.confirm_pixels:  # a large detection is no noise
                 track.confirmed = True
                 reported.append((track.track_id, b.copy()))
         return reported
 
-    def _regroup(self, boxes, pixels, predicted, t_s):
+    def _regroup(self, boxes, pixels, predicted, t_s, counts):
         """Split detections that hold several tracks' predictions; join pieces inside one track's prediction.
 
         Only confirmed tracks seen within ``max_coast_ticks`` take part. A detection covering at
@@ -804,7 +810,7 @@ class Tracker:
         live = [i for i, tr in enumerate(self.tracks) if tr.confirmed and t_s - tr.last_seen_t <= coast_s]
         n_comp = int(comp.max()) + 1 if comp.size else 0
         if not live or n_comp == 0:
-            return boxes, {}, set()
+            return boxes, {}, set(), counts
         # every component, the small ones too (boxes of their pixels)
         keep = comp >= 0
         order = np.argsort(comp[keep], kind="stable")
@@ -823,7 +829,7 @@ class Tracker:
         cover = inter / np.maximum(pred[:, 2] * pred[:, 3], 1e-9)[None, :]
         inside_strict = _intersection(comp_boxes, predicted[live]) / np.maximum(
             comp_boxes[:, 2] * comp_boxes[:, 3], 1e-9)[:, None]
-        out_boxes, forced, used = [], {}, np.zeros(n_comp, bool)
+        out_boxes, out_counts, forced, used = [], [], {}, np.zeros(n_comp, bool)
         taken = set()
         merged = set()
         for j in range(n_comp):
@@ -850,6 +856,7 @@ class Tracker:
                 x0, y0 = cx[a:b][own].min(), cy[a:b][own].min()
                 forced[live[holders[primary]]] = len(out_boxes)
                 out_boxes.append((x0, y0, cx[a:b][own].max() - x0 + 1, cy[a:b][own].max() - y0 + 1))
+                out_counts.append(int(own.sum()))
         # pieces inside one track's prediction only
         owner = np.full(n_comp, -1)
         for j in range(n_comp):
@@ -860,11 +867,11 @@ class Tracker:
                 owner[j] = mostly[0]
         for h in np.unique(owner[owner >= 0]):
             parts = np.nonzero(owner == h)[0]
-            counts = starts[parts + 1] - starts[parts]
-            if len(parts) < 2 and counts.sum() >= p.min_pixels:
+            sizes = starts[parts + 1] - starts[parts]
+            if len(parts) < 2 and sizes.sum() >= p.min_pixels:
                 owner[parts] = -1  # one piece, large enough: an ordinary detection
                 continue
-            if counts.sum() < p.min_pixels:
+            if sizes.sum() < p.min_pixels:
                 continue  # (dropped with the other small pieces)
             pb = comp_boxes[parts]
             g = predicted[live[h]]  # the union, within the prediction (pieces may hang over it)
@@ -874,12 +881,14 @@ class Tracker:
             forced[live[h]] = len(out_boxes)
             taken.add(live[h])
             out_boxes.append((x0, y0, x1 - x0, y1 - y0))
+            out_counts.append(int(sizes.sum()))
             used[parts] = True
         # the rest: components large enough, as they were
         for j in range(n_comp):
             if not used[j] and owner[j] < 0 and starts[j + 1] - starts[j] >= p.min_pixels:
                 out_boxes.append(tuple(comp_boxes[j]))
-        return np.array(out_boxes, np.float64).reshape(-1, 4), forced, merged
+                out_counts.append(int(starts[j + 1] - starts[j]))
+        return np.array(out_boxes, np.float64).reshape(-1, 4), forced, merged, np.array(out_counts, np.float64)
 
     def _moving(self, track: _Track, t_s: float) -> bool:
         """Whether the track's measured centre moved at least ``min_speed`` over the last ``still_ticks``."""
@@ -980,7 +989,8 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
             t_s = source.start_time_s + frame * step_ticks / source.clock_hz
             boxes, counts, pixels = detector.components(bits, p.merge_px, 1)
             n_det += int(np.count_nonzero(counts >= p.min_pixels))
-            reported = tracker.update(boxes[counts >= p.min_pixels], t_s, pixels)
+            big = counts >= p.min_pixels
+            reported = tracker.update(boxes[big], t_s, pixels, counts[big])
             rows += _rows(frame, reported)
             times.append(t_s)
             if on_step is not None:
