@@ -21,6 +21,9 @@ from numba.extending import intrinsic
 MIN_INTERVALS = 4
 MIN_SPAN_TICKS = 8
 
+#: Columns of the per-spike state ``spk`` (n_pixels, 4) int64.
+LAST, BEFORE, FIRST, COUNT = 0, 1, 2, 3
+
 
 @intrinsic
 def _cttz(typingctx, x):  # pragma: no cover - compiled
@@ -37,20 +40,28 @@ def _cttz(typingctx, x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always")
-def _evaluate(s, tick, last, before, anchor, first, count, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev,
+def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev, due,
               k_lo, k_hi, k_seed, k_left, background_ticks, hold_ticks):  # pragma: no cover - compiled
-    """One pixel at the end of tick ``tick``: update its window and background; its foreground state (−1, 0, +1)."""
-    lt = last[s]
+    """One pixel at the end of tick ``tick``: update its window and background; its foreground state (−1, 0, +1).
+
+    Also sets ``due[s]``: the tick from which its silence alone could change that state (a pixel
+    neither fired nor flagged is evaluated again only then).
+    """
+    lt = spk[s, LAST]
     q = prev[s]
+    due[s] = np.inf
     if lt < 0:  # never fired: darker than the background seeded around it, if silent for long enough
         f = 0
-        if q > 0.0 and tick > q * k_seed:
-            f = -1
-            if flag_since[s] < 0:
-                flag_since[s] = tick
+        if q > 0.0:
+            if tick > q * k_seed:
+                f = -1
+                if flag_since[s] < 0:
+                    flag_since[s] = tick
+            else:
+                due[s] = q * k_seed
         fg[s] = f
         return f
-    n = count[s]
+    n = spk[s, COUNT]
     drop = False
     if n > 0:  # new intervals since the last evaluation
         a = anchor[s]
@@ -58,8 +69,8 @@ def _evaluate(s, tick, last, before, anchor, first, count, span1, n1, win_span, 
         if n >= 2:
             # the step's first interval against the others: far apart, it belongs to the light before a change
             # (an object arrived or left during it), and the later ones are the light now
-            head = first[s] - a
-            inner = lt - first[s]
+            head = spk[s, FIRST] - a
+            inner = lt - spk[s, FIRST]
             if head * (n - 1) > (inner + 1.0) * k_left + (n - 1) or (head + 1.0) * (n - 1) * k_left < inner - 1.0:
                 span = inner
                 n -= 1
@@ -68,7 +79,7 @@ def _evaluate(s, tick, last, before, anchor, first, count, span1, n1, win_span, 
         # one interval far longer than the last step's: the light fell during it (an object left), so it
         # mixes two levels and says nothing of the light now
         drop = n == 1 and p_n > 0 and span * p_n > p_span * k_left
-        tail = lt - before[s]
+        tail = lt - spk[s, BEFORE]
         if n >= 2 and (tail - 1.0) * (n - 1) > (span - tail + 1.0) * k_left:
             # the step's last interval far longer than its others (one tick of slack each): the light fell
             # at the end of the step
@@ -88,7 +99,7 @@ def _evaluate(s, tick, last, before, anchor, first, count, span1, n1, win_span, 
         span1[s] = span
         n1[s] = n
         anchor[s] = lt
-        count[s] = 0
+        spk[s, COUNT] = 0
         win_span[s] = S
         win_n[s] = N
     else:
@@ -100,10 +111,13 @@ def _evaluate(s, tick, last, before, anchor, first, count, span1, n1, win_span, 
     b = bg[s]
     if N == 0:  # one spike so far: the interval in progress only (silent objects since the start)
         f = 0
-        if q > 0.0 and silence > q * k_seed:
-            f = -1
-            if flag_since[s] < 0:
-                flag_since[s] = tick
+        if q > 0.0:
+            if silence > q * k_seed:
+                f = -1
+                if flag_since[s] < 0:
+                    flag_since[s] = tick
+            else:
+                due[s] = lt + q * k_seed
         fg[s] = f
         return f
     tau = S / N
@@ -164,16 +178,22 @@ def _evaluate(s, tick, last, before, anchor, first, count, span1, n1, win_span, 
     if f == 0 and n > 0 and span > 0 and not win_bright and not win_dark:
         t_step = span / n  # the background follows the pixel only while they agree
         bg[s] = b + span / (background_ticks + span) * (t_step - b)
+    if f == 0:
+        due[s] = lt + bg[s] * k_hi + 1.0  # darker from then on, if silent
     fg[s] = f
     return f
 
 
 @njit(parallel=True, cache=True)
 def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, n_pixels,
-                      last, before, anchor, first, count, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev,
-                      out, k_lo, k_hi, k_seed, k_left, background_ticks, hold_ticks):  # pragma: no cover
+                      spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
+                      fg, flag_since, prev, due, out, k_lo, k_hi, k_seed, k_left, background_ticks,
+                      hold_ticks):  # pragma: no cover - compiled
     """Feed ticks ``first_tick`` … of ``words`` (T, n_words) uint64; write each completed step's foreground bits.
 
+    Per spike only the pixel's row of ``spk`` (last spike, the one before, the step's first,
+    intervals counted) and its spike total change. At the end of a step, only the pixels of words
+    that fired, hold foreground, or reached a pixel's ``due`` tick are evaluated (:func:`_evaluate`).
     ``out`` has one row per step ending in the block (plus one when ``evaluate_at_end`` and the block
     does not end on a step: the state is then evaluated at the block's last tick, and that row is
     scratch).
@@ -186,30 +206,47 @@ def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, 
             tick = first_tick + t
             for i in range(lo, hi):
                 w = words[t, i]
+                if not w:
+                    continue
+                fired[i] |= w
                 while w:
                     s = i * 64 + _cttz(w)
                     w &= w - np.uint64(1)
-                    if last[s] < 0:  # the first spike opens the first interval; the one it ends reaches
+                    lt = spk[s, LAST]
+                    if lt < 0:  # the first spike opens the first interval; the one it ends reaches
                         anchor[s] = tick  # back before the stream: the background is at least tick + 1
                         if bg[s] <= 0.0:
                             bg[s] = tick + 1.0
                             censored[s] = True
                     else:
-                        if count[s] == 0:
-                            first[s] = tick  # the end of the step's first interval
-                        count[s] += 1
-                    before[s] = last[s]
-                    last[s] = tick
+                        if spk[s, COUNT] == 0:
+                            spk[s, FIRST] = tick  # the end of the step's first interval
+                        spk[s, COUNT] += 1
+                    spk[s, BEFORE] = lt
+                    spk[s, LAST] = tick
+                    total[s] += 1
             if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T - 1):
                 for i in range(lo, hi):
-                    bits = np.uint64(0)
                     top = min(64, n_pixels - i * 64)
-                    for j in range(top):
-                        if _evaluate(i * 64 + j, tick, last, before, anchor, first, count, span1, n1, win_span, win_n, mixed,
-                                     bg, censored, fg, flag_since, prev, k_lo, k_hi, k_seed, k_left,
-                                     background_ticks, hold_ticks) != 0:
-                            bits |= np.uint64(1) << np.uint64(j)
-                    out[step, i] = bits
+                    cand = fired[i] | fg_bits[i]
+                    if tick >= word_due[i]:
+                        cand = ~np.uint64(0)
+                    if cand:
+                        bits = np.uint64(0)
+                        soonest = np.inf
+                        for j in range(top):
+                            s = i * 64 + j
+                            if (cand >> np.uint64(j)) & np.uint64(1):
+                                if _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
+                                             fg, flag_since, prev, due, k_lo, k_hi, k_seed, k_left,
+                                             background_ticks, hold_ticks) != 0:
+                                    bits |= np.uint64(1) << np.uint64(j)
+                            if due[s] < soonest:
+                                soonest = due[s]
+                        fg_bits[i] = bits
+                        word_due[i] = soonest
+                        fired[i] = np.uint64(0)
+                    out[step, i] = fg_bits[i]
                 step += 1
 
 
@@ -225,22 +262,26 @@ def foreground_pixels(bits, height, width, stored_width, flip):  # pragma: no co
     ys = np.empty(n, np.int64)
     xs = np.empty(n, np.int64)
     k = 0
-    for i in range(bits.size):
-        w = bits[i]
-        while w:
-            s = i * 64 + _cttz(w)
-            w &= w - np.uint64(1)
-            r, c = s // stored_width, s % stored_width
-            if c >= width or r >= height:
-                continue
-            ys[k] = height - 1 - r if flip else r
-            xs[k] = c
-            k += 1
-    ys, xs = ys[:k], xs[:k]
-    if flip:  # stored bottom-up: put the rows back in upright scan order
-        order = np.argsort(ys * width + xs, kind="mergesort")
-        ys, xs = ys[order], xs[order]
-    return ys, xs
+    for y in range(height):  # upright rows in order: stored row y, or H − 1 − y when stored bottom-up
+        r = height - 1 - y if flip else y
+        lo = r * stored_width
+        hi = lo + width
+        i = lo // 64
+        while i * 64 < hi:
+            w = bits[i]
+            if w:
+                base = i * 64
+                if base < lo:
+                    w &= ~np.uint64(0) << np.uint64(lo - base)
+                if base + 64 > hi:
+                    w &= (np.uint64(1) << np.uint64(hi - base)) - np.uint64(1)
+                while w:
+                    ys[k] = y
+                    xs[k] = base + _cttz(w) - lo
+                    w &= w - np.uint64(1)
+                    k += 1
+            i += 1
+    return ys[:k], xs[:k]
 
 
 @njit(cache=True)
@@ -263,6 +304,22 @@ def components_of_pixels(ys, xs, height, width, reach, min_pixels, index):  # pr
     for k in range(n):
         y, x = ys[k], xs[k]
         index[y, x] = k
+        left = index[y, x - 1] if x > 0 else -1
+        if left >= 0:
+            # the pixel to the left has met every earlier pixel within reach of it: only the column
+            # x + reach above is new (and the left pixel itself)
+            a, b = _find(parent, k), _find(parent, left)
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+            xx = x + reach
+            if xx < width:
+                for yy in range(max(0, y - reach), y):
+                    j = index[yy, xx]
+                    if j >= 0:
+                        a, b = _find(parent, k), _find(parent, j)
+                        if a != b:
+                            parent[max(a, b)] = min(a, b)
+            continue
         for yy in range(max(0, y - reach), y + 1):  # earlier pixels in scan order only
             hi = min(width - 1, x + reach) if yy < y else x - 1
             for xx in range(max(0, x - reach), hi + 1):
@@ -303,3 +360,23 @@ def components_of_pixels(ys, xs, height, width, reach, min_pixels, index):  # pr
     for k in range(n):
         pixel_label[k] = label[root[k]]
     return boxes, counts, pixel_label
+
+
+@njit(cache=True)
+def theil_sen(ts, xs, ys):  # pragma: no cover - compiled
+    """Velocity (vx, vy) of points (ts, xs, ys): the median over pairs of (Δx/Δt, Δy/Δt) (Theil–Sen)."""
+    n = ts.size
+    m = n * (n - 1) // 2
+    vx = np.empty(m)
+    vy = np.empty(m)
+    k = 0
+    for a in range(n):
+        for b in range(a + 1, n):
+            dt = ts[b] - ts[a]
+            if dt != 0.0:
+                vx[k] = (xs[b] - xs[a]) / dt
+                vy[k] = (ys[b] - ys[a]) / dt
+                k += 1
+    if k == 0:
+        return 0.0, 0.0
+    return np.median(vx[:k]), np.median(vy[:k])

@@ -47,11 +47,10 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 from scipy.ndimage import binary_closing, binary_opening, gaussian_filter, maximum_filter, median_filter
 from scipy.optimize import linear_sum_assignment
 
-from viform._validate import ViformError, check_int, check_non_negative, check_positive
+from viform._validate import ViformError, check_int, check_positive
 from viform.vision import _spike_front as _front
 
 
@@ -63,6 +62,10 @@ class TrackerParameters:
     ----------
     threshold_log : float
         |ln(light / background)| above which a pixel is foreground (0.4: ×1.5 either way).
+    left_log : float
+        A foreground pixel brighter than its background stops being so once its silence passes
+        e^``left_log`` times the intervals it had (the object has left it), and a pixel's last
+        interval that long against its others reads as light that fell.
     background_ticks : float
         Time constant of the background level, in ticks (spike) — frames use the same
         time in seconds, converted with the stream's clock.
@@ -73,70 +76,63 @@ class TrackerParameters:
         Foreground pixels closer than this (px) belong to one detection.
     min_pixels : int
         Smallest detection, foreground pixels (isolated noise is dropped).
-    min_hits : int
-        Matched steps before a track is confirmed (reported).
+    min_hits, confirm_pixels : int
+        Matched steps before a track is confirmed (reported); a track born on a detection of at
+        least ``confirm_pixels`` pixels is confirmed at once (no noise makes one that large).
     max_coast_ticks : int
         Longest gap without a detection (ticks) a track survives, coasting on its prediction.
     gate_px : float
         Largest distance (px) between a prediction's and a detection's centres for a match,
         on top of the two boxes' half-diagonals.
-    min_speed_px_per_s, still_ticks : float, int
-        A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
-        not reported (a ghost, or an object that stopped). 0 (the default) reports every track:
-        with the start-up seeding there are few ghosts left, and slow objects (100 px/s) count.
-    merged_keep_alive : bool
-        A confirmed track with no detection whose predicted box lies at least half inside a
-        detection matched to another track is merged with (or hidden by) that object: it does
-        not age while that lasts (the ball behind the truck keeps its id), and is not reported.
+    merged_keep_alive, report_merged : bool
+        A confirmed track whose prediction lies inside another object's foreground (merged with
+        it, or hidden by it) does not age while that lasts, so the ball behind the truck keeps its
+        id; ``report_merged``: where the foreground holding both is split (:meth:`Tracker._regroup`),
+        it is reported at its prediction.
     seed_ticks, seed_measured_fraction : int, float
-        When to seed: at the first of ``seed_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to
-        ``hold_ticks``, at which at least this fraction of the pixels has measured an interval
-        (later at a high threshold Q).
+        Seeding checks at ``seed_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to ``hold_ticks``,
+        until at least this fraction of the pixels has measured an interval (later at a high
+        threshold Q).
     seed_window_px, seed_threshold_log, seed_unsure : int, float, bool
-        Objects already in view when tracking starts: when seeded,
-        a pixel whose learned light differs (|ln ratio| > ``seed_threshold_log``) from the median
-        over ``seed_window_px`` px around it (wider than any object, on the assumption that the
-        background is smoother than the objects on it) takes the background interpolated from
-        the pixels around it, so the object is foreground at once and the place it leaves is not
-        a ghost (:func:`seed_background`); with ``seed_unsure``, pixels that differ from that
-        background by more than ``threshold_log`` only may return to it without being flagged.
-        Frames apply it to their first frame.
+        Objects already in view when tracking starts: at each check, a pixel whose light
+        differs (|ln ratio| > ``seed_threshold_log``) from the median over ``seed_window_px``
+        px around it (wider than any object, on the assumption that the background is smoother
+        than the objects on it) takes the background interpolated from the pixels around it,
+        so the object is foreground at once and the place it leaves is not a ghost
+        (:meth:`SpikeChangeDetector._seed`, :func:`seed_background`); with ``seed_unsure``,
+        pixels that differ from that background by more than ``threshold_log`` only may return
+        to it without being flagged. Frames apply it to their first frame.
     """
 
     threshold_log: float = 0.4
+    left_log: float = 0.4
     background_ticks: float = 400.0
     hold_ticks: int = 2000
     merge_px: int = 2
     min_pixels: int = 12
     min_hits: int = 2
+    confirm_pixels: int = 48
     max_coast_ticks: int = 600
     gate_px: float = 8.0
-    min_speed_px_per_s: float = 0.0
-    still_ticks: int = 400
+    merged_keep_alive: bool = True
+    report_merged: bool = True
     seed_ticks: int = 8
     seed_window_px: int = 96
     seed_threshold_log: float = 0.7
     seed_unsure: bool = True
     seed_measured_fraction: float = 0.9
-    merged_keep_alive: bool = True
-    left_log: float = 0.4
-    report_merged: bool = True
-    acceleration_px_per_s2: float = 2e6
-    position_noise_px: float = 1.0
-    robust_velocity: bool = True
-    confirm_pixels: int = 48
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
+        check_positive("left_log", self.left_log)
         check_positive("background_ticks", self.background_ticks)
         check_int("hold_ticks", self.hold_ticks, 1)
         check_int("merge_px", self.merge_px, 0)
         check_int("min_pixels", self.min_pixels, 1)
         check_int("min_hits", self.min_hits, 1)
+        check_int("confirm_pixels", self.confirm_pixels, 1)
         check_int("max_coast_ticks", self.max_coast_ticks, 0)
         check_positive("gate_px", self.gate_px)
-        check_non_negative("min_speed_px_per_s", self.min_speed_px_per_s)
-        check_int("still_ticks", self.still_ticks, 1)
         check_int("seed_ticks", self.seed_ticks, 0)
         check_int("seed_window_px", self.seed_window_px, 1)
         check_positive("seed_threshold_log", self.seed_threshold_log)
@@ -200,11 +196,14 @@ class SpikeChangeDetector:
         self.n_pixels = self.height * self.stored_width
         self.n_words = -(-self.n_pixels // 64)
         n = self.n_words * 64
-        self.last = np.full(n, -1, np.int64)
-        self.before = np.full(n, -1, np.int64)  # the spike before the last
+        self.spk = np.zeros((n, 4), np.int64)  # per spike: last spike, the one before, step's first, intervals
+        self.spk[:, _front.LAST] = -1
+        self.spk[:, _front.BEFORE] = -1
+        self.total = np.zeros(n, np.int64)  # spikes so far
+        self.fired = np.zeros(self.n_words, np.uint64)  # pixels that fired in the current step
+        self.fg_bits = np.zeros(self.n_words, np.uint64)
+        self.word_due = np.full(self.n_words, -np.inf)  # the soonest due tick in each word
         self.anchor = np.full(n, -1, np.int64)
-        self.first = np.full(n, -1, np.int64)
-        self.count = np.zeros(n, np.int64)
         self.span1 = np.zeros(n, np.int64)
         self.n1 = np.zeros(n, np.int64)
         self.win_span = np.zeros(n, np.int64)
@@ -215,6 +214,7 @@ class SpikeChangeDetector:
         self.fg = np.zeros(n, np.int8)
         self.flag_since = np.full(n, -1, np.int64)
         self.prev = np.zeros(n, np.float64)  # the background before the last absorption, or seeded (0: none)
+        self.due = np.full(n, np.inf)  # the tick from which silence alone could change the pixel's state
         chunks = max(1, min(get_num_threads(), self.n_words))
         edges = np.linspace(0, self.n_words, chunks + 1).round().astype(np.int64)
         self._chunks = (edges[:-1].copy(), edges[1:].copy())
@@ -282,9 +282,10 @@ class SpikeChangeDetector:
         if t:
             p = self.parameters
             _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
-                                     self.n_pixels, self.last, self.before, self.anchor, self.first, self.count, self.span1, self.n1,
-                                     self.win_span, self.win_n, self.mixed, self.bg, self.censored, self.fg, self.flag_since,
-                                     self.prev, out, math.exp(-p.threshold_log), math.exp(p.threshold_log),
+                                     self.n_pixels, self.spk, self.total, self.fired, self.fg_bits, self.word_due,
+                                     self.anchor, self.span1, self.n1, self.win_span, self.win_n, self.mixed, self.bg,
+                                     self.censored, self.fg, self.flag_since, self.prev, self.due, out,
+                                     math.exp(-p.threshold_log), math.exp(p.threshold_log),
                                      math.exp(p.seed_threshold_log), math.exp(p.left_log),
                                      float(p.background_ticks), int(p.hold_ticks))
         self.next_tick += t
@@ -318,7 +319,7 @@ class SpikeChangeDetector:
         p = self.parameters
         t = self.next_tick - 1  # the state was evaluated at this tick
         up = self.upright
-        last, n_win, s_win = up(self.last), up(self.win_n), up(self.win_span)
+        last, n_win, s_win = up(self.spk[:, _front.LAST]), up(self.win_n), up(self.win_span)
         bg, censored, prev, flag_since = up(self.bg), up(self.censored), up(self.prev), up(self.flag_since)
         k_hi = math.exp(p.threshold_log)
         tau = np.where(n_win > 0, s_win / np.maximum(n_win, 1), 0.0)
@@ -376,6 +377,7 @@ class SpikeChangeDetector:
             prev[unsure] = level[unsure]
         later = ~measured & ~seeded & around_measured & (weight > 0.5)
         prev[later] = level[later]
+        self.word_due[:] = -np.inf  # every pixel evaluated at the next step, against its new background
         if measured.mean() >= p.seed_measured_fraction:
             self.seeded = True
 
@@ -422,11 +424,11 @@ class FrameChangeDetector:
 
 # --------------------------------------------------------------------------- start-up background
 
-_SEED_BLOCK_PX = 4  # the start-up background is computed on blocks of 4×4 px (the background is smooth)
+_SEED_BLOCK_PX = 8  # the start-up background is computed on blocks of 8×8 px (the background is smooth)
 
 
 def _blocks(a: np.ndarray, fill) -> np.ndarray:
-    """(H, W) → (H/4, W/4, 16) blocks of 4×4 px (edges padded with ``fill``)."""
+    """(H, W) → (H/8, W/8, 64) blocks of 8×8 px (edges padded with ``fill``)."""
     H, W = a.shape
     b = _SEED_BLOCK_PX
     hb, wb = -(-H // b), -(-W // b)
@@ -452,7 +454,7 @@ def _upsample(blocks: np.ndarray, H: int, W: int) -> np.ndarray:
 
 
 def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int) -> np.ndarray:
-    """Median of ``log_light`` over valid pixels in a ``window_px`` square around each pixel, per 4×4 block."""
+    """Median of ``log_light`` over valid pixels in a ``window_px`` square around each pixel, per 8×8 block."""
     blocks = _blocks(np.where(valid, log_light, np.nan), np.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks: filled below
@@ -466,7 +468,7 @@ def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int)
 def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int):
     """Normalised Gaussian smoothing (σ = ``window_px``/8) of ``values`` over the ``clear`` pixels.
 
-    Works on 4×4 blocks (sums and counts), so it costs a fraction of a full-resolution filter;
+    Works on 8×8 blocks (sums and counts), so it costs a fraction of a full-resolution filter;
     returns the smoothed values and the weight (Gaussian fraction of clear pixels, 0 … 1) per pixel.
     """
     H, W = values.shape
@@ -485,8 +487,16 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int):
 
 def _opened(mask: np.ndarray) -> np.ndarray:
     """``mask`` without the parts narrower than 3 px once its gaps are closed (lines, specks of texture)."""
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    out = np.zeros_like(mask)
+    if rows.size == 0:
+        return out
+    r0, r1 = max(rows[0] - 3, 0), min(rows[-1] + 4, mask.shape[0])  # only the part that holds the mask
+    c0, c1 = max(cols[0] - 3, 0), min(cols[-1] + 4, mask.shape[1])
+    part = mask[r0:r1, c0:c1]
     square = np.ones((3, 3), bool)
-    return mask & binary_opening(binary_closing(mask, square), square)
+    out[r0:r1, c0:c1] = part & binary_opening(binary_closing(part, square), square)
+    return out
 
 
 def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int,
@@ -499,7 +509,7 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
     than ``threshold_log`` from the median of ln(light) over ``window_px`` px (wider than twice
     any object) is on an object (*seeded*). The background under and near it is then
     interpolated from the pixels around that are not seeded (normalised Gaussian smoothing,
-    σ = ``window_px``/8, on 4×4-px blocks: the local background, not the window's median),
+    σ = ``window_px``/8, on 8×8-px blocks: the local background, not the window's median),
     which is what the pixel shows once the object has moved off.
 
     Parameters
@@ -537,69 +547,6 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
 
 # --------------------------------------------------------------------------- grouping
 
-@njit(cache=True)
-def _find(parent, i):  # pragma: no cover - compiled
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
-@njit(cache=True)
-def _components(mask, reach, min_pixels):  # pragma: no cover - compiled
-    """Union–find over the foreground pixels; pixels within Chebyshev distance ``reach`` join."""
-    H, W = mask.shape
-    n = 0
-    for y in range(H):
-        for x in range(W):
-            if mask[y, x]:
-                n += 1
-    ys = np.empty(n, np.int64)
-    xs = np.empty(n, np.int64)
-    index = np.full((H, W), -1, np.int64)
-    parent = np.arange(n)
-    k = 0
-    for y in range(H):
-        for x in range(W):
-            if not mask[y, x]:
-                continue
-            ys[k], xs[k] = y, x
-            index[y, x] = k
-            for yy in range(max(0, y - reach), y + 1):  # earlier pixels in scan order only
-                hi = min(W - 1, x + reach) if yy < y else x - 1
-                for xx in range(max(0, x - reach), hi + 1):
-                    j = index[yy, xx]
-                    if j >= 0:
-                        a, b = _find(parent, k), _find(parent, j)
-                        if a != b:
-                            parent[max(a, b)] = min(a, b)
-            k += 1
-    box = np.empty((n, 4), np.int64)  # x0, y0, x1, y1 per root
-    count = np.zeros(n, np.int64)
-    for k in range(n):
-        r = _find(parent, k)
-        if count[r] == 0:
-            box[r, 0], box[r, 1], box[r, 2], box[r, 3] = xs[k], ys[k], xs[k], ys[k]
-        else:
-            box[r, 0], box[r, 1] = min(box[r, 0], xs[k]), min(box[r, 1], ys[k])
-            box[r, 2], box[r, 3] = max(box[r, 2], xs[k]), max(box[r, 3], ys[k])
-        count[r] += 1
-    m = 0
-    for k in range(n):
-        if count[k] >= min_pixels:
-            m += 1
-    boxes = np.empty((m, 4), np.float64)
-    counts = np.empty(m, np.int64)
-    m = 0
-    for k in range(n):  # roots in scan order of their first pixel: a deterministic order
-        if count[k] >= min_pixels:
-            boxes[m, 0], boxes[m, 1] = box[k, 0], box[k, 1]
-            boxes[m, 2], boxes[m, 3] = box[k, 2] - box[k, 0] + 1, box[k, 3] - box[k, 1] + 1
-            counts[m] = count[k]
-            m += 1
-    return boxes, counts
-
-
 def detect_boxes(mask: np.ndarray, merge_px: int = 2, min_pixels: int = 4):
     """Detections of one foreground mask: boxes (N, 4) of (x, y, w, h) px, 0-based, and pixel counts.
 
@@ -613,10 +560,19 @@ def detect_boxes(mask: np.ndarray, merge_px: int = 2, min_pixels: int = 4):
     boxes : ndarray, shape (N, 4), float64
     counts : ndarray, shape (N,), int64
     """
-    mask = np.ascontiguousarray(mask, dtype=np.bool_)
+    mask = np.asarray(mask, dtype=np.bool_)
     if mask.ndim != 2:
         raise ViformError(f"mask must be 2-D (H, W); got shape {mask.shape}")
-    return _components(mask, 2 * check_int("merge_px", merge_px, 0) + 1, check_int("min_pixels", min_pixels, 1))
+    boxes, counts, _ = _components_of_mask(mask, merge_px, min_pixels)
+    return boxes, counts
+
+
+def _components_of_mask(mask, merge_px, min_pixels):
+    ys, xs = np.nonzero(mask)  # scan order
+    index = np.full(mask.shape, -1, np.int64)
+    return _front.components_of_pixels(ys.astype(np.int64), xs.astype(np.int64), mask.shape[0], mask.shape[1],
+                                       2 * check_int("merge_px", merge_px, 0) + 1,
+                                       check_int("min_pixels", min_pixels, 1), index)
 
 
 def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -643,55 +599,62 @@ def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- association
 
+_TRAIL = 24  # measured centres kept per track (for its velocity)
+
+
 @dataclass
 class _Track:
     track_id: int
-    state: np.ndarray  # (cx, cy, vx, vy): px and px per second
-    cov: np.ndarray
-    size: np.ndarray  # (w, h), px
+    cx: float  # centre (px) at last_t
+    cy: float
+    vx: float  # px/s
+    vy: float
+    w: float  # size, px
+    h: float
     last_t: float
     last_seen_t: float
     hits: int = 1
     confirmed: bool = False
-    trail: list = field(default_factory=list)
     merged: bool = False
+    trail_t: np.ndarray = field(default_factory=lambda: np.zeros(_TRAIL))
+    trail_x: np.ndarray = field(default_factory=lambda: np.zeros(_TRAIL))
+    trail_y: np.ndarray = field(default_factory=lambda: np.zeros(_TRAIL))
+    n_trail: int = 0
+
+    def box_at(self, t_s: float) -> np.ndarray:
+        dt = t_s - self.last_t
+        cx, cy = self.cx + self.vx * dt, self.cy + self.vy * dt
+        return np.array([cx - self.w / 2, cy - self.h / 2, self.w, self.h])
+
+    def add(self, t_s: float, cx: float, cy: float) -> None:
+        k = self.n_trail % _TRAIL
+        self.trail_t[k], self.trail_x[k], self.trail_y[k] = t_s, cx, cy
+        self.n_trail += 1
 
 
 class Tracker:
-    """Constant-velocity Kalman tracks, Hungarian assignment, birth and death with hysteresis.
+    """Tracks of detections: predicted boxes, Hungarian assignment, birth and death with hysteresis.
+
+    Each track predicts its box at the next step from its last measured centre and a velocity
+    fitted to its recent measured centres (Theil–Sen: the median of the velocities between pairs
+    of them, so a few jumps of the box — an object entering, foreground growing — do not throw
+    it). Detections are assigned to predictions by the Hungarian method
+    (``scipy.optimize.linear_sum_assignment``) on 1 − IoU, with a centre-distance fallback for
+    small fast objects. Before that, a detection holding the predictions of several tracks is
+    split and pieces inside one prediction are joined (:meth:`_regroup`).
 
     Parameters
     ----------
     parameters : TrackerParameters
     tick_s : float
         Duration of a tick, s (turns ``max_coast_ticks`` into seconds).
-    position_noise_px : float
-        Measurement noise of a detection's centre, px (std).
-    acceleration_px_per_s2 : float
-        Process noise: unmodelled acceleration, px/s² (std).
     """
 
     def __init__(self, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000):
         self.parameters = parameters or TrackerParameters()
         self.tick_s = check_positive("tick_s", tick_s)
-        self.r = self.parameters.position_noise_px ** 2
-        self.q = self.parameters.acceleration_px_per_s2 ** 2
         self.tracks: list[_Track] = []
         self.next_id = 1
-
-    def _predict(self, track: _Track, t_s: float) -> np.ndarray:
-        dt = t_s - track.last_t
-        f = np.eye(4)
-        f[0, 2] = f[1, 3] = dt
-        g = np.array([[dt * dt / 2, 0], [0, dt * dt / 2], [dt, 0], [0, dt]])
-        track.state = f @ track.state
-        track.cov = f @ track.cov @ f.T + self.q * (g @ g.T)
-        track.last_t = t_s
-        return track.state
-
-    def _box(self, track: _Track) -> np.ndarray:
-        (cx, cy), (w, h) = track.state[:2], track.size
-        return np.array([cx - w / 2, cy - h / 2, w, h])
 
     def update(self, boxes: np.ndarray, t_s: float, pixels=None, counts=None) -> list[tuple[int, np.ndarray]]:
         """One step: detections seen at ``t_s``; returns [(track id, box)] reported now.
@@ -699,27 +662,22 @@ class Tracker:
         Parameters
         ----------
         boxes : ndarray (N, 4)
-            Detections (x, y, w, h), px.
+            Detections (x, y, w, h), px: with ``counts``, every connected component of the step's
+            foreground, those under ``min_pixels`` only as pieces a track may join.
         t_s : float
             The step's instant, s.
         pixels : tuple (ys, xs, component), optional
-            The foreground pixels and the detection each belongs to (−1: a component smaller than
-            ``min_pixels``). With them, a detection holding the predictions of several tracks is
-            split between them, and pieces lying inside one track's prediction join it
-            (:meth:`_regroup`).
+            The foreground pixels and the component each belongs to. With them, a component
+            holding the predictions of several tracks is split between them (:meth:`_regroup`).
         counts : ndarray (N,), optional
-            Foreground pixels of each detection: a new track on at least ``confirm_pixels`` of them
-            is confirmed at once (default: the box's area).
+            Foreground pixels of each component (default: every box is a detection, counted by its
+            area). A new track on at least ``confirm_pixels`` of them is confirmed at once.
         """
         p = self.parameters
         boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
         counts = boxes[:, 2] * boxes[:, 3] if counts is None else np.asarray(counts, np.float64).ravel()
-        for track in self.tracks:
-            self._predict(track, t_s)
-        predicted = np.array([self._box(tr) for tr in self.tracks]).reshape(-1, 4)
-        forced, merged = {}, set()
-        if pixels is not None:
-            boxes, forced, merged, counts = self._regroup(boxes, pixels, predicted, t_s, counts)
+        predicted = np.array([tr.box_at(t_s) for tr in self.tracks]).reshape(-1, 4)
+        boxes, counts, forced, merged = self._regroup(boxes, counts, pixels, predicted, t_s)
         matches = list(forced.items())
         unmatched = set(range(len(boxes))) - set(forced.values())
         free_tracks = [i for i in range(len(self.tracks)) if i not in forced and i not in merged]
@@ -730,7 +688,7 @@ class Tracker:
             pc = pr[:, :2] + pr[:, 2:] / 2
             bc = bx[:, :2] + bx[:, 2:] / 2
             dist = np.hypot(pc[:, None, 0] - bc[None, :, 0], pc[:, None, 1] - bc[None, :, 1])
-            reach = (np.hypot(*pr[:, 2:].T)[:, None] + np.hypot(*bx[:, 2:].T)[None, :]) / 2 + p.gate_px
+            reach = (np.hypot(pr[:, 2], pr[:, 3])[:, None] + np.hypot(bx[:, 2], bx[:, 3])[None, :]) / 2 + p.gate_px
             cost = np.where(iou > 0, 1.0 - iou, 1.0 + dist / reach)
             cost = np.where(dist <= reach, cost, 1e6)
             rows, cols = linear_sum_assignment(cost)
@@ -746,16 +704,10 @@ class Tracker:
             matched_tracks.add(i)
             if track.confirmed or track.hits >= p.min_hits:
                 track.confirmed = True
-                if self._moving(track, t_s):
-                    reported.append((track.track_id, boxes[j].copy()))
+                reported.append((track.track_id, boxes[j].copy()))
         for i, track in enumerate(self.tracks):
-            if i in merged and not track.merged and len(track.trail) >= 3:
-                # it goes on at its prediction, with the median velocity between pairs of its measured centres
-                # (Theil–Sen: steadier than the filter's, which follows each box, and blind to a few jumps)
-                ts = np.array([t for t, _ in track.trail])
-                cs = np.array([c for _, c in track.trail])
-                a, b = np.triu_indices(ts.size, 1)
-                track.state[2:] = np.median((cs[b] - cs[a]) / (ts[b] - ts[a])[:, None], axis=0)
+            if i in merged and not track.merged and track.n_trail >= 3:
+                track.vx, track.vy = _trail_velocity(track)
             track.merged = i in merged
         for i in sorted(merged):  # inside another object's foreground: reported where predicted
             track = self.tracks[i]
@@ -766,25 +718,21 @@ class Tracker:
             # a confirmed track without a detection whose prediction lies inside another track's detection
             # is merged with (or hidden by) that object: it coasts on as long as that lasts
             matched_boxes = boxes[[j for _, j in matches]]
-            for i, track in enumerate(self.tracks):
-                if i in matched_tracks or not track.confirmed:
-                    continue
-                pb = predicted[i]
-                ix = np.clip(np.minimum(pb[0] + pb[2], matched_boxes[:, 0] + matched_boxes[:, 2])
-                             - np.maximum(pb[0], matched_boxes[:, 0]), 0, None)
-                iy = np.clip(np.minimum(pb[1] + pb[3], matched_boxes[:, 1] + matched_boxes[:, 3])
-                             - np.maximum(pb[1], matched_boxes[:, 1]), 0, None)
-                inside = ix * iy / max(pb[2] * pb[3], 1e-9)
-                if inside.max() >= 0.5:
-                    track.last_seen_t = t_s  # not reported: its box is a prediction, not a measurement
+            idle = [i for i, tr in enumerate(self.tracks) if i not in matched_tracks and tr.confirmed]
+            if idle:
+                pb = predicted[idle]
+                inside = _intersection(pb, matched_boxes) / np.maximum(pb[:, 2] * pb[:, 3], 1e-9)[:, None]
+                for i in np.asarray(idle)[inside.max(axis=1) >= 0.5]:
+                    self.tracks[i].last_seen_t = t_s  # not reported: its box is a prediction, not a measurement
         coast_s = p.max_coast_ticks * self.tick_s
         self.tracks = [tr for i, tr in enumerate(self.tracks)
                        if i in matched_tracks or (tr.confirmed and t_s - tr.last_seen_t <= coast_s)]
         for j in sorted(unmatched):
+            if counts[j] < p.min_pixels:
+                continue
             b = boxes[j]
-            state = np.array([b[0] + b[2] / 2, b[1] + b[3] / 2, 0.0, 0.0])
-            cov = np.diag([self.r, self.r, 1e8, 1e8])  # unknown velocity: up to 10,000 px/s
-            track = _Track(self.next_id, state, cov, b[2:].copy(), t_s, t_s, trail=[(t_s, state[:2].copy())])
+            track = _Track(self.next_id, b[0] + b[2] / 2, b[1] + b[3] / 2, 0.0, 0.0, b[2], b[3], t_s, t_s)
+            track.add(t_s, track.cx, track.cy)
             self.next_id += 1
             self.tracks.append(track)
             if p.min_hits <= 1 or counts[j] >= p.confirm_pixels:  # a large detection is no noise
@@ -792,137 +740,108 @@ class Tracker:
                 reported.append((track.track_id, b.copy()))
         return reported
 
-    def _regroup(self, boxes, pixels, predicted, t_s, counts):
-        """Split detections that hold several tracks' predictions; join pieces inside one track's prediction.
+    def _regroup(self, boxes, counts, pixels, predicted, t_s):
+        """Split components that hold several tracks' predictions; join pieces inside one track's prediction.
 
-        Only confirmed tracks seen within ``max_coast_ticks`` take part. A detection covering at
+        Only confirmed tracks seen within ``max_coast_ticks`` take part. A component covering at
         least half of the predicted boxes of two or more of them (an object passing in front of
-        another merges their foreground) gives each track the pixels inside its predicted box
-        (grown by ``merge_px``; pixels in none go to the nearest); pieces of foreground that lie
-        mostly (≥ 60 % of their box) inside one track's predicted box and inside no other's are
-        joined into one detection for it (a textured or partly hidden object whose foreground
-        breaks up). Returns the new boxes and {track index: detection index} for the detections
-        made for a track.
+        another merges their foreground) is measured for the largest of them (the occluder, or
+        what the others cross) without the pixels that lie only inside the others' predictions;
+        the others go on at their predictions (a box measured from shared pixels would drag a
+        partly hidden object along with its occluder). Pieces of foreground that lie mostly
+        (≥ 60 % of their box) inside one track's predicted box and inside no other's are joined
+        into one detection for it, within that box (a textured or partly hidden object whose
+        foreground breaks up). Components under ``min_pixels`` that join nothing are dropped.
+
+        Returns the detections' boxes and pixel counts, {track index: detection index} for the
+        detections made for a track, and the set of tracks that go on at their predictions.
         """
         p = self.parameters
-        ys, xs, comp = pixels
+        big = counts >= p.min_pixels
         coast_s = p.max_coast_ticks * self.tick_s
-        live = [i for i, tr in enumerate(self.tracks) if tr.confirmed and t_s - tr.last_seen_t <= coast_s]
-        n_comp = int(comp.max()) + 1 if comp.size else 0
-        if not live or n_comp == 0:
-            return boxes, {}, set(), counts
-        # every component, the small ones too (boxes of their pixels)
-        keep = comp >= 0
-        order = np.argsort(comp[keep], kind="stable")
-        cy, cx, cc = ys[keep][order], xs[keep][order], comp[keep][order]
-        starts = np.searchsorted(cc, np.arange(n_comp + 1))
+        live = np.array([i for i, tr in enumerate(self.tracks) if tr.confirmed and t_s - tr.last_seen_t <= coast_s],
+                        np.int64)
+        if live.size == 0 or len(boxes) == 0:
+            return boxes[big], counts[big], {}, set()
+        n_comp = len(boxes)
         grow = float(p.merge_px)
         pred = predicted[live].copy()
         pred[:, :2] -= grow
         pred[:, 2:] += 2 * grow
-        comp_boxes = np.empty((n_comp, 4))
-        for j in range(n_comp):
-            a, b = starts[j], starts[j + 1]
-            x0, y0 = cx[a:b].min(), cy[a:b].min()
-            comp_boxes[j] = (x0, y0, cx[a:b].max() - x0 + 1, cy[a:b].max() - y0 + 1)
-        inter = _intersection(comp_boxes, pred)  # (components, tracks)
-        cover = inter / np.maximum(pred[:, 2] * pred[:, 3], 1e-9)[None, :]
-        inside_strict = _intersection(comp_boxes, predicted[live]) / np.maximum(
-            comp_boxes[:, 2] * comp_boxes[:, 3], 1e-9)[:, None]
-        out_boxes, out_counts, forced, used = [], [], {}, np.zeros(n_comp, bool)
+        cover = _intersection(boxes, pred) / np.maximum(pred[:, 2] * pred[:, 3], 1e-9)[None, :]
+        inside = _intersection(boxes, predicted[live]) / np.maximum(boxes[:, 2] * boxes[:, 3], 1e-9)[:, None]
+        out_boxes, out_counts, forced, merged = [], [], {}, set()
+        used = np.zeros(n_comp, bool)
         taken = set()
-        merged = set()
-        for j in range(n_comp):
-            holders = np.nonzero(cover[j] >= 0.5)[0]
-            holders = [h for h in holders if live[h] not in taken]
+        multi = np.nonzero((cover >= 0.5).sum(axis=1) >= 2)[0] if pixels is not None else np.zeros(0, np.int64)
+        if multi.size:
+            ys, xs, comp = pixels
+        for j in multi:
+            holders = [h for h in np.nonzero(cover[j] >= 0.5)[0] if live[h] not in taken]
             if len(holders) < 2:
                 continue
             used[j] = True
-            a, b = starts[j], starts[j + 1]
-            px, py = cx[a:b] + 0.5, cy[a:b] + 0.5
+            sel = comp == j
+            px, py = xs[sel] + 0.5, ys[sel] + 0.5
             hb = pred[holders]
             member = ((px[:, None] >= hb[None, :, 0]) & (px[:, None] < hb[None, :, 0] + hb[None, :, 2])
                       & (py[:, None] >= hb[None, :, 1]) & (py[:, None] < hb[None, :, 1] + hb[None, :, 3]))
-            # the largest is the occluder (or what the others cross): measured from the blob without what lies
-            # only inside the others' predictions; the others go on at their predictions (a measurement of a
-            # partly hidden object from shared pixels would drag it along with the occluder)
             primary = int(np.argmax(hb[:, 2] * hb[:, 3]))
             own = member[:, primary] | ~member.any(axis=1)
             for k, h in enumerate(holders):
-                taken.add(live[h])
+                taken.add(int(live[h]))
                 if k != primary:
-                    merged.add(live[h])
+                    merged.add(int(live[h]))
             if own.any():
-                x0, y0 = cx[a:b][own].min(), cy[a:b][own].min()
-                forced[live[holders[primary]]] = len(out_boxes)
-                out_boxes.append((x0, y0, cx[a:b][own].max() - x0 + 1, cy[a:b][own].max() - y0 + 1))
-                out_counts.append(int(own.sum()))
+                x0, y0 = px[own].min() - 0.5, py[own].min() - 0.5
+                forced[int(live[holders[primary]])] = len(out_boxes)
+                out_boxes.append((x0, y0, px[own].max() + 0.5 - x0, py[own].max() + 0.5 - y0))
+                out_counts.append(float(own.sum()))
         # pieces inside one track's prediction only
-        owner = np.full(n_comp, -1)
-        for j in range(n_comp):
-            if used[j]:
-                continue
-            mostly = np.nonzero(inside_strict[j] >= 0.6)[0]
-            if mostly.size == 1 and live[mostly[0]] not in taken:
-                owner[j] = mostly[0]
+        mostly = inside >= 0.6
+        single = ~used & (mostly.sum(axis=1) == 1)
+        owner = np.where(single, np.argmax(mostly, axis=1), -1)
         for h in np.unique(owner[owner >= 0]):
+            if int(live[h]) in taken:
+                owner[owner == h] = -1
+                continue
             parts = np.nonzero(owner == h)[0]
-            sizes = starts[parts + 1] - starts[parts]
-            if len(parts) < 2 and sizes.sum() >= p.min_pixels:
+            size = counts[parts].sum()
+            if len(parts) < 2 and size >= p.min_pixels:
                 owner[parts] = -1  # one piece, large enough: an ordinary detection
                 continue
-            if sizes.sum() < p.min_pixels:
+            if size < p.min_pixels:
                 continue  # (dropped with the other small pieces)
-            pb = comp_boxes[parts]
+            pb = boxes[parts]
             g = predicted[live[h]]  # the union, within the prediction (pieces may hang over it)
             x0, y0 = max(pb[:, 0].min(), g[0]), max(pb[:, 1].min(), g[1])
             x1 = min((pb[:, 0] + pb[:, 2]).max(), g[0] + g[2])
             y1 = min((pb[:, 1] + pb[:, 3]).max(), g[1] + g[3])
-            forced[live[h]] = len(out_boxes)
-            taken.add(live[h])
+            forced[int(live[h])] = len(out_boxes)
+            taken.add(int(live[h]))
             out_boxes.append((x0, y0, x1 - x0, y1 - y0))
-            out_counts.append(int(sizes.sum()))
+            out_counts.append(float(size))
             used[parts] = True
-        # the rest: components large enough, as they were
-        for j in range(n_comp):
-            if not used[j] and owner[j] < 0 and starts[j + 1] - starts[j] >= p.min_pixels:
-                out_boxes.append(tuple(comp_boxes[j]))
-                out_counts.append(int(starts[j + 1] - starts[j]))
-        return np.array(out_boxes, np.float64).reshape(-1, 4), forced, merged, np.array(out_counts, np.float64)
-
-    def _moving(self, track: _Track, t_s: float) -> bool:
-        """Whether the track's measured centre moved at least ``min_speed`` over the last ``still_ticks``."""
-        window_s = self.parameters.still_ticks * self.tick_s
-        while len(track.trail) > 2 and track.trail[1][0] <= t_s - window_s:
-            track.trail.pop(0)  # keep one point at or before the window's start
-        (t0, c0), (t1, c1) = track.trail[0], track.trail[-1]
-        if t1 - t0 < window_s:
-            return True  # too young to judge
-        return math.hypot(*(c1 - c0)) >= self.parameters.min_speed_px_per_s * (t1 - t0)
+        rest = ~used & (owner < 0) & big
+        boxes_out = np.concatenate([np.array(out_boxes, np.float64).reshape(-1, 4), boxes[rest]])
+        counts_out = np.concatenate([np.array(out_counts, np.float64), counts[rest]])
+        return boxes_out, counts_out, forced, merged
 
     def _correct(self, track: _Track, box: np.ndarray, t_s: float) -> None:
-        h = np.zeros((2, 4))
-        h[0, 0] = h[1, 1] = 1.0
-        z = box[:2] + box[2:] / 2
-        s = h @ track.cov @ h.T + self.r * np.eye(2)
-        k = track.cov @ h.T @ np.linalg.inv(s)
-        track.state = track.state + k @ (z - h @ track.state)
-        track.cov = (np.eye(4) - k @ h) @ track.cov
-        track.size = 0.5 * track.size + 0.5 * box[2:]
+        """A measured box: the track's centre is the box's, its velocity refitted, its size smoothed."""
+        cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
+        track.add(t_s, cx, cy)
+        track.cx, track.cy, track.last_t = cx, cy, t_s
+        if track.n_trail >= 2:
+            track.vx, track.vy = _trail_velocity(track)
+        track.w, track.h = 0.5 * (track.w + box[2]), 0.5 * (track.h + box[3])
         track.hits += 1
         track.last_seen_t = t_s
-        track.trail.append((t_s, z.copy()))
-        if self.parameters.robust_velocity:
-            # the measured centre, and the median velocity between pairs of measured centres over the
-            # trail (Theil–Sen, up to 24 points: a few jumps of the box, as where the object enters or
-            # the foreground grows, do not throw it)
-            trail = track.trail[-24:] if len(track.trail) <= 48 else track.trail[:: max(1, len(track.trail) // 24)]
-            ts = np.array([t for t, _ in trail])
-            cs = np.array([c for _, c in trail])
-            track.state[:2] = z
-            if ts.size >= 2:
-                a, b = np.triu_indices(ts.size, 1)
-                track.state[2:] = np.median((cs[b] - cs[a]) / (ts[b] - ts[a])[:, None], axis=0)
+
+
+def _trail_velocity(track: _Track) -> tuple[float, float]:
+    n = min(track.n_trail, _TRAIL)
+    return _front.theil_sen(track.trail_t[:n], track.trail_x[:n], track.trail_y[:n])
 
 
 # --------------------------------------------------------------------------- pipelines
@@ -989,8 +908,7 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
             t_s = source.start_time_s + frame * step_ticks / source.clock_hz
             boxes, counts, pixels = detector.components(bits, p.merge_px, 1)
             n_det += int(np.count_nonzero(counts >= p.min_pixels))
-            big = counts >= p.min_pixels
-            reported = tracker.update(boxes[big], t_s, pixels, counts[big])
+            reported = tracker.update(boxes, t_s, pixels, counts)
             rows += _rows(frame, reported)
             times.append(t_s)
             if on_step is not None:
@@ -1045,9 +963,10 @@ def track_frames(frames, times_s, parameters: TrackerParameters | None = None, t
     rows, n_det, n = [], 0, 0
     for frame, (image, t_s) in enumerate(zip(frames, times, strict=False), start=1):
         mask = detector.feed(image, float(t_s))
-        boxes, _ = detect_boxes(mask, p.merge_px, p.min_pixels)
-        n_det += len(boxes)
-        rows += _rows(frame, tracker.update(boxes, float(t_s)))
+        boxes, counts, labels = _components_of_mask(mask, p.merge_px, 1)
+        n_det += int(np.count_nonzero(counts >= p.min_pixels))
+        ys, xs = np.nonzero(mask)
+        rows += _rows(frame, tracker.update(boxes, float(t_s), (ys, xs, labels), counts))
         n = frame
     if n != times.size:
         raise ViformError(f"{n} frames were given for {times.size} instants")
