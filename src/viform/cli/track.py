@@ -143,11 +143,8 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
         gt = None
     want_scores = gt is not None and scores is not False
 
-    mean_rate = np.zeros((source.height, source.width))
     result = track_spikes(source, every)
-    for _, block in source.iter_blocks(4096):
-        mean_rate += block.sum(axis=0)
-    mean_rate /= max(source.n_ticks, 1)
+    mean_rate = result.spike_counts / max(source.n_ticks, 1)
 
     summary = {"file": str(file), "every_ticks": every, "frames": n_frames, "frame_rate_hz": source.clock_hz / every,
                "tracks": int(len(np.unique(result.rows[:, 1]))) if len(result.rows) else 0,

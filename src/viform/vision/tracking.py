@@ -330,19 +330,14 @@ class SpikeChangeDetector:
         log_v = np.log(np.maximum(value, 1e-3))
         H, W = log_v.shape
         # the robust median around, and whether it is measured: bounds above the median do not move it
-        blocks = _blocks(log_v, np.nan)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            med_b = np.nanmedian(blocks, axis=2)
-        size = max(1, p.seed_window_px // _SEED_BLOCK_PX) | 1
-        med_b = median_filter(np.where(np.isfinite(med_b), med_b, np.nanmedian(med_b)), size=size, mode="nearest")
-        low_bounds = _blocks((~measured & (log_v < _upsample(med_b, H, W))).astype(np.float64), np.nan)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            low_frac = np.nanmean(low_bounds, axis=2)
-        low_frac = median_filter(np.nan_to_num(low_frac), size=size, mode="nearest")
-        median = _upsample(med_b, H, W)
-        median_measured = _upsample(low_frac, H, W) < 0.1
+        # (on 16-px blocks: the window is 96 px)
+        b = 2 * _SEED_BLOCK_PX
+        size = max(1, p.seed_window_px // b) | 1
+        med_b = median_filter(np.median(_blocks(log_v, block=b), axis=2), size=size, mode="nearest")
+        median = _nearest(med_b, H, W, b)
+        low_frac = median_filter(_blocks(~measured & (log_v < median), block=b).mean(axis=2), size=size,
+                                 mode="nearest")
+        median_measured = _nearest(low_frac, H, W, b) < 0.1
         thr = p.seed_threshold_log
         upper = np.log((s_win + 1.0) / np.maximum(n_win, 1))  # the longest the measured interval can be
         lower = np.log(np.maximum(np.where(measured, (s_win - 1.0) / np.maximum(n_win, 1), bound), 1e-3))
@@ -357,11 +352,11 @@ class SpikeChangeDetector:
         if self._seeded_ever is None:
             self._seeded_ever = np.zeros(stale.shape, bool)
         self._seeded_ever |= bright | dark
-        stale &= _opened(stale) | maximum_filter(self._seeded_ever, size=5, mode="constant")
+        stale &= _opened(stale) | _grown(self._seeded_ever)
         seeded = bright | dark | stale
-        clear = ~maximum_filter(bright | dark, size=5, mode="constant") & ~stale
-        around, weight = _interpolate_clear(log_v, clear, p.seed_window_px)
-        around_measured = _interpolate_clear(measured.astype(np.float64), clear, p.seed_window_px)[0] > 0.9
+        clear = ~_grown(bright | dark) & ~stale
+        around, weight, measured_around = _interpolate_clear(log_v, clear, p.seed_window_px, measured)
+        around_measured = measured_around > 0.9
         level = np.exp(around)
         bg[seeded] = level[seeded]
         # a lower bound unless measured around (only "brighter" is tested against it until the pixel's first
@@ -427,14 +422,33 @@ class FrameChangeDetector:
 _SEED_BLOCK_PX = 8  # the start-up background is computed on blocks of 8×8 px (the background is smooth)
 
 
-def _blocks(a: np.ndarray, fill) -> np.ndarray:
-    """(H, W) → (H/8, W/8, 64) blocks of 8×8 px (edges padded with ``fill``)."""
+def _blocks(a: np.ndarray, fill=None, block: int = _SEED_BLOCK_PX) -> np.ndarray:
+    """(H, W) → (H/b, W/b, b²) blocks of b × b px (edges padded with ``fill``, or the edge values)."""
     H, W = a.shape
-    b = _SEED_BLOCK_PX
+    b = block
     hb, wb = -(-H // b), -(-W // b)
-    pad = np.full((hb * b, wb * b), fill, dtype=np.result_type(a.dtype, np.asarray(fill).dtype))
-    pad[:H, :W] = a
+    if fill is None:
+        pad = np.pad(a, ((0, hb * b - H), (0, wb * b - W)), mode="edge")
+    else:
+        pad = np.full((hb * b, wb * b), fill, dtype=np.result_type(a.dtype, np.asarray(fill).dtype))
+        pad[:H, :W] = a
     return pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
+
+
+def _nearest(blocks: np.ndarray, H: int, W: int, block: int = _SEED_BLOCK_PX) -> np.ndarray:
+    """Block values (hb, wb) of b × b px back to pixels, each pixel its block's value."""
+    return blocks[np.arange(H) // block][:, np.arange(W) // block]
+
+
+def _grown(mask: np.ndarray, px: int = 2) -> np.ndarray:
+    """``mask`` grown by ``px`` in every direction (a (2·px + 1)² maximum filter, on the part that holds it)."""
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    out = np.zeros_like(mask)
+    if rows.size:
+        r0, r1 = max(rows[0] - px, 0), min(rows[-1] + px + 1, mask.shape[0])
+        c0, c1 = max(cols[0] - px, 0), min(cols[-1] + px + 1, mask.shape[1])
+        out[r0:r1, c0:c1] = maximum_filter(mask[r0:r1, c0:c1], size=2 * px + 1, mode="constant")
+    return out
 
 
 def _upsample(blocks: np.ndarray, H: int, W: int) -> np.ndarray:
@@ -465,11 +479,13 @@ def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int)
     return median_filter(med, size=size, mode="nearest")
 
 
-def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int):
+def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, also=None):
     """Normalised Gaussian smoothing (σ = ``window_px``/8) of ``values`` over the ``clear`` pixels.
 
     Works on 8×8 blocks (sums and counts), so it costs a fraction of a full-resolution filter;
-    returns the smoothed values and the weight (Gaussian fraction of clear pixels, 0 … 1) per pixel.
+    returns the smoothed values (bilinear between blocks) and the weight (Gaussian fraction of
+    clear pixels, 0 … 1) per pixel, and with ``also`` (a bool image) the clear-weighted fraction
+    of its pixels around each pixel (per block).
     """
     H, W = values.shape
     n = _blocks(clear.astype(np.float64), 0.0).sum(axis=2)
@@ -482,7 +498,11 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int):
         level = np.where(np.isfinite(level), level, np.nanmedian(level))
     else:
         level = np.zeros_like(level)
-    return _upsample(level, H, W), _upsample(weight / _SEED_BLOCK_PX ** 2, H, W)
+    out = (_upsample(level, H, W), _nearest(weight / _SEED_BLOCK_PX ** 2, H, W))
+    if also is not None:
+        part = gaussian_filter(_blocks((clear & also).astype(np.float64), 0.0).sum(axis=2), sigma, mode="nearest")
+        out += (_nearest(part / np.maximum(weight, 1e-9), H, W),)
+    return out
 
 
 def _opened(mask: np.ndarray) -> np.ndarray:
@@ -536,7 +556,7 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
     coarse = _upsample(_robust_background(log_light, valid, window_px), H, W)
     seeded = _opened(valid & (np.abs(log_light - coarse) > threshold_log))  # objects are ≥ 3 px across
     # the local background from the pixels that are not on an object (their anti-aliased edges excluded)
-    clear = valid & ~maximum_filter(seeded, size=5, mode="constant")
+    clear = valid & ~_grown(seeded)
     background, weight = _interpolate_clear(log_light, clear, window_px)
     background = np.where(weight > 1e-3, background, coarse)
     unsure = np.zeros_like(seeded)
@@ -860,12 +880,15 @@ class TrackingResult:
         Ticks per frame (spike streams), None for frame cameras.
     detections : int
         Detections found over the run.
+    spike_counts : ndarray (H, W) or None
+        Spikes per pixel over the ticks tracked (spike streams; the overlay's background).
     """
 
     rows: np.ndarray
     times_s: np.ndarray
     step_ticks: int | None
     detections: int
+    spike_counts: np.ndarray | None = None
 
 
 def _rows(frame: int, reported) -> list:
@@ -913,7 +936,8 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
             times.append(t_s)
             if on_step is not None:
                 on_step(frame, t_s, detector.mask(bits), reported)
-    return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det)
+    return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det,
+                          detector.upright(detector.total).copy())
 
 
 def _packed_layout(source) -> tuple[int, bool]:
