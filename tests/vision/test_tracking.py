@@ -256,3 +256,57 @@ def test_a_track_merged_with_a_larger_object_keeps_its_id(keep_alive):
             if not overlap and iou_matrix(box, b)[0, 0] > 0.5:
                 ids_of_b.add(tid)
     assert len(ids_of_b) == (1 if keep_alive else 2)
+
+
+def test_frame_tracking_does_not_depend_on_the_first_frame():
+    # An auto-exposure start-up (or any frame that blinked) must not set the background: it starts from
+    # the median of the first three frames that measure enough pixels. A first frame that measured
+    # nothing changes nothing; one three times too bright changes nothing either.
+    scene = Square(speed=1000.0)
+    times = np.arange(1, 21) * 1e-3
+    frames = [scene.illuminance_lux(t) for t in times]
+    base = track_frames(frames[1:], times[1:], PARAMS)
+    gt = mot.gt_rows(scene, times[1:])
+    reference = score_tracking(gt, base.rows, times[1:])
+    assert reference["never_found"] == [] and reference["mota"] > 0.7
+
+    def from_frame_2(first, measured_first):
+        measured = [measured_first] + [np.ones(scene.shape, bool)] * (len(frames) - 1)
+        res = track_frames([first] + frames[1:], times, PARAMS, measured=measured)
+        rows = res.rows[res.rows[:, 0] > 1].copy()
+        rows[:, 0] -= 1
+        return rows
+
+    blank = from_frame_2(np.zeros(scene.shape), np.zeros(scene.shape, bool))
+    np.testing.assert_array_equal(blank, base.rows)
+    bright = from_frame_2(3.0 * frames[0], np.ones(scene.shape, bool))
+    np.testing.assert_array_equal(bright, base.rows)
+    # while a background learned from that one frame would be blinded by it
+    from viform.vision.tracking import FrameChangeDetector
+
+    one = FrameChangeDetector(0.01, 0.05, PARAMS, init_frames=1)
+    masks = one.feed(3.0 * frames[0], times[0])
+    for f, t in zip(frames[1:], times[1:], strict=True):
+        masks += one.feed(f, t)
+    assert masks[1].mean() > 0.9  # every pixel "changed"
+
+
+def test_saturated_and_unmeasured_pixels():
+    # a saturated pixel is at least as bright as its value: brighter than the background below it;
+    # an unmeasured one is never flagged and never moves the background
+    from viform.vision.tracking import FrameChangeDetector
+
+    det = FrameChangeDetector(0.01, 0.05, TrackerParameters(seed_ticks=0), init_frames=1)
+    flat = np.full((8, 8), 5.0)
+    (first,) = det.feed(flat, 0.001)
+    assert not first.any()
+    frame = flat.copy()
+    frame[2:4, 2:4] = 50.0
+    saturated = np.zeros((8, 8), bool)
+    saturated[2:4, 2:4] = True
+    unmeasured = np.ones((8, 8), bool)
+    unmeasured[6, 6] = False
+    frame[6, 6] = 0.0
+    (mask,) = det.feed(frame, 0.002, unmeasured, saturated)
+    assert mask[2:4, 2:4].all() and not mask[6, 6] and mask.sum() == 4
+    assert det.ref[6, 6] == pytest.approx(math.log(5.0))

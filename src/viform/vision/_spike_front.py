@@ -227,20 +227,22 @@ def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, 
                     total[s] += 1
             if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T - 1):
                 for i in range(lo, hi):
-                    top = min(64, n_pixels - i * 64)
                     cand = fired[i] | fg_bits[i]
-                    if tick >= word_due[i]:
-                        cand = ~np.uint64(0)
+                    whole = tick >= word_due[i]
+                    if whole:  # some pixel's silence may change it: the whole word (and its soonest due anew)
+                        top = min(64, n_pixels - i * 64)
+                        cand = ~np.uint64(0) if top == 64 else (np.uint64(1) << np.uint64(top)) - np.uint64(1)
                     if cand:
-                        bits = np.uint64(0)
-                        soonest = np.inf
-                        for j in range(top):
+                        bits = fg_bits[i] & ~cand
+                        soonest = np.inf if whole else word_due[i]  # (a bound: a spike may only delay a due)
+                        while cand:
+                            j = _cttz(cand)
+                            cand &= cand - np.uint64(1)
                             s = i * 64 + j
-                            if (cand >> np.uint64(j)) & np.uint64(1):
-                                if _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
-                                             fg, flag_since, prev, due, k_lo, k_hi, k_seed, k_left,
-                                             background_ticks, hold_ticks) != 0:
-                                    bits |= np.uint64(1) << np.uint64(j)
+                            if _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
+                                         fg, flag_since, prev, due, k_lo, k_hi, k_seed, k_left,
+                                         background_ticks, hold_ticks) != 0:
+                                bits |= np.uint64(1) << j
                             if due[s] < soonest:
                                 soonest = due[s]
                         fg_bits[i] = bits

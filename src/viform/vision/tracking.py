@@ -101,7 +101,9 @@ class TrackerParameters:
         so the object is foreground at once and the place it leaves is not a ghost
         (:meth:`SpikeChangeDetector._seed`, :func:`seed_background`); with ``seed_unsure``,
         pixels that differ from that background by more than ``threshold_log`` only may return
-        to it without being flagged. Frames apply it to their first frame.
+        to it without being flagged. Frames apply it to their starting background, and give a
+        seeded group none of whose pixels changes within ``seed_confirm_ticks`` its own light back
+        (objects in view move; static texture that a dim 8-bit image shows strongly does not).
     """
 
     threshold_log: float = 0.4
@@ -121,6 +123,7 @@ class TrackerParameters:
     seed_threshold_log: float = 0.7
     seed_unsure: bool = True
     seed_measured_fraction: float = 0.9
+    seed_confirm_ticks: int = 200
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -376,44 +379,174 @@ class SpikeChangeDetector:
         if measured.mean() >= p.seed_measured_fraction:
             self.seeded = True
 
+#: A frame pixel counts as changed only beyond this many standard deviations of its own noise.
+NOISE_SIGMAS = 4.0
+#: ... and is taken for an object in view at the start only beyond this many median absolute
+#: deviations of the background's texture around it.
+TEXTURE_SIGMAS = 3.0
+
+
 class FrameChangeDetector:
     """Foreground masks from frames (any unit proportional to light), one per frame.
 
     The rule of :class:`SpikeChangeDetector` on ln(light): a pixel is foreground where
-    |ln(E / background)| > threshold; the background follows unflagged pixels with time
+    |ln(E / background)| > ``threshold_log``; the background follows unflagged pixels with time
     constant ``background_s`` and absorbs pixels flagged for longer than ``hold_s``.
-    ``floor`` (same unit as the frames) keeps the logarithm finite in the dark.
+
+    A frame carries, besides its light, which pixels it measured: a pixel under its noise floor
+    or saturated says only that the light is below (or above) some level, and a camera whose
+    auto-exposure is still settling delivers frames where many pixels are such. Unmeasured pixels
+    are never flagged and never move the background. The background is not learned from one
+    frame: it starts from the per-pixel median of the first ``init_frames`` frames that measure at
+    least ``seed_measured_fraction`` of the pixels (objects in view there seeded as for spikes,
+    :func:`seed_background`), so no single frame — an auto-exposure start-up, a frame that
+    blinked — sets it; the masks of those first frames are given once it is known. A pixel
+    unmeasured there takes the light around it (an object in view) or its first measured light.
+    Each pixel also learns its noise (the spread of ln light while it agrees with the background;
+    at first its spread over those frames, at least the typical one): a change must exceed
+    :data:`NOISE_SIGMAS` standard deviations too, so the quantization of dim 8-bit pixels is not
+    read as motion. A frame that measures fewer than ``seed_measured_fraction`` of its pixels
+    gives an empty mask.
+
+    Parameters
+    ----------
+    background_s, hold_s : float
+        Time constant of the background and time after which a change is absorbed, s.
+    parameters : TrackerParameters, optional
+    floor : float
+        Smallest light kept (same unit as the frames): it keeps the logarithm finite in the dark.
+    init_frames : int
+        Frames the starting background is the median of.
     """
 
     def __init__(self, background_s: float, hold_s: float, parameters: TrackerParameters | None = None,
-                 floor: float = 1e-3):
+                 floor: float = 1e-3, init_frames: int = 3):
         self.parameters = parameters or TrackerParameters()
         self.background_s = check_positive("background_s", background_s)
         self.hold_s = check_positive("hold_s", hold_s)
         self.floor = check_positive("floor", floor)
+        self.init_frames = check_int("init_frames", init_frames, 1)
         self.ref = None
+        self.known = None
         self.flag_since = None
         self.last_t = None
+        self._pending = []  # frames seen before the background is known: (log light, measured, t, saturated)
+        self._group = None  # seeded groups still to confirm (labels), their light before seeding, which moved
+        self.confirm_s = self.parameters.seed_confirm_ticks * self.hold_s / self.parameters.hold_ticks
 
-    def feed(self, frame: np.ndarray, t_s: float) -> np.ndarray:
-        """One frame (H, W) seen at ``t_s``: its foreground mask (all False for the first frame)."""
+    def feed(self, frame: np.ndarray, t_s: float, measured: np.ndarray | None = None,
+             saturated: np.ndarray | None = None) -> list[np.ndarray]:
+        """One frame (H, W) seen at ``t_s``.
+
+        ``measured``: its pixels with a measurement (default all); ``saturated``: pixels whose
+        light is at least the frame's value (a saturated pixel is brighter than a background
+        below that, and never moves it). Returns the foreground masks now decided, in order: none
+        while the starting background is gathered, then those of every frame held back, then one
+        per frame.
+        """
         cur = np.log(np.maximum(np.asarray(frame, dtype=np.float64), self.floor))
+        ok = np.ones(cur.shape, bool) if measured is None else np.asarray(measured, bool)
+        sat = np.zeros(cur.shape, bool) if saturated is None else np.asarray(saturated, bool)
+        ok = ok & ~sat
         if self.ref is None:
-            self.ref, self.flag_since, self.last_t = cur.copy(), np.full(cur.shape, np.nan), t_s
-            p = self.parameters
-            if p.seed_ticks > 0:  # objects in the first frame: the background around them, as for spikes
-                seeded, _, around = seed_background(cur, np.ones(cur.shape, bool), p.seed_threshold_log,
-                                                    p.seed_window_px, p.threshold_log)
-                self.ref[seeded] = around[seeded]
+            self._pending.append((cur, ok, float(t_s), sat))
+            usable = [f for f in self._pending if f[1].mean() >= self.parameters.seed_measured_fraction]
+            if len(usable) < self.init_frames:
+                return []
+            self._start(usable)
+            held, self._pending = self._pending, []
+            return [self._step(*f) for f in held]
+        return [self._step(cur, ok, float(t_s), sat)]
+
+    def finish(self) -> list[np.ndarray]:
+        """The masks of frames still held back when the frames end (the background from what was seen)."""
+        if self.ref is not None or not self._pending:
+            return []
+        usable = [f for f in self._pending if f[1].mean() >= self.parameters.seed_measured_fraction]
+        self._start(usable or self._pending)
+        held, self._pending = self._pending, []
+        return [self._step(*f) for f in held]
+
+    def _start(self, frames):
+        stack = np.stack([np.where(f[1], f[0], np.nan) for f in frames])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # pixels never measured: all-NaN
+            ref = np.nanmedian(stack, axis=0)
+        self.known = np.isfinite(ref)
+        self.ref = np.where(self.known, ref, 0.0)
+        # each pixel's noise (ln light): its spread over those frames, at least the typical one
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            var = np.nanmean((stack - ref) ** 2, axis=0)
+        typical = float(np.nanmedian(var)) if np.isfinite(var).any() else 0.0
+        self.var = np.where(np.isfinite(var), np.maximum(var, typical), typical)
+        noise = NOISE_SIGMAS * math.sqrt(typical)  # (a pixel's own spread over the frames counts motion too)
+        self.flag_since = np.full(ref.shape, np.nan)
+        self.last_t = frames[0][2]
+        p = self.parameters
+        if p.seed_ticks > 0 and self.known.any():  # objects in view: the background around them, as for spikes
+            seeded, _, around, weight = seed_background(self.ref, self.known, max(p.seed_threshold_log, noise),
+                                                        p.seed_window_px, p.threshold_log, weights=True,
+                                                        min_pixels=p.min_pixels, texture_sigmas=TEXTURE_SIGMAS)
+            # an object in view moves: a group of seeded pixels none of which changes within confirm_s is
+            # background after all (static texture the image shows strongly), and gets its own light back
+            if seeded.any():
+                ys, xs = np.nonzero(seeded)
+                _, _, label = _components_of_mask(seeded, 0, 1)  # touching pixels only
+                self._group = np.full(seeded.shape, -1, np.int64)
+                self._group[ys, xs] = label
+                self._moved = np.zeros(int(label.max()) + 1, bool)
+                self._prior = self.ref.copy()
+                self._around = around
+                self._confirm_at = self.last_t + self.confirm_s
+            self.ref[seeded] = around[seeded]
+            # pixels never measured (saturated, or under the floor, on an object in view): the background around
+            fill = ~self.known & (weight > 0.5)
+            self.ref[fill] = around[fill]
+            self.known |= fill
+
+    def _confirm(self, cur, ok, t_s, limit):
+        """Seeded pixels: note the groups that changed; past ``confirm_s``, give the still ones their own light
+        back; a seeded pixel whose light has left its starting level for one near the background around it
+        (within the seeding threshold) has been uncovered: that light is its background."""
+        g = self._group
+        moved = ok & (g >= 0) & (np.abs(cur - self._prior) > limit)
+        self._moved[g[moved]] = True
+        uncovered = moved & (np.abs(cur - self._around) < self.parameters.seed_threshold_log)
+        self.ref[uncovered] = cur[uncovered]
+        self.flag_since[uncovered] = np.nan
+        g[uncovered] = -1
+        if self._confirm_at is not None and t_s >= self._confirm_at:
+            still = (g >= 0) & ~self._moved[np.maximum(g, 0)]
+            self.ref[still] = self._prior[still]
+            self.flag_since[still] = np.nan
+            g[still] = -1
+            self._confirm_at = None
+        if not (g >= 0).any():
+            self._group = None
+
+    def _step(self, cur, ok, t_s, sat):
+        if ok.mean() < self.parameters.seed_measured_fraction:
+            # a frame that measures too few pixels (auto-exposure still settling): nothing is read from it
             return np.zeros(cur.shape, bool)
+        new = ok & ~self.known  # first measurement of a pixel unmeasured so far: its background
+        self.ref[new] = cur[new]
+        self.known |= new
+        # beyond the change threshold and beyond the pixel's own noise (NOISE_SIGMAS standard deviations)
+        limit = np.maximum(self.parameters.threshold_log, NOISE_SIGMAS * np.sqrt(self.var))
+        if self._group is not None:
+            self._confirm(cur, ok, t_s, limit)
         d = cur - self.ref
-        flagged = np.abs(d) > self.parameters.threshold_log
+        flagged = ok & ~new & (np.abs(d) > limit)
+        flagged |= sat & self.known & (d > limit)  # at least that bright
         self.flag_since[flagged & np.isnan(self.flag_since)] = t_s
-        self.flag_since[~flagged] = np.nan
+        self.flag_since[ok & ~flagged] = np.nan
         gain = 1.0 - math.exp(-max(t_s - self.last_t, 0.0) / self.background_s)
-        update = ~flagged | (t_s - np.nan_to_num(self.flag_since, nan=t_s) > self.hold_s)
+        update = ok & ~new & (~flagged | (t_s - np.nan_to_num(self.flag_since, nan=t_s) > self.hold_s))
+        quiet = update & ~flagged
+        self.var[quiet] += gain * (d[quiet] ** 2 - self.var[quiet])
         self.ref[update] += gain * d[update]
-        self.last_t = t_s
+        self.last_t = max(self.last_t, t_s)
         return flagged
 
 
@@ -519,8 +652,9 @@ def _opened(mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int,
-                    unsure_log: float | None = None, weights: bool = False):
+def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log, window_px: int,
+                    unsure_log: float | None = None, weights: bool = False, min_pixels: int = 1,
+                    texture_sigmas: float = 0.0):
     """Objects in view at the start: pixels that stand out from the background around them, and that background.
 
     A change detector that learns its background from the first light it sees learns the objects
@@ -538,9 +672,18 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
         ln of the light (or of the spike interval, its inverse: the test is symmetric).
     valid : ndarray (H, W) bool
         Pixels with a measurement (spike pixels that have no interval yet are left out).
-    threshold_log, window_px : float, int
+    threshold_log : float or ndarray (H, W)
+        How far from the median around (|ln ratio|) marks a pixel: one value, or one per pixel
+        (beyond its own noise).
+    window_px : int
     unsure_log : float, optional
         Pixels not seeded but more than this from the local background are returned as *unsure*.
+    min_pixels : int
+        Smallest object: marked groups of fewer pixels (within 5 px of each other) are left alone.
+    texture_sigmas : float
+        With > 0, a pixel must also stand out by this many times the median absolute deviation
+        of ln light around it (a background whose texture an image shows strongly — the coarse
+        steps of a dim 8-bit frame — is not taken for objects).
 
     Returns
     -------
@@ -554,7 +697,16 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
     window_px = check_int("window_px", window_px, 1)
     H, W = log_light.shape
     coarse = _upsample(_robust_background(log_light, valid, window_px), H, W)
-    seeded = _opened(valid & (np.abs(log_light - coarse) > threshold_log))  # objects are ≥ 3 px across
+    deviation = np.abs(log_light - coarse)
+    if texture_sigmas:  # beyond the background's own texture: its median absolute deviation around
+        spread = _upsample(_robust_background(deviation, valid, window_px), H, W)
+        threshold_log = np.maximum(threshold_log, texture_sigmas * spread)
+    # objects are ≥ 3 px across and hold at least min_pixels (specks of texture are not objects)
+    seeded = _opened(valid & (deviation > threshold_log))
+    if min_pixels > 1 and seeded.any():
+        ys, xs = np.nonzero(seeded)
+        _, counts, label = _components_of_mask(seeded, 2, 1)
+        seeded[ys[counts[label] < min_pixels], xs[counts[label] < min_pixels]] = False
     # the local background from the pixels that are not on an object (their anti-aliased edges excluded)
     clear = valid & ~_grown(seeded)
     background, weight = _interpolate_clear(log_light, clear, window_px)
@@ -966,7 +1118,7 @@ def _packed_blocks(source, block_ticks: int, stop: int, layout):
 
 
 def track_frames(frames, times_s, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000,
-                 floor: float = 1e-3) -> TrackingResult:
+                 floor: float = 1e-3, measured=None, saturated=None) -> TrackingResult:
     """The same back end on a frame camera's images (frame k = ``frames[k − 1]`` seen at ``times_s[k − 1]``).
 
     Time constants in ticks (``background_ticks``, ``hold_ticks``, ``max_coast_ticks``) become
@@ -979,19 +1131,39 @@ def track_frames(frames, times_s, parameters: TrackerParameters | None = None, t
         Light estimates (lux, or anything proportional to light).
     times_s : array_like
         The instant each frame reports (end of its exposure: the earliest it can be read), s.
+    floor : float
+        Smallest light kept (same unit as the frames).
+    measured, saturated : iterable of ndarray (H, W) bool, optional
+        Per frame, the pixels it measured (not under the noise floor) and those saturated (their
+        light at least the frame's value); default all measured, none saturated.
+        See :class:`FrameChangeDetector`.
     """
     p = parameters or TrackerParameters()
     times = np.asarray(times_s, np.float64).ravel()
     detector = FrameChangeDetector(p.background_ticks * tick_s, p.hold_ticks * tick_s, p, floor)
     tracker = Tracker(p, tick_s=tick_s)
-    rows, n_det, n = [], 0, 0
-    for frame, (image, t_s) in enumerate(zip(frames, times, strict=False), start=1):
-        mask = detector.feed(image, float(t_s))
-        boxes, counts, labels = _components_of_mask(mask, p.merge_px, 1)
-        n_det += int(np.count_nonzero(counts >= p.min_pixels))
-        ys, xs = np.nonzero(mask)
-        rows += _rows(frame, tracker.update(boxes, float(t_s), (ys, xs, labels), counts))
-        n = frame
-    if n != times.size:
-        raise ViformError(f"{n} frames were given for {times.size} instants")
+    rows, n_det = [], 0
+    frames = list(frames)
+    if len(frames) != times.size:
+        raise ViformError(f"{len(frames)} frames were given for {times.size} instants")
+    measured = [None] * len(frames) if measured is None else list(measured)
+    saturated = [None] * len(frames) if saturated is None else list(saturated)
+    if len(measured) != len(frames) or len(saturated) != len(frames):
+        raise ViformError(f"{len(measured)} measured and {len(saturated)} saturated masks were given for "
+                          f"{len(frames)} frames")
+    done = 0
+
+    def track(masks):
+        nonlocal done, n_det, rows
+        for mask in masks:
+            t_s = float(times[done])
+            done += 1
+            boxes, counts, labels = _components_of_mask(mask, p.merge_px, 1)
+            n_det += int(np.count_nonzero(counts >= p.min_pixels))
+            ys, xs = np.nonzero(mask)
+            rows += _rows(done, tracker.update(boxes, t_s, (ys, xs, labels), counts))
+
+    for image, t_s, ok, sat in zip(frames, times, measured, saturated, strict=True):
+        track(detector.feed(image, float(t_s), ok, sat))
+    track(detector.finish())
     return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), times, None, n_det)
