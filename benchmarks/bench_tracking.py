@@ -165,11 +165,31 @@ def speed(args, folder):
 
 
 def frames(args):
-    from viform.measure.vision_comparison import frame_tracking_report
+    """The 1,667 fps camera (auto-exposure) and a 1 ms CMOS at 1,000 fps through the frame back end."""
+    from viform.measure import comparison as cmp
+    from viform.measure.vision_comparison import _causes, _frame_detectability, _frames_of
+    from viform.sensors.frame import FramePixelParameters, FrameSensor
+    from viform.vision.tracking import track_frames
 
-    print("\n== Frame sensors through the same back end (multi-object 200×125, seed 1) ==")
-    for line in frame_tracking_report(seed=1):
-        print("  " + line)
+    scene = builtin_scene("multi-object", height=125, width=200)
+    print("\n== Frame sensors through the same back end (multi-object 200×125, seed 1, 50 ms) ==")
+    shot = cmp.shoot("highspeed", scene, 0.05, [0.015, 0.025, 0.035], seed=1)[0]
+    lux, ends, measured, saturated = _frames_of(shot, 0.05)
+    runs = {"1,667 fps camera, auto-exposure": (track_frames(lux, ends, measured=measured, saturated=saturated),
+                                                _frame_detectability(shot), float(np.median(shot.raw.exposure_s))),
+            "  … the same frames, every pixel taken as measured": (track_frames(lux, ends), None, None)}
+    cmos = FrameSensor(FramePixelParameters(), exposure_s=1e-3, frame_rate_hz=1000.0)
+    stack = cmos.capture(scene, 0.05, seed=1)
+    cends = stack.start_times_s + stack.exposure_s
+    runs["CMOS 1 ms at 1,000 fps (DN)"] = (track_frames(stack.frames_dn.astype(np.float64), cends), None, 1e-3)
+    for name, (res, detect, exposure) in runs.items():
+        gt = mot.gt_rows(scene, res.times_s, detectability=detect)
+        s = score_tracking(gt, res.rows, res.times_s, 40_000.0)
+        found = len(s["objects"]) - len(s["never_found"])
+        print(f"  {name}: {res.times_s.size} frames, found {found} of {len(s['objects'])}, HOTA {s['hota']:.3f}, "
+              f"MOTA {s['mota']:.3f}, IDF1 {s['idf1']:.3f}")
+        for oid, cause in _causes(s, gt, res.times_s.size, exposure, scene).items():
+            print(f"    object {oid} never matched: {cause}")
 
 
 def main():
