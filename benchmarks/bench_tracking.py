@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.sensors.spike import SpikeSensor
 from viform.sensors.spike_presets import load_spike_preset
 from viform.stream.io import open_spikes, save_spikes

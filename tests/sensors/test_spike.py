@@ -14,7 +14,8 @@ import pytest
 from scipy import stats
 
 from viform._validate import ViformError
-from viform.light.scenes import StepScene, StillScene, TranslatingScene, builtin_scene
+from viform.light.catalog import builtin_scene
+from viform.light.scenes import StepScene, StillScene, TranslatingScene
 from viform.sensors._gamma import gamma_samples
 from viform.sensors.spike import CHIP_THRESHOLD_LEVELS_ELECTRONS, SpikeSensor
 
@@ -176,7 +177,7 @@ def test_bad_parameters_name_themselves(field, value):
 def test_vectorized_noise_free_kernel_matches_the_general_lanes(reset):
     """The noise-free model resolves crossings in the SIMD loop itself; it must give the bits of the
     general path (every crossing through ``_fire``)."""
-    from viform.sensors import spike as module
+    from viform.sensors import _spike_kernels as module
 
     sensor = SpikeSensor(photon_noise=False, reset=reset)
     scene = builtin_scene("hdr", 20, 50)  # includes pixels above the one-spike-per-tick limit
@@ -214,7 +215,7 @@ def test_reused_block_buffer_gives_the_same_bits():
 def per_tick_reference(sensor, scene, n_ticks, seed, sample):
     """Plain tick-by-tick integration with the simulator's targets: add each tick's charge,
     fire when it reaches the target (the model the event-driven kernel must reproduce)."""
-    from viform.sensors import spike as module
+    from viform.sensors import _spike_kernels as module
 
     h, w = scene.shape
     q, _, index, tables = sensor._pixel_tables(h, w)
@@ -306,7 +307,7 @@ def test_saturated_jump_has_the_law_of_one_gamma_per_crossing(residual_electrons
     Reference: NumPy Gamma(Q) intervals summed past R; the state is (age since the last
     crossing, charge still missing). Two-sample Kolmogorov–Smirnov on 20,000 draws each.
     """
-    from viform.sensors import spike as module
+    from viform.sensors import _spike_kernels as module
 
     q, n = 7, 20_000
     rng = np.random.default_rng(1)

@@ -233,7 +233,7 @@ def test_saturated_pixels_skipped_then_settled_give_the_same_bits_and_state(scen
 
 def test_saturated_pixels_are_only_counted_in_the_kernel():
     """On a still saturated scene the kernel draws nothing for pixels above the bound: it counts their ticks."""
-    from viform.sensors import spike as module
+    from viform.sensors import _spike_kernels as module
 
     sensor = SpikeSensor()
     scene = HDRScene(4, 64, 0.01, 7.0)
