@@ -195,15 +195,21 @@ def vision_verdict(rows: list[dict]) -> list[str]:
     if not scored:
         return []
     lines = []
-    top = max(r["hota"] for r in scored)
-    best = [r for r in scored if abs(r["hota"] - top) < 5e-4]
+    # a sensor with too few frames to see motion is scored at its few instants; it is not ranked
+    ranked = [r for r in scored if r.get("frames", FRAMES_NEEDED) >= FRAMES_NEEDED] or scored
+    few = [r for r in scored if r not in ranked]
+    top = max(r["hota"] for r in ranked)
+    best = [r for r in ranked if abs(r["hota"] - top) < 5e-4]
     if len(best) == 1:
         b = best[0]
         lines.append(f"Tracking: best HOTA {b['hota']:.2f} by {b['label']} (MOTA {b['mota']:.2f}, "
                      f"IDF1 {b['idf1']:.2f}).")
     else:
         lines.append(f"Tracking: best HOTA {top:.2f}, a {len(best)}-way tie: {_named(best)}.")
-    timed = [r for r in scored if r["median_latency_ms"] is not None]
+    if few:
+        lines.append(f"Not ranked (fewer than {FRAMES_NEEDED} frames in the clip, so no motion to track; scored at "
+                     f"their {'/'.join(str(r['frames']) for r in few)} instants only): {_named(few)}.")
+    timed = [r for r in ranked if r["median_latency_ms"] is not None and len(r["never_found"]) < r["objects"]]
     if timed:
         low = min(r["median_latency_ms"] for r in timed)
         fast = [r for r in timed if abs(r["median_latency_ms"] - low) < 5e-4]
@@ -218,8 +224,9 @@ def vision_verdict(rows: list[dict]) -> list[str]:
             lines.append(f"Most objects never matched: {w['label']}, {most} of {w['objects']} "
                          f"(ids {', '.join(map(str, w['never_found']))}).")
         else:
-            lines.append(f"Most objects never matched: {most} of each sensor's objects, a {len(worst)}-way tie: "
-                         f"{_named(worst)}.")
+            counts = {w["objects"] for w in worst}
+            of = f"{most} of {counts.pop()}" if len(counts) == 1 else f"{most} objects"
+            lines.append(f"Most objects never matched: {of}, a {len(worst)}-way tie: {_named(worst)}.")
     for r in lost:  # the physical cause where one sensor finds nothing, with its number
         causes = r.get("causes", {})
         if len(r["never_found"]) == r["objects"] and causes:
@@ -270,12 +277,16 @@ def _hota_detectable(r) -> str:
 
 
 def _never(r) -> str:
-    """Objects never found, each with its cause where it is physical."""
+    """Objects never found, grouped by their cause (where it is physical), and how many were in view."""
     if not r["never_found"]:
-        return "none"
+        return f"none of {r['objects']}"
     causes = r.get("causes", {})
-    return "; ".join(f"{k} ({causes[k]})" if k in causes and not causes[k].startswith("missed") else str(k)
-                     for k in r["never_found"])
+    groups: dict[str, list] = {}
+    for k in r["never_found"]:
+        groups.setdefault(causes.get(k, ""), []).append(k)
+    parts = [", ".join(map(str, ids)) + (f": {c}" if c and not c.startswith("missed") else "")
+             for c, ids in groups.items()]
+    return "; ".join(parts) + f" (of {r['objects']} in view)"
 
 
 def vision_html(vision: dict, figure_img: str) -> str:
@@ -297,7 +308,7 @@ def vision_html(vision: dict, figure_img: str) -> str:
         parts.append(f"<tr data-sensor='{e(r['key'])}'><td>{e(r['label'])}</td><td>{r['frame_rate_hz']:,.0f}</td>"
                      f"<td>{r['hota']:.3f}</td><td>{_hota_detectable(r)}</td><td>{r['mota']:.3f}</td>"
                      f"<td>{r['idf1']:.3f}</td><td>{r['id_switches']}</td><td>{lat}</td>"
-                     f"<td>{e(_never(r))} — of {r['objects']}</td></tr>")
+                     f"<td>{e(_never(r))}</td></tr>")
     parts.append("</table><ul class='verdict'>")
     parts += [f"<li>{e(line)}</li>" for line in vision_verdict(rows)]
     parts.append("</ul><p class='note'>The same detection and association back end on every sensor's own output "
