@@ -79,8 +79,7 @@ def _mota_by_hand(gt, rows, n_frames):
             idsw += oid in last and last[oid] != tid
             last[oid] = tid
         fn += sum(1 for i in range(len(g)) if i not in hit_g and not g_skip[i])
-        fp += sum(1 for j in range(len(r)) if j not in used_r)
-        fp -= sum(1 for i, j in pairs if g_skip[i])  # a box on a row that need not be found is no false positive
+        fp += sum(1 for j in range(len(r)) if j not in used_r)  # (a box on a row that need not be found: neither)
     n_gt = int((~skip).sum())
     return 1.0 - (fn + fp + idsw) / max(n_gt, 1)
 

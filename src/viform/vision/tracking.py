@@ -771,7 +771,8 @@ def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- association
 
-_TRAIL = 24  # measured centres kept per track (for its velocity)
+_TRAIL = 24  # measured centres kept per track (for its velocity) ...
+_TRAIL_SPACING_TICKS = 10  # ... at least this far apart (24 of them span 240 ticks or more)
 
 
 @dataclass
@@ -798,7 +799,11 @@ class _Track:
         cx, cy = self.cx + self.vx * dt, self.cy + self.vy * dt
         return np.array([cx - self.w / 2, cy - self.h / 2, self.w, self.h])
 
-    def add(self, t_s: float, cx: float, cy: float) -> None:
+    def add(self, t_s: float, cx: float, cy: float, spacing_s: float = 0.0) -> None:
+        """Keep a measured centre; one closer than ``spacing_s`` to the one before replaces it (the trail
+        spans the same time whatever the output step)."""
+        if self.n_trail >= 2 and t_s - self.trail_t[(self.n_trail - 2) % _TRAIL] < spacing_s:
+            self.n_trail -= 1
         k = self.n_trail % _TRAIL
         self.trail_t[k], self.trail_x[k], self.trail_y[k] = t_s, cx, cy
         self.n_trail += 1
@@ -1002,7 +1007,7 @@ class Tracker:
     def _correct(self, track: _Track, box: np.ndarray, t_s: float) -> None:
         """A measured box: the track's centre is the box's, its velocity refitted, its size smoothed."""
         cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
-        track.add(t_s, cx, cy)
+        track.add(t_s, cx, cy, _TRAIL_SPACING_TICKS * self.tick_s)
         track.cx, track.cy, track.last_t = cx, cy, t_s
         if track.n_trail >= 2:
             track.vx, track.vy = _trail_velocity(track)
