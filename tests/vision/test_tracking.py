@@ -310,3 +310,35 @@ def test_saturated_and_unmeasured_pixels():
     (mask,) = det.feed(frame, 0.002, unmeasured, saturated)
     assert mask[2:4, 2:4].all() and not mask[6, 6] and mask.sum() == 4
     assert det.ref[6, 6] == pytest.approx(math.log(5.0))
+
+
+def test_a_saturated_object_in_view_and_the_dark_strip_beside_it_leave_no_ghost():
+    # A bright object in view at the start saturates most of its pixels: each is at least as bright
+    # as its value, so the object is seeded (not learned as background from the few pixels it does
+    # not saturate, which would leave a ghost where it stood once it moves off). A dark strip of
+    # static background touching it is seeded too (it stands out, darker) but as a group of its own
+    # that never moves: it gets its own light back instead of following the object's group.
+    from viform.vision.tracking import FrameChangeDetector
+
+    speed = 200.0  # px/s: 1 px in 5 frames, off its starting place after 45 ms
+    scene = Square(lux=400.0, speed=speed, width=64, enter_s=-0.09)  # at x = 10 … 18 px at t = 0
+    full_lux = 100.0
+    det = FrameChangeDetector(0.01, 0.05, TrackerParameters(), init_frames=3)
+    masks, times = [], np.arange(1, 61) * 1e-3
+    for t in times:
+        light = scene.illuminance_lux(t)
+        # its texture: one pixel in nine (every third row and column) under the saturation level
+        dots = np.zeros(light.shape, bool)
+        dots[9:16:3, (round(-8.0 + speed * (t + 0.09)) + 1) % 3::3] = True
+        light[dots & (light > 60.0)] = 60.0
+        light[16:19, :24] = 2.0  # the dark strip under the object's starting place
+        saturated = light >= full_lux
+        masks += det.feed(np.minimum(light, full_lux), t, np.ones(light.shape, bool), saturated)
+    assert len(masks) == len(times)
+    for mask, t in zip(masks, times, strict=True):
+        x0 = -8.0 + speed * (t + 0.09)
+        near = np.zeros(mask.shape, bool)
+        near[7:17, max(int(x0) - 1, 0):int(x0) + 10] = True  # the square now, ±1 px
+        if t >= 0.006:  # the starting background confirmed (200 ticks' time): nothing outside the square
+            assert not (mask & ~near).any(), f"{(mask & ~near).sum()} px flagged away from the square at {t:.3f} s"
+        assert (mask & near).sum() >= 48  # the square itself, from the first frame (most of it saturated)

@@ -398,10 +398,15 @@ class FrameChangeDetector:
     auto-exposure is still settling delivers frames where many pixels are such. Unmeasured pixels
     are never flagged and never move the background. The background is not learned from one
     frame: it starts from the per-pixel median of the first ``init_frames`` frames that measure at
-    least ``seed_measured_fraction`` of the pixels (objects in view there seeded as for spikes,
-    :func:`seed_background`), so no single frame — an auto-exposure start-up, a frame that
-    blinked — sets it; the masks of those first frames are given once it is known. A pixel
-    unmeasured there takes the light around it (an object in view) or its first measured light.
+    least ``seed_measured_fraction`` of the pixels, so no single frame — an auto-exposure start-up, a frame that
+    blinked — sets it; the masks of those first frames are given once it is known. Objects in view
+    there are seeded as for spikes (:func:`seed_background`), a saturated pixel counting as at least
+    as bright as its value (a bright object saturates most of its pixels). Seeded pixels are grouped
+    (touching, brighter and darker than the background apart); a group none of whose pixels changes
+    within ``seed_confirm_ticks`` gets its own light back (static texture), and a seeded pixel whose
+    light has left its starting level and holds still over two frames, nearer the background around
+    than that level, has been uncovered: that light is its background. A pixel unmeasured there
+    takes the light around it (an object in view) or its first measured light.
     Each pixel also learns its noise (the spread of ln light while it agrees with the background;
     at first its spread over those frames, at least the typical one): a change must exceed
     :data:`NOISE_SIGMAS` standard deviations too, so the quantization of dim 8-bit pixels is not
@@ -472,6 +477,8 @@ class FrameChangeDetector:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # pixels never measured: all-NaN
             ref = np.nanmedian(stack, axis=0)
+            # what each pixel showed, saturated values included (lower bounds of their light)
+            seen = np.nanmedian(np.stack([np.where(f[1] | f[3], f[0], np.nan) for f in frames]), axis=0)
         self.known = np.isfinite(ref)
         self.ref = np.where(self.known, ref, 0.0)
         # each pixel's noise (ln light): its spread over those frames, at least the typical one
@@ -485,34 +492,48 @@ class FrameChangeDetector:
         self.last_t = frames[0][2]
         p = self.parameters
         if p.seed_ticks > 0 and self.known.any():  # objects in view: the background around them, as for spikes
-            seeded, _, around, weight = seed_background(self.ref, self.known, max(p.seed_threshold_log, noise),
+            # a saturated pixel is at least as bright as its value: one that stands out above the background
+            # around is on an object for sure (a bright object in view saturates most of its pixels, and seen
+            # only through its unsaturated edges it would be learned as background and leave a ghost)
+            shown = np.isfinite(seen)
+            seen = np.where(self.known, self.ref, np.where(shown, seen, 0.0))
+            seeded, _, around, weight = seed_background(seen, self.known | shown, max(p.seed_threshold_log, noise),
                                                         p.seed_window_px, p.threshold_log, weights=True,
                                                         min_pixels=p.min_pixels, texture_sigmas=TEXTURE_SIGMAS)
             # an object in view moves: a group of seeded pixels none of which changes within confirm_s is
             # background after all (static texture the image shows strongly), and gets its own light back
             if seeded.any():
-                ys, xs = np.nonzero(seeded)
-                _, _, label = _components_of_mask(seeded, 0, 1)  # touching pixels only
+                # groups of touching pixels, brighter and darker than the background apart (a dark strip of
+                # background beside a bright object in view is not that object, and it does not move)
                 self._group = np.full(seeded.shape, -1, np.int64)
-                self._group[ys, xs] = label
-                self._moved = np.zeros(int(label.max()) + 1, bool)
-                self._prior = self.ref.copy()
+                n = 0
+                for part in (seeded & (seen > around), seeded & (seen <= around)):
+                    if part.any():
+                        ys, xs = np.nonzero(part)
+                        _, _, label = _components_of_mask(part, 0, 1)  # touching pixels only
+                        self._group[ys, xs] = label + n
+                        n += int(label.max()) + 1
+                self._moved = np.zeros(n, bool)
+                self._prior = seen  # (saturated pixels: their lower bound)
                 self._around = around
+                self._last = None  # the previous frame (log light, measured)
                 self._confirm_at = self.last_t + self.confirm_s
             self.ref[seeded] = around[seeded]
             # pixels never measured (saturated, or under the floor, on an object in view): the background around
-            fill = ~self.known & (weight > 0.5)
+            fill = ~self.known & (seeded | (weight > 0.5))
             self.ref[fill] = around[fill]
             self.known |= fill
 
     def _confirm(self, cur, ok, t_s, limit):
         """Seeded pixels: note the groups that changed; past ``confirm_s``, give the still ones their own light
-        back; a seeded pixel whose light has left its starting level for one near the background around it
-        (within the seeding threshold) has been uncovered: that light is its background."""
+        back; a seeded pixel whose light has left its starting level and holds still (two frames alike) nearer
+        the background around it than that level has been uncovered: that light is its background."""
         g = self._group
         moved = ok & (g >= 0) & (np.abs(cur - self._prior) > limit)
         self._moved[g[moved]] = True
-        uncovered = moved & (np.abs(cur - self._around) < self.parameters.seed_threshold_log)
+        steady = np.zeros_like(moved) if self._last is None else self._last[1] & (np.abs(cur - self._last[0]) < limit)
+        uncovered = moved & steady & (np.abs(cur - self._around) < np.abs(cur - self._prior))
+        self._last = (cur, ok)
         self.ref[uncovered] = cur[uncovered]
         self.flag_since[uncovered] = np.nan
         g[uncovered] = -1
