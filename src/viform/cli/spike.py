@@ -284,11 +284,13 @@ def _write_truth(folder, clip: str, scene, stream, sensor, step_ticks: int) -> d
     from viform._io import atomic_path, write_json
     from viform.datasets.build import full_scale_lux
     from viform.datasets.scene_clips import write_truth
+    from viform.vision.detectability import spike_detectability_of
 
     full_scale = full_scale_lux(sensor.parameters, 1.0)
     with atomic_path(folder, directory=True) as tmp:
         Path(tmp).mkdir()
-        written = write_truth(tmp, clip, scene, stream.n_ticks, step_ticks, stream.clock_hz, full_scale)
+        written = write_truth(tmp, clip, scene, stream.n_ticks, step_ticks, stream.clock_hz, full_scale,
+                              detectability=spike_detectability_of(stream))
         meta = {"scene": scene.describe(), "step_ticks": step_ticks, "clock_hz": stream.clock_hz,
                 "gt_full_scale_lux": full_scale, **written,
                 "frame_time": "frame k: the end of step k, t = k·step_ticks / clock_hz (s)",

@@ -337,7 +337,11 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
     seed = clip_seed(s.seed, spec.get("twin_of", clip.name))
     source = sensor.stream(scene, spec["duration_s"], seed=seed, light_sample_ticks=s.light_sample_ticks,
                            reuse_buffer=True)
-    truth = write_truth(out, clip.name, scene, source.n_ticks, s.truth_every_ticks, source.clock_hz, s.max_lux)
+    from viform.vision.detectability import SpikeDetectability
+
+    detect = SpikeDetectability(parameters.threshold_electrons, parameters.optics.electrons_per_lux_second)
+    truth = write_truth(out, clip.name, scene, source.n_ticks, s.truth_every_ticks, source.clock_hz, s.max_lux,
+                        detectability=detect)
     spikes, digest = _write_dat(task, dat, source)
     from viform.datasets.scene_clips import too_dark
 

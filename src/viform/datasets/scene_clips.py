@@ -117,8 +117,11 @@ def truth_name(clip: str, frame: int, suffix: str) -> str:
     return f"{clip}_{frame:06d}{suffix}"
 
 
-def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: float, max_lux: float) -> dict:
+def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: float, max_lux: float,
+                detectability=None) -> dict:
     """Write a clip's truth files under ``out`` (layout in the module notes); returns their records.
+
+    ``detectability`` (:mod:`viform.vision.detectability`) fills gt.txt's detectability column.
 
     Returns
     -------
@@ -161,7 +164,7 @@ def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: 
 
         classes = class_ids_of(scene, times)
         folder = out / MOT_DIR / clip
-        write_gt(folder / "gt" / "gt.txt", gt_rows(scene, times, classes))
+        write_gt(folder / "gt" / "gt.txt", gt_rows(scene, times, classes, detectability=detectability))
         write_seqinfo(folder / "seqinfo.ini", name=clip, n_frames=len(times), step_ticks=step_ticks,
                       clock_hz=clock_hz, width=scene.width, height=scene.height, classes=classes)
         digest = hashlib.sha256()

@@ -233,7 +233,13 @@ class DatFile(SpikeSource):
             return 416
         return self.width
 
-    def read_ticks(self, start: int, stop: int) -> np.ndarray:
+    def read_packed(self, start: int, stop: int) -> np.ndarray:
+        """The stored bytes of ticks [start, stop) as they are in the file: (T, frame bytes) uint8.
+
+        Each row holds ``height × stored_width`` bits, pixel k of the stored frame being bit
+        k mod 8 of byte k // 8 (least significant first); rows are bottom-up when ``flip``.
+        Checked against the sidecar's checksums exactly as :meth:`read_ticks`.
+        """
         start, stop = max(0, start), min(stop, self.n_ticks)
         # positioned reads rather than a memory map: the resident memory stays one block whatever
         # the file size (mapped pages of a long file count against the process)
@@ -248,7 +254,10 @@ class DatFile(SpikeSource):
             data = self._pread(start * self.frame_bytes, want) if want else b""
         if len(data) != want:
             raise ViformError(f"{str(self.path)!r} was cut while being read (ticks {start}–{stop - 1})")
-        raw = np.frombuffer(data, np.uint8).reshape(-1, self.frame_bytes)
+        return np.frombuffer(data, np.uint8).reshape(-1, self.frame_bytes)
+
+    def read_ticks(self, start: int, stop: int) -> np.ndarray:
+        raw = self.read_packed(start, stop)
         bits = np.unpackbits(raw, axis=1, bitorder="little").view(bool)
         frames = bits.reshape(-1, self.height, self.stored_width)[:, :, : self.width]
         if self.flip:
