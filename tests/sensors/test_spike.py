@@ -191,8 +191,9 @@ def test_vectorized_noise_free_kernel_matches_the_general_lanes(reset):
         rates = sensor._fixed_point_rates(lux.reshape(last - first, -1), 20, 50)
         seg_end = np.arange(first + 1, last + 1, dtype=np.int64)
         module._run_block(words, rates, seg_end, first, state.charge, state.target, state.counter,
-                          q, index, *tables, state.keys, False, reset == "readout", 0.0, module.MODE_GENERAL,
-                          bounds, state.pending_ticks, state.pending_rate)
+                          q, index, *tables, *module.fixed_point_tables(tables[0]), state.keys, False,
+                          reset == "readout", 0.0, module.MODE_GENERAL,
+                          bounds, state.pending_ticks, state.pending_rate, module.SPARSE_FIRING)
         bits = np.unpackbits(words.view(np.uint8), axis=1, count=1000, bitorder="little")
         blocks.append(bits.reshape(-1, 20, 50).astype(bool))
     assert np.array_equal(vectorized, np.concatenate(blocks))
