@@ -767,16 +767,17 @@ def _store_row_bits(out, k, bit0, n_bits, row_words, aligned):
 
 @njit(cache=True, parallel=True)
 def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round, charge, target,
-                     counter, q, index, bins, keys, noise, reset_readout, dead_ticks, band_rows):
+                     counter, q, index, bins, scaled, accept, keys, noise, reset_readout, dead_ticks, band_rows):
     """Integrate-and-fire with the light computed per pixel and tick in compiled code.
 
     The light of pixel p in tick k is :func:`viform.light.compiled.pixel_lux` from the
     tick's scalars (row k of ``scalars``, ``xtab``, ``ytab``); its charge that tick is
     int64(a[p]·lux + b[p] + 0.5) in fixed point (gain and dark current per pixel), added
-    exactly; the pixel fires when the sum reaches its Gamma(Q) target (the same
-    :func:`_fire` as the constant-light kernel). Per image row and tick: one vectorized pass
-    for the light (:func:`~viform.light.compiled.row_lux`), one for the charge, one that adds,
-    compares and packs 64 lanes per word, then only the lanes that fired. ``out`` (uint8,
+    exactly; the pixel fires when the sum reaches its Gamma(Q) target (the crossing rules of
+    :func:`_fire`, its common case from ``scaled`` and ``accept`` as in :func:`_run_block`). Per
+    image row and tick: one vectorized pass for the light (:func:`~viform.light.compiled.row_lux`),
+    one for the charge, one that adds, compares and packs 64 lanes per word, then only the lanes
+    that fired. ``out`` (uint8,
     ticks × packed frame bytes) receives the bits in the .dat order. Work items are bands of
     ``band_rows`` rows × windows of ticks, so the light tables stay in cache.
     """
@@ -788,6 +789,7 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
     padded = n_row_words * _LANES
     aligned = width % 8 == 0
     n_bands = (height + band_rows - 1) // band_rows
+    fast = noise and not reset_readout and dead_ticks == 0.0  # _fire's common case, inlined below
     for band in prange(n_bands):
         y0 = band * band_rows
         y1 = min(y0 + band_rows, height)
@@ -831,8 +833,24 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
                         while todo != 0:
                             x = w * _LANES + np.int64(trailing_zeros(todo))
                             todo &= todo - np.uint64(1)
-                            cw[x], tw[x] = _fire(cw[x], tw[x], rate[x], dead_ticks, base + x, q, index, bins, keys,
-                                                 noise, reset_readout, counter)
+                            p = base + x
+                            ci = cw[x]
+                            ti = tw[x]
+                            if fast and ci - ti < min(_fixed_charge(_JUMP_INTERVALS * q[p]),
+                                                      _fixed_charge(8.0 * q[p] * q[p])):
+                                # _fire's common case: one Gamma target per crossing, later ones lost
+                                while ci >= ti:
+                                    ci -= ti
+                                    ti = _target_fast(np.int64(index[p]) * TABLE_SIZE, scaled, accept, keys[p],
+                                                      counter[p])
+                                    if ti == 0:
+                                        ti = _target_general(q[p], index[p], bins, keys[p], counter[p])
+                                    counter[p] += 1
+                            else:
+                                ci, ti = _fire_general(ci, ti, rate[x], dead_ticks, p, q, index, bins, keys, noise,
+                                                       reset_readout, counter)
+                            cw[x] = ci
+                            tw[x] = ti
                 charge[base:base + width] = cw[:width]
                 target[base:base + width] = tw[:width]
 

@@ -558,7 +558,7 @@ class SpikeSensor(Sensor):
             band_rows = _band_rows(height, width)
         else:
             bounds = self._saturation_bounds(height, width)
-            fixed_tables = self._fixed_point_tables(height, width)
+        fixed_tables = self._fixed_point_tables(height, width)
         segments = _Segments(self, scene, light, sample, height, width)
         buffer = None
         bar = None
@@ -581,8 +581,8 @@ class SpikeSensor(Sensor):
                     n = last - first
                     tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
                     _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round,
-                                     state.charge, state.target, state.counter, q, index, *tables, state.keys,
-                                     p.photon_noise, reset_readout, dead_ticks, band_rows)
+                                     state.charge, state.target, state.counter, q, index, *tables, *fixed_tables,
+                                     state.keys, p.photon_noise, reset_readout, dead_ticks, band_rows)
                 else:
                     rates, seg_end = segments.block(first, last)
                     _run_block(out.view(np.uint64), rates, seg_end, first, state.charge, state.target,
