@@ -22,7 +22,6 @@ import math
 
 import numpy as np
 from numba import njit
-from scipy import special
 
 #: Bins per table (a power of two: the bin index is the top bits of the hash).
 TABLE_BITS = 10
@@ -63,34 +62,37 @@ def build_tables(shapes) -> tuple[np.ndarray]:
     without evaluating the density. The four values of a bin share a cache line.
     """
     shapes = np.asarray(shapes, dtype=np.float64)
-    n, m = shapes.size, TABLE_SIZE
-    edges = np.empty((n, m))
-    widths = np.empty((n, m))
-    log_peak = np.empty((n, m))
-    squeeze = np.empty((n, m))
-    probabilities = np.arange(m + 1) / m
+    out = np.empty((shapes.size, TABLE_SIZE, 4))
     for i, a in enumerate(shapes):
-        q = special.gammaincinv(a, probabilities)
-        q[0], q[-1] = 0.0, np.inf
-        lo, hi = q[:-1], q[1:]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            log_f_lo = np.where(lo > 0, (a - 1) * np.log(np.where(lo > 0, lo, 1.0)) - lo,
-                                0.0 if a == 1 else -np.inf)
-            log_f_hi = (a - 1) * np.log(hi) - hi
-        mode = a - 1.0
-        log_f_mode = (a - 1) * np.log(mode) - mode if mode > 0 else 0.0
-        peak = np.maximum(log_f_lo, log_f_hi)
-        inside = (lo <= mode) & (mode <= hi)
-        peak = np.where(inside, log_f_mode, peak)
-        low = np.minimum(log_f_lo, log_f_hi)
-        edges[i] = lo
-        widths[i] = hi - lo
-        log_peak[i] = peak
-        squeeze[i] = np.exp(low - peak)
-        # the open last bin is sampled from its exponential envelope instead
-        widths[i, -1] = 0.0
-        squeeze[i, -1] = 0.0
-    return (np.ascontiguousarray(np.stack([edges, widths, log_peak, squeeze], axis=-1)),)
+        out[i] = _table(a)
+    return (np.ascontiguousarray(out),)
+
+
+def _table(a: np.float64) -> np.ndarray:
+    """The (M, 4) table of Gamma(a, 1) (see :func:`build_tables`). scipy.special is imported here,
+    where it is used: commands that draw no photon noise do without it."""
+    from scipy import special
+
+    probabilities = np.arange(TABLE_SIZE + 1) / TABLE_SIZE
+    q = special.gammaincinv(a, probabilities)
+    q[0], q[-1] = 0.0, np.inf
+    lo, hi = q[:-1], q[1:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_f_lo = np.where(lo > 0, (a - 1) * np.log(np.where(lo > 0, lo, 1.0)) - lo,
+                            0.0 if a == 1 else -np.inf)
+        log_f_hi = (a - 1) * np.log(hi) - hi
+    mode = a - 1.0
+    log_f_mode = (a - 1) * np.log(mode) - mode if mode > 0 else 0.0
+    peak = np.maximum(log_f_lo, log_f_hi)
+    inside = (lo <= mode) & (mode <= hi)
+    peak = np.where(inside, log_f_mode, peak)
+    low = np.minimum(log_f_lo, log_f_hi)
+    widths = hi - lo
+    squeeze = np.exp(low - peak)
+    # the open last bin is sampled from its exponential envelope instead
+    widths[-1] = 0.0
+    squeeze[-1] = 0.0
+    return np.stack([lo, widths, peak, squeeze], axis=-1)
 
 
 def stream_keys(seed: int, n: int) -> np.ndarray:
