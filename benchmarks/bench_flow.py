@@ -43,7 +43,7 @@ import time
 import numpy as np
 
 from viform.datasets.build import full_scale_lux
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.sensors.spike import SpikeSensor
 from viform.sensors.spike_presets import load_spike_preset
 from viform.vision.flow import (

@@ -20,7 +20,7 @@ import tracemalloc
 
 import numpy as np
 
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.sensors.frame import FramePixelParameters, FrameSensor
 from viform.sensors.spike import SpikeSensor
 from viform.vision import motchallenge as mot

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from viform.cli import main
-from viform.light.scenes import StillScene, builtin_scene
+from viform.light.catalog import builtin_scene
+from viform.light.scenes import StillScene
 from viform.sensors.spike import SpikeSensor
 from viform.stream.io import save_spikes
 from viform.vision import motchallenge as mot

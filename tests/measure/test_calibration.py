@@ -1,6 +1,7 @@
 """Calibration of a spike-sensor preset from a recording (issue 10 item 5; seed 000 §5.1)."""
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,8 @@ from viform.sensors.spike_presets import load_spike_preset
 from viform.stream.container import SpikeStream
 from viform.stream.io import open_spikes, save_spikes
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike" / "real_uhsr_250x250.npz"
+REAL = Path(os.environ.get("VIFORM_SPIKE_DATA")
+            or Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike") / "real_uhsr_250x250.npz"
 
 
 def _ramp_recording(q, prnu, size=96, ticks=400, seed=1, **kw):
@@ -142,7 +144,7 @@ def test_moving_scene_gives_no_false_hot_pixels(hot_fraction):
     of the recording, so none is reported without real ones, and real ones (2·10⁵ e⁻/s at
     Q = 100: 20 extra spikes in 10 ms, ≥ 6 Poisson σ above the local median in each half)
     are still found."""
-    from viform.light.scenes import builtin_scene
+    from viform.light.catalog import builtin_scene
 
     sensor = SpikeSensor(threshold_electrons=100, hot_pixel_fraction=hot_fraction,
                          hot_pixel_dark_current_e_per_s=2e5)

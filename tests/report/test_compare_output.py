@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.measure import comparison as cmp
 from viform.report.compare_report import _fmt, figure_errors, finite_json, metrics_table, run_comparison
 

@@ -137,3 +137,14 @@ def test_compare_bad_input(tmp_path, capsys, args, needle):
     _, err = capsys.readouterr()
     assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "r" / "report.html").exists()
+
+
+def test_compiled_kernels_are_recognised():
+    """After one simulation the kernels' cache is found, so the 'compiling' notice is not printed again
+    (it was printed on every run once the kernels moved to their own module)."""
+    from viform.cli.compare import kernels_cached
+    from viform.light.scenes import TranslatingScene
+    from viform.sensors.spike import SpikeSensor
+
+    SpikeSensor(threshold_electrons=100).capture(TranslatingScene(8, 16), 1e-3, seed=0)
+    assert kernels_cached()

@@ -91,3 +91,44 @@ def test_bad_input_one_line_exit_2_nothing_left(tmp_path, capsys, extra, needle)
     assert code == 2, err
     assert len(err.strip().splitlines()) == 1 and needle in err, err
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_flat_metric_is_drawn_flat_not_stretched():
+    """A metric that varies by 5·10⁻⁴ of its size over a sweep is not stretched to fill its panel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from viform.report.sweep_report import MIN_SPAN_FRACTION, _floor_span
+
+    fig, ax = plt.subplots()
+    values = [0.80196, 0.80251, 0.80230]
+    ax.plot(range(3), values)
+    half = _floor_span(ax, values)
+    lo, hi = ax.get_ylim()
+    assert half == pytest.approx((0.80251 - 0.80196) / 2)
+    assert hi - lo == pytest.approx(MIN_SPAN_FRACTION * np.mean([min(values), max(values)]))
+    # a metric that really varies keeps matplotlib's own limits; all-zero values get one display unit
+    fig2, ax2 = plt.subplots()
+    assert _floor_span(ax2, [10.0, 20.0, 30.0]) is None
+    assert _floor_span(ax2, [0.0, 0.0]) == 0.0 and ax2.get_ylim() == (-0.5, 0.5)
+    plt.close("all")
+
+
+def test_pareto_front_of_one_point_is_visible(swept):
+    """Each panel outlines its front's points, so a front of one point is still seen (and named in the legend)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from viform.report.sweep_report import figure_pareto
+
+    out, _ = swept
+    doc = json.loads((out / "sweep.json").read_text())
+    doc.setdefault("records", doc.get("points"))
+    fig = figure_pareto(doc, doc["pareto"])
+    for ax in fig.axes:
+        fronts = [c for c in ax.collections if c.get_label().startswith("Pareto front")]
+        assert fronts and len(fronts[0].get_offsets()) >= 1
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert any(lb.startswith("Pareto front") for lb in labels)

@@ -14,7 +14,8 @@ import pytest
 from scipy import stats
 
 from viform._validate import ViformError
-from viform.light.scenes import StepScene, StillScene, TranslatingScene, builtin_scene
+from viform.light.catalog import builtin_scene
+from viform.light.scenes import StepScene, StillScene, TranslatingScene
 from viform.sensors._gamma import gamma_samples
 from viform.sensors.spike import CHIP_THRESHOLD_LEVELS_ELECTRONS, SpikeSensor
 

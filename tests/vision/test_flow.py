@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from viform._validate import ViformError
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.light.truth import FlowTruth
 from viform.sensors.spike import SpikeSensor
 from viform.vision.flow import (

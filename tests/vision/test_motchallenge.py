@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from viform._validate import ViformError
-from viform.light.scenes import StillScene, builtin_scene
+from viform.light.catalog import builtin_scene
+from viform.light.scenes import StillScene
 from viform.light.truth import TruthUnavailable
 from viform.vision import motchallenge as mot
 

@@ -34,6 +34,7 @@ COMMAND_MODULES = [
     "viform.cli.calibrate",  # calibrate (issue 10)
     "viform.cli.flow",  # flow (issue 21)
     "viform.cli.track",  # track (issue 22)
+    "viform.cli.scenes",  # scenes, scenes show (issue 35)
 ]
 
 

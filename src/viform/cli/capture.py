@@ -16,6 +16,7 @@ import click
 import numpy as np
 
 from viform._validate import ViformError, check_int, check_positive
+from viform.cli._scenes import scene_set_option, scene_settings, with_scene_list
 from viform.cli.app import cli
 
 #: Frame-file suffixes.
@@ -343,17 +344,18 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
                    "(repeatable; viform characterize SENSOR --set lists the names on a wrong one).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of a line of text.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
+@scene_set_option
+@with_scene_list
 def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, max_lux, frame_rate_hz, device,
-            settings, as_json, json_file):
+            settings, as_json, json_file, scene_set):
     """Shoot SCENE with SENSOR and save its output with every exposure window.
 
     SENSOR: cmos, cmos-short, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
     seed003-overflow, highspeed, gated, spike, spikeone, spiketwo, spiketwo-40k.
-    SCENE: a built-in scene (dilemma, night-road-fog, translating, rotating, hdr, ...), an
-    image, a video or a folder of images.
+    SCENE: {scenes}
     """
     from viform._io import check_json_file, check_output_folder, write_json
-    from viform.light.scenes import load_scene
+    from viform.light.catalog import load_scene
     from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS
 
@@ -383,7 +385,8 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
     from viform.cli.compare import announce_preparation
     from viform.report.compare_report import finite_json
 
-    light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz)
+    light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
+                       settings=scene_settings(scene_set))
     if is_spike(sensor):
         announce_preparation()
     summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview, device=device,

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import click
 
-from viform._validate import ViformError
+from viform._validate import ViformError, check_positive
+from viform.cli._scenes import scene_options, scene_set_option, with_scene_list
 from viform.cli.app import cli
 
 
@@ -67,16 +68,17 @@ def command_start() -> float:
 def kernels_cached() -> bool:
     """Whether numba's on-disk cache holds the spike simulation kernels for the current source.
 
-    Cheap check: an index file (``*.nbi``) of ``viform/sensors/spike.py`` no older than the source,
-    in ``__pycache__`` next to it or under ``NUMBA_CACHE_DIR`` when that is set.
+    Cheap check: an index file (``*.nbi``) of the kernels' module ``viform/sensors/_spike_kernels.py`` no
+    older than the source, in ``__pycache__`` next to it or under ``NUMBA_CACHE_DIR`` when that is set.
     """
     import os
 
     import viform.sensors as sensors
 
-    src = Path(sensors.__file__).with_name("spike.py")
+    src = Path(sensors.__file__).with_name("_spike_kernels.py")
     where = os.environ.get("NUMBA_CACHE_DIR")
-    found = Path(where).rglob("spike.*.nbi") if where else (src.parent / "__pycache__").glob("spike.*.nbi")
+    pattern = f"{src.stem}.*.nbi"
+    found = Path(where).rglob(pattern) if where else (src.parent / "__pycache__").glob(pattern)
     try:
         made = src.stat().st_mtime
         return any(p.stat().st_mtime >= made for p in found)
@@ -153,18 +155,21 @@ def _echo_vision(doc: dict) -> None:
 @click.option("--seed", type=int, default=0, show_default=True, help="Noise seed.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(), default=None, help="Also write the JSON summary here.")
+@scene_set_option
+@with_scene_list
 def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, speed, visibility_m, seed, as_json,
-            json_file):
+            json_file, scene_set):
     """Shoot SCENE with every sensor and write a self-contained report.html and metrics.json.
 
     SCENE: dilemma (high speed and high dynamic range at once), night-road-fog (with range,
-    for the gated camera), another built-in scene, an image or a video.
+    for the gated camera), another scene. {scenes}
     """
     started = command_start()
     from viform.report.compare_report import compare as run
 
     keys = parse_sensors(sensors)
     instants = parse_instants(at)
+    check_positive("--duration", duration_s)
     check_outputs(out_dir, json_file)
     options = {k: v for k, v in (("brightness", brightness), ("speed", speed), ("visibility_m", visibility_m))
                if v is not None}
@@ -175,6 +180,7 @@ def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, 
         raise ViformError("--speed applies to the dilemma scene only")
     if visibility_m is not None and scene != "night-road-fog":
         raise ViformError("--visibility-m applies to the night-road-fog scene only")
+    options.update(scene_options(scene, scene_set))
     announce_preparation()
     doc = run(scene, out_dir, keys, duration_s, height, width, seed, instants, progress=True,
               command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "", scene_options=options,

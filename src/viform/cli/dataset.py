@@ -109,7 +109,10 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
         rows = [
             ("dataset", summary["out"]),
             ("sensor", f"{settings.width}×{settings.height} px, {_sig(settings.parameters.clock_hz / 1e3)} kHz, "
-                       f"full scale {_sig(settings.max_lux)} lux"),
+                       f"Q = {_sig(settings.parameters.threshold_electrons)} e-, full scale {_sig(settings.max_lux)} "
+                       f"lux"),
+            ("preset", settings.preset + ("" if preset is not None else " (the dataset default; give --preset to "
+                                          "change it — viform simulate's default is Q = 100 e-)")),
             ("clips", f"{summary['clips']} (converted {summary['converted']}, skipped {summary['skipped']} "
                       f"already done, failed {len(summary['failed'])}"
                       + (f": {', '.join(f['clip'] for f in summary['failed'])}" if summary["failed"] else "") + ")"),
@@ -121,6 +124,11 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
                      f"worker{'' if summary['workers'] == 1 else 's'}"),
             ("speed", f"{_sig(summary['clips_per_s'])} clips/s, {_sig(summary['pixel_ticks_per_s'])} pixel-ticks/s"),
         ]
+        dark = summary.get("too_dark", [])
+        if dark:
+            rows.append(("too dark", f"{len(dark)} clip{'s' if len(dark) > 1 else ''} fire less than once a pixel "
+                                     f"per truth step at this preset ({', '.join(dark[:6])}"
+                                     + (", …" if len(dark) > 6 else "") + "): flagged too_dark in the manifest"))
         for name, value in rows:
             click.echo(f"{name:<12} {value}")
     for fail in summary["failed"]:

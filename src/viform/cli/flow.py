@@ -15,7 +15,7 @@ from viform.cli.app import cli
 
 def truth_scene_of(source, flag: str | None = None):
     """The built-in scene a stream was simulated from (its truth), or None; with ``flag``, refuse instead of None."""
-    from viform.light.scenes import scene_from_description
+    from viform.light.catalog import scene_from_description
     from viform.light.truth import TruthUnavailable
 
     try:

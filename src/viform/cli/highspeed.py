@@ -15,6 +15,7 @@ from pathlib import Path
 import click
 
 from viform._validate import ViformError, check_choice, check_positive, check_range
+from viform.cli._scenes import with_scene_list
 from viform.cli.app import cli
 
 
@@ -75,13 +76,13 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON instead of the summary.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None,
               help="Also write the report JSON to this file (OUT/report.json is always written).")
+@with_scene_list
 def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray, band_gray,
               ae_saturated_cut, equalize, eq_source, eq_method, n_frames, exposure_us, render, lux, steps, scene_fps,
               video_format, seed, out_dir, as_json, json_file):
     """Shoot SCENE with a LUX13HS-like high-speed camera (1280x864, up to 3 500 fps).
 
-    SCENE is a built-in scene (translating, moving-edge, rotating, hdr, step, flicker), an
-    image or a video. Writes OUT/video.gif|mp4 (the frames leaving the link), OUT/exposure.png
+    SCENE: {scenes} Writes OUT/video.gif|mp4 (the frames leaving the link), OUT/exposure.png
     and OUT/report.json (frames captured, buffered, transmitted, dropped).
     """
     from tqdm import tqdm
@@ -95,7 +96,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         write_outputs,
     )
     from viform.isp.link import INTERFACES, link_plan
-    from viform.light.scenes import load_scene
+    from viform.light.catalog import load_scene
     from viform.sensors.highspeed_timing import lux13hs_timing
 
     check_choice("interface", interface, tuple(INTERFACES))
@@ -104,7 +105,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     window = timing.window(roi)
     rh, rw = _parse_size(render, "render")
     rh, rw = min(rh, window.height), min(rw, window.width)
-    from viform.light.scenes import BUILTIN_SCENES
+    from viform.light.catalog import BUILTIN_SCENES
 
     if scene in BUILTIN_SCENES:
         base = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps)
@@ -141,7 +142,7 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         click.echo(f"note: {decimation}:1 over {interface} is faster than the link ({plan['decimation_strict']}:1 "
                    "fits); the DDR ring will overflow and frames will be lost", err=True)
     with tqdm(total=n_frames, desc="frames", file=sys.stderr, leave=False) as bar:
-        result = run_highspeed(sc, cfg, timing, progress=bar.update)
+        result = run_highspeed(sc, cfg, progress=bar.update)
     report = write_outputs(result, out_dir, video_format, [t for t, _ in step_list])
     if json_file:
         from viform._io import write_json

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from viform._validate import ViformError
+from viform.cli._scenes import scene_set_option, scene_settings, with_scene_list
 from viform.cli.app import cli
 
 #: sensor options → SpikeSensorParameters fields (None: not given, keep the preset's / default)
@@ -167,17 +168,22 @@ def _apply(options):
                    "bits for the same seed), or a GPU when one is found.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
+@scene_set_option
 @_apply(sensor_options)
+@with_scene_list
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
-             light_sample_ticks, truth_dir, truth_every_ticks, force, device, as_json, json_file, **sensor_kw):
-    """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the spike stream.
+             light_sample_ticks, truth_dir, truth_every_ticks, force, device, as_json, json_file, scene_set,
+             **sensor_kw):
+    """Shoot SCENE (a built-in name, a scene description, an image or a video) with the spike camera and save
+    the spike stream.
 
-    Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
+    {scenes}
     Memory stays bounded (blocks of about 50 MB) whatever the resolution and duration.
     """
     from viform._io import check_json_file, check_output_folder, write_json
     from viform.cli._types import check_simulation_work
-    from viform.light.scenes import VideoScene, load_scene
+    from viform.light.catalog import load_scene
+    from viform.light.scenes import VideoScene
     from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS, save_spikes
 
@@ -195,14 +201,14 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     fit = (height, width)  # files: resized only when the user asked
     height = height if height is not None else (preset.height if preset is not None else 250)
     width = width if width is not None else (preset.width if preset is not None else 400)
-    if duration_s is None and not Path(scene).exists():
+    if duration_s is None and not Path(scene).exists() and not scene.lower().endswith((".yaml", ".yml", ".json")):
         raise ViformError(f"--duration is required: SCENE = {scene!r} is a built-in scene, which has no length of "
                           "its own (a video or image folder gives its own)")
     # the size is known before the scene loads
     if duration_s is not None and (all(v is not None for v in fit) or not Path(scene).exists()):
         check_simulation_work(duration_s, sensor.parameters.clock_hz, height * width, force)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
-                       interpolation=interpolation, fit=fit)
+                       interpolation=interpolation, fit=fit, settings=scene_settings(scene_set))
     if truth_dir is not None:
         from viform._validate import check_int
 

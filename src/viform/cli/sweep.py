@@ -12,6 +12,7 @@ import click
 
 from viform._io import JSON_FILE_HELP
 from viform._validate import ViformError
+from viform.cli._scenes import scene_options, scene_set_option, with_scene_list
 from viform.cli.app import cli
 
 #: Largest --speed factor of the dilemma scene a sweep accepts.
@@ -62,11 +63,15 @@ MAX_SPEED = 100.0
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help=JSON_FILE_HELP)
+@scene_set_option
+@with_scene_list
 def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at, height, width, brightness, speed,
           visibility_m, seed, out_dir, workers, scheduler, worker_memory, tracking, list_parameters, no_progress,
-          as_json, json_file):
+          as_json, json_file, scene_set):
     """Shoot SCENE with each --sensor at every setting --vary gives; score each point as `viform compare`
     does; write OUT/report.html (trade-offs, Pareto fronts, best images) and OUT/sweep.zarr.
+
+    SCENE: {scenes}
 
     With --require, names the setting of each sensor that meets every demand (best by --objective)
     or, where none does, the nearest miss and by how much.
@@ -99,6 +104,7 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
                               f"{'s' if len(scenes) > 1 else ''} only, not to SCENE = {scene!r}")
     if speed is not None and speed > MAX_SPEED:  # the scene samples its window means every 0.5 px of motion
         raise ViformError(f"--speed {speed:g} is not allowed: at most {MAX_SPEED:g} (× the scene's 2 000–3 000 px/s)")
+    options.update({k: tuple(v) if isinstance(v, list) else v for k, v in scene_options(scene, scene_set).items()})
     plan = sw.make_plan(scene, list(sensors) or None, list(vary), height=height, width=width, duration_s=duration_s,
                         seed=seed, instants_s=instants, require=require, objective=objective,
                         spike_image=spike_image, scene_options=options, tracking=tracking)

@@ -16,7 +16,7 @@ from viform.cli.app import cli
 
 def scene_from_metadata(metadata: dict):
     """The built-in scene a simulated stream was shot from (its sidecar records it), or None."""
-    from viform.light.scenes import BUILTIN_SCENES, builtin_scene
+    from viform.light.catalog import BUILTIN_SCENES, builtin_scene
 
     described = (metadata or {}).get("scene")
     if not isinstance(described, dict) or described.get("name") not in BUILTIN_SCENES:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import logging
 import math
 import os
 import time
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open, check_output_folder, save_image, write_json
+from viform._parallel import open_client, parse_memory
 from viform._validate import ViformError, check_choice, check_int, check_positive, one_line
 from viform.datasets.layout import (
     CONFIG_NAME,
@@ -332,6 +332,9 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
                            reuse_buffer=True)
     truth = write_truth(out, clip.name, scene, source.n_ticks, s.truth_every_ticks, source.clock_hz, s.max_lux)
     spikes, digest = _write_dat(task, dat, source)
+    from viform.datasets.scene_clips import too_dark
+
+    darkness = too_dark(spikes, source.n_ticks, s.height * s.width, s.truth_every_ticks)
     full_scale_rate = float(sensor.expected_firing_rate_per_tick(np.array(s.max_lux)))
     record = {
         "clip": clip.name, "source": clip.path, "seed": seed, "ticks": source.n_ticks,
@@ -339,7 +342,7 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
         "height": s.height, "width": s.width, "clock_hz": source.clock_hz, "n_frames": len(truth["frames"]),
         "frame_rate_hz": source.clock_hz / s.truth_every_ticks, "rate": full_scale_rate,
         "gt_frames": truth["frames"], "settings_sha256": s.fingerprint(),
-        "scene": spec["scene"], "scene_parameters": spec["parameters"], "clean": spec["clean"],
+        "scene": spec["scene"], "scene_parameters": spec["parameters"], "clean": spec["clean"], **darkness,
         "truth": {"kinds": truth["kinds"], "step_ticks": s.truth_every_ticks, "mot": truth["mot"],
                   "frame_time": "frame k: the end of step k, t = k·step_ticks / clock_hz (s)",
                   "flow": "forward flow from frame k to frame k + 1, px, Middlebury .flo (unknown = 1e10)",
@@ -456,7 +459,7 @@ def _label_types(clips) -> list:
     types = [1]
     scenes = [c for c in clips if c.kind == "scene"]
     if scenes:
-        from viform.light.scenes import builtin_scene
+        from viform.light.catalog import builtin_scene
 
         kinds = set()
         for name in {json.loads(c.path)["scene"] for c in scenes}:
@@ -494,35 +497,6 @@ def _check_existing_config(out: Path, config: dict) -> None:
     what = f"{diff}: {old_s.get(diff)!r} there, {new_s.get(diff)!r} now" if diff else "not a viform dataset"
     raise ViformError(f"--out {str(out)!r} already holds a dataset made with other settings ({what}); "
                       "use a new --out folder, or the same options to resume it")
-
-
-def _parse_memory(memory_limit) -> str | int:
-    if memory_limit in (None, "auto"):
-        return "auto"
-    from dask.utils import parse_bytes
-
-    try:
-        value = parse_bytes(str(memory_limit))
-    except (ValueError, TypeError):
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: give a size such as 2GiB, "
-                          "or auto") from None
-    if value < 64 << 20:
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: at least 64MiB per worker")
-    return value
-
-
-def _open_client(workers: int, scheduler: str | None, memory_limit):
-    """A dask client: on an existing scheduler, or on a new LocalCluster (processes, 1 thread each)."""
-    from distributed import Client, LocalCluster
-
-    if scheduler:
-        try:
-            return Client(scheduler, timeout="20s"), None
-        except (OSError, TimeoutError) as exc:
-            raise ViformError(f"--scheduler {scheduler!r}: could not connect ({one_line(exc)})") from None
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                           dashboard_address=":0", silence_logs=logging.ERROR)
-    return Client(cluster), cluster
 
 
 def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,
@@ -573,7 +547,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     if workers is None:
         workers = max(1, min(os.cpu_count() or 1, len(clips)))
     workers = check_int("--workers", workers, 1, 1024)
-    memory_limit = _parse_memory(memory_limit)
+    memory_limit = parse_memory(memory_limit)
     check_output_folder("--out", out)
     if out.exists() and not out.is_dir():
         raise ViformError(f"--out {str(out)!r} is a file, not a folder")
@@ -584,7 +558,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     own_client = client is None
     own_cluster = None
     if own_client:
-        client, own_cluster = _open_client(workers, scheduler, memory_limit)
+        client, own_cluster = open_client(workers, scheduler, memory_limit)
     try:
         (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
         (out / GT_DIR).mkdir(parents=True, exist_ok=True)
@@ -652,7 +626,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
 
 
 #: Manifest keys of scene clips: what was drawn, and where the truth is.
-_SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth")
+_SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth", "too_dark", "spikes_per_pixel_per_truth_step")
 
 
 def _write_manifest(out: Path, settings: DatasetSettings, rows: dict, failed: dict) -> None:
@@ -686,6 +660,7 @@ def _summary(out, clips, rows, failed, seconds, workers) -> dict:
         "pixel_ticks_per_s": pixel_ticks / seconds if seconds > 0 else 0.0,
         "workers": workers,
         "manifest": str(Path(out) / MANIFEST_NAME),
+        "too_dark": sorted(c for c, r in rows.items() if r.get("too_dark")),
         # how the source frames were fitted to the sensor (scaled, centre-cropped: never stretched)
         "fits": sorted({describe_fit(r["fit"]) for r in rows.values() if r.get("fit")}),
     }

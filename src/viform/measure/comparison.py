@@ -84,6 +84,11 @@ METRICS = {
 }
 
 
+#: A sensor meets a scene's range when the range it renders is within this many dB of the scene's
+#: (a factor of 2 in light): the verdict's and the demo's rule.
+RANGE_MARGIN_DB = 6.0
+
+
 def spike_preset():
     """The spike camera: the ``spikeone`` preset when the project has it, else the defaults.
 
@@ -755,7 +760,7 @@ def verdict(shots, demand: dict | None) -> list[str]:
                      + (f"{len(others)} of {len(cnr)} sensors see none." if others else "every sensor sees some."))
     if demand and image_rows:
         meets = [r.label for r in image_rows
-                 if r.metrics.get("dr_captured_db", 0) >= demand["dynamic_range_db"] - 6
+                 if r.metrics.get("dr_captured_db", 0) >= demand["dynamic_range_db"] - RANGE_MARGIN_DB
                  and r.time_resolution_s <= demand["time_resolution_s"]]
         lines.append("Meets both the scene's range and its speed: " + (", ".join(meets) + "." if meets else
                      "no sensor compared here, at these settings."))

@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_path, write_json
+from viform._parallel import open_client, parse_memory
 from viform._validate import ViformError, check_int, check_positive, one_line
 from viform.measure import comparison as cmp
 
@@ -518,11 +519,12 @@ class SweepContext:
         return hashlib.sha256(json.dumps(self.describe(), sort_keys=True).encode()).hexdigest()
 
     def make_scene(self):
-        from viform.light.scenes import BUILTIN_SCENES, builtin_scene, load_scene
+        from viform.light.catalog import BUILTIN_SCENES, builtin_scene, load_scene
 
         if self.scene in BUILTIN_SCENES:
             return builtin_scene(self.scene, self.height, self.width, **dict(self.scene_options))
-        return load_scene(self.scene, self.height, self.width, resize=True)
+        return load_scene(self.scene, self.height, self.width, resize=True,
+                          settings={k: list(v) if isinstance(v, tuple) else v for k, v in self.scene_options} or None)
 
 
 def run_point(context: SweepContext, point: Point) -> dict:
@@ -825,9 +827,7 @@ def standard_vary(scene) -> tuple[list[str], dict[str, dict[str, list]]]:
 
 
 def _open(workers, scheduler, memory_limit):
-    from viform.datasets.build import _open_client, _parse_memory
-
-    return _open_client(workers, scheduler, _parse_memory(memory_limit))
+    return open_client(workers, scheduler, parse_memory(memory_limit))
 
 
 def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,

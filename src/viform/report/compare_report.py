@@ -327,6 +327,18 @@ def figure_dilemma(result):
     return fig
 
 
+def _wrap_label(label: str, chars: int) -> str:
+    """A legend label on lines of at most ``chars``; a long sensor label breaks at its " · " (the imaging
+    method goes on its own line), so no line ends in a dangling separator that reads as a cut."""
+    if len(label) <= chars:
+        return label
+    head, *parts = label.split(" · ")
+    lines = textwrap.wrap(head, chars, subsequent_indent="      ")
+    for part in parts:
+        lines += textwrap.wrap("· " + part, chars, initial_indent="      ", subsequent_indent="        ")
+    return "\n".join(lines)
+
+
 def _legend_at_right(fig, ax, chars: int = 44) -> None:
     """The axes' legend on the figure's right, labels wrapped; the axes shrink so it fits.
 
@@ -336,7 +348,7 @@ def _legend_at_right(fig, ax, chars: int = 44) -> None:
     handles, labels = ax.get_legend_handles_labels()
     if not handles:
         return
-    wrapped = [textwrap.fill(lb, chars, subsequent_indent="      ") for lb in labels]
+    wrapped = [_wrap_label(lb, chars) for lb in labels]
     leg = fig.legend(handles, wrapped, fontsize=8, loc="center right", bbox_to_anchor=(0.995, 0.5))
     box = leg.get_window_extent(fig.canvas.get_renderer())
     if box.height > 0.98 * fig.bbox.height:  # many sensors: a taller figure, same legend
@@ -643,7 +655,7 @@ def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, he
 
     ``started_s``: ``time.perf_counter()`` at the command's start; the reported wall time runs from it.
     """
-    from viform.light.scenes import BUILTIN_SCENES, builtin_scene, load_scene
+    from viform.light.catalog import BUILTIN_SCENES, builtin_scene, load_scene
 
     height = check_int("--height", height, 32)
     width = check_int("--width", width, 48)
@@ -653,7 +665,7 @@ def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, he
     if scene_spec in BUILTIN_SCENES:
         scene = builtin_scene(scene_spec, height, width, **(scene_options or {}))
     else:
-        scene = load_scene(scene_spec, height, width, resize=True)
+        scene = load_scene(scene_spec, height, width, resize=True, settings=scene_options or None)
     started = time.perf_counter() if started_s is None else started_s
     result = run_comparison(scene, duration_s, keys, instants_s, seed, progress)
     return write_report(result, out_dir, command, started_s=started)

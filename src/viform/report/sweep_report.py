@@ -124,14 +124,19 @@ def _pareto_panel(ax, doc, records, colours, meeting, x_key, y_key):
     if ok.sum() >= 2:
         hx, hy = sw.METRIC_DIRECTIONS.get(x_key, True), sw.METRIC_DIRECTIONS.get(y_key, True)
         front = pareto_front(xs[ok], ys[ok], hx, hy)
-        ax.plot(xs[ok][front], ys[ok][front], color="0.35", lw=1.2, ls="--", zorder=2,
-                label="Pareto front (no point beats it on both)")
+        # the front's points are outlined, so a front of one point (or of two close ones) is still seen
+        ax.plot(xs[ok][front], ys[ok][front], color="0.35", lw=1.2, ls="--", zorder=2)
+        ax.scatter(xs[ok][front], ys[ok][front], marker="s", s=95, facecolor="none", edgecolor="0.25",
+                   linewidth=1.2, zorder=4, label="Pareto front: no point beats these on both metrics "
+                                                  "(grey squares, dashed line)")
     for d in doc["answer"]["demands"]:
         metric, op, bound = _split_demand(d)
         if metric == x_key:
             ax.axvline(float(_shown(x_key, bound)), color="green", lw=1, ls=":")
         if metric == y_key:
             ax.axhline(float(_shown(y_key, bound)), color="green", lw=1, ls=":")
+    if doc["answer"]["demands"]:
+        ax.plot([], [], color="green", lw=1, ls=":", label="a demand's bound (--require)")
     if logx:
         ax.set_xscale("log")
     ax.set_xlabel(metric_label(x_key) + (", log scale" if logx else ""))
@@ -202,7 +207,9 @@ def figure_curves(doc, key: str):
                        edgecolor="black", linewidth=0.7, zorder=6)
         if logx:
             ax.set_xscale("log")
-        ax.set_title(metric_label(metric), fontsize=9)
+        flat = _floor_span(ax, [_value(r, metric) for r in records])
+        ax.set_title(metric_label(metric) + (f"\nflat: every point within ±{flat:.2g}" if flat is not None else ""),
+                     fontsize=9)
         ax.set_xlabel(parameter_label(x_name), fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(True, which="both", alpha=0.3)
@@ -216,6 +223,26 @@ def figure_curves(doc, key: str):
     fig.suptitle(f"{key}: each metric over {parameter_label(x_name)}{extra}; gold star = the default setting, "
                  "green ring = meets every demand", fontsize=10)
     return fig
+
+
+#: The smallest y-span a metric's panel shows, as a fraction of the metric's size: a metric that varies
+#: less than this over the sweep is drawn flat, not stretched until rounding noise looks like structure.
+MIN_SPAN_FRACTION = 0.05
+
+
+def _floor_span(ax, values) -> float | None:
+    """Widen a panel whose values vary by less than :data:`MIN_SPAN_FRACTION` of their size (or by less
+    than 1 display unit around 0); returns the half-range of the values when it did, else None."""
+    v = np.asarray([x for x in values if math.isfinite(x)], float)
+    if v.size == 0:
+        return None
+    lo, hi = float(v.min()), float(v.max())
+    centre = (lo + hi) / 2
+    floor = MIN_SPAN_FRACTION * abs(centre) if centre != 0 else 1.0
+    if hi - lo >= floor:
+        return None
+    ax.set_ylim(centre - floor / 2, centre + floor / 2)
+    return (hi - lo) / 2
 
 
 def _fmt_param(v) -> str:
@@ -262,8 +289,11 @@ def figure_best(doc, scene, out: Path):
 
 
 # ------------------------------------------------------------------ HTML
-def write_sweep_report(doc, scene, out, command: str = "", started_s: float | None = None) -> Path:
-    """Write ``out/report.html`` (figures under ``out/figures``); returns its path."""
+def write_sweep_report(doc, scene, out, command: str = "", started_s: float | None = None,
+                       demand_notes: list[str] | None = None) -> Path:
+    """Write ``out/report.html`` (figures under ``out/figures``); returns its path.
+
+    ``demand_notes`` say where the demands come from (printed under them)."""
     out = Path(out)
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
@@ -301,6 +331,9 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
                  f"{e(metric_label(ans['objective']))} among the points that meet every demand; nearest miss = "
                  "the point missing the fewest demands, then by the smallest relative shortfall. A metric not "
                  "defined for a sensor (n/a) counts as missed.</p>")
+    if demand_notes:
+        parts.append("<p class='note'>Where the demands come from:</p><ul class='note'>"
+                     + "".join(f"<li>{e(n)}</li>" for n in demand_notes) + "</ul>")
     parts.append("<table><tr><th>sensor</th><th>meets every demand</th><th>setting</th>"
                  f"<th>{e(metric_label(ans['objective']))}</th><th>points meeting / swept</th><th>misses</th></tr>")
     for key, v in ans["per_sensor"].items():
@@ -362,11 +395,11 @@ def console_lines(doc) -> list[str]:
 
 def run_sweep_report(plan, out, *, workers=None, scheduler=None, client=None, memory_limit="auto",
                      progress: bool = True, command: str = "", started_s: float | None = None,
-                     crash_after_points: int | None = None) -> dict:
+                     crash_after_points: int | None = None, demand_notes: list[str] | None = None) -> dict:
     """Run a planned sweep into ``out`` and write its report; returns the sweep document."""
     started = time.perf_counter() if started_s is None else started_s
     doc = sw.sweep(plan, out, workers=workers, scheduler=scheduler, client=client, memory_limit=memory_limit,
                    progress=progress, crash_after_points=crash_after_points)
-    write_sweep_report(doc, plan.context.make_scene(), out, command, started)
+    write_sweep_report(doc, plan.context.make_scene(), out, command, started, demand_notes)
     doc["report"] = str(Path(out) / "report.html")
     return doc
