@@ -313,15 +313,17 @@ def test_saturated_jump_has_the_law_of_one_gamma_per_crossing(residual_electrons
     q, n = 7, 20_000
     rng = np.random.default_rng(1)
     age_ref, rest_ref = np.empty(n), np.empty(n)
-    for i in range(n):
-        total = 0.0
-        while True:
-            interval = rng.gamma(q)
-            if total + interval > residual_electrons:
-                age_ref[i] = residual_electrons - total
-                rest_ref[i] = total + interval - residual_electrons
-                break
-            total += interval
+    # intervals per row: enough to pass R but for a 10-sigma fluctuation (asserted per block)
+    m = int(residual_electrons / q + 10 * math.sqrt(residual_electrons / q) + 10)
+    for start in range(0, n, 2000):
+        rows = slice(start, min(start + 2000, n))
+        crossings = np.cumsum(rng.gamma(q, size=(rows.stop - rows.start, m)), axis=1)
+        assert np.all(crossings[:, -1] > residual_electrons)
+        first = np.argmax(crossings > residual_electrons, axis=1)  # the interval in progress at R
+        index = np.arange(first.size)
+        before = np.where(first > 0, crossings[index, np.maximum(first - 1, 0)], 0.0)
+        age_ref[rows] = residual_electrons - before
+        rest_ref[rows] = crossings[index, first] - residual_electrons
     qs = np.full(1, float(q))
     keys = np.array([np.uint64(123456789)])
     counter = np.zeros(1, dtype=np.int64)
