@@ -64,6 +64,36 @@ def test_gamma_sampler_is_exact(shape):
     assert x.mean() == pytest.approx(shape, abs=5 * math.sqrt(shape / x.size))
 
 
+def test_gamma_tables_cached_on_disk_are_the_computed_ones(tmp_path, monkeypatch):
+    """A new process loads the tables it would compute, bit for bit; a damaged file is recomputed,
+    an unwritable folder only costs the computation, a SciPy build of its own gets tables of its own."""
+    from viform.sensors import _gamma
+
+    monkeypatch.setattr(_gamma, "table_cache_folder", lambda: tmp_path / "tables")
+    monkeypatch.setattr(_gamma, "_TABLES", {})
+    shapes = [7.0, 100.0]
+    computed = np.stack([_gamma._table(a) for a in shapes])
+    (first,) = _gamma.build_tables(shapes)
+    files = list((tmp_path / "tables").iterdir())
+    assert len(files) == 1 and first.tobytes() == computed.tobytes()
+    monkeypatch.setattr(_gamma, "_TABLES", {})  # as in a new process
+    monkeypatch.setattr(_gamma, "_table", lambda a: pytest.fail("computed although cached"))
+    assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()
+    monkeypatch.undo()
+    monkeypatch.setattr(_gamma, "table_cache_folder", lambda: tmp_path / "tables")
+    monkeypatch.setattr(_gamma, "_TABLES", {})
+    files[0].write_bytes(files[0].read_bytes()[:1000])  # a truncated file
+    assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()
+    monkeypatch.setattr(_gamma, "_TABLES", {})
+    monkeypatch.setattr(_gamma, "_scipy_build", lambda: "version = '0.0'")
+    assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()
+    assert len(list((tmp_path / "tables").iterdir())) == 2
+    monkeypatch.setattr(_gamma, "_TABLES", {})
+    (tmp_path / "file").write_text("")
+    monkeypatch.setattr(_gamma, "table_cache_folder", lambda: tmp_path / "file" / "tables")
+    assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()
+
+
 def test_dark_only_pixels_fire_at_dark_current_over_q():
     """Seed 000 §4.4: with no light a pixel fires at Id/Q (τ̂ = Q/Id)."""
     q, dark = 20, 2000.0
