@@ -518,10 +518,13 @@ def _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pen
     c = charge[p]
     t = target[p]
     e = pending_rate[p]
+    # typed bools, not literals: a literal gives _fire_general a signature (and a compilation) of its own
+    noise = np.bool_(True)
+    reset_readout = np.bool_(False)
     for _ in range(pending_ticks[p]):
         c += e
         if c >= t:
-            c, t = _fire(c, t, e, 0.0, p, q, index, bins, keys, True, False, counter)
+            c, t = _fire(c, t, e, 0.0, p, q, index, bins, keys, noise, reset_readout, counter)
     charge[p] = c
     target[p] = t
     pending_ticks[p] = 0
@@ -530,8 +533,8 @@ def _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pen
 @njit(cache=True, parallel=True)
 def _settle_all(charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate):
     for p in prange(charge.size):
-        if pending_ticks[p] > 0:
-            _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
+        if pending_ticks[p] > 0:  # (a prange index may be unsigned: int64 keeps _settle to one signature)
+            _settle(np.int64(p), charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
 
 
 @njit(cache=True, parallel=True)
