@@ -29,11 +29,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from llvmlite import ir
+from numba import get_num_threads, njit, prange, types
 from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.extending import intrinsic
 
 from viform.light.compiled import row_lux
 from viform.sensors._gamma import (
+    TABLE_BITS,
+    TABLE_SIZE,
     event_stream,
     gamma_draw,
     splitmix64,
@@ -353,29 +357,91 @@ def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, co
 # bytes), the tick loop inside the work item so a tile's state stays in L1, and the spikes
 # written as bits the moment they are produced.
 #
-# What the lane loop compiles to (checked with ``inspect_asm`` on x86-64 AVX-512, Zen 4;
-# ``NUMBA_DEBUG_ARRAY_OPT_STATS`` reports only prange fusion, not LLVM's loop vectorizer):
-# :func:`_lanes_add_compare` is fully unrolled into 8 × (vpaddq, vpcmpnltq → k-mask) per
-# 64 lanes, the mask expanded and shifted into place (vpsllq / vporq) and OR-reduced to the
-# word; on AVX2 the same code runs as 16 × 4 lanes. The fired lanes of a word are then
-# visited with ``tzcnt`` (count trailing zeros), so a tick without spikes costs no branch
-# per pixel, and the per-spike Gamma draw stays off the common path.
+# The lane loop is written as LLVM vector operations on 8 lanes at a time (the intrinsics
+# below): load, add and store 8 int64 charges, compare them with their targets as one vector
+# and turn the 8 comparison bits into a byte (`bitcast <8 x i1> to i8`). On x86-64 with
+# AVX-512 that is vpaddq / vpcmpq into a mask register / kmovb, 8 of them per 64-pixel word,
+# and the same IR lowers to AVX2 (vpcmpgtq / vmovmskpd) or NEON elsewhere; a plain loop over
+# the 64 lanes vectorized as well but built the word from the comparison bits with one
+# masked OR per bit. The fired lanes of a word are then visited with ``tzcnt`` (count
+# trailing zeros), so a tick without spikes costs no branch per pixel, and the per-spike
+# Gamma draw stays off the common path.
 _LANES = 64
 _TILE_WORDS = 4  # words (× 64 pixels) per work item of the constant-light kernel: state, rates in L1
 _NO_TARGET = np.int64(0x7FFFFFFFFFFFFFFF)  # target of padding lanes: they never fire
 #: Lane modes of the constant-light kernel: any option through :func:`_fire`; the two
 #: noise-free models without dead time, resolved in the vector loop itself.
 MODE_GENERAL, MODE_NOISE_FREE_SELF, MODE_NOISE_FREE_READOUT = 0, 1, 2
+#: Expected spikes per tick (charge per tick / Q) up to which the constant-light kernel visits a
+#: word's crossings one by one instead of its ticks: there a tick by tick pass costs more than
+#: the crossings it finds (the cost of a crossing is about 20 lane-ticks).
+SPARSE_FIRING = 0.05
+_VECTOR = ir.VectorType(ir.IntType(64), 8)
+_I64 = ir.IntType(64)
+
+
+def _vector_pointer(context, builder, array_type, array, index):
+    """Pointer to the 8 int64 elements of a contiguous 1-D ``array`` from ``index``, as one vector."""
+    data = context.make_array(array_type)(context, builder, array).data
+    return builder.bitcast(builder.gep(data, [index]), _VECTOR.as_pointer())
+
+
+def _mask_bits(builder, mask):
+    """The 8 lanes of an <8 x i1> comparison as the low byte of an int64 (lane i in bit i)."""
+    return builder.zext(builder.bitcast(mask, ir.IntType(8)), _I64)
+
+
+@intrinsic
+def _add_compare8(typingctx, c, e, t, base):
+    """c[base:base + 8] += e[base:base + 8]; the byte of lanes where c >= t (lane i in bit i)."""
+
+    def codegen(context, builder, signature, args):
+        pc, pe, pt = (_vector_pointer(context, builder, signature.args[i], args[i], args[3]) for i in range(3))
+        charge = builder.add(builder.load(pc, align=8), builder.load(pe, align=8))
+        builder.store(charge, pc, align=8)
+        return _mask_bits(builder, builder.icmp_signed(">=", charge, builder.load(pt, align=8)))
+
+    return types.uint64(c, e, t, base), codegen
+
+
+@intrinsic
+def _noise_free_self8(typingctx, c, e, t, base):
+    """Noise-free self-reset on 8 lanes: c += e, and c -= t where c reached t. Returns the byte of
+    lanes that fired, and in bits 8–15 the lanes still at or above their target (lost crossings)."""
+
+    def codegen(context, builder, signature, args):
+        pc, pe, pt = (_vector_pointer(context, builder, signature.args[i], args[i], args[3]) for i in range(3))
+        target = builder.load(pt, align=8)
+        charge = builder.add(builder.load(pc, align=8), builder.load(pe, align=8))
+        fired = builder.icmp_signed(">=", charge, target)
+        charge = builder.select(fired, builder.sub(charge, target), charge)
+        builder.store(charge, pc, align=8)
+        over = builder.icmp_signed(">=", charge, target)
+        return builder.or_(_mask_bits(builder, fired), builder.shl(_mask_bits(builder, over), ir.Constant(_I64, 8)))
+
+    return types.uint64(c, e, t, base), codegen
+
+
+@intrinsic
+def _noise_free_readout8(typingctx, c, e, t, base):
+    """Noise-free readout reset on 8 lanes: c += e, drained to 0 where c reached t; the fired byte."""
+
+    def codegen(context, builder, signature, args):
+        pc, pe, pt = (_vector_pointer(context, builder, signature.args[i], args[i], args[3]) for i in range(3))
+        charge = builder.add(builder.load(pc, align=8), builder.load(pe, align=8))
+        fired = builder.icmp_signed(">=", charge, builder.load(pt, align=8))
+        builder.store(builder.select(fired, ir.Constant(_VECTOR, [0] * 8), charge), pc, align=8)
+        return _mask_bits(builder, fired)
+
+    return types.uint64(c, e, t, base), codegen
 
 
 @njit(cache=True, inline="always")
 def _lanes_add_compare(c, e, t, base):
     """Add each lane's charge for the tick; the word of lanes that reached their target."""
     word = np.uint64(0)
-    for i in range(_LANES):
-        cc = c[base + i] + e[base + i]
-        c[base + i] = cc
-        word |= np.uint64(cc >= t[base + i]) << np.uint64(i)
+    for j in range(_LANES // 8):
+        word |= _add_compare8(c, e, t, base + 8 * j) << np.uint64(8 * j)
     return word
 
 
@@ -384,28 +450,65 @@ def _lanes_noise_free_self(c, e, t, base):
     """Noise-free self-reset: add, compare, subtract the target where reached; also whether a
     lane is still at or above its target (light above one spike per tick: lost crossings)."""
     word = np.uint64(0)
-    over = False
-    for i in range(_LANES):
-        tt = t[base + i]
-        cc = c[base + i] + e[base + i]
-        fired = cc >= tt
-        cc = cc - tt if fired else cc
-        c[base + i] = cc
-        word |= np.uint64(fired) << np.uint64(i)
-        over |= cc >= tt
-    return word, over
+    over = np.uint64(0)
+    for j in range(_LANES // 8):
+        bits = _noise_free_self8(c, e, t, base + 8 * j)
+        word |= (bits & np.uint64(0xFF)) << np.uint64(8 * j)
+        over |= bits
+    return word, over > np.uint64(0xFF)
 
 
 @njit(cache=True, inline="always")
 def _lanes_noise_free_readout(c, e, t, base):
     """Noise-free readout reset: add, compare, drain the lanes that fired."""
     word = np.uint64(0)
-    for i in range(_LANES):
-        cc = c[base + i] + e[base + i]
-        fired = cc >= t[base + i]
-        c[base + i] = 0 if fired else cc
-        word |= np.uint64(fired) << np.uint64(i)
+    for j in range(_LANES // 8):
+        word |= _noise_free_readout8(c, e, t, base + 8 * j) << np.uint64(8 * j)
     return word
+
+
+# ---------------------------------------------------------------------- a spike's common case
+def fixed_point_tables(bins) -> tuple[np.ndarray, np.ndarray]:
+    """The Gamma tables (:func:`viform.sensors._gamma.build_tables`) rescaled for the kernels'
+    common case, one row per (table, bin) of the flat index ``table·TABLE_SIZE + bin``:
+    ``scaled[:, 0]`` = edge·2^32 and ``scaled[:, 1]`` = width·2^6 (float64), ``accept`` = the
+    26-bit squeeze threshold ⌈squeeze·2^26 − 1/2⌉ (int64; 0 for the open last bin).
+
+    With them :func:`_target_fast` computes what :func:`_next_target` computes, bit for bit:
+    scaling by powers of two commutes with rounding, so edge·2^32 + (k₁ + 1/2)·(width·2^6)
+    rounds to exactly 2^32 times edge + ((k₁ + 1/2)·2^-26)·width, and the uniform
+    (k₂ + 1/2)·2^-26 is below the squeeze exactly when the integer k₂ is below ``accept``.
+    """
+    bins = np.asarray(bins, dtype=np.float64)
+    scaled = np.empty((bins.shape[0] * bins.shape[1], 2))
+    scaled[:, 0] = (bins[..., 0] * 4294967296.0).ravel()
+    scaled[:, 1] = (bins[..., 1] * 64.0).ravel()
+    accept = np.ceil(bins[..., 3] * 67108864.0 - 0.5)
+    accept[:, -1] = 0.0  # the open last bin: the general sampler
+    return np.ascontiguousarray(scaled), np.ascontiguousarray(np.maximum(accept, 0.0).astype(np.int64).ravel())
+
+
+@njit(cache=True)
+def _target_general(shape, table, bins, key, counter):
+    """The fixed-point target of draw ``counter`` of a pixel's stream by the general sampler
+    (:func:`viform.sensors._gamma.gamma_draw`), out of line: the rare cases of :func:`_target_fast`."""
+    x = gamma_draw(shape, table, bins, key, counter)
+    return max(np.int64(1), np.int64(x * 4294967296.0 + 0.5))
+
+
+@njit(cache=True, inline="always")
+def _target_fast(row0, scaled, accept, key, counter):
+    """The fixed-point Gamma(Q) target of draw ``counter`` of a pixel's stream, the same value as
+    :func:`_next_target` (see :func:`fixed_point_tables`), when the bin's squeeze accepts the
+    first try (about 99 % of draws); 0 (no target is 0) when :func:`_target_general` must draw it.
+    ``row0`` = the pixel's table · TABLE_SIZE. (No calls in here: an inlined function that takes
+    arrays and calls another costs two reference-count updates per use.)"""
+    h = splitmix64(key + np.uint64(counter) * np.uint64(0x9E3779B97F4A7C15))
+    row = row0 + np.int64(h >> np.uint64(64 - TABLE_BITS))
+    if np.int64(h & np.uint64(0x3FFFFFF)) < accept[row]:
+        x = scaled[row, 0] + (np.int64((h >> np.uint64(26)) & np.uint64(0x3FFFFFF)) + 0.5) * scaled[row, 1]
+        return max(np.int64(1), np.int64(x + 0.5))
+    return np.int64(0)
 
 
 @njit(cache=True)
@@ -415,10 +518,13 @@ def _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pen
     c = charge[p]
     t = target[p]
     e = pending_rate[p]
+    # typed bools, not literals: a literal gives _fire_general a signature (and a compilation) of its own
+    noise = np.bool_(True)
+    reset_readout = np.bool_(False)
     for _ in range(pending_ticks[p]):
         c += e
         if c >= t:
-            c, t = _fire(c, t, e, 0.0, p, q, index, bins, keys, True, False, counter)
+            c, t = _fire(c, t, e, 0.0, p, q, index, bins, keys, noise, reset_readout, counter)
     charge[p] = c
     target[p] = t
     pending_ticks[p] = 0
@@ -427,13 +533,13 @@ def _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pen
 @njit(cache=True, parallel=True)
 def _settle_all(charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate):
     for p in prange(charge.size):
-        if pending_ticks[p] > 0:
-            _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
+        if pending_ticks[p] > 0:  # (a prange index may be unsigned: int64 keeps _settle to one signature)
+            _settle(np.int64(p), charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
 
 
 @njit(cache=True, parallel=True)
-def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, keys, noise,
-               reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate):
+def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, scaled, accept, keys,
+               noise, reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate, sparse_firing):
     """Integrate-and-fire over one block of ticks in runs of constant light, 64 pixels per word.
 
     ``rates[s, p]`` is the fixed-point charge per tick of pixel p in run s, which ends
@@ -448,10 +554,21 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
     tick whatever its state, so the kernel only counts those ticks (``pending_ticks``, at rate
     ``pending_rate``) and :func:`_settle` replays the draws when the light changes or the
     caller asks for the state: same bits, same state, and a still saturated scene draws nothing.
+
+    ``scaled`` and ``accept`` are :func:`fixed_point_tables` of ``bins``: a spike's common case
+    (photon noise, self-reset, no dead time, fewer than 48·Q e⁻ past the crossing) draws its
+    target from them in the lane loop; every other case goes through :func:`_fire_general`.
+
+    Dim words: where every lane of a word expects at most ``sparse_firing`` spikes per tick (the
+    callers pass :data:`SPARSE_FIRING`) in a
+    run (charge per tick ≤ ``sparse_firing``·Q), the word's lanes are run crossing by crossing
+    (the tick of the next crossing from the charge still missing, then the same crossing rules)
+    instead of tick by tick: the same bits and state for any ``sparse_firing``, less work.
     """
     n_ticks, n_words = words.shape
     n_pixels = charge.size
     lazy_ok = mode == MODE_GENERAL and noise and not reset_readout and dead_ticks == 0.0
+    fast = lazy_ok  # photon noise, self-reset, no dead time: the common case inlined below
     n_tiles = (n_words + _TILE_WORDS - 1) // _TILE_WORDS
     for tile in prange(n_tiles):
         w0 = tile * _TILE_WORDS
@@ -465,21 +582,24 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
         lazy_from = np.full(size, -1, dtype=np.int64)  # tick of the block where a lane's lazy run began
         lazy_mask = np.zeros(nw, dtype=np.uint64)
         # per lane, what a spike's common case reads (kept beside the lane state, in L1): the charge
-        # past a crossing below which _fire draws crossing by crossing, and the draw's arguments
+        # past a crossing below which a crossing draws one target, the pixel's draw counter (the
+        # lane's copy is the pixel's counter while the tile runs), stream key and table row
         one_by_one = np.zeros(size, dtype=np.int64)
-        shape = np.ones(size)
-        table = np.zeros(size, dtype=np.int64)
-        key = np.zeros(size, dtype=np.uint64)
         drawn = np.zeros(size, dtype=np.int64)
+        key = np.zeros(size, dtype=np.uint64)
+        row0 = np.zeros(size, dtype=np.int64)
+        # charge per tick up to which a lane fires rarely (≤ 1 spike in 20 ticks on average): words whose
+        # lanes are all below it are run crossing by crossing (same bits, less work than tick by tick)
+        sparse_rate = np.zeros(size, dtype=np.int64)
         for j in range(n):
             p = p0 + j
             c[j] = charge[p]
             t[j] = target[p]
             one_by_one[j] = min(_fixed_charge(_JUMP_INTERVALS * q[p]), _fixed_charge(8.0 * q[p] * q[p]))
-            shape[j] = q[p]
-            table[j] = index[p]
+            drawn[j] = counter[p]
             key[j] = keys[p]
-        fast = lazy_ok  # photon noise, self-reset, no dead time: the common case inlined below
+            row0[j] = np.int64(index[p]) * TABLE_SIZE
+            sparse_rate[j] = _fixed_charge(sparse_firing * q[p])
         s = 0
         while seg_end[s] <= first_tick:
             s += 1
@@ -498,12 +618,11 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                     r = rates[s, p]
                     lazy = r >= lazy_bound[p]
                     bit = np.uint64(1) << np.uint64(j & 63)
-                    if drawn[j]:  # the lane's draws so far, into the pixel's counter
-                        counter[p] += drawn[j]
-                        drawn[j] = 0
                     if pending_ticks[p] > 0 and (not lazy or pending_rate[p] != r):
                         # the saturated stretch ends (or its light changes): its draws first
+                        counter[p] = drawn[j]
                         _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
+                        drawn[j] = counter[p]
                         c[j] = charge[p]
                         t[j] = target[p]
                     if lazy:
@@ -522,6 +641,53 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                         e[j] = r
             for w in range(nw):  # a word's 64 lanes through the run's ticks, then the next word
                 base = w * _LANES
+                sparse = lazy_mask[w] == 0
+                for i in range(base, base + _LANES):
+                    sparse &= e[i] <= sparse_rate[i]
+                if sparse:
+                    # every lane fires rarely in this run: visit each lane's crossings instead of each tick
+                    for kk in range(k, end):
+                        words[kk, w0 + w] = 0
+                    for i in range(base, base + min(_LANES, n - base)):
+                        ci = c[i]
+                        ti = t[i]
+                        ei = e[i]
+                        kk = k  # the lane has run up to the start of tick kk (ci < ti)
+                        while ei > 0:
+                            # the crossing's tick: the smallest m ≥ 1 with ci + m·ei ≥ ti
+                            need = ti - ci
+                            m = max(np.int64(1), np.int64(need / ei))
+                            while m * ei < need:
+                                m += 1
+                            while m > 1 and (m - 1) * ei >= need:
+                                m -= 1
+                            if m > end - kk:
+                                ci += (end - kk) * ei
+                                break
+                            kk += m
+                            ci += m * ei
+                            words[kk - 1, w0 + w] |= np.uint64(1) << np.uint64(i - base)
+                            if mode == MODE_NOISE_FREE_SELF:
+                                ci -= ti
+                                if ci >= ti:
+                                    ci %= ti
+                            elif mode == MODE_NOISE_FREE_READOUT:
+                                ci = 0
+                            elif fast and ci - ti < one_by_one[i]:
+                                while ci >= ti:
+                                    ci -= ti
+                                    ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
+                                    if ti == 0:
+                                        ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
+                                    drawn[i] += 1
+                            else:
+                                counter[p0 + i] = drawn[i]
+                                ci, ti = _fire_general(ci, ti, ei, dead_ticks, p0 + i, q, index, bins, keys, noise,
+                                                       reset_readout, counter)
+                                drawn[i] = counter[p0 + i]
+                        c[i] = ci
+                        t[i] = ti
+                    continue
                 for kk in range(k, end):
                     if mode == MODE_NOISE_FREE_SELF:
                         word, over = _lanes_noise_free_self(c, e, t, base)
@@ -540,21 +706,21 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                             ci = c[i]
                             ti = t[i]
                             if fast and ci - ti < one_by_one[i]:
-                                # _fire's common case, from the lane's copies: one Gamma target per crossing
-                                # (the k-th draw of the pixel's stream: counter + drawn), later ones lost
+                                # _fire's common case: one Gamma target per crossing (draw `drawn[i]` of
+                                # the pixel's stream), the later crossings of the tick lost
                                 while ci >= ti:
                                     ci -= ti
-                                    x = gamma_draw(shape[i], table[i], bins, key[i], counter[p0 + i] + drawn[i])
+                                    ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
+                                    if ti == 0:
+                                        ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
                                     drawn[i] += 1
-                                    ti = max(np.int64(1), np.int64(x * 4294967296.0 + 0.5))
                                 c[i] = ci
                                 t[i] = ti
                             else:
-                                if drawn[i]:
-                                    counter[p0 + i] += drawn[i]
-                                    drawn[i] = 0
-                                c[i], t[i] = _fire(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins, keys, noise,
-                                                   reset_readout, counter)
+                                counter[p0 + i] = drawn[i]
+                                c[i], t[i] = _fire_general(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins, keys,
+                                                           noise, reset_readout, counter)
+                                drawn[i] = counter[p0 + i]
                     words[kk, w0 + w] = word
             if lazy_ok:
                 for j in range(n):
@@ -564,7 +730,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
             k = end
             s += 1
         for j in range(n):
-            counter[p0 + j] += drawn[j]
+            counter[p0 + j] = drawn[j]
             if not lazy_mask[j >> 6] & (np.uint64(1) << np.uint64(j & 63)):
                 charge[p0 + j] = c[j]
                 target[p0 + j] = t[j]
@@ -604,16 +770,17 @@ def _store_row_bits(out, k, bit0, n_bits, row_words, aligned):
 
 @njit(cache=True, parallel=True)
 def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round, charge, target,
-                     counter, q, index, bins, keys, noise, reset_readout, dead_ticks, band_rows):
+                     counter, q, index, bins, scaled, accept, keys, noise, reset_readout, dead_ticks, band_rows):
     """Integrate-and-fire with the light computed per pixel and tick in compiled code.
 
     The light of pixel p in tick k is :func:`viform.light.compiled.pixel_lux` from the
     tick's scalars (row k of ``scalars``, ``xtab``, ``ytab``); its charge that tick is
     int64(a[p]·lux + b[p] + 0.5) in fixed point (gain and dark current per pixel), added
-    exactly; the pixel fires when the sum reaches its Gamma(Q) target (the same
-    :func:`_fire` as the constant-light kernel). Per image row and tick: one vectorized pass
-    for the light (:func:`~viform.light.compiled.row_lux`), one for the charge, one that adds,
-    compares and packs 64 lanes per word, then only the lanes that fired. ``out`` (uint8,
+    exactly; the pixel fires when the sum reaches its Gamma(Q) target (the crossing rules of
+    :func:`_fire`, its common case from ``scaled`` and ``accept`` as in :func:`_run_block`). Per
+    image row and tick: one vectorized pass for the light (:func:`~viform.light.compiled.row_lux`),
+    one for the charge, one that adds, compares and packs 64 lanes per word, then only the lanes
+    that fired. ``out`` (uint8,
     ticks × packed frame bytes) receives the bits in the .dat order. Work items are bands of
     ``band_rows`` rows × windows of ticks, so the light tables stay in cache.
     """
@@ -625,6 +792,7 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
     padded = n_row_words * _LANES
     aligned = width % 8 == 0
     n_bands = (height + band_rows - 1) // band_rows
+    fast = noise and not reset_readout and dead_ticks == 0.0  # _fire's common case, inlined below
     for band in prange(n_bands):
         y0 = band * band_rows
         y1 = min(y0 + band_rows, height)
@@ -668,8 +836,24 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
                         while todo != 0:
                             x = w * _LANES + np.int64(trailing_zeros(todo))
                             todo &= todo - np.uint64(1)
-                            cw[x], tw[x] = _fire(cw[x], tw[x], rate[x], dead_ticks, base + x, q, index, bins, keys,
-                                                 noise, reset_readout, counter)
+                            p = base + x
+                            ci = cw[x]
+                            ti = tw[x]
+                            if fast and ci - ti < min(_fixed_charge(_JUMP_INTERVALS * q[p]),
+                                                      _fixed_charge(8.0 * q[p] * q[p])):
+                                # _fire's common case: one Gamma target per crossing, later ones lost
+                                while ci >= ti:
+                                    ci -= ti
+                                    ti = _target_fast(np.int64(index[p]) * TABLE_SIZE, scaled, accept, keys[p],
+                                                      counter[p])
+                                    if ti == 0:
+                                        ti = _target_general(q[p], index[p], bins, keys[p], counter[p])
+                                    counter[p] += 1
+                            else:
+                                ci, ti = _fire_general(ci, ti, rate[x], dead_ticks, p, q, index, bins, keys, noise,
+                                                       reset_readout, counter)
+                            cw[x] = ci
+                            tw[x] = ti
                 charge[base:base + width] = cw[:width]
                 target[base:base + width] = tw[:width]
 

@@ -67,6 +67,7 @@ from viform.sensors._spike_kernels import (
     MODE_GENERAL,
     MODE_NOISE_FREE_READOUT,
     MODE_NOISE_FREE_SELF,
+    SPARSE_FIRING,
     SpikeSimulationState,
     _band_rows,
     _dead_time_stationary_state,
@@ -78,6 +79,7 @@ from viform.sensors._spike_kernels import (
     _settle_all,
     _ticks_per_run,
     _unpack_bits,
+    fixed_point_tables,
     saturation_bound_fixed,
     simulation_threads,
 )
@@ -321,6 +323,13 @@ class SpikeSensor(Sensor):
             self._tables[key] = (q, shapes, index.astype(np.int32), tables)
         return self._tables[key]
 
+    def _fixed_point_tables(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """The Gamma tables rescaled for the kernels' common case (:func:`fixed_point_tables`)."""
+        key = ("fixed", height, width)
+        if key not in self._tables:
+            self._tables[key] = fixed_point_tables(self._pixel_tables(height, width)[3][0])
+        return self._tables[key]
+
     def _saturation_bounds(self, height: int, width: int) -> np.ndarray:
         """Per pixel, the charge per tick (fixed point) from which it fires every tick whatever its
         state (:func:`saturation_bound_fixed`; photon noise only)."""
@@ -549,6 +558,7 @@ class SpikeSensor(Sensor):
             band_rows = _band_rows(height, width)
         else:
             bounds = self._saturation_bounds(height, width)
+        fixed_tables = self._fixed_point_tables(height, width)
         segments = _Segments(self, scene, light, sample, height, width)
         buffer = None
         bar = None
@@ -571,13 +581,14 @@ class SpikeSensor(Sensor):
                     n = last - first
                     tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
                     _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round,
-                                     state.charge, state.target, state.counter, q, index, *tables, state.keys,
-                                     p.photon_noise, reset_readout, dead_ticks, band_rows)
+                                     state.charge, state.target, state.counter, q, index, *tables, *fixed_tables,
+                                     state.keys, p.photon_noise, reset_readout, dead_ticks, band_rows)
                 else:
                     rates, seg_end = segments.block(first, last)
                     _run_block(out.view(np.uint64), rates, seg_end, first, state.charge, state.target,
-                               state.counter, q, index, *tables, state.keys, p.photon_noise, reset_readout,
-                               dead_ticks, mode, bounds, state.pending_ticks, state.pending_rate)
+                               state.counter, q, index, *tables, *fixed_tables, state.keys, p.photon_noise,
+                               reset_readout, dead_ticks, mode, bounds, state.pending_ticks, state.pending_rate,
+                               SPARSE_FIRING)
                     if caller_state:  # the caller reads the state between blocks: no tick left pending
                         _settle_all(state.charge, state.target, state.counter, q, index, *tables, state.keys,
                                     state.pending_ticks, state.pending_rate)
