@@ -43,27 +43,58 @@ from viform.light.scenes import PATTERNS, Scene
 from viform.light.truth import FlowTruth, ObjectTruth, flow_from_layers
 
 ELLIPSE_SIDES = 256
+#: Light samples per period of a layer's modulation at least, when the simulator chooses the hold.
+MODULATION_SAMPLES_PER_PERIOD = 32
 
 
 # ------------------------------------------------------------------------- affine maps
 
 def pose_matrix(x, y, angle, sx, sy) -> np.ndarray:
     """2×3 map of a pose: p = (x, y) + R(angle)·diag(sx, sy)·q."""
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c * sx, -s * sy, x], [s * sx, c * sy, y]])
+    return pose_matrices(*(np.array([v], dtype=np.float64) for v in (x, y, angle, sx, sy)))[0]
+
+
+def pose_matrices(x, y, angle, sx, sy) -> np.ndarray:
+    """(n, 2, 3) maps of poses given as arrays (n,)."""
+    c, s = np.cos(angle), np.sin(angle)
+    out = np.empty((np.size(x), 2, 3))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = c * sx, -s * sy, x
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = s * sx, c * sy, y
+    return out
 
 
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a ∘ b for 2×3 affine maps."""
-    out = np.empty((2, 3))
-    out[:, :2] = a[:, :2] @ b[:, :2]
-    out[:, 2] = a[:, :2] @ b[:, 2] + a[:, 2]
+    """a ∘ b for 2×3 affine maps, or stacks of them (..., 2, 3), broadcast."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a00, a01, a02 = a[..., 0, 0], a[..., 0, 1], a[..., 0, 2]
+    a10, a11, a12 = a[..., 1, 0], a[..., 1, 1], a[..., 1, 2]
+    b00, b01, b02 = b[..., 0, 0], b[..., 0, 1], b[..., 0, 2]
+    b10, b11, b12 = b[..., 1, 0], b[..., 1, 1], b[..., 1, 2]
+    out[..., 0, 0] = a00 * b00 + a01 * b10
+    out[..., 0, 1] = a00 * b01 + a01 * b11
+    out[..., 0, 2] = a00 * b02 + a01 * b12 + a02
+    out[..., 1, 0] = a10 * b00 + a11 * b10
+    out[..., 1, 1] = a10 * b01 + a11 * b11
+    out[..., 1, 2] = a10 * b02 + a11 * b12 + a12
+    return out
+
+
+def invert_many(a: np.ndarray) -> np.ndarray:
+    """Inverses of 2×3 affine maps (..., 2, 3), in closed form."""
+    a = np.asarray(a, dtype=np.float64)
+    a00, a01, a02 = a[..., 0, 0], a[..., 0, 1], a[..., 0, 2]
+    a10, a11, a12 = a[..., 1, 0], a[..., 1, 1], a[..., 1, 2]
+    det = a00 * a11 - a01 * a10
+    out = np.empty(a.shape)
+    m00, m01, m10, m11 = a11 / det, -a01 / det, -a10 / det, a00 / det
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = m00, m01, -(m00 * a02 + m01 * a12)
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = m10, m11, -(m10 * a02 + m11 * a12)
     return out
 
 
 def invert(a: np.ndarray) -> np.ndarray:
-    m = np.linalg.inv(a[:, :2])
-    return np.concatenate([m, -(m @ a[:, 2])[:, None]], axis=1)
+    return invert_many(a)
 
 
 def apply(a: np.ndarray, x, y):
@@ -105,54 +136,71 @@ class Motion:
                 self._spline = CubicSpline(self.key_t, self.key_v, axis=0, bc_type="natural")
 
     def pose(self, t: float) -> tuple:
-        if self.static:
-            return self.base
-        tau = self.k * (float(t) - self.t_ref_s)  # time since the reference instant, scaled by the speed
-        t = self.t_ref_s + tau
-        m = self.motion
+        return tuple(float(v[0]) for v in self.poses(np.array([t], dtype=np.float64)))
+
+    def poses(self, times) -> tuple:
+        """(x, y, angle, sx, sy) at ``times`` (s), each an array (n,)."""
+        times = np.asarray(times, dtype=np.float64).ravel()
+        n = times.size
         x, y, a, sx, sy = self.base
+        if self.static:
+            return tuple(np.full(n, v) for v in self.base)
+        tau = self.k * (times - self.t_ref_s)  # time since the reference instant, scaled by the speed
+        m = self.motion
         if "velocity" in m:
-            t = tau
             v = m["velocity"]
             vx, vy = v.get("px_per_s", (0.0, 0.0))
-            ds = v.get("scale_per_s", 0.0) * t
-            return (x + vx * t, y + vy * t, a + v.get("rad_per_s", 0.0) * t, sx + ds * sx, sy + ds * sy)
+            ds = v.get("scale_per_s", 0.0) * tau
+            return (x + vx * tau, y + vy * tau, a + v.get("rad_per_s", 0.0) * tau, sx + ds * sx, sy + ds * sy)
         if "circle" in m:
             c = m["circle"]
             phi = c.get("phase_rad", 0.0) + c["rad_per_s"] * tau
-            return (c["centre_px"][0] + c["radius_px"] * math.cos(phi),
-                    c["centre_px"][1] + c["radius_px"] * math.sin(phi), a, sx, sy)
+            return (c["centre_px"][0] + c["radius_px"] * np.cos(phi), c["centre_px"][1] + c["radius_px"] * np.sin(phi),
+                    np.full(n, a), np.full(n, sx), np.full(n, sy))
+        t = self.t_ref_s + tau
         kt, kv = self.key_t, self.key_v
-        if t <= kt[0]:
-            return tuple(kv[0])
-        if t >= kt[-1]:
-            return tuple(kv[-1])
         if self._spline is not None:
-            return tuple(float(v) for v in self._spline(t))
-        j = int(np.searchsorted(kt, t, side="right")) - 1
-        w = (t - kt[j]) / (kt[j + 1] - kt[j])
-        return tuple(kv[j] + w * (kv[j + 1] - kv[j]))
+            inner = self._spline(np.clip(t, kt[0], kt[-1]))
+            rows = np.where((t <= kt[0])[:, None], kv[0], np.where((t >= kt[-1])[:, None], kv[-1], inner))
+        else:
+            j = np.clip(np.searchsorted(kt, t, side="right") - 1, 0, max(0, kt.size - 2))
+            if kt.size == 1:
+                rows = np.repeat(kv[:1], n, axis=0)
+            else:
+                w = ((t - kt[j]) / (kt[j + 1] - kt[j]))[:, None]
+                rows = kv[j] + w * (kv[j + 1] - kv[j])
+                rows = np.where((t <= kt[0])[:, None], kv[0], np.where((t >= kt[-1])[:, None], kv[-1], rows))
+        return tuple(rows[:, k] for k in range(5))
 
     def matrix(self, t: float) -> np.ndarray:
         return pose_matrix(*self.pose(t))
 
+    def matrices(self, times) -> np.ndarray:
+        return pose_matrices(*self.poses(times))
+
 
 def modulation_factor(node: dict | None, t: float) -> float:
     """The modulation m(t) of a layer (1 without one)."""
+    return float(modulation_factors(node, np.array([t], dtype=np.float64))[0])
+
+
+def modulation_factors(node: dict | None, times) -> np.ndarray:
+    """The modulation m(t) of a layer at ``times`` (s), an array (1 without one)."""
+    t = np.asarray(times, dtype=np.float64).ravel()
     if not node:
-        return 1.0
+        return np.ones(t.size)
     if "pwm" in node:
         p = node["pwm"]
         phase = ((t - p.get("phase_s", 0.0)) * p["frequency_hz"]) % 1.0
-        return 1.0 if phase < p["duty"] else p.get("low", 0.0)
+        return np.where(phase < p["duty"], 1.0, p.get("low", 0.0))
     if "sine" in node:
         p = node["sine"]
-        return 1.0 + p["depth"] * math.sin(2 * math.pi * p["frequency_hz"] * t + p.get("phase_rad", 0.0))
+        return 1.0 + p["depth"] * np.sin(2 * math.pi * p["frequency_hz"] * t + p.get("phase_rad", 0.0))
     if "square" in node:
         p = node["square"]
-        return 1.0 + p["depth"] * (1.0 if math.sin(2 * math.pi * p["frequency_hz"] * t) >= 0 else -1.0)
+        return 1.0 + p["depth"] * np.where(np.sin(2 * math.pi * p["frequency_hz"] * t) >= 0, 1.0, -1.0)
     p = node["step"]
-    return p["factor"] if t >= p["t_s"] else 1.0
+    return np.where(t >= p["t_s"], p["factor"], 1.0)
 
 
 def modulation_peak(node: dict | None) -> float:
@@ -237,7 +285,9 @@ class Texels:
 
     def sample(self, u, v, hx, hy) -> np.ndarray:
         """Mean over the box [u ± hx] × [v ± hy] (texel units; the box is clamped into the image,
-        so the edge texels extend outward)."""
+        so the edge texels extend outward). Boxes at most two texels wide (magnified or mildly
+        minified images) sum their ≤ 3 × 3 texels directly; wider ones difference the summed-area
+        table."""
         h, w = self.values.shape
         hx = np.broadcast_to(hx, np.shape(u))
         hy = np.broadcast_to(hy, np.shape(v))
@@ -248,8 +298,31 @@ class Texels:
         x1 = np.minimum(x0 + 2 * hx, w)
         y1 = np.minimum(y0 + 2 * hy, h)
         area = (x1 - x0) * (y1 - y0)
-        total = self._integral(x1, y1) - self._integral(x0, y1) - self._integral(x1, y0) + self._integral(x0, y0)
-        return total / area
+        small = (hx <= 1.0) & (hy <= 1.0)
+        out = np.empty(np.shape(u))
+        if small.any():
+            sx0, sx1, sy0, sy1 = x0[small], x1[small], y0[small], y1[small]
+            i0 = np.minimum(np.floor(sx0).astype(np.intp), w - 1)
+            j0 = np.minimum(np.floor(sy0).astype(np.intp), h - 1)
+            total = np.zeros(sx0.shape)
+            for kj in range(3):
+                j = j0 + kj
+                wy = np.maximum(np.minimum(sy1, j + 1.0) - np.maximum(sy0, j * 1.0), 0.0)
+                jj = np.minimum(j, h - 1)
+                row = np.zeros(sx0.shape)
+                for ki in range(3):
+                    i = i0 + ki
+                    wx = np.maximum(np.minimum(sx1, i + 1.0) - np.maximum(sx0, i * 1.0), 0.0)
+                    row += wx * self.values[jj, np.minimum(i, w - 1)]
+                total += wy * row
+            out[small] = total / area[small]
+        if not small.all():
+            big = ~small
+            bx0, bx1, by0, by1 = x0[big], x1[big], y0[big], y1[big]
+            total = self._integral(bx1, by1) - self._integral(bx0, by1) - self._integral(bx1, by0) + \
+                self._integral(bx0, by0)
+            out[big] = total / area[big]
+        return out
 
 
 # ------------------------------------------------------------------------- coverage
@@ -532,7 +605,7 @@ class Layer:
             name = p["name"]
             period = p.get("period_px", 48.0 if name != "sines" else 6.0)
             if name == "sines":
-                x0, y0 = self.polygon[0].min(), self.polygon[1].min()
+                x0, y0 = self.sines_origin()
                 depth = p.get("depth", 0.5)
                 mean = self.lux_high / (1 + depth)
                 return mean * (1.0 + depth * np.sin(2 * np.pi * (v - y0) / period)
@@ -544,6 +617,12 @@ class Layer:
                 value = PATTERNS[name](u / sx, v / sy, period)
             return self.lux_low + (self.lux_high - self.lux_low) * value
         return self._sample(self.texels, u, v, jac)
+
+    def sines_origin(self) -> tuple[float, float]:
+        """Where the sines pattern starts: the top-left corner of the layer's outline (0, 0 without one)."""
+        if self.polygon is None:
+            return 0.0, 0.0
+        return float(self.polygon[0].min()), float(self.polygon[1].min())
 
     def _sample(self, texels, u, v, jac):
         x, y, w, h = self.image_box
@@ -668,27 +747,45 @@ class DescribedScene(Scene):
 
     # ----------------------------------------------------------------- maps
     def _camera(self, t: float) -> np.ndarray:
+        return self._cameras(np.array([t], dtype=np.float64))[0]
+
+    def _cameras(self, times) -> np.ndarray:
+        """The camera's map (view → canvas) at ``times`` (s), (n, 2, 3)."""
+        times = np.asarray(times, dtype=np.float64).ravel()
+        n = times.size
         cx, cy = self._centre
-        cam = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        cam = np.zeros((n, 2, 3))
+        cam[:, 0, 0] = cam[:, 1, 1] = 1.0
         if self.camera is not None:
-            px, py, a, sx, sy = self.camera.pose(t)
+            px, py, a, sx, sy = self.camera.poses(times)
             about = np.array([[1.0, 0.0, -cx], [0.0, 1.0, -cy]])
-            cam = compose(pose_matrix(cx + px, cy + py, a, sx, sy), about)
+            cam = compose(pose_matrices(cx + px, cy + py, a, sx, sy), about)
         if self.shake:
             s = self.shake
             rng = np.random.default_rng(s.get("seed", 0))
             phases = rng.uniform(0, 2 * np.pi, (2, 3))
             ratios = np.array([1.0, 1.618, 2.718])
-            tt = self.speed * t
+            tt = (self.speed * times)[:, None]
             amp = s["amplitude_px"] / math.sqrt(3 / 2)
-            dx = amp * float(np.sum(np.sin(2 * np.pi * s["frequency_hz"] * ratios * tt + phases[0]) / np.sqrt(3)))
-            dy = amp * float(np.sum(np.sin(2 * np.pi * s["frequency_hz"] * ratios * tt + phases[1]) / np.sqrt(3)))
-            cam = cam + np.array([[0.0, 0.0, dx], [0.0, 0.0, dy]])
+            k = (2 * np.pi * s["frequency_hz"] * ratios)[None, :]
+            dx = amp * np.sum(np.sin(k * tt + phases[0]) / np.sqrt(3), axis=1)
+            dy = amp * np.sum(np.sin(k * tt + phases[1]) / np.sqrt(3), axis=1)
+            cam[:, 0, 2] = cam[:, 0, 2] + dx
+            cam[:, 1, 2] = cam[:, 1, 2] + dy
         return cam
 
     def layer_map(self, layer: Layer, t: float) -> np.ndarray:
         """2×3 map from the layer's plane to the canvas (px of the rendered size) at ``t_s``."""
-        return compose(self._canvas_scale, compose(self._camera(t), layer.motion.matrix(t)))
+        return self.layer_maps(layer, np.array([t], dtype=np.float64))[0]
+
+    def layer_maps(self, layer: Layer, times) -> np.ndarray:
+        """The layer's maps at ``times`` (s), (n, 2, 3): what the reference and the compiled light both use."""
+        times = np.asarray(times, dtype=np.float64).ravel()
+        return compose(self._canvas_scale, compose(self._cameras(times), layer.motion.matrices(times)))
+
+    def modulation_factors(self, layer: Layer, times) -> np.ndarray:
+        """The layer's modulation at ``times`` (s)."""
+        return modulation_factors(layer.modulation, times)
 
     def _moves(self, layer: Layer) -> bool:
         return not layer.motion.static or self.camera is not None or bool(self.shake)
@@ -750,15 +847,60 @@ class DescribedScene(Scene):
         return lux
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
-        return self.reference_lux(t_s)
+        """The light at ``t_s`` (lux, (H, W)): the compiled renderer's (:meth:`sampler`), which agrees
+        with :meth:`reference_lux` to rounding."""
+        return self.sampler().frames(np.array([float(t_s)]))[0]
+
+    def illuminance_lux_many(self, times_s) -> np.ndarray:
+        return self.sampler().frames(np.asarray(times_s, dtype=np.float64).ravel())
+
+    def sampler(self):
+        """The :class:`~viform.light.layered_render.LayeredSampler` that renders this scene (made once)."""
+        if getattr(self, "_sampler", None) is None:
+            from viform.light.layered_render import LayeredSampler
+
+            self._sampler = LayeredSampler(self)
+        return self._sampler
+
+    def auto_light_sample_ticks(self, clock_hz: float, duration_s: float | None = None) -> int:
+        """The longest hold of the light (ticks) that misplaces the fastest outline vertex or field corner
+        by at most :data:`~viform.light.sampled.LIGHT_ERROR_PX` px at any tick (v·S/2 ≤ bound, v in px per
+        tick), and that keeps at least :data:`MODULATION_SAMPLES_PER_PERIOD` samples per period of every
+        modulation (a step: any); 1 where the light is evaluated per tick in the kernel."""
+        from viform.light.sampled import MAX_AUTO_SAMPLE_TICKS, auto_light_sample_ticks
+
+        light = self.compiled_light()
+        if light is None or light.kind != "sampled":
+            return 1
+        span = duration_s if duration_s is not None else (self.duration_s or 0.05)
+        speed = self.max_speed_px_per_s(0.0, span)
+        ticks = auto_light_sample_ticks(speed, clock_hz)
+        for layer in self._all_layers():
+            mod = layer.modulation
+            if mod:
+                kind, p = next(iter(mod.items()))
+                if kind != "step":
+                    per_period = clock_hz / (p["frequency_hz"] * MODULATION_SAMPLES_PER_PERIOD)
+                    ticks = min(ticks, max(1, int(math.floor(per_period))))
+        return int(max(1, min(ticks, MAX_AUTO_SAMPLE_TICKS)))
 
     def compiled_light(self):
-        """The simulator's compiled light where the description is one of its forms: a full-field
-        pattern (texture, edge, bars) translating or rotating, or a solid level, times a modulation, with
-        no layers, no camera motion and the canvas at its own size; None otherwise (the simulator then
-        evaluates :meth:`illuminance_lux` per light sample)."""
+        """The simulator's light: the per-tick compiled kinds where the description is one of their forms
+        (a full-field pattern — texture, edge, bars — translating or rotating, or a solid level, times a
+        modulation, with no layers, no camera motion and the canvas at its own size: the built-in scenes'
+        bits), else the sampled kind rendered by :meth:`sampler`; None when a subclass changed the light."""
         if type(self).illuminance_lux is not DescribedScene.illuminance_lux:
             return None
+        if getattr(self, "_compiled", None) is None:
+            light = self._per_tick_light()
+            if light is None:
+                from viform.light.compiled import CompiledLight
+
+                light = CompiledLight("sampled", self.height, self.width, sampler=self.sampler())
+            self._compiled = light
+        return self._compiled
+
+    def _per_tick_light(self):
         if self.layers or self.camera is not None or self.shake or self.scale_xy != (1.0, 1.0):
             return None
         from viform.light.compiled import CompiledLight

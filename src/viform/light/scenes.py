@@ -96,6 +96,11 @@ class Scene(ABC):
         """
         return None
 
+    def auto_light_sample_ticks(self, clock_hz: float, duration_s: float | None = None) -> int:
+        """Ticks per light sample the simulator uses when asked for "auto": 1 (the light of every tick
+        at its middle). Scenes whose light is sampled (described scenes) choose from their motion."""
+        return 1
+
     def _own_light(self, cls) -> bool:
         """True when ``illuminance_lux`` is ``cls``'s own (a subclass may have changed the light)."""
         return type(self).illuminance_lux is cls.illuminance_lux and \

@@ -386,7 +386,7 @@ class SpikeSensor(Sensor):
         n_ticks = max(1, int(round(duration_s * p.clock_hz)))
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
-        sample = check_int("light_sample_ticks", light_sample_ticks, 1)
+        sample = self.light_sample_ticks_for(scene, light_sample_ticks, duration_s)
         light = scene.compiled_light() if compiled_light else None
         if light is not None and light.kind in drop_light_kinds:
             light = None
@@ -410,7 +410,7 @@ class SpikeSensor(Sensor):
             mode = MODE_GENERAL
         return _RunPlan(p, n_ticks, height, width, pixels, 8 * ((pixels + _LANES - 1) // _LANES), sample, light,
                         block_ticks, q, shapes, index, tables, a, b, rate_bound, state, caller_state, reset_readout,
-                        dead_ticks, mode, light is not None and light.kind != "frames")
+                        dead_ticks, mode, light is not None and light.kind not in ("frames", "sampled"))
 
     def start_state(self, scene: Scene, sample: int, height: int, width: int, seed: int, q,
                     state: SpikeSimulationState | None = None) -> SpikeSimulationState:
@@ -446,7 +446,7 @@ class SpikeSensor(Sensor):
         return SpikeSimulationState(charge, target, counter, keys, 0)
 
     def simulate(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
-                 light_sample_ticks: int = 1, progress: bool = False,
+                 light_sample_ticks: int | str = "auto", progress: bool = False,
                  state: SpikeSimulationState | None = None,
                  reuse_buffer: bool = False, compiled_light: bool = True,
                  device: str = "cpu") -> Iterator[tuple[int, np.ndarray]]:
@@ -472,9 +472,12 @@ class SpikeSensor(Sensor):
             Photon-noise seed. Same seed, same bits, whatever ``block_ticks``.
         block_ticks : int, optional
             Ticks per block.
-        light_sample_ticks : int
+        light_sample_ticks : int or "auto"
             The scene is evaluated at the middle of every interval of ``light_sample_ticks``
-            ticks and held over it; 1 (default) evaluates it at the middle of every tick.
+            ticks and held over it; 1 evaluates it at the middle of every tick. "auto" (default):
+            the scene's choice (:meth:`light_sample_ticks_for`): 1 for every built-in scene, and for
+            a described scene the longest hold that misplaces its fastest edge by at most
+            :data:`~viform.light.sampled.LIGHT_ERROR_PX`.
         reuse_buffer : bool
             Yield every block in the same output buffer, overwritten by the next block: for
             consumers that use each block at once (writers, reducers), it saves allocating and
@@ -506,7 +509,7 @@ class SpikeSensor(Sensor):
             yield first, out.reshape(n, height, width)
 
     def simulate_packed(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
-                        light_sample_ticks: int = 1, progress: bool = False, flip: bool = False,
+                        light_sample_ticks: int | str = "auto", progress: bool = False, flip: bool = False,
                         compiled_light: bool = True, device: str = "cpu") -> Iterator[tuple[int, np.ndarray]]:
         """As :meth:`simulate`, but yields the spikes as they are produced: packed bits in the
         ``.dat`` layout, ``(first_tick, frames)`` with uint8 frames (T, H·W/8), pixel k = r·W + c
@@ -532,6 +535,7 @@ class SpikeSensor(Sensor):
     def _packed_blocks(self, scene, duration_s, seed, block_ticks, light_sample_ticks, progress, state,
                        reuse_buffer, compiled_light, packed_only=False, device="cpu"):
         """(first tick, packed bits uint8 (T, 8·⌈H·W/64⌉)) per block: the kernels' own output."""
+        light_sample_ticks = self.light_sample_ticks_for(scene, light_sample_ticks, duration_s)
         if resolve_device(device) == "cuda":
             if block_ticks is None:
                 block_ticks = self.default_block_ticks(scene, light_sample_ticks,
@@ -559,6 +563,11 @@ class SpikeSensor(Sensor):
         else:
             bounds = self._saturation_bounds(height, width)
         fixed_tables = self._fixed_point_tables(height, width)
+        sampled = None
+        if light is not None and light.kind == "sampled":
+            from viform.sensors._sampled_runs import SampledRuns
+
+            sampled = SampledRuns(self, light, sample, height, width, plan, bounds)
         segments = _Segments(self, scene, light, sample, height, width)
         buffer = None
         bar = None
@@ -583,6 +592,11 @@ class SpikeSensor(Sensor):
                     _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round,
                                      state.charge, state.target, state.counter, q, index, *tables, *fixed_tables,
                                      state.keys, p.photon_noise, reset_readout, dead_ticks, band_rows)
+                elif sampled is not None:
+                    sampled.run(out, first, last, state)
+                    if caller_state:
+                        _settle_all(state.charge, state.target, state.counter, q, index, *tables, state.keys,
+                                    state.pending_ticks, state.pending_rate)
                 else:
                     rates, seg_end = segments.block(first, last)
                     _run_block(out.view(np.uint64), rates, seg_end, first, state.charge, state.target,
@@ -600,6 +614,13 @@ class SpikeSensor(Sensor):
             if bar is not None:
                 bar.close()
 
+    def light_sample_ticks_for(self, scene: Scene, light_sample_ticks, duration_s: float | None = None) -> int:
+        """Ticks per light sample: ``light_sample_ticks`` checked, or for "auto" (or None) the scene's
+        :meth:`~viform.light.scenes.Scene.auto_light_sample_ticks` at this clock over ``duration_s``."""
+        if light_sample_ticks is None or (isinstance(light_sample_ticks, str) and light_sample_ticks == "auto"):
+            return int(scene.auto_light_sample_ticks(self.parameters.clock_hz, duration_s))
+        return check_int("light_sample_ticks", light_sample_ticks, 1)
+
     def default_block_ticks(self, scene: Scene, light_sample_ticks: int = 1, light=None,
                             budget_bytes: int | None = None, packed: bool = False) -> int:
         """Ticks per block so that a block's buffers take about ``budget_bytes`` (default
@@ -616,6 +637,8 @@ class SpikeSensor(Sensor):
             per_tick = spikes + pixels * 32 / light_sample_ticks
         elif light.kind == "frames":
             per_tick = spikes + pixels * 8 / _ticks_per_run(light, light_sample_ticks, self.parameters.clock_hz)
+        elif light.kind == "sampled":
+            per_tick = spikes  # the rendered charge is held in chunks of its own budget (sensors._sampled_runs)
         else:
             from viform.light.compiled import tick_bytes
 
@@ -623,16 +646,17 @@ class SpikeSensor(Sensor):
         return max(1, int(budget // per_tick))
 
     def capture(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
-                light_sample_ticks: int = 1, progress: bool = False, device: str = "cpu") -> SpikeStream:
+                light_sample_ticks: int | str = "auto", progress: bool = False, device: str = "cpu") -> SpikeStream:
         """Simulate into memory and return the :class:`SpikeStream` (``device`` as in :meth:`simulate`)."""
         device = resolve_device(device)
+        light_sample_ticks = self.light_sample_ticks_for(scene, light_sample_ticks, duration_s)
         blocks = [b for _, b in self.simulate(scene, duration_s, seed=seed, block_ticks=block_ticks,
                                               light_sample_ticks=light_sample_ticks, progress=progress,
                                               device=device)]
         return SpikeStream(np.concatenate(blocks), self.parameters.clock_hz, self.parameters.threshold_electrons,
                            0.0, self.capture_metadata(scene, seed, light_sample_ticks, device))
 
-    def stream(self, scene: Scene, duration_s: float, *, seed: int = 0, light_sample_ticks: int = 1,
+    def stream(self, scene: Scene, duration_s: float, *, seed: int = 0, light_sample_ticks: int | str = "auto",
                progress: bool = False, reuse_buffer: bool = False, device: str = "cpu") -> SimulatedSpikes:
         """A lazy :class:`SpikeSource` that simulates as it is read (bounded memory).
 
@@ -668,12 +692,13 @@ class SimulatedSpikes(SpikeSource):
     """
 
     def __init__(self, sensor: SpikeSensor, scene: Scene, duration_s: float, seed: int,
-                 light_sample_ticks: int = 1, progress: bool = False, reuse_buffer: bool = False,
+                 light_sample_ticks: int | str = "auto", progress: bool = False, reuse_buffer: bool = False,
                  device: str = "cpu"):
         self.device = resolve_device(device)
         p = sensor.parameters
         self.sensor, self.scene, self.seed = sensor, scene, seed
-        self.light_sample_ticks, self.progress = light_sample_ticks, progress
+        self.light_sample_ticks = sensor.light_sample_ticks_for(scene, light_sample_ticks, duration_s)
+        self.progress = progress
         self.reuse_buffer = reuse_buffer  # blocks from iter_blocks valid only until the next one
         self.height, self.width = sensor.check_scene(scene, sensor.height, sensor.width)
         self.n_ticks = max(1, int(round(check_positive("duration_s", duration_s) * p.clock_hz)))
