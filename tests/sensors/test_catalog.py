@@ -161,7 +161,9 @@ def test_highspeed_parasitic_light_reaches_the_frames():
 
     lux = 400.0
     scene = StillScene(np.full((40, 40), lux))
-    base = make_sensor("highspeed", ae=False, exposure_s=100e-6, prnu_fraction=0.0, dsnu_electrons=0.0)
+    # the camera's own shutter leaks (PLS 0.01 by default): the reference has none
+    base = make_sensor("highspeed", ae=False, exposure_s=100e-6, prnu_fraction=0.0, dsnu_electrons=0.0,
+                       parasitic_light_sensitivity=0.0)
     t_ro = base.frame_period_s
     leaky = make_sensor("highspeed", ae=False, exposure_s=100e-6, prnu_fraction=0.0, dsnu_electrons=0.0,
                         parasitic_light_sensitivity=0.05, readout_time_s=t_ro)
