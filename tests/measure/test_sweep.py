@@ -340,13 +340,16 @@ def test_resume_after_kill_and_extend(serial, tmp_path):
 
 def test_tracking_scores_join_the_table(tmp_path):
     """--tracking adds the comparison tracker's scores as columns; a 30 fps camera has one frame in a 40 ms
-    clip, so it tracks nothing: HOTA 0 and objects missed."""
+    clip: from one frame the back end finds at most the objects that stand out of their background, never
+    all of them, so it misses objects and falls short of the demand."""
     plan = sw.make_plan("multi-object", ["cmos"], ["cmos:exposure_s=1e-3"], height=32, width=48, duration_s=0.04,
                         tracking=True, require="tracking_hota>=0.5")
     doc = sw.sweep(plan, tmp_path, workers=0, progress=False)
     table = sw.read_table(tmp_path / "sweep.zarr")
     assert {"metric/tracking_hota", "metric/tracking_objects_missed"} <= set(table)
-    assert np.all(table["metric/tracking_hota"] == 0) and np.all(table["metric/tracking_objects_missed"] >= 1)
+    hota = np.asarray(table["metric/tracking_hota"], float)
+    assert np.all((hota >= 0) & (hota < 0.5)), hota
+    assert np.all(table["metric/tracking_objects_missed"] >= 1)
     assert not doc["answer"]["per_sensor"]["cmos"]["meets"]
 
 

@@ -17,25 +17,25 @@ from viform.cli.app import cli
 
 #: Modules that add commands to :data:`cli` (imported on start).
 COMMAND_MODULES = [
-    "viform.cli.spike",  # simulate (issue 2)
-    "viform.cli.reconstruct",  # reconstruct (issue 2)
-    "viform.cli.files",  # info (issue 2)
-    "viform.cli.demo",  # demo (issue 2)
-    "viform.cli.frame",  # characterize (issue 3)
-    "viform.cli.highspeed",  # highspeed (issue 4)
-    "viform.cli.gated",  # gated (issue 5)
-    "viform.cli.coding",  # encode, decode, dr (issue 6)
-    "viform.cli.display",  # lightcomm, display (issue 7)
-    "viform.cli.dataset",  # dataset (issue 14)
-    "viform.cli.capture",  # capture (issue 12)
-    "viform.cli.compare",  # compare (issue 12)
-    "viform.cli.sweep",  # sweep (issue 23)
-    "viform.cli.chip_figures",  # chip-figures (issue 16)
-    "viform.cli.calibrate",  # calibrate (issue 10)
-    "viform.cli.flow",  # flow (issue 21)
-    "viform.cli.track",  # track (issue 22)
+    "viform.cli.spike",  # simulate
+    "viform.cli.reconstruct",  # reconstruct
+    "viform.cli.files",  # info
+    "viform.cli.demo",  # demo
+    "viform.cli.frame",  # characterize
+    "viform.cli.highspeed",  # highspeed
+    "viform.cli.gated",  # gated
+    "viform.cli.coding",  # encode, decode, dr
+    "viform.cli.display",  # lightcomm, display
+    "viform.cli.dataset",  # dataset
+    "viform.cli.capture",  # capture
+    "viform.cli.compare",  # compare
+    "viform.cli.sweep",  # sweep
+    "viform.cli.chip_figures",  # chip-figures
+    "viform.cli.calibrate",  # calibrate
+    "viform.cli.flow",  # flow
+    "viform.cli.track",  # track
     "viform.cli.sensors",  # sensors: the sensor catalogue
-    "viform.cli.scenes",  # scenes, scenes show (issue 35)
+    "viform.cli.scenes",  # scenes, scenes show
 ]
 
 

@@ -64,7 +64,7 @@ OPTION_BOUNDS = {
 }
 #: Simulation work a command runs without ``--force``, estimated seconds (about a minute). The
 #: estimate uses the simulator's speed on one core of an idle machine (README "Speed": 1.6–3.8e8
-#: pixel-ticks/s on textured scenes; issue 26 measured ~14 µs of scene and bookkeeping per tick
+#: pixel-ticks/s on textured scenes; ~14 µs of scene and bookkeeping per tick measured
 #: at 32×48): :data:`SIM_PIXEL_TICKS_PER_S` and :data:`SIM_S_PER_TICK`, on the slow side.
 FORCE_WORK_S = 60.0
 SIM_PIXEL_TICKS_PER_S = 1e8

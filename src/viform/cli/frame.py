@@ -1,4 +1,4 @@
-"""CLI commands: frame sensors (issue 3) — ``viform characterize SENSOR [--out DIR] [--json] [--json-file FILE]``.
+"""CLI commands: frame sensors — ``viform characterize SENSOR [--out DIR] [--json] [--json-file FILE]``.
 
 Registered on :data:`viform.cli.app.cli`.
 """

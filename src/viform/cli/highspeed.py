@@ -1,4 +1,4 @@
-"""CLI commands: highspeed (registered on viform.cli.app.cli) — seed 002, issue 4.
+"""CLI commands: highspeed (registered on viform.cli.app.cli) — seed 002.
 
 ``viform highspeed SCENE``: the LUX13HS-like camera shoots SCENE with auto-exposure and
 histogram equalization, buffers in DDR, decimates for the link and writes the video, a plot

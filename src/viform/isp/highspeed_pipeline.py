@@ -636,7 +636,7 @@ def seed_figures(include_simulation: bool = True) -> dict:
         "equalization_shift": {**eq, "seed": "<<8, >>20 (net >>12); error 0.00003*c; + >>15; "
                                              "compensated error 'close to 0'"},
     }
-    # every published figure's status (issue 28): predicted from the paper's parameters, or
+    # every published figure's status: predicted from the paper's parameters, or
     # fitted to the figure (the 2,500 fps clock is back-solved from it)
     fig["status"] = {"reduced_1280x720_100MHz": "predicted", "normal_full_1280x864_133MHz": "predicted",
                      "reduced_166MHz": "predicted",

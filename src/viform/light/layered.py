@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._validate import ViformError, one_line
+from viform.light.affine import invert_many
 from viform.light.scenes import PATTERNS, Scene
 from viform.light.truth import FlowTruth, ObjectTruth, flow_from_layers
 
@@ -77,19 +78,6 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out[..., 1, 0] = a10 * b00 + a11 * b10
     out[..., 1, 1] = a10 * b01 + a11 * b11
     out[..., 1, 2] = a10 * b02 + a11 * b12 + a12
-    return out
-
-
-def invert_many(a: np.ndarray) -> np.ndarray:
-    """Inverses of 2×3 affine maps (..., 2, 3), in closed form."""
-    a = np.asarray(a, dtype=np.float64)
-    a00, a01, a02 = a[..., 0, 0], a[..., 0, 1], a[..., 0, 2]
-    a10, a11, a12 = a[..., 1, 0], a[..., 1, 1], a[..., 1, 2]
-    det = a00 * a11 - a01 * a10
-    out = np.empty(a.shape)
-    m00, m01, m10, m11 = a11 / det, -a01 / det, -a10 / det, a00 / det
-    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = m00, m01, -(m00 * a02 + m01 * a12)
-    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = m10, m11, -(m10 * a02 + m11 * a12)
     return out
 
 

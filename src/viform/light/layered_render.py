@@ -21,6 +21,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from viform.light.affine import invert_many
 from viform.light.sampled import LightSampler, lux_to_rates, ranges_to_spans
 
 SOLID, GAUSSIAN, PATTERN, IMAGE = 0, 1, 2, 3
@@ -504,7 +505,5 @@ class LayeredSampler(LightSampler):
 
 
 def _invert(a: np.ndarray) -> np.ndarray:
-    """Inverses of 2×3 affine maps (n, 2, 3) (:func:`viform.light.layered.invert_many`)."""
-    from viform.light.layered import invert_many
-
+    """Inverses of 2×3 affine maps (n, 2, 3) (:func:`viform.light.affine.invert_many`)."""
     return invert_many(a)
