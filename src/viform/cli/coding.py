@@ -29,11 +29,11 @@ def _emit(summary: dict, as_json: bool, json_file, line: str) -> None:
     click.echo(json.dumps(summary, indent=2, ensure_ascii=False) if as_json else line)
 
 
-def _announce_compile(direction: str) -> None:
-    from viform.coding._compile_cache import COMPILING_NOTICE, kernels_cached
+def _announce_compile() -> None:
+    """The compile notice, on stderr, at the moment a coding kernel really is compiled (not loaded)."""
+    from viform.coding._compile_cache import COMPILING_NOTICE, announce_compiles
 
-    if not kernels_cached(direction):
-        click.echo(COMPILING_NOTICE, err=True)
+    announce_compiles(lambda: click.echo(COMPILING_NOTICE, err=True))
 
 
 _JSON_OPTIONS = (
@@ -111,7 +111,7 @@ def encode_cmd(src, dst, mode, k, threshold, slack, height, width, no_flip, cloc
             raise ViformError(f"--segment-ticks = {segment_ticks} is not allowed for {source.height}×{source.width} "
                               f"pixels: a segment is held in memory while it is coded; give at most "
                               f"{MAX_SEGMENT_PIXEL_TICKS // n_pixels} ticks")
-    _announce_compile("encode")
+    _announce_compile()
     t0 = time.perf_counter()
     summary = encode_source(source, dst, mode, k=k, threshold_electrons=threshold, slack_ticks=slack,
                             segment_ticks=segment_ticks, progress=True, fast=fast)
@@ -132,7 +132,7 @@ def decode_cmd(src, dst, as_json, json_file):
 
     check_json_file(json_file)
     coded = CodedFile(src)
-    _announce_compile("decode")
+    _announce_compile()
     t0 = time.perf_counter()
     save_spikes(dst, coded)
     summary = {"path": str(dst), "source": str(src), "mode": coded.mode, "n_ticks": int(coded.n_ticks),
