@@ -27,7 +27,7 @@ from make_stream import (  # noqa: E402 -- the fixtures' own generator, importab
 )
 
 #: versions whose fixtures were written by the code of that version (make_stream.py)
-FIXTURE_VERSIONS = (1, 2, 3, 4, 5)
+FIXTURE_VERSIONS = (1, 2, 3, 4, 5, 6)
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,7 @@ def spikes():
 @pytest.mark.parametrize("mode", MODES)
 def test_files_of_every_earlier_version_decode_exactly(spikes, mode):
     """The fixtures were written by the code of each version (v1: f5a62db^, v2: 8d83148^, v3: 608621c^,
-    v4: 866098e, v5: 70d19ee); strict ones decode to the stream,
+    v4: 866098e, v5: 70d19ee, v6: the commit that made it the default); strict ones decode to the stream,
     lossy ones to the same spikes in every version (they code the same first-spike records), with the
     header's values."""
     decoded = []
@@ -70,7 +70,7 @@ def test_writers_of_every_version_keep_their_bytes(tmp_path, spikes, mode):
         assert path.read_bytes() == (FIXTURES / f"v{v}_{mode}.vfc").read_bytes(), v
     if mode == "strict":
         size = {v: (FIXTURES / f"v{v}_strict.vfc").stat().st_size for v in FIXTURE_VERSIONS}
-        assert size[5] <= min(size[3], size[4]), size
+        assert size[5] <= min(size[3], size[4]) and size[6] <= size[5], size
 
 
 def test_version_5_chooses_per_band(tmp_path):
@@ -94,8 +94,9 @@ def test_version_5_chooses_per_band(tmp_path):
         charge[charge >= 1] -= 1
     s = SpikeStream(out, 40_000.0, 30.0)
     sizes = {}
-    for v in (3, 4, 5):
+    for v in (3, 4, 5, 6):
         sizes[v] = encode_source(s, tmp_path / f"v{v}.vfc", segment_ticks=400, version=v)["bytes"]
+    assert sizes[6] <= sizes[5] and np.array_equal(CodedFile(tmp_path / "v6.vfc").read_ticks(0, t), out), sizes
     payload = (tmp_path / "v5.vfc").read_bytes()
     cf = CodedFile(tmp_path / "v5.vfc")
     start = cf._index[0][0]
@@ -106,6 +107,7 @@ def test_version_5_chooses_per_band(tmp_path):
     # --fast: version 5 with the interval model on every band (version 4's work), still lossless, larger here
     fast = encode_source(s, tmp_path / "f.vfc", segment_ticks=400, fast=True)["bytes"]
     ff = CodedFile(tmp_path / "f.vfc")
+    assert ff.version == 5
     fp = (tmp_path / "f.vfc").read_bytes()[ff._index[0][0]:ff._index[0][0] + ff._index[0][1]]
     assert vfc_v5.band_models(fp, 2) == [vfc_v5.MODEL_INTERVALS] * 2 and fast > sizes[5]
     assert np.array_equal(ff.read_ticks(0, t), out)
@@ -191,3 +193,54 @@ def test_writer_never_writes_what_the_reader_refuses(tmp_path):
     with pytest.raises(ViformError, match="k = "):
         encode_source(SpikeStream(np.zeros((10, 2, 2), bool), 1e3, 100.0), tmp_path / "k.vfc", "statistical", k=2e6)
     assert not list(tmp_path.iterdir())
+
+
+def _runs_of_widths(rng, t, h, w, widths=(5, 60), runs=(2, 5)) -> np.ndarray:
+    """Pixels that hold a random width for a short run of spikes, then jump to another (what records code well)."""
+    out = np.zeros((t, h, w), bool)
+    for i in range(h):
+        for j in range(w):
+            tick = int(rng.integers(0, 10))
+            while tick < t:
+                width = int(rng.integers(*widths))
+                for _ in range(int(rng.integers(*runs))):
+                    if tick >= t:
+                        break
+                    out[tick, i, j] = True
+                    tick += width
+    return out
+
+
+def test_version_6_codes_records_where_smaller(tmp_path, monkeypatch):
+    """A band of shot-noise pixels (Gamma intervals, Q = 30) and a band of pixels jumping between held widths:
+    version 6 codes the first with the tick model and the second as records (after its first segment), the
+    state carried across the switch; exact, no larger than version 5, the same bytes on 1 or 2 threads, and
+    damage gives a one-line error or the exact spikes."""
+    from test_aer_file import _assert_damage_is_refused_or_harmless
+
+    from viform.coding import vfc_v6
+
+    rng = np.random.default_rng(11)
+    t, h, w = 400, 96, 8
+    out = np.zeros((t, h, w), bool)
+    rate = rng.uniform(0.08, 0.3, (48, w))
+    charge = rng.uniform(0, 1, (48, w))
+    for k in range(t):
+        charge += rng.gamma(30 * rate, 1 / 30)
+        out[k, :48] = charge >= 1
+        charge[charge >= 1] -= 1
+    out[:, 48:] = _runs_of_widths(rng, t, 48, w)
+    s = SpikeStream(out, 40_000.0, 30.0)
+    sizes = {v: encode_source(s, tmp_path / f"v{v}.vfc", segment_ticks=100, version=v)["bytes"] for v in (5, 6)}
+    assert sizes[6] <= sizes[5], sizes
+    cf = CodedFile(tmp_path / "v6.vfc")
+    data = (tmp_path / "v6.vfc").read_bytes()
+    models = [vfc_v6.band_models(data[off:off + length], 2) for off, length, _ in cf._index]
+    assert [m[0] for m in models] == [vfc_v6.MODEL_TICKS] * 4, models
+    assert vfc_v6.MODEL_RECORDS in [m[1] for m in models], models
+    assert np.array_equal(cf.read_ticks(0, t), out)
+    assert np.array_equal(cf.read_ticks(150, 333), out[150:333])
+    monkeypatch.setenv("VIFORM_THREADS", "1")
+    encode_source(s, tmp_path / "one.vfc", segment_ticks=100, version=6)
+    assert (tmp_path / "one.vfc").read_bytes() == data
+    _assert_damage_is_refused_or_harmless(tmp_path, data, step=53, seed=6, flips=150)

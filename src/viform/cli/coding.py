@@ -86,8 +86,9 @@ def _check_tolerance(threshold, k, slack) -> None:
                    "fewer for sensors above 8,192 pixels in strict mode: a segment holds at most 2^25 "
                    "pixel-ticks by default and 2^28 if you set it]")
 @click.option("--fast", is_flag=True,
-              help="Strict mode: code every band of rows with one model instead of keeping the smallest of three "
-                   "(about 3× faster to encode; files up to 10 % larger on some streams; decoding is as fast).")
+              help="Strict mode: write format version 5 with its interval model on every band of rows instead of "
+                   "version 6's tick model (about 1.5× faster to encode and decode; files up to 10 % larger on "
+                   "some streams).")
 @_json_options
 def encode_cmd(src, dst, mode, k, threshold, slack, height, width, no_flip, clock_hz, key, axes, segment_ticks, fast,
                as_json, json_file):
