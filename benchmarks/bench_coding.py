@@ -344,7 +344,7 @@ CORPUS_CLOCKS_HZ = (20e3, 40e3)
 
 def corpus_streams():
     """(half, name, make) for every stream of the corpus; ``make()`` gives a SpikeStream."""
-    from viform.light.scenes import BUILTIN_SCENES, builtin_scene
+    from viform.light.catalog import BUILTIN_SCENES, builtin_scene
     from viform.sensors.spike_presets import _builtin
     from viform.stream.io import open_spikes
 

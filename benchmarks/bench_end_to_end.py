@@ -30,7 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from viform.light.scenes import BUILTIN_SCENES, StillScene, VideoScene, builtin_scene, texture
+from viform.light.catalog import BUILTIN_SCENES, builtin_scene
+from viform.light.scenes import StillScene, VideoScene, texture
 from viform.sensors.spike import SpikeSensor, simulation_threads
 from viform.stream.dat import pack_frames
 

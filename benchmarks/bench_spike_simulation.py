@@ -1,20 +1,25 @@
 """Spike-camera simulation throughput against plain per-tick NumPy loops, in the same process.
 
-Configuration (issues 2 §8 and 30): 400×250 pixels, 40 kHz clock, Q = 100 e⁻, constant light
-with a ±50 % texture at mean firing 0.01, 0.1 and 0.5 spikes per tick. For each firing rate,
-viform exact (Gamma intervals) and noise-free, as the file writers run it (packed ``.dat`` bits,
-:meth:`SpikeSensor.simulate_packed`) and as bool frames (:meth:`SpikeSensor.simulate`), against:
+Configuration: 400×250 pixels, 40 kHz clock, Q = 100 e⁻, constant light with a ±50 % texture at
+mean firing 0.01, 0.1 and 0.5 spikes per tick. viform exact (Gamma intervals) and noise-free, as
+the file writers run it (packed ``.dat`` bits, :meth:`SpikeSensor.simulate_packed`), at 1 and 2
+numba threads, against three plain loops, each started from the stationary charge (uniform in
+[0, Q): no pixel fires in lockstep with another) and each writing packed bits:
 
-* the plain noise-free NumPy loop, float32 (``integral += frame; fire = integral >= Q;
-  integral[fire] -= Q``) — what public dataset generators run;
-* the NumPy per-tick Poisson loop (the textbook exact method);
-* a Spike-Zoo-style generator, written out below (random initial integral in [0, Q), the same
-  accumulate-and-fire per frame, spikes stored as uint8 through ``nonzero``).
+* masked, float32: ``acc += frame; fired = acc >= Q; acc[fired] -= Q`` — what public dataset
+  generators run; its speed depends on the firing pattern (a random one defeats the branch
+  predictor);
+* branch-free, float32: ``acc -= fired * Q`` in place of the masked subtraction — the fastest
+  plain loop whatever the pattern, the reference of the ratios below;
+* Poisson: a Poisson electron count per pixel and tick, fire and subtract Q — the textbook exact
+  method.
 
-Rates are pixel-ticks per second of wall time and per CPU-second (process time of all threads,
-less sensitive to the other work on a shared machine); ratios are per CPU-second, measured in
-the same process. The machine's load average is printed before and after. The real-time
-factor (simulated seconds per wall second at 40 kHz) is printed for 400×250 and 1000×1000.
+Rates are pixel-ticks per CPU-second (process time of all threads: less sensitive than wall time
+to the other work on a shared machine); the ratios divide viform's by a loop's, measured in the
+same process. Each stream's mean firing is printed beside it: viform's and the loops' must agree
+(the same light), so the ratios compare like with like. The machine's load average is printed
+before and after, and the peak resident memory at the end. The real-time factor (simulated
+seconds per wall second at 40 kHz) is printed for 400×250 and 1000×1000.
 Run: ``python benchmarks/bench_spike_simulation.py [--seconds 0.1] [--repeats 3]``.
 """
 
@@ -22,66 +27,80 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import time
 
 import numpy as np
+from numba import get_num_threads, set_num_threads
 
 from viform.light.scenes import StillScene
-from viform.sensors.spike import SpikeSensor, simulation_threads
+from viform.sensors.spike import SpikeSensor
 
 HEIGHT, WIDTH, CLOCK_HZ, Q = 250, 400, 40_000.0, 100
 FIRINGS_PER_TICK = (0.01, 0.1, 0.5)
 
 
-def reference_poisson(rate_e_per_tick: np.ndarray, n_ticks: int, q: int, seed: int) -> np.ndarray:
-    """Plain per-tick loop: Poisson electrons each tick, fire and reset at Q (the textbook way)."""
+def masked_loop(rate_e_per_tick: np.ndarray, n_ticks: int, q: float, seed: int) -> np.ndarray:
+    """The masked float32 loop from the stationary charge; packed bits (ticks × pixels/8)."""
     rng = np.random.default_rng(seed)
-    charge = np.zeros(rate_e_per_tick.shape, dtype=np.int64)
-    out = np.empty((n_ticks,) + rate_e_per_tick.shape, dtype=bool)
+    frame = rate_e_per_tick.astype(np.float32).ravel()
+    acc = (rng.random(frame.size) * q).astype(np.float32)
+    qf = np.float32(q)
+    out = np.empty((n_ticks, frame.size // 8), dtype=np.uint8)
     for k in range(n_ticks):
-        charge += rng.poisson(rate_e_per_tick)
+        acc += frame
+        fired = acc >= qf
+        acc[fired] -= qf
+        out[k] = np.packbits(fired, bitorder="little")
+    return out
+
+
+def branch_free_loop(rate_e_per_tick: np.ndarray, n_ticks: int, q: float, seed: int) -> np.ndarray:
+    """The branch-free float32 loop (``acc -= fired * Q``, buffers reused) from the stationary charge."""
+    rng = np.random.default_rng(seed)
+    frame = rate_e_per_tick.astype(np.float32).ravel()
+    acc = (rng.random(frame.size) * q).astype(np.float32)
+    qf = np.float32(q)
+    fired = np.empty(frame.size, dtype=bool)
+    step = np.empty(frame.size, dtype=np.float32)
+    out = np.empty((n_ticks, frame.size // 8), dtype=np.uint8)
+    for k in range(n_ticks):
+        np.add(acc, frame, out=acc)
+        np.greater_equal(acc, qf, out=fired)
+        np.multiply(fired, qf, out=step)
+        np.subtract(acc, step, out=acc)
+        out[k] = np.packbits(fired, bitorder="little")
+    return out
+
+
+def poisson_loop(rate_e_per_tick: np.ndarray, n_ticks: int, q: int, seed: int) -> np.ndarray:
+    """Poisson electrons per pixel and tick, fire and subtract Q, from the stationary count (uniform
+    in 0 … Q − 1: the electron count modulo Q of a pixel exposed long before)."""
+    rng = np.random.default_rng(seed)
+    rate = rate_e_per_tick.ravel()
+    charge = rng.integers(0, q, size=rate.size).astype(np.int64)
+    out = np.empty((n_ticks, rate.size // 8), dtype=np.uint8)
+    for k in range(n_ticks):
+        charge += rng.poisson(rate)
         fired = charge >= q
-        charge[fired] -= q
-        out[k] = fired
+        charge -= fired * q
+        out[k] = np.packbits(fired, bitorder="little")
     return out
 
 
-def reference_float32(rate_e_per_tick: np.ndarray, n_ticks: int, q: float) -> np.ndarray:
-    """The plain noise-free loop in float32: accumulate the expected charge, fire and subtract Q."""
-    frame = rate_e_per_tick.astype(np.float32)
-    integral = np.zeros(frame.shape, dtype=np.float32)
-    out = np.empty((n_ticks,) + frame.shape, dtype=bool)
-    for k in range(n_ticks):
-        integral += frame
-        fire = integral >= q
-        integral[fire] -= q
-        out[k] = fire
-    return out
+LOOPS = {"masked": masked_loop, "branch-free": branch_free_loop, "Poisson": poisson_loop}
 
 
-def spike_zoo_style(frames: np.ndarray, q: float, seed: int = 0) -> np.ndarray:
-    """A Spike-Zoo-style generator: random initial integral, per-frame accumulate and fire, uint8 spikes."""
-    rng = np.random.default_rng(seed)
-    integral = rng.random(frames.shape[1:]) * q
-    spikes = np.zeros(frames.shape, dtype=np.uint8)
-    for k in range(frames.shape[0]):
-        integral += frames[k]
-        fire = (integral - q) >= 0
-        positions = fire.nonzero()
-        integral[positions] -= q
-        spikes[k][positions] = 1
-    return spikes
-
-
-def timed(fn, repeats: int) -> tuple[float, float]:
-    """Best (wall s, CPU s of all threads) over ``repeats`` calls."""
+def timed(fn, repeats: int):
+    """(best wall s, best CPU s of all threads, last result) over ``repeats`` calls."""
     walls, cpus = [], []
+    result = None
     for _ in range(repeats):
         wall, cpu = time.perf_counter(), time.process_time()
-        fn()
+        result = fn()
         walls.append(time.perf_counter() - wall)
         cpus.append(time.process_time() - cpu)
-    return min(walls), min(cpus)
+    return min(walls), min(cpus), result
 
 
 def still_scene(firing_per_tick: float, height: int = HEIGHT, width: int = WIDTH) -> StillScene:
@@ -92,73 +111,80 @@ def still_scene(firing_per_tick: float, height: int = HEIGHT, width: int = WIDTH
 
 
 def run_packed(sensor, scene, n_ticks):
-    for _ in sensor.simulate_packed(scene, n_ticks / CLOCK_HZ, seed=1):
-        pass
+    """The packed stream as one array (ticks × pixels/8)."""
+    return np.concatenate([b for _, b in sensor.simulate_packed(scene, n_ticks / CLOCK_HZ, seed=1)])
 
 
-def run_bool(sensor, scene, n_ticks):
-    for _ in sensor.simulate(scene, n_ticks / CLOCK_HZ, seed=1, reuse_buffer=True):
-        pass
+def firing(packed: np.ndarray) -> float:
+    return float(np.unpackbits(packed).mean())
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=0.1, help="simulated seconds for viform")
-    parser.add_argument("--reference-ticks", type=int, default=200, help="ticks run by the reference loops")
+    parser.add_argument("--reference-ticks", type=int, default=400, help="ticks run by the NumPy loops")
+    parser.add_argument("--poisson-ticks", type=int, default=40, help="ticks run by the (slow) Poisson loop")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="numba threads for viform")
     parser.add_argument("--megapixel-seconds", type=float, default=0.01,
                         help="simulated seconds for the 1000×1000 real-time figure (0 skips it)")
     args = parser.parse_args(argv)
     n_ticks = int(round(args.seconds * CLOCK_HZ))
     pixels = HEIGHT * WIDTH
-    print(f"{HEIGHT}x{WIDTH} pixels, {CLOCK_HZ:g} Hz, Q = {Q} e-, {n_ticks} ticks; numba threads "
-          f"{simulation_threads()} on {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.1f}")
-    print(f"{'firing':>6} {'model':>10} {'viform .dat bits':>26} {'viform bool':>12} {'float32 loop':>13} "
-          f"{'Poisson loop':>13} {'Spike-Zoo':>10} {'× f32':>6} {'× Poisson':>9} {'× Zoo':>6} {'real time':>9}")
-    print(f"{'/tick':>6} {'':>10} {'wall':>8} {'per CPU-s':>9} {'CPU/wall':>8} {'per CPU-s':>12} {'per CPU-s':>13} "
-          f"{'per CPU-s':>13} {'per CPU-s':>10} {'(CPU)':>6} {'(CPU)':>9} {'(CPU)':>6} {'(wall)':>9}")
+    threads_before = get_num_threads()
+    threads = [t for t in args.threads if 1 <= t <= threads_before]
+    print(f"{HEIGHT}x{WIDTH} pixels, {CLOCK_HZ:g} Hz, Q = {Q} e-, viform {n_ticks} ticks, loops "
+          f"{args.reference_ticks} (Poisson {args.poisson_ticks}); {os.cpu_count()} CPUs; "
+          f"load average {os.getloadavg()[0]:.1f}")
+    print("rates in M pixel-ticks per CPU-second; ratios = viform / loop, same process; firing = mean spikes/tick")
     rows = []
-    for firing in FIRINGS_PER_TICK:
-        scene = still_scene(firing)
+    for firing_target in FIRINGS_PER_TICK:
+        scene = still_scene(firing_target)
         probe = SpikeSensor(threshold_electrons=Q, clock_hz=CLOCK_HZ, dark_current_e_per_s=0.0)
         rate = probe.electrons_per_tick(scene.illuminance_lux(0.0))
-        _, cpu_f32 = timed(lambda r=rate, n=args.reference_ticks: reference_float32(r, n, Q), args.repeats)
-        _, cpu_zoo = timed(lambda r=rate, n=args.reference_ticks:
-                           spike_zoo_style(np.broadcast_to(r, (n,) + r.shape), Q), args.repeats)
-        _, cpu_poisson = timed(lambda r=rate, n=args.reference_ticks: reference_poisson(r, n, Q, 1), args.repeats)
-        f32 = args.reference_ticks * pixels / cpu_f32
-        zoo = args.reference_ticks * pixels / cpu_zoo
-        poisson = args.reference_ticks * pixels / cpu_poisson
+        loops = {}
+        for name, loop in LOOPS.items():
+            ticks = args.poisson_ticks if name == "Poisson" else args.reference_ticks
+            _, cpu, bits = timed(lambda lp=loop, t=ticks, r=rate: lp(r, t, Q, 1), args.repeats)
+            loops[name] = (ticks * pixels / cpu, firing(bits))
+        print(f"\nfiring {firing_target:g}: loops " + ", ".join(f"{name} {r / 1e6:.0f} (firing {f:.3f})"
+                                                           for name, (r, f) in loops.items()))
+        print(f"  {'model':>10} {'threads':>7} {'per CPU-s':>9} {'wall':>8} {'firing':>7} {'× masked':>8} "
+              f"{'× branch-free':>13} {'× Poisson':>9} {'real time':>9}")
         for noise in (True, False):
             sensor = SpikeSensor(threshold_electrons=Q, clock_hz=CLOCK_HZ, dark_current_e_per_s=0.0,
                                  photon_noise=noise)
-            run_packed(sensor, scene, 64)  # compile
-            run_bool(sensor, scene, 64)
-            wall, cpu = timed(lambda s=sensor, sc=scene: run_packed(s, sc, n_ticks), args.repeats)
-            _, cpu_bool = timed(lambda s=sensor, sc=scene: run_bool(s, sc, n_ticks), args.repeats)
-            work = n_ticks * pixels
-            viform_wall, viform_cpu = work / wall, work / cpu
-            row = {"firing_per_tick": firing, "model": "exact" if noise else "noise-free",
-                   "pixel_ticks_per_s": viform_wall, "per_cpu_s": viform_cpu, "cpu_over_wall": cpu / wall,
-                   "bool_per_cpu_s": work / cpu_bool, "float32_loop_per_cpu_s": f32,
-                   "poisson_loop_per_cpu_s": poisson, "spike_zoo_per_cpu_s": zoo,
-                   "ratio_float32": viform_cpu / f32, "ratio_poisson": viform_cpu / poisson,
-                   "ratio_spike_zoo": viform_cpu / zoo, "real_time_factor": viform_wall / (pixels * CLOCK_HZ)}
-            rows.append(row)
-            print(f"{firing:>6g} {row['model']:>10} {viform_wall:>8.3g} {viform_cpu:>9.3g} {cpu / wall:>8.2f} "
-                  f"{work / cpu_bool:>12.3g} {f32:>13.3g} {poisson:>13.3g} {zoo:>10.3g} "
-                  f"{row['ratio_float32']:>6.2f} {row['ratio_poisson']:>9.1f} {row['ratio_spike_zoo']:>6.2f} "
-                  f"{row['real_time_factor']:>9.3f}", flush=True)
+            for n_threads in threads:
+                set_num_threads(n_threads)
+                try:
+                    run_packed(sensor, scene, 64)  # compile / load the cached kernels
+                    wall, cpu, bits = timed(lambda s=sensor, sc=scene: run_packed(s, sc, n_ticks), args.repeats)
+                finally:
+                    set_num_threads(threads_before)
+                work = n_ticks * pixels
+                per_cpu = work / cpu
+                row = {"firing_per_tick": firing_target, "model": "exact" if noise else "noise-free",
+                       "threads": n_threads, "per_cpu_s": per_cpu, "pixel_ticks_per_s": work / wall,
+                       "firing": firing(bits), "real_time_factor": work / wall / (pixels * CLOCK_HZ)}
+                for name, (r, _) in loops.items():
+                    row[f"ratio_{name}"] = per_cpu / r
+                    row[f"{name}_per_cpu_s"] = r
+                rows.append(row)
+                print(f"  {row['model']:>10} {n_threads:>7} {per_cpu / 1e6:>9.0f} {work / wall / 1e6:>8.0f} "
+                      f"{row['firing']:>7.3f} {row['ratio_masked']:>8.2f} {row['ratio_branch-free']:>13.2f} "
+                      f"{row['ratio_Poisson']:>9.1f} {row['real_time_factor']:>9.3f}", flush=True)
     if args.megapixel_seconds > 0:
         scene = still_scene(0.1, 1000, 1000)
         sensor = SpikeSensor(threshold_electrons=Q, clock_hz=CLOCK_HZ, dark_current_e_per_s=0.0)
         run_packed(sensor, scene, 16)
         ticks = max(1, int(round(args.megapixel_seconds * CLOCK_HZ)))
-        wall, cpu = timed(lambda: run_packed(sensor, scene, ticks), 1)
-        print(f"1000x1000 exact at firing 0.1: {ticks * 1e6 / wall:.3g} pixel-ticks/s wall "
-              f"({ticks * 1e6 / cpu:.3g} per CPU-s), real-time factor {ticks / CLOCK_HZ / wall:.4f}")
-    print(f"load average after: {os.getloadavg()[0]:.1f}. × f32 / × Poisson / × Zoo: viform .dat bits per "
-          "CPU-second over the loop's; real time: simulated seconds per wall second at 40 kHz.")
+        wall, cpu, _ = timed(lambda: run_packed(sensor, scene, ticks), 1)
+        print(f"\n1000x1000 exact at firing 0.1, {threads_before} threads: {ticks * 1e6 / wall / 1e6:.0f} M "
+              f"pixel-ticks/s wall ({ticks * 1e6 / cpu / 1e6:.0f} per CPU-s), real-time factor "
+              f"{ticks / CLOCK_HZ / wall:.4f}")
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"load average after: {os.getloadavg()[0]:.1f}; peak resident memory {peak_mib:.0f} MiB. "
+          "Real time: simulated seconds per wall second at 40 kHz.")
     return rows
 
 

@@ -1,71 +1,95 @@
-"""The designer's standard sweep on the demo's dilemma scene: wall time, CPU-seconds, speed-up on 2 workers.
+"""Sweeps that scale: a 32-point sweep in this process and on 1 and 2 dask workers — wall, CPU, ratios.
 
-The sweep (``viform sweep dilemma`` with no ``--sensor``): the spike camera's 16 threshold levels ×
-2 clocks (20 / 40 kHz) and 20 settings of each frame sensor (plus each sensor's default), at
-64×128 pixels, 40 ms. It is run into fresh folders with 1 and with 2 local dask workers (the
-LocalCluster's start-up included in the wall time, as a user sees it) and, as the plain
-reference, in this process without dask. Printed: points, wall s, CPU-seconds of the points
-(each worker process's CPU time over its points, summed) and of this process, the load average
-before and after, and the speed-up of 2 workers over 1. The metrics of the runs are checked
-identical.
-Run: ``python benchmarks/bench_sweep.py [--workers 1,2] [--serial]``.
+The sweep (default): the spike camera's 16 threshold levels × 2 clocks (20 / 40 kHz) on the demo's
+dilemma scene, 64×128 pixels, 40 ms — 32 points (``--standard``: the designer's standard sweep of
+every sensor instead). It is run into fresh folders in this process without dask (the plain
+reference) and with 1 and 2 local dask workers (the LocalCluster's start-up included in the wall
+time, as a user sees it). Printed per run: wall s; CPU-seconds of this process and of its child
+processes (the dask workers and their nannies, counted when they exit), and their sum; the sum of
+the points' own CPU-seconds; the per-point overhead (the run's CPU beyond the points', per point);
+the load average before and after. Then the ratios to the in-process run, wall and CPU, and the
+check that every run's metrics and images are identical.
+
+The machine may be shared: the load is printed beside every figure, and the CPU-seconds ratio
+(which a busy machine changes little) beside the wall ratio. The goal (≤ 0.6× the in-process wall
+with 2 workers) is stated for an idle 2-core machine.
+
+Run: ``python benchmarks/bench_sweep.py [--workers 0,1,2] [--height 64 --width 128 --duration 0.04]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import tempfile
 import time
 
 import numpy as np
 
-from viform.measure.sweep import make_plan, sweep
+from viform.measure.sweep import load_images, make_plan, run, sweep
 
 
 def load() -> str:
     return " ".join(f"{v:.2f}" for v in os.getloadavg())
 
 
+def _cpu() -> tuple[float, float]:
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--workers", default="1,2", help="worker counts to run, comma-separated")
-    ap.add_argument("--serial", action="store_true", help="also run in this process without dask")
+    ap.add_argument("--workers", default="0,1,2", help="worker counts to run, comma-separated (0: in this process)")
     ap.add_argument("--height", type=int, default=64)
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--duration", type=float, default=0.04)
+    ap.add_argument("--standard", action="store_true", help="the standard sweep of every sensor (158 points)")
+    ap.add_argument("--tasks-per-worker", type=int, default=None,
+                    help=f"points are grouped into this many tasks per worker (default {run.TASKS_PER_WORKER}); "
+                         "a large number gives one task per point")
     args = ap.parse_args()
-    plan = make_plan("dilemma", height=args.height, width=args.width, duration_s=args.duration,
-                     require="dr_captured_db>=122,edge_width_px<=2")
-    print(f"standard sweep: {len(plan.points)} points on dilemma {args.height}×{args.width}, "
-          f"{args.duration * 1e3:g} ms; {os.cpu_count()} CPUs; load {load()}")
-    runs = [("in-process", 0)] if args.serial else []
-    runs += [(f"{n} worker{'s' if n > 1 else ''}", n) for n in map(int, args.workers.split(","))]
+    if args.tasks_per_worker is not None:
+        run.TASKS_PER_WORKER = args.tasks_per_worker
+    size = dict(height=args.height, width=args.width, duration_s=args.duration)
+    if args.standard:
+        plan = make_plan("dilemma", require="dr_captured_db>=122,edge_width_px<=2", **size)
+    else:
+        plan = make_plan("dilemma", ["spikeone"], ["spikeone:threshold_level=all", "spikeone:clock_hz=20e3,40e3"],
+                         require="dr_captured_db>=60,time_resolution_s<=0.000333", **size)
+    print(f"sweep: {len(plan.points)} points on dilemma {args.height}×{args.width}, {args.duration * 1e3:g} ms; "
+          f"{run.TASKS_PER_WORKER} tasks per worker; {os.cpu_count()} CPUs; load {load()}", flush=True)
     results = {}
-    for name, workers in runs:
-        with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp:
+        for workers in map(int, args.workers.split(",")):
+            out = os.path.join(tmp, f"w{workers}")
             before = load()
-            wall, cpu = time.perf_counter(), time.process_time()
-            doc = sweep(plan, tmp, workers=workers, progress=False)
-            wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-            results[name] = (wall, doc)
-            print(f"{name:<12} {doc['n_points']} points  wall {wall:7.1f} s (points {doc['seconds']:.1f} s)  "
-                  f"CPU-s of the points {doc['cpu_seconds']:6.1f}  of this process {cpu:6.1f}  "
-                  f"load {before} → {load()}", flush=True)
-    names = list(results)
-    ref = results[names[0]][1]["records"]
-    for name in names[1:]:
-        for a, b in zip(ref, results[name][1]["records"], strict=True):
-            for k, v in a["metrics"].items():
-                w = b["metrics"][k]
-                same = (v == w) or (isinstance(v, float) and np.isnan(v) and np.isnan(w))
-                assert same, (name, a["label"], k, v, w)
-    print("metrics identical across runs: yes")
-    one = [n for n in names if n.startswith("1 ")]
-    two = [n for n in names if n.startswith("2 ")]
-    if one and two:
-        print(f"speed-up of 2 workers over 1: {results[one[0]][0] / results[two[0]][0]:.2f}× (wall)")
-    print("answer:", *results[names[-1]][1]["answer"]["sentences"], sep="\n  ")
+            (me0, kids0), wall = _cpu(), time.perf_counter()
+            doc = sweep(plan, out, workers=workers, progress=False)
+            wall = time.perf_counter() - wall
+            me1, kids1 = _cpu()
+            me, kids = me1 - me0, kids1 - kids0
+            overhead = (me + kids - doc["cpu_seconds"]) / len(plan.points)
+            results[workers] = (wall, me + kids, doc, out)
+            print(f"{workers} worker{'s' if workers != 1 else ''}{' (in this process)' if workers == 0 else ''}: "
+                  f"wall {wall:6.1f} s  CPU-s: this process {me:5.1f} + children {kids:5.1f} = {me + kids:5.1f}; "
+                  f"points' own {doc['cpu_seconds']:5.1f} ({doc['cpu_seconds'] / len(plan.points):.3f}/point); "
+                  f"overhead {overhead:+.3f} CPU-s/point; load {before} → {load()}", flush=True)
+        names = list(results)
+        ref_wall, ref_cpu, ref, ref_out = results[names[0]]
+        for w in names[1:]:
+            wall, cpu, doc, out = results[w]
+            for a, b in zip(ref["records"], doc["records"], strict=True):
+                for k, v in a["metrics"].items():
+                    u = b["metrics"][k]
+                    assert v == u or (isinstance(v, float) and np.isnan(v) and np.isnan(u)), (w, a["label"], k, v, u)
+                assert np.array_equal(load_images(ref_out, a["point_id"]), load_images(out, b["point_id"]),
+                                      equal_nan=True), (w, a["label"])
+            print(f"{w} workers / {names[0]}: wall {wall / ref_wall:.2f}×, CPU-s {cpu / ref_cpu:.2f}×")
+    print("metrics and images identical across runs: yes")
+    print("answer:", *results[names[-1]][2]["answer"]["sentences"], sep="\n  ")
 
 
 if __name__ == "__main__":

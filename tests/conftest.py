@@ -1,15 +1,41 @@
-"""Shared fixtures: the real spike data kept beside the project (never copied into it)."""
+"""Shared fixtures: the real spike data kept beside the project (never copied into it); the whole
+suite on two worker processes."""
 
+import os
 from pathlib import Path
 
 import pytest
 
-SHARED_SPIKE_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "spike"
+#: Worker processes for a plain ``pytest`` (the README's command: no paths, no ``-n``) when
+#: pytest-xdist (a test extra) is installed; ``VIFORM_TEST_WORKERS=N`` sets another number
+#: (0: one process), and ``-n N`` or ``-p no:xdist`` on the command line decide as usual.
+TEST_WORKERS = 2
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+    """Run the whole suite on :data:`TEST_WORKERS` processes (at most one per CPU), test files
+    spread over them by work stealing; runs of chosen paths stay in one process."""
+    if (not config.pluginmanager.hasplugin("xdist") or hasattr(config, "workerinput")
+            or config.option.numprocesses is not None or config.option.dist != "no"
+            or config.args_source != pytest.Config.ArgsSource.TESTPATHS
+            or config.getoption("usepdb") or config.getoption("collectonly")):
+        return
+    workers = int(os.environ.get("VIFORM_TEST_WORKERS", TEST_WORKERS))
+    workers = min(workers, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count())
+    if workers >= 2:
+        config.option.numprocesses = workers
+        config.option.dist = "worksteal"
+
+#: The real recordings (README, "Tests that read real recordings"): ``$VIFORM_SPIKE_DATA`` if set,
+#: else ``<repo>/../shared/data/spike``.
+SHARED_SPIKE_DATA = Path(os.environ.get("VIFORM_SPIKE_DATA")
+                         or Path(__file__).resolve().parents[1].parent / "shared" / "data" / "spike")
 
 
 @pytest.fixture(scope="session")
 def spike_data_dir() -> Path:
-    """``<repo>/../shared/data/spike``; tests that need it are skipped when it is absent."""
+    """The real recordings' folder; tests that need it are skipped when it is absent."""
     if not SHARED_SPIKE_DATA.is_dir():
         pytest.skip(f"shared spike data absent: {SHARED_SPIKE_DATA}")
     return SHARED_SPIKE_DATA

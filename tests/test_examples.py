@@ -25,7 +25,7 @@ def test_readme_quickstart_runs_and_writes_its_figure(tmp_path):
     code = _quickstart_code()
     assert len([line for line in code.splitlines() if line.strip()]) <= 10, "the quick start promises ≤ 10 lines"
     run = subprocess.run([sys.executable, "-c", "import matplotlib; matplotlib.use('Agg')\n" + code],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=300)
+                         cwd=tmp_path, capture_output=True, text=True, timeout=1800)
     assert run.returncode == 0, run.stderr
     assert (tmp_path / "quickstart.png").stat().st_size > 10_000
 
@@ -33,6 +33,6 @@ def test_readme_quickstart_runs_and_writes_its_figure(tmp_path):
 @pytest.mark.parametrize("script", EXAMPLES, ids=[p.stem for p in EXAMPLES])
 def test_example_runs(script, tmp_path):
     run = subprocess.run([sys.executable, str(script), str(tmp_path)], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=300, env={**os.environ, "MPLBACKEND": "Agg"})
+                         text=True, timeout=1800, env={**os.environ, "MPLBACKEND": "Agg"})
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip(), "an example prints what it found"

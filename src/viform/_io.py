@@ -20,6 +20,23 @@ OLD_MARK = ".viform-old-"
 
 _deferred_sections = 0
 _pending_interrupt: BaseException | None = None
+#: Outputs completed (renamed in) since :func:`begin_outputs`, in order: what an interrupted command kept.
+_completed: list[Path] = []
+
+
+def begin_outputs() -> None:
+    """Start a new record of completed outputs (the CLI calls it when a command starts)."""
+    _completed.clear()
+
+
+def completed_outputs() -> list[Path]:
+    """Outputs written whole (renamed in) since :func:`begin_outputs` that are still there."""
+    seen, kept = set(), []
+    for path in _completed:
+        if path not in seen and os.path.lexists(path):
+            seen.add(path)
+            kept.append(path)
+    return kept
 
 
 @contextlib.contextmanager
@@ -124,6 +141,26 @@ def clean_stale(path) -> list[Path]:
     return done
 
 
+def store_set_aside(path) -> Path | None:
+    """The old folder store a live writer has renamed aside from ``path`` while it renames its new
+    one in (the moment between the two renames of :func:`atomic_path`), or None.
+
+    A reader that finds ``path`` missing reads this one: the old store is whole until the writer,
+    once its new store is in, deletes it (a read then fails on a missing chunk, never on wrong bits).
+    """
+    path = Path(path)
+    prefix = f".{path.name}{OLD_MARK}"
+    try:
+        entries = sorted(e for e in path.parent.iterdir() if e.name.startswith(prefix) and e.is_dir())
+    except OSError:
+        return None
+    for entry in entries:
+        pid = _leftover_pid(entry.name, prefix)
+        if pid is not None and _pid_alive(pid):
+            return entry
+    return None
+
+
 def folder_writable(folder) -> bool:
     """Whether a file can be created in the existing ``folder``, tried by creating (and removing) one.
 
@@ -166,6 +203,11 @@ def check_output_path(option: str, path, *, directory: bool = False) -> None:
         raise ViformError(f"{option}: {exc}") from None
 
 
+def _rename(src: Path, dst: Path) -> None:
+    """The renames of :func:`atomic_path` (one function, so that tests can stop a writer at each)."""
+    os.replace(src, dst)
+
+
 @contextlib.contextmanager
 def atomic_path(path, suffix: str | None = None, *, directory: bool = False):
     """Yield a temporary path in the target's folder; move it onto ``path`` on success.
@@ -174,7 +216,9 @@ def atomic_path(path, suffix: str | None = None, *, directory: bool = False):
     the name see the right one). With ``directory=False`` an empty temporary file is
     created; with ``directory=True`` nothing is created and the caller makes a folder there
     (e.g. a zarr store). On any exception (Ctrl-C and SIGTERM included) the temporary is
-    removed and the target is untouched.
+    removed and the target is untouched; an interrupt that arrives while the output is being
+    renamed in waits until it is (the command line's handlers, :func:`interrupts_deferred`), so the
+    output is then whole under its name and listed by :func:`completed_outputs`.
 
     A folder replaces an existing one in three steps: the old store is renamed aside, the
     new one renamed in, the old one deleted; a crash at any point leaves the old or the new
@@ -189,37 +233,53 @@ def atomic_path(path, suffix: str | None = None, *, directory: bool = False):
     path = Path(path)
     suffix = path.suffix if suffix is None else suffix
     pid = os.getpid()
+    tmp = None
     try:
         _check_target(path, directory)
         path.parent.mkdir(parents=True, exist_ok=True)
         clean_stale(path)
-        if directory:
-            tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{TMP_MARK}{pid}-", suffix=suffix, dir=path.parent))
-            tmp.rmdir()  # the caller creates it (libraries refuse an existing folder)
-        else:
-            fd, name = tempfile.mkstemp(prefix=f".{path.name}{TMP_MARK}{pid}-", suffix=suffix, dir=path.parent)
-            os.close(fd)
-            tmp = Path(name)
-            # mkstemp creates 0600; give the result the permissions a plain open() would
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)
+        with interrupts_deferred():  # an interrupt between creating the temporary and the try below would leak it
+            if directory:
+                tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{TMP_MARK}{pid}-", suffix=suffix, dir=path.parent))
+                tmp.rmdir()  # the caller creates it (libraries refuse an existing folder)
+            else:
+                fd, name = tempfile.mkstemp(prefix=f".{path.name}{TMP_MARK}{pid}-", suffix=suffix, dir=path.parent)
+                os.close(fd)
+                tmp = Path(name)
+                try:  # mkstemp creates 0600; give the result the permissions a plain open() would
+                    umask = os.umask(0)
+                    os.umask(umask)
+                    os.chmod(tmp, 0o666 & ~umask)
+                except OSError:
+                    _remove(tmp)
+                    raise
     except OSError as exc:  # name the file the user asked for, not the temporary one
         raise ViformError(f"{str(path)!r} cannot be written: {exc.strerror or exc}") from None
+    except BaseException:  # an interrupt held while the temporary was made is raised here
+        if tmp is not None:
+            _remove(tmp)
+        raise
+    old = None
     try:
         yield tmp
-        if tmp.is_dir() and os.path.lexists(path):
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}{OLD_MARK}{pid}-", dir=path.parent))
-            old.rmdir()
-            os.rename(path, old)
-            try:
-                os.rename(tmp, path)
-            except BaseException:
-                os.rename(old, path)  # put the old store back
-                raise
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, path)
+        # Ctrl-C/SIGTERM wait for the renames, the record of them and the old store's removal (raised after:
+        # the output is then whole under its name, and reported as kept)
+        with interrupts_deferred():
+            if tmp.is_dir() and os.path.lexists(path):
+                old = Path(tempfile.mkdtemp(prefix=f".{path.name}{OLD_MARK}{pid}-", dir=path.parent))
+                old.rmdir()
+                _rename(path, old)
+                try:
+                    _rename(tmp, path)
+                except BaseException:
+                    _rename(old, path)  # put the old store back
+                    old = None
+                    raise
+            else:
+                _rename(tmp, path)
+            _completed.append(path)
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
     except BaseException:
         _remove(tmp)
         raise

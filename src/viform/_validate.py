@@ -11,7 +11,75 @@ import numbers
 
 
 class ViformError(ValueError):
-    """Bad input to viform; the message is a complete one-line explanation."""
+    """Bad input to viform; the message is a complete one-line explanation.
+
+    ``remedies`` maps a parameter name to a way out that needs it (``{"allow_partial": "keep
+    the whole frames with allow_partial=True"}``): each is appended to the message (after
+    "; "). A caller that lacks the parameter drops its remedy (the command line keeps only
+    those of flags the command has, see :attr:`message` and :attr:`remedies`).
+    """
+
+    def __init__(self, message: str = "", *args, remedies: dict | None = None):
+        self.message = str(message)
+        self.remedies = dict(remedies or {})
+        text = self.message + "".join(f"; {r}" for r in self.remedies.values())
+        super().__init__(text, *args)
+
+    def without(self, keep) -> str:
+        """The message with only the remedies whose parameter ``keep(name)`` accepts."""
+        return self.message + "".join(f"; {r}" for name, r in self.remedies.items() if keep(name))
+
+
+class ViformWarning(UserWarning):
+    """Something the user should know about a result that is still produced (one line)."""
+
+
+class UnverifiedDataWarning(ViformWarning):
+    """Data read without checksums viform can verify (another tool's file, or its checksums removed)."""
+
+
+def warning_line(message, category) -> str:
+    """A warning as one line: ``viform: warning: TEXT`` (its first line), and for a library's warning
+    ``(Category from library)`` — no source line, no file path."""
+    import sys
+
+    lines = [line for line in str(message).splitlines() if line.strip()]
+    text = lines[0] if lines else category.__name__
+    if not issubclass(category, ViformWarning):
+        origin = _warning_origin(sys._getframe(2))
+        text += f" ({category.__name__}{f' from {origin}' if origin else ''})"
+    return f"viform: warning: {text}"
+
+
+def _warning_origin(frame) -> str | None:
+    """The installed library whose code issued the warning being shown (the first frame below the
+    warnings machinery), or None (viform's own code, or a warning raised from C)."""
+    import os
+
+    while frame is not None and frame.f_globals.get("__name__", "").split(".")[0] in ("warnings", "viform"):
+        if frame.f_globals.get("__name__", "").startswith("viform"):
+            return None
+        frame = frame.f_back
+    if frame is None:
+        return None
+    parts = os.path.normpath(frame.f_code.co_filename).split(os.sep)
+    for i in range(len(parts) - 1):
+        if parts[i] in ("site-packages", "dist-packages"):
+            name = parts[i + 1]
+            return name[:-3] if name.endswith(".py") else name
+    return None
+
+
+def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A replacement of :func:`warnings.showwarning` that prints :func:`warning_line` on stderr."""
+    import sys
+
+    stream = sys.stderr if file is None else file
+    try:
+        stream.write(warning_line(message, category) + "\n")
+        stream.flush()
+    except (OSError, ValueError):  # a closed or broken stream: as Python's own display does
+        pass
 
 
 def _as_float(name: str, value) -> float:

@@ -125,7 +125,7 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, needle
 
 def test_set_changes_a_frame_preset_parameter(tmp_path, capsys):
     """--set dark_current_e_per_s adds dark·exposure electrons per pixel: the mean rises by that × gain."""
-    from viform.sensors.presets import make_sensor
+    from viform.sensors.catalog import make_sensor
 
     outs = {}
     for label, extra in (("plain", []), ("dark", ["--set", "dark_current_e_per_s=5000"])):

@@ -178,13 +178,13 @@ def test_dr_shows_the_range_a_clip_can_show(inputs):
 
 def test_spike_capture_defaults_to_the_preset_resolution():
     """Issue 27 item 10: one rule with simulate --preset: a preset's resolution unless one is given."""
-    from viform.cli.capture import FRAME_DEFAULT_SHAPE, default_resolution
+    from viform.cli.capture import default_resolution
     from viform.sensors.spike_presets import load_spike_preset
 
     preset = load_spike_preset("spikeone")
     assert default_resolution("spikeone") == (preset.height, preset.width) == (250, 400)
     assert default_resolution("spike") == (250, 400)  # simulate's default without a preset
-    assert default_resolution("cmos") == FRAME_DEFAULT_SHAPE
+    assert default_resolution("cmos") == (64, 128)  # compare's size
 
 
 def test_spike_preview_shows_single_spikes(tmp_path):

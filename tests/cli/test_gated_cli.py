@@ -79,6 +79,12 @@ def test_gated_set_changes_the_ccd_and_bad_names_are_refused(capsys):
     fit = [r for r in res["pulses_both_ways"] if r["range_m"] == 800.0 and not r["optics"].startswith("default")]
     assert fit[0]["threshold_pulses"] == 84
     assert {f["status"].split(":")[0].split(" ")[0] for f in res["seed_figures"]} == {"predicted", "fitted", "refuted"}
+    # blooming is simulated in frames, not in the field test's expected tables: refused with where it works
     assert main(["gated", "--set", "bloom=true"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--set bloom=true" in err[0] and "viform capture gated" in err[0]
+    assert main(["gated", "--set", "nope=1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--set" in err[0] and "gate_jitter_s" in err[0]
+    assert main(["gated", "--set", "pulses=5"]) == 2  # the command's own flag sets it
+    assert "--pulses" in capsys.readouterr().err

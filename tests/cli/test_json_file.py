@@ -42,6 +42,7 @@ ARGS = {
     "calibrate": ["{clip}"],
     "flow": ["{clip}", "--at", "0.0002", "--dt", "0.0002", "--out", "{tmp}/flow"],
     "track": ["{clip}", "--every", "10", "--out", "{tmp}/trk"],
+    "sensors": [],
 }
 
 

@@ -104,3 +104,54 @@ def test_display_255_tau_and_its_old_name(clip, tmp_path, capsys):
     assert code == 2 and "--display" in err
     code, text, _ = run(["reconstruct", "--help"], capsys)
     assert "255-tau" in text and "seed" not in text and "TFP" not in text
+
+
+def test_at_alone_writes_a_png_in_the_working_folder(clip, tmp_path, capsys, monkeypatch):
+    """The README's own form, `viform reconstruct F --at T`, writes STEM_METHOD_Ts.png where the user is."""
+    import imageio.v3 as iio
+
+    monkeypatch.chdir(tmp_path)
+    code, stdout, err = run(["reconstruct", str(clip), "--at", "0.002"], capsys)
+    assert code == 0, err
+    png = tmp_path / "clip_multi-interval_0.002000s.png"
+    assert png.is_file() and iio.imread(png).shape == (32, 48)
+    assert str(png.name) in stdout
+    # several instants: one folder named after the input, with light.npz
+    code, _, err = run(["reconstruct", str(clip), "--at", "0.001,0.003", "--method", "interval"], capsys)
+    assert code == 0, err
+    assert np.load(tmp_path / "clip_interval" / "light.npz")["ticks"].tolist() == [40, 120]
+
+
+def test_one_definition_of_white(clip, tmp_path, capsys):
+    """The table names one white level, with its lux and where it comes from (not two definitions)."""
+    code, stdout, err = run(["reconstruct", str(clip), "--every", "40", "--out", str(tmp_path / "f")], capsys)
+    assert code == 0, err
+    assert stdout.count("white =") == 1 and stdout.count("99.9th percentile") == 1, stdout
+    assert "lux" in stdout.split("white =", 1)[1].splitlines()[0]
+
+
+@pytest.mark.parametrize("case", ["nan", "late", "empty", "truncated", "png"])
+def test_inputs_are_checked_before_outputs(clip, tmp_path, capsys, case, monkeypatch):
+    """A bad instant or a bad file is named as such, whether or not an output was given."""
+    monkeypatch.chdir(tmp_path)
+    path, at, expect = str(clip), "0.002", None
+    if case == "nan":
+        at, expect = "nan", "--at"
+    elif case == "late":
+        at, expect = "5", "--at"
+    elif case == "empty":
+        (tmp_path / "e.dat").write_bytes(b"")
+        path, expect = str(tmp_path / "e.dat"), "e.dat"
+    elif case == "truncated":
+        (tmp_path / "t.dat").write_bytes(b"\x00" * 1001)
+        path, expect = str(tmp_path / "t.dat"), "t.dat"
+    else:
+        import imageio.v3 as iio
+
+        iio.imwrite(tmp_path / "p.png", np.zeros((8, 8), np.uint8))
+        path, expect = str(tmp_path / "p.png"), "p.png"
+    extra = ["--height", "8", "--width", "8"] if case in ("empty", "truncated") else []
+    code, _, err = run(["reconstruct", path, "--at", at, *extra], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "nothing to write" not in err and expect in err, err
+    assert not list(tmp_path.glob("*_multi-interval*"))

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from viform.cli import main
-from viform.light.scenes import fit_shape, image_to_lux, load_scene
+from viform.light.catalog import fit_shape, load_scene
+from viform.light.scenes import image_to_lux
 from viform.stream.io import open_spikes
 
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from viform.cli import main
-from viform.light.scenes import StillScene, builtin_scene
+from viform.light.catalog import builtin_scene
+from viform.light.scenes import StillScene
 from viform.sensors.spike import SpikeSensor
 from viform.stream.io import save_spikes
 from viform.vision import motchallenge as mot
@@ -64,3 +65,76 @@ def test_empty_stream_and_fractional_step(tmp_path, files, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "no whole frame" in err[0] and "--every" in err[1]
     assert not (tmp_path / "o").exists()
+
+
+@pytest.fixture(scope="module")
+def clip_with_truth(tmp_path_factory):
+    """A multi-object clip simulated with its truth written every 40 ticks (simulate --truth)."""
+    folder = tmp_path_factory.mktemp("aligned")
+    dat = folder / "mo.dat"
+    assert main(["simulate", "multi-object", "--duration", "0.005", "--height", "32", "--width", "48",
+                 "--threshold-electrons", "100", "--out", str(dat), "--truth", str(folder / "truth")]) == 0
+    return dat, folder / "truth" / "mot" / "mo" / "gt" / "gt.txt"
+
+
+def test_truth_with_another_step_is_scored_at_its_own_instants(clip_with_truth, tmp_path, capsys):
+    # the truth has 40 ticks a frame (its seqinfo.ini says so); results every 10 ticks are scored at the
+    # truth's instants (every 4th result frame), never frame k against frame k
+    dat, gt = clip_with_truth
+    capsys.readouterr()
+    assert main(["track", str(dat), "--every", "10", "--truth", str(gt), "--json"]) == 0
+    aligned = json.loads(capsys.readouterr().out)
+    assert any("every 40 ticks" in n for n in aligned["notes"])
+    assert aligned["scores"]["n_frames"] == 5
+    # the same as tracking every 10 and keeping every 4th frame by hand
+    assert main(["track", str(dat), "--every", "10", "--out", str(tmp_path / "t"), "--json"]) == 0
+    capsys.readouterr()
+    res = mot.read_results(tmp_path / "t" / "results.txt")
+    res = res[res[:, 0] % 4 == 0]
+    res[:, 0] //= 4
+    from viform.vision.metrics import score_tracking
+    expected = score_tracking(mot.read_gt(gt), res, mot.step_times_s(5, 40, 40_000.0), 40_000.0)
+    assert aligned["scores"]["hota"] == pytest.approx(expected["hota"], abs=1e-9)
+    # a step that does not divide the truth's is refused
+    assert main(["track", str(dat), "--every", "15", "--truth", str(gt), "--out", str(tmp_path / "n")]) == 2
+    err = capsys.readouterr().err
+    assert "records 40 ticks a frame" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "n").exists()
+
+
+def test_one_truth_wherever_written(clip_with_truth, tmp_path, capsys):
+    # simulate --truth and track write the same gt.txt: boxes clipped to the image, the visible
+    # fraction and the detectability (charge against Q) in the last columns
+    dat, gt = clip_with_truth
+    assert main(["track", str(dat), "--every", "40", "--out", str(tmp_path / "t")]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "t" / "gt.txt").read_text() == gt.read_text()
+    rows = mot.read_gt(gt)
+    assert rows[:, 2:4].min() >= 0 and (rows[:, 2] + rows[:, 4]).max() <= 48
+    assert (rows[:, 9] >= 0).all()  # the sensor is known: every row has its detectability
+
+
+def test_no_object_in_view_is_said_or_refused(tmp_path, capsys):
+    dat = tmp_path / "tr.dat"
+    assert main(["simulate", "translating", "--duration", "0.002", "--height", "16", "--width", "24",
+                 "--out", str(dat)]) == 0
+    capsys.readouterr()
+    assert main(["track", str(dat), "--every", "20", "--scores", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "no object in view" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+    assert main(["track", str(dat), "--every", "20", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "not scored" in out and "HOTA" not in out
+    assert not (tmp_path / "o" / "gt.txt").exists() and not (tmp_path / "o" / "scores.json").exists()
+
+
+def test_speed_is_the_scenes(tmp_path, capsys):
+    # the bullet (10,000 px/s at 400 × 250) enters and leaves: its clipped box's centre is slower
+    scene = builtin_scene("multi-object", height=50, width=80)
+    dat = save_spikes(tmp_path / "b.dat", SpikeSensor(threshold_electrons=100).capture(scene, 0.012, seed=1))
+    assert main(["track", str(dat), "--every", "40", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)["scores"]
+    for oid in (3, 4):  # bullet, car: 10,000 and 4,000 px/s at 400 px, × 80/400 here
+        vx, vy = scene.velocity_px_per_s(scene.specs[oid - 1], 0.005)
+        assert s["objects"][str(oid)]["speed_px_per_s"] == pytest.approx(np.hypot(vx, vy), rel=1e-6)

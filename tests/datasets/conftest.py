@@ -6,6 +6,7 @@ Cluster start-up costs seconds, so one 2-process cluster serves every test of th
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 from pathlib import Path
 
@@ -14,7 +15,8 @@ import numpy as np
 import pytest
 
 H, W, FRAMES, FRAME_RATE_HZ = 24, 32, 6, 1000.0
-SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
+SHARED = Path(os.environ.get("VIFORM_SPIKE_DATA")
+              or Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike")
 
 
 def make_clips(root: Path, n_folders: int = 3, gif: bool = True) -> Path:

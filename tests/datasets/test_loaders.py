@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,8 @@ import pytest
 from viform._validate import ViformError
 from viform.datasets.loaders import open_dataset, spikes_to_tonic
 
-SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
+SHARED = Path(os.environ.get("VIFORM_SPIKE_DATA")
+              or Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike")
 pytestmark = pytest.mark.skipif(not (SHARED / "reds_sim_400x250.dat").is_file(),
                                 reason=f"shared spike data absent: {SHARED / 'reds_sim_400x250.dat'}")
 

@@ -12,7 +12,7 @@ from viform.datasets import build_dataset, make_settings
 from viform.datasets.build import scene_clips
 from viform.datasets.loaders import open_dataset
 from viform.datasets.scene_clips import make_scene, scene_parameters
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.vision.flow import read_flo
 from viform.vision.motchallenge import read_gt, read_seqinfo
 

@@ -56,7 +56,7 @@ def test_an_unreachable_scheduler_leaves_no_dataset(tmp_path, settings, monkeypa
     def refuse(*args):
         raise ViformError("--scheduler 'tcp://127.0.0.1:1': could not connect")
 
-    monkeypatch.setattr(build, "_open_client", refuse)
+    monkeypatch.setattr(build, "open_client", refuse)
     _disc_clip(tmp_path / "src" / "a")
     with pytest.raises(ViformError, match="could not connect"):
         build.build_dataset(tmp_path / "src", tmp_path / "ds", settings, scheduler="tcp://127.0.0.1:1")

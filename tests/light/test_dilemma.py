@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from viform._validate import ViformError
+from viform.light.catalog import builtin_scene
 from viform.light.dilemma import DilemmaScene, NightRoadFogScene, pwm_on_time_s
-from viform.light.scenes import builtin_scene
 
 
 def test_registered_as_builtin_scenes():

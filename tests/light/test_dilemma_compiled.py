@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from viform.light.catalog import builtin_scene
 from viform.light.compiled import evaluate
-from viform.light.scenes import builtin_scene
 from viform.sensors.spike import SpikeSensor
 
 

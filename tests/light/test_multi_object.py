@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
+from viform.light.catalog import builtin_scene
 from viform.light.multi_object import MultiObjectScene
-from viform.light.scenes import builtin_scene
 
 
 @pytest.fixture(scope="module")

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from viform._validate import ViformError
+from viform.light.catalog import builtin_scene, load_scene
 from viform.light.scenes import (
     FlickerScene,
     HDRScene,
@@ -12,9 +13,7 @@ from viform.light.scenes import (
     StillScene,
     TranslatingScene,
     VideoScene,
-    builtin_scene,
     image_to_lux,
-    load_scene,
 )
 
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import map_coordinates, maximum_filter, minimum_filter
 
-from viform.light.scenes import StillScene, VideoScene, builtin_scene
+from viform.light.catalog import builtin_scene
+from viform.light.scenes import StillScene, VideoScene
 from viform.light.truth import TruthUnavailable, disc_fraction_inside
 
 

@@ -1,12 +1,15 @@
 """Calibration of a spike-sensor preset from a recording (issue 10 item 5; seed 000 §5.1)."""
 
 import json
+import math
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import ndimage
 
+from viform._validate import ViformError
 from viform.cli import main
 from viform.light.scenes import FlickerScene, StillScene
 from viform.measure.calibration import (
@@ -22,7 +25,8 @@ from viform.sensors.spike_presets import load_spike_preset
 from viform.stream.container import SpikeStream
 from viform.stream.io import open_spikes, save_spikes
 
-REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike" / "real_uhsr_250x250.npz"
+REAL = Path(os.environ.get("VIFORM_SPIKE_DATA")
+            or Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike") / "real_uhsr_250x250.npz"
 
 
 def _ramp_recording(q, prnu, size=96, ticks=400, seed=1, **kw):
@@ -109,12 +113,49 @@ def test_too_short_recording_says_so():
 @pytest.mark.parametrize("fill", [False, True])
 def test_degenerate_recordings_give_reasons_not_errors(shape, fill):
     """Dark (no spike) or saturated (a spike every tick) recordings of odd sizes: every figure
-    is None with a reason; a preset can still be written (chip defaults, listed as assumed)."""
+    is None with a reason; no preset is written from them unless the caller names the
+    threshold to assume (then listed as assumed)."""
     r = calibrate(SpikeStream(np.full(shape, fill), 40e3))
     assert r["threshold"]["q_eff_electrons"] is None and r["threshold"]["reason"]
     assert r["gain_spread"]["gain_spread_fraction"] is None and r["gain_spread"]["reason"]
-    preset = preset_from_calibration(r)
-    assert "threshold_electrons" in preset.calibration["assumed"]
+    with pytest.raises(ViformError, match="no threshold"):
+        preset_from_calibration(r)
+    preset = preset_from_calibration(r, fallback_threshold_electrons=5000.0)
+    assert preset.calibration["assumed"] == {"threshold_electrons": 5000.0}
+    assert preset.parameters.threshold_electrons == 5000.0
+
+
+def test_too_bright_recording_uses_its_recorded_threshold_or_writes_nothing(tmp_path, capsys):
+    """A recording at 1.4 ticks per interval (Q = 1,000 in its sidecar) measures no threshold
+    and bounds no gain spread (every pixel near one spike a tick reads the same whatever its
+    gain): the preset takes the Q its sidecar records and says so; without a recorded Q the
+    CLI writes no preset and exits 2 with one line naming --out."""
+    s = SpikeSensor(threshold_electrons=1000, dark_current_e_per_s=0.0, gain_spread_fraction=0.03)
+    clock = s.parameters.clock_hz
+    lux = s.parameters.optics.lux_from_electrons_per_s(np.full((32, 32), 1000 / 1.4 * clock))
+    rec = s.capture(StillScene(lux), 200 / clock, seed=3)
+    path = save_spikes(tmp_path / "bright.dat", rec)
+    out = tmp_path / "p.json"
+    code = main(["calibrate", str(path), "--out", str(out)])
+    text, err = capsys.readouterr()
+    assert code == 0, err
+    assert "1,000 e⁻" in text and "not a measurement" in text
+    preset = load_spike_preset(str(out))
+    assert preset.parameters.threshold_electrons == 1000.0
+    assert preset.calibration["recorded"] == {"threshold_electrons": 1000.0}
+    assert "threshold_electrons" not in preset.calibration["measured"]
+    assert "gain_spread_fraction" not in preset.calibration["bounds"]  # nothing bounded it
+    assert "16,250" not in preset.description and "1.625e+04" not in preset.description
+    # the same bits without a sidecar: nothing to write
+    raw = tmp_path / "raw.dat"
+    raw.write_bytes(path.read_bytes())
+    out2 = tmp_path / "q.json"
+    code = main(["calibrate", str(raw), "--height", "32", "--width", "32", "--out", str(out2)])
+    _, err = capsys.readouterr()
+    # one line of error (a raw file without its sidecar is also said to be read unverified)
+    errors = [line for line in err.splitlines() if not line.startswith("viform: warning:")]
+    assert code == 2 and len(errors) == 1 and "--out" in errors[0] and "no threshold" in errors[0], err
+    assert not out2.exists()
 
 
 def test_hot_and_dead_pixels_found():
@@ -142,7 +183,7 @@ def test_moving_scene_gives_no_false_hot_pixels(hot_fraction):
     of the recording, so none is reported without real ones, and real ones (2·10⁵ e⁻/s at
     Q = 100: 20 extra spikes in 10 ms, ≥ 6 Poisson σ above the local median in each half)
     are still found."""
-    from viform.light.scenes import builtin_scene
+    from viform.light.catalog import builtin_scene
 
     sensor = SpikeSensor(threshold_electrons=100, hot_pixel_fraction=hot_fraction,
                          hot_pixel_dark_current_e_per_s=2e5)
@@ -386,3 +427,57 @@ def test_lag1_correlation_is_free_of_the_window(ticks):
     se = np.std(1 - d1 / d2, ddof=1) / 4
     assert abs(row["lag1_correlation"] - row["expected_lag1_correlation"]) < 5 * se + 0.01
     assert row["static_consistent"]
+
+
+def _scene_light(kind, h, w):
+    """Relative light of the texture scenes of benchmarks/bench_hot_pixels.py (0–1)."""
+    if kind == "strip":  # a 3.4-px bright strip under a dark edge, edges at sub-pixel positions
+        y = np.arange(h)[:, None].astype(float)
+        top = h * 0.4 + 0.3 * np.sin(np.arange(w)[None] / 17.0)
+
+        def inside(a, b):
+            return np.clip(np.minimum(b, y + 1) - np.maximum(a, y), 0.0, 1.0)
+
+        dark, bright = inside(-np.inf, top), inside(top, top + 3.4)
+        return 0.45 * (1 - dark - bright) + 0.03 * dark + bright
+    from skimage import data, transform
+
+    return transform.resize(getattr(data, kind)() / 255.0, (h, w), anti_aliasing=True, order=1)
+
+
+@pytest.mark.parametrize("kind", ["strip", "camera", "coins"])
+@pytest.mark.parametrize("q", [1000.0, 16250.0])
+def test_hot_pixels_on_realistic_texture(kind, q):
+    """Hot pixels on a bright strip under a dark edge and on natural images (skimage's camera, a
+    tuning scene, and coins, a report scene; 2 % PRNU; light 0.01–0.30 spikes a tick): the twin
+    without hot pixels gets no report (the old rule reported 320–1,100 per 10⁵ pixels here);
+    with 1 % hot pixels of 0.1 spikes a tick, those in the pixels the calibration says can show
+    them are found at a rate not 3 binomial σ below 90 %, ≤ 5 % of the reports are false, the dark current is within
+    5 standard errors, and the hot fraction's 95 % range holds this twin's own hot fraction."""
+    from viform.measure.calibration import _hot_dead, hot_pixel_statistics
+
+    h, w, ticks, clock, hot_rate = 96, 128, 400, 40e3, 0.1
+    rate = 0.01 + 0.29 * _scene_light(kind, h, w)
+    reports = []
+    for fraction in (0.0, 0.01):
+        s = SpikeSensor(threshold_electrons=q, dark_current_e_per_s=20.0, gain_spread_fraction=0.02,
+                        hot_pixel_fraction=fraction, hot_pixel_dark_current_e_per_s=hot_rate * q * clock,
+                        fixed_pattern_seed=31)
+        lux = s.parameters.optics.lux_from_electrons_per_s(rate * q * clock)
+        st = interval_statistics(s.capture(StillScene(lux), ticks / clock, seed=2))
+        d, hot, dead = _hot_dead(st, q)
+        truth = s.dark_current_map_e_per_s(h, w) > 0.5 * hot_rate * q * clock
+        reports.append((d, hot, truth, st, dead))
+    d0, hot0, _, _, _ = reports[0]
+    assert d0["hot_pixels"] == 0 and hot0.sum() == 0
+    d, hot, truth, st, dead = reports[1]
+    assert (hot & ~truth).sum() <= 0.05 * hot.sum()
+    level = d["hot_pixel_dark_current_e_per_s"]
+    assert abs(level - hot_rate * q * clock) <= 5 * d["hot_pixel_dark_current_standard_error_e_per_s"]
+    searchable = (hot_pixel_statistics(st, q)["limit"] * q * clock <= 0.5 * level) & ~dead
+    n = int((truth & searchable).sum())  # found ~ Binomial(n, recall): not 3σ below a recall of 0.9
+    assert n >= 10 and (hot & truth & searchable).sum() >= 0.9 * n - 3 * math.sqrt(0.09 * n)
+    lo, hi = d["hot_pixel_fraction_range"]
+    assert lo <= truth.mean() <= hi
+    assert d["hot_pixels_with_reported_neighbour_fraction"] <= 3 * d["hot_pixels_with_reported_neighbour_if_random"] \
+        + 0.05

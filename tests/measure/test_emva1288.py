@@ -14,8 +14,8 @@ from viform.measure.emva1288 import (
     measure_response,
     pair_statistics,
 )
+from viform.sensors.catalog import make_sensor
 from viform.sensors.frame import FramePixelParameters, FrameSensor
-from viform.sensors.presets import make_sensor
 
 
 @pytest.fixture(scope="module")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -30,18 +31,18 @@ def test_value_specs():
     assert sw.parse_values("--vary", p, "0.001:0.004:0.001") == [0.001, 0.002, 0.003, 0.004]  # stop included
     log = sw.parse_values("--vary", p, "log:1e-5:1e-2:4")
     assert log == pytest.approx([1e-5, 1e-4, 1e-3, 1e-2])
-    level = sw.sweep_parameters("spike")["threshold_level"]
+    level = sw.sweep_parameters("spikeone")["threshold_level"]
     assert sw.parse_values("--vary", level, "all") == list(range(16))
     assert sw.parse_values("--vary", level, "0:15:5") == [0, 5, 10, 15]
-    assert sw.parse_values("--vary", sw.sweep_parameters("spike")["photon_noise"], "true,false") == [True, False]
+    assert sw.parse_values("--vary", sw.sweep_parameters("spikeone")["photon_noise"], "true,false") == [True, False]
 
 
 @pytest.mark.parametrize("spec, needle", [("5:1:1", "no points"), ("log:1e-3:1e-2:0", "no points"), ("", "no values"),
                                           ("1:2:0", "step"), ("log:0:1:3", "> 0"), ("abc", "not a number")])
 def test_bad_value_specs(spec, needle):
     with pytest.raises(ViformError, match=needle) as err:
-        sw.parse_values("--vary exposure_s=" + spec, sw.sweep_parameters("cmos")["exposure_s"], spec)
-    assert str(err.value).startswith("--vary")
+        sw.parse_values("vary_texts exposure_s=" + spec, sw.sweep_parameters("cmos")["exposure_s"], spec)
+    assert str(err.value).startswith("vary_texts")
 
 
 def test_require_parsing_and_checks():
@@ -52,25 +53,27 @@ def test_require_parsing_and_checks():
     with pytest.raises(ViformError, match="'blur' is not a metric; allowed: psnr_log_db"):
         sw.parse_require("blur<=2")
     for bad in ("dr_captured_db>>3", "dr_captured_db>=abc", "dr_captured_db>=nan", "dr_captured_db"):
-        with pytest.raises(ViformError, match="--require"):
+        with pytest.raises(ViformError, match="^require"):
             sw.parse_require(bad)
 
 
 def test_unknown_parameter_names_the_allowed_ones():
     with pytest.raises(ViformError, match=r"'exposure' is not a parameter of cmos; allowed: .*exposure_s"):
         sw.parse_vary(["exposure=1e-3"], ["cmos"])
-    # a setting the sensor refuses is refused before any work, naming --vary and the value
-    with pytest.raises(ViformError, match=r"--vary: sensor 'cmos' at exposure_s=0.05"):
+    # a setting the sensor refuses is refused before any work, naming the parameter and the value
+    with pytest.raises(ViformError, match=r"^settings: sensor 'cmos' at exposure_s=0.05"):
         sw.make_point_sensor("cmos", {"exposure_s": 0.05})  # longer than the 30 fps frame period
+    with pytest.raises(ViformError, match=r"^vary: sensor 'cmos' at exposure_s=0.05"):
+        sw.make_plan("dilemma", ["cmos"], ["exposure_s=0.05"], **TINY)
 
 
 def test_points_default_once_and_seeds_are_per_point():
-    plan = tiny_plan(["spike:threshold_level=11,12,13"])
+    plan = tiny_plan(["spikeone:threshold_level=11,12,13"])
     assert len(plan.points) == 3  # level 12 is the preset's default: one point, not two
     assert sum(p.is_default for p in plan.points) == 1
     seeds = {p.point_id: sw.point_seed(3, p) for p in plan.points}
     assert len(set(seeds.values())) == 3
-    again = tiny_plan(["spike:threshold_level=13,12"])  # other order, fewer points: same ids and seeds
+    again = tiny_plan(["spikeone:threshold_level=13,12"])  # other order, fewer points: same ids and seeds
     assert {p.point_id: sw.point_seed(3, p) for p in again.points}.items() <= seeds.items()
 
 
@@ -91,11 +94,148 @@ def test_answer_best_and_nearest_miss():
     assert "a meets" in ans["sentences"][0]
 
 
+def test_no_demands_means_nothing_meets():
+    """Without demands the answer names each sensor's best point by the objective and says nothing was
+    demanded: no point "meets", and an objective a sensor does not define is said so (not "-inf")."""
+    recs = [{"point_id": "1", "sensor": "cmos", "settings": {"exposure_s": 1e-3}, "label": "cmos 1",
+             "metrics": {"psnr_log_db": 22.0}},
+            {"point_id": "2", "sensor": "cmos", "settings": {}, "label": "cmos (default)",
+             "metrics": {"psnr_log_db": 19.0}},
+            {"point_id": "3", "sensor": "gated", "settings": {}, "label": "gated (default)",
+             "metrics": {"psnr_log_db": math.nan}},
+            {"point_id": "4", "sensor": "seed003-overflow", "settings": {}, "label": "overflow", "metrics": {},
+             "skipped": "its frame is longer than the clip"}]
+    ans = sw.answer(recs, [])
+    assert ans["meeting"] == [] and all(v["meets"] is None for v in ans["per_sensor"].values())
+    assert ans["per_sensor"]["cmos"]["best"] == "1" and math.isnan(ans["per_sensor"]["gated"]["objective"])
+    text = " ".join(ans["sentences"])
+    assert ans["sentences"][0].startswith("No demands were given") and " meets " not in text
+    assert "psnr_log_db is not defined for it here" in text and "inf" not in text
+    assert ans["not_scored"] == {"seed003-overflow": "its frame is longer than the clip"}
+    assert "seed003-overflow: not scored on this scene" in text
+
+
+def test_tracking_needs_objects_in_the_clip():
+    """A scene whose object truth is empty over the clip (translating) is refused for tracking, naming the
+    parameter; one with objects is planned."""
+    with pytest.raises(ViformError, match=r"^tracking: scene 'translating' has no objects to track"):
+        sw.make_plan("translating", ["cmos"], ["exposure_s=1e-3"], tracking=True, **TINY)
+    sw.make_plan("multi-object", ["cmos"], ["exposure_s=1e-3"], tracking=True, **TINY)
+
+
+def test_library_errors_name_the_parameter():
+    """The library speaks its parameter names, never a command's flags."""
+    cases = [(dict(duration_s=20.0), "duration_s = 20 s is not allowed"), (dict(height=8), "height = 8"),
+             (dict(instants_s=[0.5]), "instants_s: instant 0.5"), (dict(spike_image="x"), "spike_image = 'x'"),
+             (dict(objective="blur"), "objective: 'blur'"), (dict(require="blur<=2"), "require: 'blur'")]
+    for kw, needle in cases:
+        with pytest.raises(ViformError) as err:
+            sw.make_plan("dilemma", ["cmos"], None, **{**TINY, **kw})
+        assert str(err.value).startswith(needle) and "--" not in str(err.value), str(err.value)
+    with pytest.raises(ViformError, match=r"^sensors: 'nosuch' is not a sensor a sweep can vary"):
+        sw.make_plan("dilemma", ["nosuch"], None, **TINY)
+    with pytest.raises(ViformError, match=r"^vary_texts exposure=1e-3: 'exposure' is not a parameter"):
+        sw.make_plan("dilemma", ["cmos"], ["exposure=1e-3"], **TINY)
+    plan = sw.make_plan("dilemma", ["cmos"], None, **TINY)
+    with pytest.raises(ViformError, match=r"^workers = -1 is not allowed"):
+        sw.sweep(plan, "/tmp/never-written", workers=-1, progress=False)
+    with pytest.raises(ViformError, match=r"^memory_limit = 'lots' is not allowed"):
+        sw.sweep(plan, "/tmp/never-written", workers=1, memory_limit="lots", progress=False)
+    assert not Path("/tmp/never-written").exists()
+    # no string in the package's source names a flag
+    for path in Path(sw.__file__).parent.glob("*.py"):
+        assert not re.search(r"[\"'](?:[^\"'\n]*\s)?--[a-z]", path.read_text()), path
+
+
+def test_scene_parameters_are_varied_like_a_sensors():
+    """scene:PARAM=SPEC multiplies every sensor's points by the scene's values; each point records its scene
+    setting (label, seed, table column); a parameter the scene lacks, a value it refuses and one set twice
+    are refused before any work."""
+    space = sw.scene_parameters("dilemma")
+    assert {"brightness", "speed", "lamp_lux"} <= set(space) and space["brightness"].default == 1.0
+    assert sw.scene_parameters("not-a-scene.png") == {}
+    plan = sw.make_plan("dilemma", ["cmos"], ["cmos:exposure_s=1e-4", "scene:brightness=0.1,10"], **TINY)
+    assert plan.vary["scene"] == {"brightness": [0.1, 10.0]} and len(plan.points) == 4  # (1e-4, default) × 2
+    assert len({p.point_id for p in plan.points}) == 4 and len({sw.point_seed(3, p) for p in plan.points}) == 4
+    dim = [p for p in plan.points if dict(p.scene) == {"brightness": 0.1}]
+    assert len(dim) == 2 and all(p.label().endswith("· scene brightness=0.1") for p in dim)
+    assert all(dict(p.swept)["scene.brightness"] == 0.1 for p in dim)
+    # without scene:…, points keep the ids (and seeds) they always had
+    plain = sw.make_plan("dilemma", ["cmos"], ["cmos:exposure_s=1e-4"], **TINY)
+    assert {p.point_id for p in plain.points} == {sw.Point(p.sensor, p.settings).point_id for p in plain.points}
+    bad = [(["scene:nosuch=1"], {}, r"^vary_texts scene:nosuch=1: 'nosuch' is not a numeric parameter of the scene"),
+           (["scene:brightness=-1"], {}, r"^vary: the scene at brightness=-1 cannot be made"),
+           (["scene:brightness=1,2"], {"scene_options": {"brightness": 2.0}}, r"^vary: the scene's 'brightness' is"),
+           (["nosuch:brightness=1"], {}, r"sensor 'nosuch' is not in this sweep")]
+    for texts, kw, needle in bad:
+        with pytest.raises(ViformError, match=needle):
+            sw.make_plan("dilemma", ["cmos"], texts, **TINY, **kw)
+
+
+def test_a_scene_sweep_answers_per_scene_setting(tmp_path):
+    """Ten times more light leaves fewer pixels under the noise floor of the same camera; each scene setting
+    gets its own answer, and the table has a column per varied scene parameter."""
+    plan = sw.make_plan("dilemma", ["cmos"], ["scene:brightness=0.1,10"], require="underexposed_fraction<=0.1",
+                        **TINY)
+    doc = sw.sweep(plan, tmp_path, workers=0, progress=False)
+    under = {r["scene"]["brightness"]: r["metrics"]["underexposed_fraction"] for r in doc["records"]}
+    assert under[0.1] > under[10.0]
+    per = doc["answer"]["per_sensor"]
+    assert set(per) == {"cmos · scene brightness = 0.1", "cmos · scene brightness = 10"}
+    assert per["cmos · scene brightness = 0.1"]["scene"] == {"brightness": 0.1}
+    assert [s for s in doc["answer"]["sentences"] if s.startswith("At scene brightness = ")]
+    table = sw.read_table(tmp_path / "sweep.zarr")
+    assert sorted(table["parameter/scene.brightness"]) == [0.1, 10.0]
+
+
+def test_device_is_checked_before_any_work(tmp_path):
+    """device: cpu or cuda; cuda only for a sweep with a spike sensor, and only where a GPU is found."""
+    with pytest.raises(ViformError, match=r"^device = 'gpu' is not allowed: choose one of cpu, cuda"):
+        sw.check_device("gpu", ["spikeone"])
+    with pytest.raises(ViformError, match=r"^device = 'cuda' runs the spike camera's simulation on a GPU; this "
+                                          r"sweep has no spike sensor"):
+        sw.check_device("cuda", ["cmos"])
+    assert sw.check_device("cpu", ["cmos"]) == "cpu"
+    from viform.sensors.spike_cuda import cuda_available
+
+    if not cuda_available():
+        plan = sw.make_plan("dilemma", ["spikeone"], None, **TINY)
+        with pytest.raises(ViformError, match=r"^device = 'cuda'"):
+            sw.sweep(plan, tmp_path / "never", device="cuda", workers=0, progress=False)
+        assert not (tmp_path / "never").exists()
+
+
+CUDA_CHILD = """
+import json, warnings
+import numpy as np
+warnings.simplefilter("ignore")  # uint64 hash arithmetic wraps in the simulator's NumPy scalars
+from viform.measure import sweep as sw
+context = sw.SweepContext("translating", 8, 12, 0.001, (0.0005,), 3, "interval")
+point = sw.Point("spikeone", (("threshold_level", 0),))
+gpu, cpu = (sw.run_point(context, point, device=d) for d in ("cuda", "cpu"))
+print(json.dumps({"metrics": gpu["record"]["metrics"] == cpu["record"]["metrics"],
+                  "images": bool(np.array_equal(gpu["images"], cpu["images"], equal_nan=True)),
+                  "device": gpu["record"].get("device"), "cpu_device": cpu["record"].get("device", "cpu")}))
+"""
+
+
+def test_cuda_device_gives_the_cpu_points_in_the_simulator():
+    """A point shot with device='cuda' (numba-cuda's simulator, no GPU needed) scores exactly as on the CPU
+    and records its device."""
+    pytest.importorskip("numba.cuda", reason="numba-cuda is not installed")
+    env = {**__import__("os").environ, "NUMBA_ENABLE_CUDASIM": "1",
+           "PYTHONPATH": str(Path(sw.__file__).parents[3])}
+    run = subprocess.run([sys.executable, "-c", CUDA_CHILD], env=env, capture_output=True, text=True, timeout=1800)
+    assert run.returncode == 0, run.stderr[-3000:]
+    result = json.loads(run.stdout.strip().splitlines()[-1])
+    assert result == {"metrics": True, "images": True, "device": "cuda", "cpu_device": "cpu"}
+
+
 # ---------------------------------------------------------------------- running
 @pytest.fixture(scope="module")
 def serial(tmp_path_factory):
     """The reference: a spike + CMOS sweep run in this process, no dask."""
-    plan = tiny_plan(["spike:threshold_level=0,15", "cmos:exposure_s=1e-4,1e-3"],
+    plan = tiny_plan(["spikeone:threshold_level=0,15", "cmos:exposure_s=1e-4,1e-3"],
                      require="underexposed_fraction<=0.5")
     out = tmp_path_factory.mktemp("serial")
     return plan, out, sw.sweep(plan, out, workers=0, progress=False)
@@ -126,6 +266,27 @@ def test_identical_results_with_one_and_two_workers(serial, tmp_path):
                                           sw.load_images(tmp_path / f"w{n}", r["point_id"]))
 
 
+def test_own_local_cluster_gives_the_same_points(serial, tmp_path):
+    """workers=2 starts the sweep's own LocalCluster (its settings: no profiler, no work stealing), in
+    round-robin batches of points; the points equal the in-process ones, and this process's dask settings
+    are left as they were."""
+    plan, out, ref = serial
+    # a fresh process, where distributed is not imported yet (as on the command line)
+    code = (f"import dask, json\nfrom viform.measure import sweep as sw\n"
+            f"plan = sw.make_plan('dilemma', ['cmos'], ['cmos:exposure_s=1e-4,1e-3'], **{TINY!r})\n"
+            f"doc = sw.sweep(plan, {str(tmp_path)!r}, workers=2, progress=False)\n"
+            f"print(json.dumps([doc['workers'], doc['computed'], "
+            f"dask.config.get('distributed.scheduler.work-stealing')]))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800,
+                         env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[3])})
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert json.loads(run.stdout.strip().splitlines()[-1]) == [2, 3, True]
+    doc = json.loads((tmp_path / "sweep.json").read_text())
+    _same([r for r in ref["records"] if r["sensor"] == "cmos"], [sw._restore(r) for r in doc["points"]])
+    assert sw.batches(list(range(7)), 1, 3) == [[0, 3, 6], [1, 4], [2, 5]]
+    assert sw.batches(list(range(2)), 2) == [[0], [1]]
+
+
 def test_table_and_physics(serial):
     """sweep.zarr holds one row per point; a lower threshold sees darker light in the same clip (fewer pixels
     under-exposed) and the spike camera's range in a clip stays within its 20·lg(clock · clip) bound."""
@@ -133,15 +294,23 @@ def test_table_and_physics(serial):
     table = sw.read_table(out / "sweep.zarr")
     assert list(table["point_id"]) == [p.point_id for p in plan.points]
     assert table["metric/psnr_log_db"].shape == (len(plan.points),)
-    spike = {r["settings"].get("threshold_level", 12): r["metrics"] for r in doc["records"] if r["sensor"] == "spike"}
+    spike = {r["settings"].get("threshold_level", 12): r["metrics"] for r in doc["records"]
+             if r["sensor"] == "spikeone"}
     under = [spike[level]["underexposed_fraction"] for level in (0, 12, 15)]
     assert under[0] < under[1] < under[2]
     # seed 000 §3.3: floor Q/(η·T) (one spike per clip), ceiling Q·f/η: DR ≤ 20·lg(f·T), ± a factor 2 at each
     # end for the "rendered within a factor of 2" rule of the metric
     bound = 20 * math.log10(40e3 * TINY["duration_s"]) + 20 * math.log10(4)
     assert all(m["dr_captured_db"] <= bound for m in spike.values())
-    assert doc["answer"]["per_sensor"]["spike"]["meets"]  # level 0 sees most of the scene
-    assert doc["answer"]["per_sensor"]["spike"]["settings"] == {"threshold_level": 0}
+    # the integration time is each pixel's interval (Q/(η·E), seed 000 §3.3) where the scene moves: it
+    # grows with the threshold (Q = (level + 1)·1 250 e⁻), by about the ratio of Q (16 from level 0 to 15,
+    # less where level 15's dim intervals are cut by the 12 ms clip), and the latency is one tick more
+    res = [spike[level]["time_resolution_s"] for level in (0, 12, 15)]
+    assert res[0] < res[1] < res[2] and res[2] / res[0] > 8
+    assert all(spike[lv]["latency_s"] == pytest.approx(spike[lv]["time_resolution_s"] + 1 / 40e3)
+               for lv in (0, 12, 15))
+    assert doc["answer"]["per_sensor"]["spikeone"]["meets"]  # level 0 sees most of the scene
+    assert doc["answer"]["per_sensor"]["spikeone"]["settings"] == {"threshold_level": 0}
 
 
 def test_resume_after_kill_and_extend(serial, tmp_path):
@@ -151,8 +320,8 @@ def test_resume_after_kill_and_extend(serial, tmp_path):
     code = (f"from viform.measure import sweep as sw\n"
             f"plan = sw.make_plan('dilemma', ['cmos'], {vary!r}, **{TINY!r})\n"
             f"sw.sweep(plan, {str(tmp_path)!r}, workers=0, progress=False, crash_after_points=2)\n")
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
-                         env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[2])})
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800,
+                         env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[3])})
     assert run.returncode == 70, run.stderr[-2000:]
     assert len(list((tmp_path / "points").glob("*.json"))) == 2 and not (tmp_path / "sweep.json").exists()
     plan2 = sw.make_plan("dilemma", ["cmos"], vary, **TINY)
@@ -171,11 +340,26 @@ def test_resume_after_kill_and_extend(serial, tmp_path):
 
 def test_tracking_scores_join_the_table(tmp_path):
     """--tracking adds the comparison tracker's scores as columns; a 30 fps camera has one frame in a 40 ms
-    clip, so it tracks nothing: HOTA 0 and objects missed."""
+    clip: from one frame the back end finds at most the objects that stand out of their background, never
+    all of them, so it misses objects and falls short of the demand."""
     plan = sw.make_plan("multi-object", ["cmos"], ["cmos:exposure_s=1e-3"], height=32, width=48, duration_s=0.04,
                         tracking=True, require="tracking_hota>=0.5")
     doc = sw.sweep(plan, tmp_path, workers=0, progress=False)
     table = sw.read_table(tmp_path / "sweep.zarr")
     assert {"metric/tracking_hota", "metric/tracking_objects_missed"} <= set(table)
-    assert np.all(table["metric/tracking_hota"] == 0) and np.all(table["metric/tracking_objects_missed"] >= 1)
+    hota = np.asarray(table["metric/tracking_hota"], float)
+    assert np.all((hota >= 0) & (hota < 0.5)), hota
+    assert np.all(table["metric/tracking_objects_missed"] >= 1)
     assert not doc["answer"]["per_sensor"]["cmos"]["meets"]
+
+
+def test_a_renamed_camera_keeps_its_points_noise():
+    """compare/sweep's 'spike' became 'spikeone': its points are seeded under the old name, so a sweep
+    gives the same bits (and scores) at the same settings and sweep seed as before the rename."""
+    import hashlib
+
+    point = sw.Point("spikeone", (("threshold_level", 3),))
+    old_key = '["spike",[["threshold_level",3]]]'
+    expected = int.from_bytes(hashlib.sha256(f"7/{old_key}".encode()).digest()[:8], "little") & ((1 << 63) - 1)
+    assert sw.point_seed(7, point) == expected
+    assert sw.point_seed(7, sw.Point("cmos", ())) != sw.point_seed(7, sw.Point("cmos-short", ()))

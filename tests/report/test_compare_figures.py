@@ -3,7 +3,7 @@ plot's long sensor names), no text drawn over another, one colour bar per quanti
 
 import pytest
 
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.report import compare_report as cr
 
 
@@ -11,7 +11,7 @@ from viform.report import compare_report as cr
 def small():
     """Every sensor but the slow-to-compile gated one on a tiny dilemma scene (long labels, 10 points)."""
     scene = builtin_scene("dilemma", 32, 64)
-    sensors = ["spike", "cmos-short", "cmos", "seed001-2seg", "seed003-4t", "seed003-overflow", "highspeed"]
+    sensors = ["spikeone", "cmos-short", "cmos", "seed001-2seg", "seed003-4t", "seed003-overflow", "highspeed"]
     return cr.run_comparison(scene, 0.02, sensors, [0.01], seed=1, progress=False)
 
 
@@ -55,3 +55,14 @@ def test_gated_figure_fits(check_layout):
     labels = [c.get_ylabel() for a in fig.axes for c in a.child_axes]
     assert any("lux" in lb for lb in labels) and any("e⁻" in lb for lb in labels)
     check_layout(fig)
+
+
+def test_long_legend_labels_break_at_their_separator():
+    """A long sensor label breaks at " · ", so no legend line ends in a dangling separator (it read as a cut)."""
+    from viform.report.compare_report import _wrap_label
+
+    label = "1  spike (SpikeOne, Q = 16 250 e⁻, 40 kHz) · accumulation 1 ms"
+    lines = _wrap_label(label, 44).splitlines()
+    assert len(lines) == 2 and lines[1].strip() == "· accumulation 1 ms"
+    assert not any(line.rstrip().endswith("·") for line in lines) and all(len(line) <= 44 for line in lines)
+    assert _wrap_label("4  CMOS 1 ms (cmos-short)", 44) == "4  CMOS 1 ms (cmos-short)"

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from viform.light.scenes import builtin_scene
+from viform.light.catalog import builtin_scene
 from viform.measure import comparison as cmp
 from viform.report.compare_report import _fmt, figure_errors, finite_json, metrics_table, run_comparison
 
@@ -16,15 +16,15 @@ from viform.report.compare_report import _fmt, figure_errors, finite_json, metri
 def small():
     """Spike camera and the 33 ms overflow pixel on a tiny dilemma scene, 20 ms clip."""
     scene = builtin_scene("dilemma", 32, 64)
-    return run_comparison(scene, 0.02, ["spike", "seed003-overflow", "cmos"], [0.006, 0.012], seed=2,
+    return run_comparison(scene, 0.02, ["spikeone", "seed003-overflow", "cmos"], [0.006, 0.012], seed=2,
                           progress=False)
 
 
 def test_spike_rows_name_the_preset_its_threshold_and_clock(small):
-    sensor, preset = cmp.spike_preset()
+    sensor = cmp.make_compare_sensor("spikeone")
     p = sensor.parameters
     q = f"{p.threshold_electrons:,.0f}".replace(",", " ")
-    rows = [s for s in small["shots"] if s.key.startswith("spike-")]
+    rows = [s for s in small["shots"] if s.family == "spike"]
     assert rows
     for s in rows:
         assert f"Q = {q} e⁻" in s.label and f"{p.clock_hz / 1e3:g} kHz" in s.label
@@ -32,7 +32,7 @@ def test_spike_rows_name_the_preset_its_threshold_and_clock(small):
 
 def test_one_spike_per_clip_light_is_q_over_eta_t(small):
     """A pixel fires every Q/(η·E) s, so once in T seconds at E = Q/(η·T); the ceiling is Q·f/η."""
-    sensor, preset = cmp.spike_preset()
+    sensor, preset = cmp.make_compare_sensor("spikeone"), "spikeone"
     p = sensor.parameters
     note = cmp.spike_exposure_note(sensor, preset, 0.02)
     eta = p.optics.electrons_per_lux_second

@@ -8,6 +8,7 @@ import pytest
 
 from viform.light.dilemma import DilemmaScene
 from viform.measure import comparison as cmp
+from viform.sensors.catalog import SENSORS
 from viform.sensors.frame import FramePixelParameters, FrameSensor
 
 
@@ -41,7 +42,7 @@ def test_blur_width_grows_with_exposure_times_speed():
 
 def _saturated(key, scene, duration_s=0.012):
     shots = cmp.shoot(key, scene, duration_s, [duration_s / 2], seed=5)
-    shot = next(s for s in shots if s.key in (key, "spike-interval"))
+    shot = next(s for s in shots if s.key in (key, f"{key}-interval"))
     return float(shot.estimates[0].saturated.mean())
 
 
@@ -53,7 +54,7 @@ def _ceiling_lux_cmos():
 
 
 def _ceiling_lux_spike():
-    p = cmp.spike_preset()[0].parameters
+    p = cmp.make_compare_sensor("spikeone").parameters
     return p.threshold_electrons * p.clock_hz / p.optics.electrons_per_lux_second  # one spike every tick
 
 
@@ -71,7 +72,7 @@ def test_saturation_grows_with_brightness_for_the_cmos_not_the_spike_camera():
         truth = scene.mean_illuminance_lux(0.0, 0.010)  # the CMOS integrates the first 10 ms
         assert truth.max() < spike_ceiling
         cmos_frac.append(_saturated("cmos", scene))
-        spike_frac.append(_saturated("spike", scene))
+        spike_frac.append(_saturated("spikeone", scene))
         assert cmos_frac[-1] == pytest.approx((truth > cmos_ceiling).mean(), abs=0.03)
     assert cmos_frac[0] < cmos_frac[1] < cmos_frac[2]
     assert spike_frac == [0.0, 0.0, 0.0]
@@ -81,7 +82,7 @@ def test_spike_camera_saturates_where_its_ceiling_says():
     """Above Q·f/η the spike camera fires every tick too: its saturated fraction is the share of
     pixels above that ceiling (the default dilemma: lamp 50 000 lux, window up to 3 000 lux)."""
     scene = DilemmaScene(32, 48)
-    frac = _saturated("spike", scene)
+    frac = _saturated("spikeone", scene)
     truth = scene.illuminance_lux(0.006)
     expected = (truth > _ceiling_lux_spike()).mean()
     assert expected > 0.02
@@ -149,8 +150,8 @@ def test_motion_verdict_holds_when_the_speed_changes(speed):
             shots.append(shot)
     lines = cmp.verdict(shots, scene.demand())
     motion = next(line for line in lines if line.startswith("Sharpest moving edge"))
-    assert motion.startswith(f"Sharpest moving edge: {cmp.SENSOR_LABELS['seed001-3seg']}")
-    assert f"the most blurred is {cmp.SENSOR_LABELS['cmos']}" in motion
+    assert motion.startswith(f"Sharpest moving edge: {SENSORS['seed001-3seg'].label}")
+    assert f"the most blurred is {SENSORS['cmos'].label}" in motion
 
 
 def test_fog_hides_targets_from_a_passive_camera_not_from_the_gated_one():
@@ -178,6 +179,7 @@ def test_fog_hides_targets_from_a_passive_camera_not_from_the_gated_one():
 def _sensor(key, label, *, lux=True, rate_hz=30.0, **metrics):
     s = _shot(label, **metrics)
     s.key, s.lux_units, s.frame_rate_hz = key, lux, rate_hz
+    s.family = "spike" if key.startswith("spike") else "gated" if key == "gated" else "frame"
     return s
 
 

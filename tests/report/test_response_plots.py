@@ -4,7 +4,7 @@ get a panel that shows them rising, with the slopes the seed's equations give.""
 import numpy as np
 
 from viform.report.response_plots import response_figure
-from viform.sensors import presets
+from viform.sensors import catalog
 
 
 def _noise_free_curve(sensor, lux):
@@ -18,7 +18,7 @@ def test_overflow_knee_panel_slopes_match_the_equations(check_layout):
     the sharing onto C_F, and t3 add signal: slope / slope(A→B) = (t2·C_PD/(C_PD + C_F) + t3) / T
     (seed 003 eqs. 4–6), 1/316 for the seed's pixel; D→E: t3 / T = 1/1111. The panel prints
     these (to the 2 % a 2000-point curve interpolated at the knees allows)."""
-    s = presets.make_sensor("seed003-overflow", height=16, width=16)
+    s = catalog.make_sensor("seed003-overflow", height=16, width=16)
     lux = np.geomspace(1e-3, 1e5, 2000)
     knees = {f"{k} knee": float(s.lux_from_photocurrent(v)) for k, v in s.segment_boundaries_a().items()
              if k in "BCDE"}

@@ -64,7 +64,7 @@ def test_report_renders_in_chromium(swept, tmp_path):
     shot = tmp_path / "shot.png"
     run = subprocess.run([CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}",
                           "--window-size=1280,2400", "--hide-scrollbars", url], capture_output=True, text=True,
-                         timeout=120)
+                         timeout=1800)  # a hang guard only: never reached by a slow machine
     assert run.returncode == 0 and shot.exists(), run.stderr[-2000:]
     import imageio.v3 as iio
 
@@ -83,6 +83,17 @@ def test_report_renders_in_chromium(swept, tmp_path):
     (["--sensor", "nosuch"], "--sensor"),
     (["--sensor", "cmos", "--vary", "exposure_s=0.05"], "--vary: sensor 'cmos' at exposure_s=0.05"),
     (["--sensor", "cmos", "--workers", "1", "--scheduler", "tcp://127.0.0.1:1"], "--scheduler"),
+    # the library names its parameters; the command maps each to its flag (SWEEP_FLAGS)
+    (["--sensor", "cmos", "--duration", "20"], "--duration = 20 s is not allowed"),
+    (["--sensor", "cmos", "--at", "0.5"], "--at: instant 0.5 s is outside the clip"),
+    (["--sensor", "cmos", "--spike-image", "x"], "--spike-image = 'x' is not allowed"),
+    (["--sensor", "cmos", "--objective", "blur"], "--objective: 'blur' is not a metric"),
+    (["--sensor", "cmos", "--workers", "-1"], "--workers = -1 is not allowed"),
+    (["--sensor", "cmos", "--worker-memory", "lots"], "--worker-memory = 'lots' is not allowed"),
+    (["--sensor", "spikeone", "--device", "gpu"], "--device"),
+    (["--sensor", "cmos", "--device", "cuda"], "--device = 'cuda' runs the spike camera's simulation on a GPU"),
+    (["--sensor", "cmos", "--vary", "scene:nosuch=1"], "--vary scene:nosuch=1: 'nosuch' is not a numeric parameter"),
+    (["--sensor", "cmos", "--vary", "scene:brightness=-1"], "--vary: the scene at brightness=-1 cannot be made"),
 ])
 def test_bad_input_one_line_exit_2_nothing_left(tmp_path, capsys, extra, needle):
     out = tmp_path / "r"
@@ -91,3 +102,89 @@ def test_bad_input_one_line_exit_2_nothing_left(tmp_path, capsys, extra, needle)
     assert code == 2, err
     assert len(err.strip().splitlines()) == 1 and needle in err, err
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_flat_metric_is_drawn_flat_not_stretched():
+    """A metric that varies by 5·10⁻⁴ of its size over a sweep is not stretched to fill its panel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from viform.report.sweep_report import MIN_SPAN_FRACTION, _floor_span
+
+    fig, ax = plt.subplots()
+    values = [0.80196, 0.80251, 0.80230]
+    ax.plot(range(3), values)
+    half = _floor_span(ax, values)
+    lo, hi = ax.get_ylim()
+    assert half == pytest.approx((0.80251 - 0.80196) / 2)
+    assert hi - lo == pytest.approx(MIN_SPAN_FRACTION * np.mean([min(values), max(values)]))
+    # a metric that really varies keeps matplotlib's own limits; all-zero values get one display unit
+    fig2, ax2 = plt.subplots()
+    assert _floor_span(ax2, [10.0, 20.0, 30.0]) is None
+    assert _floor_span(ax2, [0.0, 0.0]) == 0.0 and ax2.get_ylim() == (-0.5, 0.5)
+    plt.close("all")
+
+
+def test_pareto_front_of_one_point_is_visible(swept):
+    """Each panel outlines its front's points, so a front of one point is still seen (and named in the legend)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from viform.report.sweep_report import figure_pareto
+
+    out, _ = swept
+    doc = json.loads((out / "sweep.json").read_text())
+    doc.setdefault("records", doc.get("points"))
+    fig = figure_pareto(doc, doc["pareto"])
+    for ax in fig.axes:
+        fronts = [c for c in ax.collections if c.get_label().startswith("Pareto front")]
+        assert fronts and len(fronts[0].get_offsets()) >= 1
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert any(lb.startswith("Pareto front") for lb in labels)
+
+
+def test_tracking_a_scene_without_objects_is_refused(tmp_path, capsys):
+    """translating has no objects: --tracking is refused in one line (exit 2), nothing written."""
+    out = tmp_path / "r"
+    code = main(["sweep", "translating", "--sensor", "cmos", "--vary", "exposure_s=0.001", "--tracking",
+                 "--height", "32", "--width", "48", "--duration", "0.012", "--no-progress", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert "--tracking: scene 'translating' has no objects to track" in err and not out.exists()
+
+
+def test_no_require_prints_no_meets(tmp_path, capsys):
+    """Without --require nothing "meets": the console names each sensor's best by the objective and says no
+    demands were given."""
+    code = main([*ARGS, "--workers", "0", "--sensor", "cmos", "--vary", "exposure_s=1e-3", "--out",
+                 str(tmp_path / "sw")])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "meets" not in out and "No demands were given" in out and "cmos    best" in out
+
+
+def test_cuda_without_a_gpu_is_one_line(tmp_path, capsys):
+    from viform.sensors.spike_cuda import cuda_available
+
+    if cuda_available():
+        pytest.skip("this machine has a CUDA GPU")
+    out = tmp_path / "r"
+    code = main([*ARGS, "--sensor", "spikeone", "--device", "cuda", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and err.count("--device = 'cuda'") == 1, err
+    assert not out.exists()
+
+
+def test_scene_parameters_from_the_command_line(tmp_path, capsys):
+    """--vary scene:brightness=… shoots every point at each light level and answers per level; --list-parameters
+    names the scene's parameters."""
+    code = main([*ARGS, "--workers", "0", "--sensor", "cmos", "--vary", "scene:brightness=0.5,2", "--require",
+                 "underexposed_fraction<=0.5", "--out", str(tmp_path / "sw")])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "At scene brightness = 0.5:" in out and "At scene brightness = 2:" in out
+    assert main(["sweep", "dilemma", "--sensor", "cmos", "--list-parameters"]) == 0
+    listed = capsys.readouterr().out
+    assert "scene (dilemma; vary as scene:PARAM): brightness=1.0" in listed

@@ -79,3 +79,59 @@ def test_storage_defaults_are_off_and_bad_values_named():
         FramePixelParameters(parasitic_light_sensitivity=1.5)
     with pytest.raises(ViformError, match="storage_leakage_e_per_s"):
         FramePixelParameters(storage_leakage_e_per_s=-1.0)
+
+
+class _CountingScene(VideoScene):
+    """A VideoScene that counts how often the light is looked at."""
+
+    looks = 0
+
+    def illuminance_lux(self, t_s):
+        type(self).looks += 1
+        return super().illuminance_lux(t_s)
+
+
+@pytest.mark.parametrize("height", [12, 40])
+def test_each_rows_light_is_its_mean_over_its_own_wait(height):
+    """Light rising linearly during the readout, L(t) = F₀ + b·t: row r's mean over
+    [end, end + w_r] is F₀ + b·(end + w_r/2). With H ≤ samples every wait ends on a segment edge
+    (exact, to rounding); with H > samples the segment a wait ends in is taken at its mean, off by
+    at most |b|·Δ²/(8·w_r) (Δ = T_read/M). The scene is looked at ``samples`` times, not per row;
+    still light gives exactly its value."""
+    p = _params(parasitic_light_sensitivity=0.01)
+    rng = np.random.default_rng(3)
+    f0, f1 = rng.uniform(0, 500, (2, height, 8))
+    rate_hz = 1 / 0.05  # frame 1 is at 50 ms, after the 20 ms readout
+    scene = _CountingScene(np.stack([f0, f1]), rate_hz, interpolation="linear")
+    arr = FrameSensor(p, exposure_s=EXPOSURE_S, frame_rate_hz=40.0).pixel_array(height, 8)
+    end = 3e-3
+    _CountingScene.looks = 0
+    got = arr.storage_light_lux(scene, end, samples=32)
+    assert _CountingScene.looks <= 32 + height  # ⌈32/M⌉ per segment: ≤ 32 + M
+    wait = arr.storage_wait_s()
+    b = (f1 - f0) * rate_hz
+    want = f0 + b * (end + wait / 2)
+    n_seg = min(height, 32)
+    bound = np.abs(b) * (p.readout_time_s / n_seg) ** 2 / (8 * wait) if height > 32 else 0.0
+    assert np.all(np.abs(got - want) <= 1e-9 + 1e-12 * np.abs(want) + bound)
+    if height > 32:  # the bound is reached somewhere, not vacuous
+        assert np.abs(got - want).max() > 0.05 * np.max(bound)
+    still = np.abs(f0)
+    np.testing.assert_array_equal(arr.storage_light_lux(StillScene(still), end), still)
+
+
+def test_light_that_starts_mid_readout_reaches_only_the_rows_still_waiting():
+    """Dark until half the readout has passed, L lux after: rows read in the first half hold no
+    parasitic charge; a later row r holds L·(w_r − T/2)/w_r of mean light (exact: the step lies
+    on a segment edge)."""
+    p = _params(parasitic_light_sensitivity=0.01)
+    lux = 300.0
+    half = p.readout_time_s / 2
+    end = 1e-3
+    frames = np.stack([np.zeros((H, 4)), np.full((H, 4), lux)])
+    scene = VideoScene(frames, 1 / (end + half), interpolation="hold")
+    arr = FrameSensor(p, exposure_s=EXPOSURE_S, frame_rate_hz=40.0).pixel_array(H, 4)
+    got = arr.storage_light_lux(scene, end, samples=8)
+    wait = arr.storage_wait_s()
+    np.testing.assert_allclose(got, np.broadcast_to(lux * np.clip(wait - half, 0, None) / wait, (H, 4)),
+                               atol=1e-9)

@@ -7,7 +7,8 @@ from viform._validate import ViformError
 from viform.light.active import ActiveScene, Medium, field_test_scene, fog_scene
 from viform.light.laser import PulsedLaser
 from viform.measure.gated_metrics import expected_cnr, field_test_table, measured_cnr, pulses_needed_vs_ambient
-from viform.sensors.gated_ccd import GatedInterlineCCD, GateTiming, InterlineCCDParameters
+from viform.sensors.gate_timing import GateTiming
+from viform.sensors.gated_ccd import GatedInterlineCCD, InterlineCCDParameters
 
 C = 299_792_458.0
 

@@ -7,6 +7,7 @@ from viform._validate import ViformError
 from viform.light.radiometry import ELEMENTARY_CHARGE_C
 from viform.light.scenes import Scene, StillScene
 from viform.measure.emva1288 import measure_response, plateau_onset
+from viform.sensors.catalog import make_sensor
 from viform.sensors.overflow import (
     SEED003_INTEGRATIONS_S,
     OverflowSensor,
@@ -16,7 +17,6 @@ from viform.sensors.overflow import (
     segment_boundaries_a,
     share_charge_v,
 )
-from viform.sensors.presets import make_sensor
 
 
 def db(ratio):

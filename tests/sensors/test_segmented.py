@@ -6,11 +6,11 @@ import pytest
 from viform._validate import ViformError
 from viform.light.scenes import StepScene, StillScene
 from viform.measure.emva1288 import measure_response, plateau_onset
+from viform.sensors.catalog import make_sensor
 from viform.sensors.frame import FramePixelParameters, FrameSensor
 from viform.sensors.presets import (
     SEED001_FIG8_UNIT_LUX,
     SEED001_FIG9_UNIT_LUX,
-    make_sensor,
 )
 from viform.sensors.segmented import (
     SegmentedExposureSensor,

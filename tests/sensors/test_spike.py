@@ -14,7 +14,8 @@ import pytest
 from scipy import stats
 
 from viform._validate import ViformError
-from viform.light.scenes import StepScene, StillScene, TranslatingScene, builtin_scene
+from viform.light.catalog import builtin_scene
+from viform.light.scenes import StepScene, StillScene, TranslatingScene
 from viform.sensors._gamma import gamma_samples
 from viform.sensors.spike import CHIP_THRESHOLD_LEVELS_ELECTRONS, SpikeSensor
 
@@ -61,6 +62,36 @@ def test_gamma_sampler_is_exact(shape):
     x = gamma_samples(shape, 200_000, key=12345)
     assert stats.kstest(x, stats.gamma(shape).cdf).pvalue > 1e-3
     assert x.mean() == pytest.approx(shape, abs=5 * math.sqrt(shape / x.size))
+
+
+def test_gamma_tables_cached_on_disk_are_the_computed_ones(tmp_path, monkeypatch):
+    """A new process loads the tables it would compute, bit for bit; a damaged file is recomputed,
+    an unwritable folder only costs the computation, a SciPy build of its own gets tables of its own."""
+    from viform.sensors import _gamma
+
+    monkeypatch.setattr(_gamma, "table_cache_folder", lambda: tmp_path / "tables")
+    monkeypatch.setattr(_gamma, "_TABLES", {})
+    shapes = [7.0, 100.0]
+    computed = np.stack([_gamma._table(a) for a in shapes])
+    (first,) = _gamma.build_tables(shapes)
+    files = list((tmp_path / "tables").iterdir())
+    assert len(files) == 1 and first.tobytes() == computed.tobytes()
+    monkeypatch.setattr(_gamma, "_TABLES", {})  # as in a new process
+    monkeypatch.setattr(_gamma, "_table", lambda a: pytest.fail("computed although cached"))
+    assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()
+    monkeypatch.undo()
+    monkeypatch.setattr(_gamma, "table_cache_folder", lambda: tmp_path / "tables")
+    monkeypatch.setattr(_gamma, "_TABLES", {})
+    files[0].write_bytes(files[0].read_bytes()[:1000])  # a truncated file
+    assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()
+    monkeypatch.setattr(_gamma, "_TABLES", {})
+    monkeypatch.setattr(_gamma, "_scipy_build", lambda: "version = '0.0'")
+    assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()
+    assert len(list((tmp_path / "tables").iterdir())) == 2
+    monkeypatch.setattr(_gamma, "_TABLES", {})
+    (tmp_path / "file").write_text("")
+    monkeypatch.setattr(_gamma, "table_cache_folder", lambda: tmp_path / "file" / "tables")
+    assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()
 
 
 def test_dark_only_pixels_fire_at_dark_current_over_q():
@@ -176,7 +207,7 @@ def test_bad_parameters_name_themselves(field, value):
 def test_vectorized_noise_free_kernel_matches_the_general_lanes(reset):
     """The noise-free model resolves crossings in the SIMD loop itself; it must give the bits of the
     general path (every crossing through ``_fire``)."""
-    from viform.sensors import spike as module
+    from viform.sensors import _spike_kernels as module
 
     sensor = SpikeSensor(photon_noise=False, reset=reset)
     scene = builtin_scene("hdr", 20, 50)  # includes pixels above the one-spike-per-tick limit
@@ -191,8 +222,9 @@ def test_vectorized_noise_free_kernel_matches_the_general_lanes(reset):
         rates = sensor._fixed_point_rates(lux.reshape(last - first, -1), 20, 50)
         seg_end = np.arange(first + 1, last + 1, dtype=np.int64)
         module._run_block(words, rates, seg_end, first, state.charge, state.target, state.counter,
-                          q, index, *tables, state.keys, False, reset == "readout", 0.0, module.MODE_GENERAL,
-                          bounds, state.pending_ticks, state.pending_rate)
+                          q, index, *tables, *module.fixed_point_tables(tables[0]), state.keys, False,
+                          reset == "readout", 0.0, module.MODE_GENERAL,
+                          bounds, state.pending_ticks, state.pending_rate, module.SPARSE_FIRING)
         bits = np.unpackbits(words.view(np.uint8), axis=1, count=1000, bitorder="little")
         blocks.append(bits.reshape(-1, 20, 50).astype(bool))
     assert np.array_equal(vectorized, np.concatenate(blocks))
@@ -214,7 +246,7 @@ def test_reused_block_buffer_gives_the_same_bits():
 def per_tick_reference(sensor, scene, n_ticks, seed, sample):
     """Plain tick-by-tick integration with the simulator's targets: add each tick's charge,
     fire when it reaches the target (the model the event-driven kernel must reproduce)."""
-    from viform.sensors import spike as module
+    from viform.sensors import _spike_kernels as module
 
     h, w = scene.shape
     q, _, index, tables = sensor._pixel_tables(h, w)
@@ -306,20 +338,22 @@ def test_saturated_jump_has_the_law_of_one_gamma_per_crossing(residual_electrons
     Reference: NumPy Gamma(Q) intervals summed past R; the state is (age since the last
     crossing, charge still missing). Two-sample Kolmogorov–Smirnov on 20,000 draws each.
     """
-    from viform.sensors import spike as module
+    from viform.sensors import _spike_kernels as module
 
     q, n = 7, 20_000
     rng = np.random.default_rng(1)
     age_ref, rest_ref = np.empty(n), np.empty(n)
-    for i in range(n):
-        total = 0.0
-        while True:
-            interval = rng.gamma(q)
-            if total + interval > residual_electrons:
-                age_ref[i] = residual_electrons - total
-                rest_ref[i] = total + interval - residual_electrons
-                break
-            total += interval
+    # intervals per row: enough to pass R but for a 10-sigma fluctuation (asserted per block)
+    m = int(residual_electrons / q + 10 * math.sqrt(residual_electrons / q) + 10)
+    for start in range(0, n, 2000):
+        rows = slice(start, min(start + 2000, n))
+        crossings = np.cumsum(rng.gamma(q, size=(rows.stop - rows.start, m)), axis=1)
+        assert np.all(crossings[:, -1] > residual_electrons)
+        first = np.argmax(crossings > residual_electrons, axis=1)  # the interval in progress at R
+        index = np.arange(first.size)
+        before = np.where(first > 0, crossings[index, np.maximum(first - 1, 0)], 0.0)
+        age_ref[rows] = residual_electrons - before
+        rest_ref[rows] = crossings[index, first] - residual_electrons
     qs = np.full(1, float(q))
     keys = np.array([np.uint64(123456789)])
     counter = np.zeros(1, dtype=np.int64)

@@ -233,7 +233,7 @@ def test_saturated_pixels_skipped_then_settled_give_the_same_bits_and_state(scen
 
 def test_saturated_pixels_are_only_counted_in_the_kernel():
     """On a still saturated scene the kernel draws nothing for pixels above the bound: it counts their ticks."""
-    from viform.sensors import spike as module
+    from viform.sensors import _spike_kernels as module
 
     sensor = SpikeSensor()
     scene = HDRScene(4, 64, 0.01, 7.0)
@@ -244,8 +244,8 @@ def test_saturated_pixels_are_only_counted_in_the_kernel():
     words = np.empty((500, 4), dtype=np.uint64)
     drawn_before = state.counter.copy()
     module._run_block(words, rates, np.array([500], np.int64), 0, state.charge, state.target, state.counter,
-                      q, index, *tables, state.keys, True, False, 0.0, module.MODE_GENERAL, bounds,
-                      state.pending_ticks, state.pending_rate)
+                      q, index, *tables, *module.fixed_point_tables(tables[0]), state.keys, True, False, 0.0,
+                      module.MODE_GENERAL, bounds, state.pending_ticks, state.pending_rate, module.SPARSE_FIRING)
     above = rates[0] >= bounds
     assert above.sum() > 30 and (~above).sum() > 30
     assert np.all(state.pending_ticks[above] == 500) and not state.pending_ticks[~above].any()
@@ -273,3 +273,58 @@ if __name__ == "__main__":
     names = sys.argv[1:] or sorted(CASES)
     for name in names:
         print(f"    {name!r}: {outcome(name)!r},")
+
+
+@pytest.mark.parametrize("make_sensor", [
+    lambda: SpikeSensor(),
+    lambda: SpikeSensor(threshold_electrons=1),
+    lambda: SpikeSensor(threshold_electrons=2e4),
+    lambda: _MapSensor(),
+    lambda: SpikeSensor(reset="readout"),
+    lambda: SpikeSensor(dead_time_s=2e-5),
+    lambda: SpikeSensor(dead_time_s=5e-5, reset="readout"),
+    lambda: SpikeSensor(photon_noise=False),
+    lambda: SpikeSensor(photon_noise=False, reset="readout"),
+    lambda: SpikeSensor(photon_noise=False, dead_time_s=3e-5),
+], ids=["q100", "q1", "q2e4", "threshold-map", "readout", "dead-time", "dead-time-readout", "noise-free",
+        "noise-free-readout", "noise-free-dead-time"])
+def test_dim_words_run_crossing_by_crossing_give_the_tick_by_tick_bits(make_sensor):
+    """The constant-light kernel runs dim words crossing by crossing (``sparse_firing``); forcing that
+    path on every word (dark to saturated, several runs of light) or never taking it gives the same
+    bits and state, for every crossing rule."""
+    from viform.sensors import _spike_kernels as module
+
+    sensor = make_sensor()
+    height, width = 6, 40
+    lux = _texture(height, width, 0.002, 2e4, seed=9)
+    runs = np.stack([lux, lux * 0.01, lux[::-1], np.zeros_like(lux), lux * 3.0]).reshape(5, -1)
+    rates = sensor._fixed_point_rates(runs, height, width)
+    seg_end = np.array([37, 38, 120, 190, 300], dtype=np.int64)
+    q, _, index, tables = sensor._pixel_tables(height, width)
+    p = sensor.parameters
+    if not p.photon_noise and p.dead_time_s == 0:
+        mode = module.MODE_NOISE_FREE_READOUT if p.reset == "readout" else module.MODE_NOISE_FREE_SELF
+    else:
+        mode = module.MODE_GENERAL
+    results = []
+    for sparse_firing in (0.0, 1e30):
+        state = sensor.initial_state(height, width, 4)
+        words = np.empty((300, 4), dtype=np.uint64)
+        for first, last in ((0, 100), (100, 300)):  # two blocks: runs cross a block boundary
+            block = words[first:last]
+            module._run_block(block, rates, seg_end, first, state.charge, state.target, state.counter, q, index,
+                              *tables, *sensor._fixed_point_tables(height, width), state.keys, p.photon_noise,
+                              p.reset == "readout", p.dead_time_s * p.clock_hz, mode,
+                              sensor._saturation_bounds(height, width), state.pending_ticks, state.pending_rate,
+                              sparse_firing)
+        module._settle_all(state.charge, state.target, state.counter, q, index, *tables, state.keys,
+                           state.pending_ticks, state.pending_rate)
+        results.append((words, state))
+    (lanes, lane_state), (sparse, sparse_state) = results
+    assert np.array_equal(lanes, sparse)
+    for name in ("charge", "target", "counter"):
+        assert np.array_equal(getattr(lane_state, name), getattr(sparse_state, name)), name
+    bits = np.unpackbits(lanes.view(np.uint8), axis=1, count=height * width, bitorder="little")
+    assert bits[190:].mean(axis=0).max() > 0.3  # bright pixels (saturated, or at the dead-time limit)
+    firing = bits.mean(axis=0)
+    assert ((firing > 0) & (firing < 0.05)).any()  # and dim ones that do fire

@@ -7,7 +7,7 @@ import pytest
 
 from viform._validate import ViformError
 from viform.light.scenes import StillScene
-from viform.sensors import presets
+from viform.sensors import catalog
 from viform.sensors.spike_presets import (
     DEFAULT_THRESHOLD_LEVEL,
     SPIKE_PRESET_NAMES,
@@ -57,10 +57,10 @@ def test_round_trip_through_json(tmp_path):
 
 
 def test_presets_reachable_through_make_sensor():
-    assert set(SPIKE_PRESET_NAMES) <= set(presets.preset_names())
-    s = presets.make_sensor("spiketwo")
+    assert set(SPIKE_PRESET_NAMES) <= set(catalog.sensor_names("spike"))
+    s = catalog.make_sensor("spiketwo")
     assert (s.height, s.width, s.parameters.clock_hz) == (1000, 1000, 20e3)
-    assert "SpikeTwo" in presets.describe_preset("spiketwo")
+    assert "SpikeTwo" in catalog.describe("spiketwo")
 
 
 def test_preset_sensor_fires_at_light_over_q():

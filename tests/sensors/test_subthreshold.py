@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
+from viform._validate import ViformError
 from viform.light.scenes import StillScene
+from viform.sensors.base import Sensor
 from viform.sensors.spike import SpikeSensor
-from viform.sensors.subthreshold import SubthresholdSpikeSensor
+from viform.sensors.subthreshold import SubthresholdSpikeSensor, subthreshold_dynamic_range_db
 
 
 def _lux(sensor, e_per_s):
@@ -15,6 +17,21 @@ def _lux(sensor, e_per_s):
 def test_dynamic_range_formula():
     sub = SubthresholdSpikeSensor(SpikeSensor(), sensitivity_ticks=400, levels=100)
     assert sub.dynamic_range_db() == pytest.approx(20 * np.log10(400 * 100))
+    # seed 000 §4.5's worked example: τ̌ = 10 ns, τ̆ = 10 ms, N = 100 → 160 dB
+    assert subthreshold_dynamic_range_db(10e-9, 10e-3, 100) == pytest.approx(160.0)
+    with pytest.raises(ViformError, match="sensitivity_s"):
+        subthreshold_dynamic_range_db(1e-3, 1e-4, 10)
+
+
+def test_is_a_sensor_and_describes_itself():
+    """The sub-threshold camera is a :class:`Sensor`: its description holds the spike sensor's
+    parameters plus τ̆ and N, and its capture is its native output (spikes plus levels)."""
+    sub = SubthresholdSpikeSensor(SpikeSensor(threshold_electrons=50.0), sensitivity_ticks=10, levels=8)
+    assert isinstance(sub, Sensor)
+    d = sub.describe()
+    assert d["threshold_electrons"] == 50.0 and d["sensitivity_ticks"] == 10 and d["subthreshold_levels"] == 8
+    cap = sub.capture(StillScene(np.full((4, 8), 10.0)), 0.001, seed=1)
+    assert cap.levels.shape == (cap.spikes.n_ticks // 10 + 1, 4, 8)
 
 
 def test_dim_light_is_measured_below_one_spike_per_window():

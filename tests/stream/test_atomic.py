@@ -34,7 +34,8 @@ while True:
 
 CLI_WRITER = """
 import sys
-from viform.cli import main
+from viform.cli import _install_sigterm, main
+_install_sigterm()  # what main() does first: a SIGTERM however soon after "ready" is the command's to handle
 print("ready", flush=True)
 while True:
     rc = main(["simulate", "translating", "--duration", "0.02", "--height", "8", "--width", "16",
@@ -69,7 +70,7 @@ def test_sigkill_at_many_points_leaves_old_or_new_store_whole(tmp_path, name):
         proc = _start(WRITER, path)
         time.sleep(rng.uniform(0.0, 0.3))
         proc.kill()
-        proc.wait(10)
+        proc.wait(600)
         source = open_spikes(path)  # restores an old store set aside by the dead writer
         source.verify()
         bits = source.read_ticks(0, 96)
@@ -99,7 +100,7 @@ def test_sigterm_leaves_nothing_behind(tmp_path):
         proc = _start(CLI_WRITER, path)
         time.sleep(rng.uniform(0.2, 0.6))
         proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=20)
+        _, err = proc.communicate(timeout=1800)  # a hang guard only
         assert proc.returncode == 143, err
         assert "Traceback" not in err
         assert _leftovers(tmp_path) == []  # no cleanup run needed
@@ -141,7 +142,7 @@ write_dat(path, SpikeStream(np.random.default_rng(1).random((96, 8, 16)) < 0.3, 
 
 def _kill_at(path, moment, with_sidecar=True):
     proc = subprocess.run([sys.executable, "-c", KILL_AT_RENAME, str(path), moment, "1" if with_sidecar else "0"],
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=1800)
     assert proc.returncode == -signal.SIGKILL, proc.stderr
 
 
@@ -183,7 +184,7 @@ def test_dat_sigkill_at_random_points_reads_old_or_new(tmp_path):
         proc = _start(WRITER, path)
         time.sleep(rng.uniform(0.0, 0.3))
         proc.kill()
-        proc.wait(10)
+        proc.wait(600)
         source = open_spikes(path)
         assert source.verify()["verified"]
         bits = source.read_ticks(0, 96)
@@ -208,7 +209,7 @@ def campaign(kills: int, seed: int) -> dict:
             proc = _start(WRITER, path)
             time.sleep(rng.uniform(0.0, 0.3))
             proc.kill()
-            proc.wait(10)
+            proc.wait(600)
             try:
                 source = open_spikes(path)
                 source.verify()
@@ -257,3 +258,129 @@ def test_interrupts_are_held_inside_a_deferred_section_and_raised_after():
     finally:
         signal.signal(signal.SIGTERM, previous[0])
         signal.signal(signal.SIGINT, previous[1])
+
+
+# ---------------------------------------------------------------- the rename windows, stopped and killed
+# The writer stops itself (SIGSTOP) right after one of its renames; while it is stopped a reader
+# opens the output, then the writer is killed (SIGKILL: no cleanup) or let go on.
+STOP_AFTER_RENAME = """
+import os, signal, sys
+import numpy as np
+from viform.stream.container import SpikeStream
+from viform.stream.io import save_spikes
+path, window = sys.argv[1], sys.argv[2]
+def stopping(real):
+    def rename(src, dst):
+        real(src, dst)
+        if (window == "aside" and os.fspath(src) == path) or (window in ("in", "data") and os.fspath(dst) == path):
+            os.kill(os.getpid(), signal.SIGSTOP)
+    return rename
+os.rename, os.replace = stopping(os.rename), stopping(os.replace)
+save_spikes(path, SpikeStream(np.random.default_rng(1).random((96, 8, 16)) < 0.3, 40000.0), block_ticks=32)
+"""
+
+
+def _stopped_writer(path, window):
+    proc = subprocess.Popen([sys.executable, "-c", STOP_AFTER_RENAME, str(path), window], stderr=subprocess.PIPE,
+                            text=True)
+    _, status = os.waitpid(proc.pid, os.WUNTRACED)  # returns once the writer has stopped itself
+    assert os.WIFSTOPPED(status), (status, proc.stderr.read())
+    return proc
+
+
+def _read_whole(path):
+    source = open_spikes(path)
+    assert source.verify()["verified"]
+    return source.read_ticks(0, 96)
+
+
+@pytest.mark.parametrize("name, window", [("s.dat", "data"), ("s.zarr", "aside"), ("s.zarr", "in")])
+@pytest.mark.parametrize("then", ["kill", "continue"])
+def test_a_reader_in_a_rename_window_sees_the_old_or_the_new_output(tmp_path, name, window, then):
+    """.dat: between the data's rename and its sidecar's (new data, old sidecar, new sidecar pending);
+    zarr: between setting the old store aside and renaming the new one in (no store under the name),
+    and between that and deleting the old one. The reader sees a whole old or new output, never new
+    data with an old sidecar; after a kill, the next write leaves nothing behind."""
+    path = tmp_path / name
+    a, b = streams()
+    save_spikes(path, SpikeStream(a, 40_000.0), block_ticks=32)
+    proc = _stopped_writer(path, window)
+    try:
+        bits = _read_whole(path)
+        assert np.array_equal(bits, a) or np.array_equal(bits, b)
+        if window == "data":
+            assert np.array_equal(bits, b)  # the pending sidecar matches the new data: the reader renames it in
+    finally:
+        if then == "kill":
+            proc.kill()
+        else:
+            os.kill(proc.pid, signal.SIGCONT)
+        proc.wait()
+    bits = _read_whole(path)
+    if then == "continue":
+        assert proc.returncode == 0, proc.stderr.read()
+        assert np.array_equal(bits, b) and _leftovers(tmp_path) == []
+    else:
+        assert np.array_equal(bits, a) or np.array_equal(bits, b)
+        save_spikes(path, SpikeStream(a, 40_000.0))
+        assert _leftovers(tmp_path) == [] and np.array_equal(_read_whole(path), a)
+
+
+# SIGTERM at chosen moments of `viform simulate` (the process signals itself there): every
+# moment ends with exit 143, one line, and no temporary file left (only SIGKILL may leave one).
+TERM_AT = """
+import os, signal, sys, tempfile
+from viform import _io
+from viform.cli import main
+from viform.sensors.spike import SpikeSensor
+moment = sys.argv[2]
+def term():
+    os.kill(os.getpid(), signal.SIGTERM)
+if moment == "temporary":  # right after the temporary file is created
+    real_mkstemp = tempfile.mkstemp
+    def mkstemp(*args, **kwargs):
+        made = real_mkstemp(*args, **kwargs)
+        if _io.TMP_MARK in made[1]:
+            term()
+        return made
+    tempfile.mkstemp = mkstemp
+elif moment == "block":  # after the first block of spikes is simulated, before it is written
+    real_blocks = SpikeSensor._packed_blocks
+    def blocks(self, *args, **kwargs):
+        for i, item in enumerate(real_blocks(self, *args, **kwargs)):
+            if i == 0:
+                term()
+            yield item
+    SpikeSensor._packed_blocks = blocks
+elif moment == "fsync":  # the data is complete, not yet renamed in
+    real_fsync = os.fsync
+    def fsync(fd):
+        real_fsync(fd)
+        term()
+    os.fsync = fsync
+elif moment == "rename":  # during the data's rename
+    real_replace = os.replace
+    def replace(src, dst):
+        if os.fspath(dst) == sys.argv[1]:
+            term()
+        real_replace(src, dst)
+    os.replace = replace
+sys.exit(main(["simulate", "translating", "--duration", "0.02", "--height", "64", "--width", "128",
+               "--out", sys.argv[1], "--json"]))
+"""
+
+
+@pytest.mark.parametrize("moment", ["temporary", "block", "fsync", "rename"])
+def test_sigterm_during_simulate_cleans_up_at_once(tmp_path, moment):
+    path = tmp_path / "s.dat"
+    proc = subprocess.run([sys.executable, "-c", TERM_AT, str(path), moment], capture_output=True, text=True)
+    assert proc.returncode == 143, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.strip() and "%|" not in line
+             and not line.startswith("compiling ")]
+    assert len(lines) == 1 and lines[0].startswith("viform: interrupted"), proc.stderr
+    assert _leftovers(tmp_path) == []  # at once: no later run needed to clean up
+    if moment == "rename":  # held until the data and its sidecar are in: a whole pair, and said so
+        assert "kept 1 complete file" in lines[0] and str(path) in lines[0]
+        assert open_spikes(path).verify()["verified"]
+    else:
+        assert not path.exists() and "no output was left" in lines[0]

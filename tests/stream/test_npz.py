@@ -1,6 +1,7 @@
 """The .npz layout: Spike-Zoo's `spk` key, declared axis order, streamed and checked reads."""
 
 import io
+import os
 import zipfile
 from pathlib import Path
 
@@ -12,7 +13,8 @@ from viform.stream.container import SpikeStream
 from viform.stream.io import open_spikes, save_spikes, verify_spikes
 from viform.stream.npz import read_npz
 
-SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike"
+SHARED = Path(os.environ.get("VIFORM_SPIKE_DATA")
+              or Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "spike")
 
 
 def stream(t=30, h=5, w=7, seed=1):

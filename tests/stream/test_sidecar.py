@@ -57,7 +57,7 @@ def test_every_format_records_the_same_fields_and_gives_lux(tmp_path, name):
 
 def test_dat_sidecar_contradiction_and_forgery_are_refused(tmp_path):
     path = write_dat(tmp_path / "s.dat", simulated_stream())
-    with pytest.raises(ViformError, match="--height = 5 contradicts"):
+    with pytest.raises(ViformError, match="height = 5 contradicts"):
         open_spikes(path, 5, 8)
     side = read_sidecar(path)
     for field, value in [("clock_hz", -1), ("height", 0), ("threshold_electrons", "nan"), ("rows", "sideways"),

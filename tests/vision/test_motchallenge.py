@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from viform._validate import ViformError
-from viform.light.scenes import StillScene, builtin_scene
+from viform.light.catalog import builtin_scene
+from viform.light.scenes import StillScene
 from viform.light.truth import TruthUnavailable
 from viform.vision import motchallenge as mot
 
@@ -20,20 +21,60 @@ def test_gt_round_trip_counts_pixels_from_one(tmp_path):
     assert tuple(r[2:6]) == pytest.approx(first[1].box_xywh)
     path = mot.write_gt(tmp_path / "gt.txt", rows)
     line = path.read_text().splitlines()[0].split(",")
-    assert float(line[2]) == pytest.approx(first[1].x_px + 1, abs=1e-4) and len(line) == 9
+    assert float(line[2]) == pytest.approx(first[1].x_px + 1, abs=1e-4) and len(line) == 10
+    assert line[9] == "-1"  # no sensor given: detectability unknown
     back = mot.read_gt(path)
     np.testing.assert_allclose(back, rows, atol=1e-4)
     assert not list(tmp_path.glob(".*"))  # no temporary left
+    # nine-column files (other tools) read with detectability unknown
+    nine = tmp_path / "nine.txt"
+    nine.write_text("1,1,2,3,4,5,1,1,1\n")
+    assert mot.read_gt(nine).tolist() == [[1, 1, 1, 2, 4, 5, 1, 1, 1, -1]]
 
 
-def test_clipping_and_ignore_flag():
+def test_boxes_clipped_to_the_image_visible_fraction_and_ignore_flag():
     scene = builtin_scene("multi-object", height=64, width=96)
-    rows = mot.gt_rows(scene, [scene.t_ref_s, 0.040], clip_to_field=True)
-    assert np.all(rows[:, 2] >= 0) and np.all(rows[:, 2] + rows[:, 4] <= 96 + 1e-9)
+    rows = mot.gt_rows(scene, [scene.t_ref_s, 0.040, 0.043])
+    assert np.all(rows[:, 2:4] >= 0) and np.all(rows[:, 2] + rows[:, 4] <= 96 + 1e-9)
+    assert np.all(rows[:, 3] + rows[:, 5] <= 64 + 1e-9)
     ball = rows[(rows[:, 0] == 1) & (rows[:, 1] == 2)][0]
-    assert ball[6] == 0 and ball[8] == 0  # fully hidden: MOT's ignore flag
-    unclipped = mot.gt_rows(scene, [0.040])
-    assert unclipped[:, 2:4].min() < 0 or (unclipped[:, 2] + unclipped[:, 4]).max() > 96
+    assert ball[6] == 0 and ball[8] == 0  # fully hidden: need not be found
+    # an object partly outside: the box is the part inside, the visibility the fraction of the whole
+    leaving = {o.object_id: o for o in scene.objects(0.043)}
+    car = leaving[4]
+    assert car.x_px < 0
+    r = rows[(rows[:, 0] == 3) & (rows[:, 1] == 4)][0]
+    assert r[2] == 0 and r[4] == pytest.approx(car.width_px + car.x_px)
+    assert r[8] == pytest.approx(car.visible_fraction) and r[8] < 1
+
+
+def test_near_integers_print_without_a_trailing_dot(tmp_path):
+    rows = np.array([[10, 7, 361.5, 11.00000001, 12, 8, 1, 6, 1.0, 2.0]])
+    text = mot.write_gt(tmp_path / "gt.txt", rows).read_text().strip()
+    assert text == "10,7,362.5,12,12,8,1,6,1,2"
+    assert ".," not in text and not text.endswith(".")
+    res = mot.write_results(tmp_path / "r.txt", [[1, 2, 3.99999999, 0.5, 2, 3, 1]]).read_text().strip()
+    assert res == "1,2,5,1.5,2,3,1,-1,-1,-1"
+
+
+def test_detectability_column_is_the_charge_against_q():
+    from viform.vision.detectability import SpikeDetectability
+
+    scene = builtin_scene("multi-object", height=250, width=400)
+    eta, q = 286_347.6, 16_250.0
+    rows = mot.gt_rows(scene, [0.010, 0.020], detectability=SpikeDetectability(q, eta))
+    bird = rows[(rows[:, 1] == 7) & (rows[:, 0] == 2)][0]
+    # the bird (1.5 lux over ≈ 5 lux, 3,606 px/s, 12 × 8 px): dwell min(12/3000, 8/2000) s
+    objs = {o.object_id: o for o in scene.objects(0.020)}
+    b = objs[7]
+    expected = eta * abs(b.lux - b.background_lux) * min(12 / 3000, 8 / 2000) / q
+    assert bird[9] == pytest.approx(expected, rel=1e-9) and bird[9] < 1
+    # in view since the stream started: the charge grows with the time seen, up to the dwell
+    # (the pedestrian: 100 px/s, so its dwell, 0.3 s, is longer than the clip)
+    for k, t in enumerate((0.010, 0.020), start=1):
+        p = {o.object_id: o for o in scene.objects(t)}[5]
+        row = rows[(rows[:, 1] == 5) & (rows[:, 0] == k)][0]
+        assert row[9] == pytest.approx(eta * abs(p.lux - p.background_lux) * t / q, rel=1e-9)
 
 
 def test_results_and_seqinfo(tmp_path):

@@ -17,23 +17,25 @@ from viform.cli.app import cli
 
 #: Modules that add commands to :data:`cli` (imported on start).
 COMMAND_MODULES = [
-    "viform.cli.spike",  # simulate (issue 2)
-    "viform.cli.reconstruct",  # reconstruct (issue 2)
-    "viform.cli.files",  # info (issue 2)
-    "viform.cli.demo",  # demo (issue 2)
-    "viform.cli.frame",  # characterize (issue 3)
-    "viform.cli.highspeed",  # highspeed (issue 4)
-    "viform.cli.gated",  # gated (issue 5)
-    "viform.cli.coding",  # encode, decode, dr (issue 6)
-    "viform.cli.display",  # lightcomm, display (issue 7)
-    "viform.cli.dataset",  # dataset (issue 14)
-    "viform.cli.capture",  # capture (issue 12)
-    "viform.cli.compare",  # compare (issue 12)
-    "viform.cli.sweep",  # sweep (issue 23)
-    "viform.cli.chip_figures",  # chip-figures (issue 16)
-    "viform.cli.calibrate",  # calibrate (issue 10)
-    "viform.cli.flow",  # flow (issue 21)
-    "viform.cli.track",  # track (issue 22)
+    "viform.cli.spike",  # simulate
+    "viform.cli.reconstruct",  # reconstruct
+    "viform.cli.files",  # info
+    "viform.cli.demo",  # demo
+    "viform.cli.frame",  # characterize
+    "viform.cli.highspeed",  # highspeed
+    "viform.cli.gated",  # gated
+    "viform.cli.coding",  # encode, decode, dr
+    "viform.cli.display",  # lightcomm, display
+    "viform.cli.dataset",  # dataset
+    "viform.cli.capture",  # capture
+    "viform.cli.compare",  # compare
+    "viform.cli.sweep",  # sweep
+    "viform.cli.chip_figures",  # chip-figures
+    "viform.cli.calibrate",  # calibrate
+    "viform.cli.flow",  # flow
+    "viform.cli.track",  # track
+    "viform.cli.sensors",  # sensors: the sensor catalogue
+    "viform.cli.scenes",  # scenes, scenes show
 ]
 
 
@@ -43,6 +45,14 @@ def _load_commands() -> None:
     for module in COMMAND_MODULES:
         importlib.import_module(module)
     install(cli)  # bounded numeric options and flag names in errors, for every command
+
+
+class ExitStatus(Exception):  # noqa: N818 -- not an error: a status the command chose
+    """Raised by a command that has printed its result and ends with exit status ``code``."""
+
+    def __init__(self, code: int):
+        super().__init__(code)
+        self.code = int(code)
 
 
 class _Terminated(KeyboardInterrupt):
@@ -77,12 +87,48 @@ def _first_line(exc: BaseException) -> str:
     return lines[0] if lines else type(exc).__name__
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Every warning as one line on stderr (:func:`viform._validate.warning_line`)."""
+    from viform._validate import warning_line
+
+    click.echo(warning_line(message, category), err=True)
+
+
+def _interrupted(exc: BaseException) -> int:
+    """The line an interrupted command prints: what it kept (complete files), never a partial one."""
+    from viform._io import completed_outputs
+
+    kept = completed_outputs()
+    if not kept:
+        click.echo("viform: interrupted; no output was left (the file being written was removed)", err=True)
+    else:
+        names = ", ".join(str(p) for p in kept[:3]) + (f" and {len(kept) - 3} more" if len(kept) > 3 else "")
+        click.echo(f"viform: interrupted; kept {len(kept)} complete file(s) written before it: {names} (the file "
+                   "being written was removed)", err=True)
+    terminated = isinstance(exc, _Terminated) or isinstance(exc.__cause__, _Terminated)
+    return 143 if terminated else 130
+
+
 def main(argv=None) -> int:
     """Entry point: bad input prints one line on stderr and exits 2; no traceback.
 
-    SIGTERM is handled as Ctrl-C (temporary outputs removed; exit 143).
+    SIGTERM is handled as Ctrl-C (temporary outputs removed; exit 143). Warnings (viform's and
+    the libraries') are printed one line each.
     """
+    import warnings
+
+    from viform._io import begin_outputs
+
     _install_sigterm()
+    begin_outputs()
+    with warnings.catch_warnings():
+        # a filter added here also clears the "already shown" records of earlier runs in this process
+        warnings.filterwarnings("default", category=UserWarning)
+        warnings.showwarning = _show_warning
+        return _main(argv)
+
+
+def _main(argv) -> int:
     try:
         _load_commands()
     except KeyboardInterrupt as exc:
@@ -90,17 +136,17 @@ def main(argv=None) -> int:
         return 143 if isinstance(exc, _Terminated) else 130
     try:
         cli.main(args=argv, prog_name="viform", standalone_mode=False)
+    except ExitStatus as exc:  # a command's own status after its output (verify's 3)
+        return exc.code
     except click.exceptions.Exit as exc:
         return exc.exit_code
     except click.ClickException as exc:
         click.echo(f"viform: error: {exc.format_message()}", err=True)
         return exc.exit_code if exc.exit_code else 2
     except click.Abort as exc:  # click turns Ctrl-C (and our SIGTERM) into Abort
-        click.echo("viform: interrupted; no partial output was left", err=True)
-        return 143 if isinstance(exc.__cause__, _Terminated) else 130
+        return _interrupted(exc)
     except KeyboardInterrupt as exc:
-        click.echo("viform: interrupted; no partial output was left", err=True)
-        return 143 if isinstance(exc, _Terminated) else 130
+        return _interrupted(exc)
     except MemoryError:
         if os.environ.get("VIFORM_DEBUG"):
             raise

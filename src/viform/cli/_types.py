@@ -64,7 +64,7 @@ OPTION_BOUNDS = {
 }
 #: Simulation work a command runs without ``--force``, estimated seconds (about a minute). The
 #: estimate uses the simulator's speed on one core of an idle machine (README "Speed": 1.6–3.8e8
-#: pixel-ticks/s on textured scenes; issue 26 measured ~14 µs of scene and bookkeeping per tick
+#: pixel-ticks/s on textured scenes; ~14 µs of scene and bookkeeping per tick measured
 #: at 32×48): :data:`SIM_PIXEL_TICKS_PER_S` and :data:`SIM_S_PER_TICK`, on the slow side.
 FORCE_WORK_S = 60.0
 SIM_PIXEL_TICKS_PER_S = 1e8
@@ -84,6 +84,7 @@ LIBRARY_NAMES = {
     ("gated", "gate_m"): ("gate_range_m",),
     ("lightcomm", "led_cd"): ("luminous_intensity_cd",),
     ("highspeed", "scene_fps"): ("frame_rate_hz",),
+    ("dataset", "worker_memory"): ("memory_limit",),
 }
 
 #: Option names that hold an output path.
@@ -218,18 +219,51 @@ def flag_of(param: click.Parameter) -> str:
     return param.opts[0] if param.opts else param.name
 
 
+def flag_message(message: str, flags: dict) -> str:
+    """``message`` with the library parameters it names replaced by their flags, by the explicit
+    mapping ``flags`` (parameter name → flag); unchanged when it names none of them.
+
+    Library errors begin with the name of the parameter they are about (``duration_s = 20 s is not
+    allowed …``), and name any other parameter in the same form (``… could not connect within
+    connect_timeout_s = 20 s``); a command that declares its mapping (``command.viform_flags``)
+    gets only these exact replacements (the leading name, and ``NAME = `` as a whole word later),
+    no guessing from its option names.
+    """
+    names = sorted(flags, key=len, reverse=True)
+    for name in names:
+        if message.startswith(name) and message[len(name):len(name) + 1] in (" ", ":", "="):
+            head, message = flags[name], message[len(name):]
+            break
+    else:
+        head = ""
+    for name in names:
+        message = re.sub(rf"(?<![\w'\"./-]){re.escape(name)}(?= = )", lambda _, flag=flags[name]: flag, message)
+    return head + message
+
+
 def name_flags(message: str, command: click.Command) -> str:
     """Replace Python parameter names (``duration_s``) in ``message`` by the command's flags.
 
-    Only option names are replaced, only as whole words not inside quotes (file fields such
-    as ``'clock_hz'`` stay), and names without an underscore only when followed by `` = ``.
+    A command with an explicit mapping (``command.viform_flags``, parameter name → flag) gets
+    :func:`flag_message`. Otherwise only option names are replaced, only as whole words not inside
+    quotes (file fields such as ``'clock_hz'`` stay), and names without an underscore only when
+    followed by `` = ``. A remedy in keyword form names the flag as it is typed: ``height=250`` →
+    ``--height 250``, ``allow_partial=True`` → ``--allow-partial``.
     """
+    explicit = getattr(command, "viform_flags", None)
+    if explicit is not None:
+        return flag_message(message, explicit)
     names = {p.name for p in command.params if p.name}
     names_with_units = {n for n in names if any(m.startswith(n + "_") for m in names)}
     for param in sorted(command.params, key=lambda p: -len(p.name or "")):
         if not isinstance(param, click.Option) or not param.name:
             continue
         flag = flag_of(param)
+        # a library remedy in keyword form: "allow_partial=True" is the flag itself, "height=250" is "--height 250"
+        if getattr(param, "is_flag", False):
+            message = re.sub(rf"(?<![\w'\"./-]){re.escape(param.name)}=True(?![\w'\"-])", flag, message)
+        else:
+            message = re.sub(rf"(?<![\w'\"./-]){re.escape(param.name)}=(?=[^\s,;)])", flag + " ", message)
         if flag.lstrip("-") == param.name and "_" not in param.name:
             pattern = rf"(?<![\w'\"./-]){re.escape(param.name)}(?= = )"
         elif "_" in param.name:
@@ -374,7 +408,9 @@ def _wrap(command: click.Command) -> None:
             check_request(command, kwargs)
             return callback(*args, **kwargs)
         except ViformError as exc:
-            text = name_flags(str(exc), command)
+            # a remedy that needs a parameter this command has no flag for is left out
+            options = {p.name for p in command.params if isinstance(p, click.Option)}
+            text = name_flags(exc.without(options.__contains__) if exc.remedies else str(exc), command)
             if text == str(exc):
                 raise
             raise ViformError(text) from None

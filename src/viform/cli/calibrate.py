@@ -68,19 +68,27 @@ def _lines(file, r: dict, out) -> list[str]:
     if levels:
         lines.append(f"  {'':<22}median tile spread by light level: " + ", ".join(
             f"{100 * v['median_spread']:.3g} % at {v['mean_interval_ticks']:.3g} ticks" for v in levels))
-    if d.get("hot_pixel_dark_current_e_per_s"):
+    if d.get("hot_pixel_dark_current_e_per_s") and d.get("hot_pixel_fraction"):
         lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} found, about "
                      f"{d['hot_pixel_dark_current_e_per_s']:.3g} e⁻/s of dark current each; "
                      f"{100 * d['hot_pixel_fraction']:.3g} ± "
                      f"{100 * d['hot_pixel_fraction_standard_error']:.2g} % of the {d['hot_pixel_searchable_pixels']} "
-                     "pixels dark enough to show them")
+                     "pixels dark or smooth enough to show them")
+    elif d.get("hot_pixel_fraction_upper_bound") is not None:
+        lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} reported, fewer than "
+                     f"{100 * d['hot_pixel_fraction_upper_bound']:.2g} % of pixels (95 %, a bound): "
+                     f"{d.get('hot_pixel_reason', '')}")
     elif d.get("hot_pixel_bound"):
         hb = d["hot_pixel_bound"]
         lines.append(f"  {'hot pixels':<22}none with ≥ {hb['dark_current_at_least_e_per_s']:.3g} e⁻/s of dark current "
                      f"(fewer than {100 * hb['fraction_upper_bound']:.2g} % of pixels, 95 %); weaker ones hide "
                      "under the light")
     else:
-        lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} ({100 * d['hot_pixel_fraction']:.3g} %)")
+        lines.append(f"  {'hot pixels':<22}{d['hot_pixels']} reported: {d.get('hot_pixel_reason', '')}")
+    if d.get("hot_pixels"):
+        lines.append(f"  {'':<22}{100 * d['hot_pixels_with_reported_neighbour_fraction']:.3g} % of them have another "
+                     f"report within 1.5 px ({100 * d['hot_pixels_with_reported_neighbour_if_random']:.2g} % if placed "
+                     "at random)")
     lines.append(f"  {'dead pixels':<22}{d['dead_pixels']} ({100 * d['dead_pixel_fraction']:.3g} %)")
     bound = dark.get("dark_current_upper_bound_e_per_s")
     lines.append(f"  {'dark current':<22}not measurable" + (f" (≤ {bound:.3g} e⁻/s)" if bound else "")
@@ -96,6 +104,10 @@ def _lines(file, r: dict, out) -> list[str]:
                          f"{'' if exp is None else format(exp, '.2f'):>12}")
     if out is not None:
         lines += ["", f"  preset written to {out} (use: viform simulate --preset {out} …)"]
+        q_file = r.get("recorded_threshold_electrons")
+        if q_file and not th.get("q_eff_electrons") and not th.get("q_eff_lower_bound_electrons"):
+            lines.append(f"  its threshold, {q_file:,.0f} e⁻, is the one the recording's metadata states, "
+                         "not a measurement")
     return lines
 
 
@@ -133,7 +145,10 @@ def calibrate(recording, out_path, name, max_ticks, height, width, no_flip, cloc
     result = run(source, max_ticks=max_ticks)
     result["source"] = str(recording)
     if out_path is not None:
-        preset = preset_from_calibration(result, name or Path(recording).stem)
+        try:
+            preset = preset_from_calibration(result, name or Path(recording).stem)
+        except ViformError as exc:
+            raise ViformError(f"--out {out_path}: {exc}") from None
         save_spike_preset(out_path, preset)
         result["preset"] = str(out_path)
     if json_file is not None:

@@ -16,74 +16,35 @@ import click
 import numpy as np
 
 from viform._validate import ViformError, check_int, check_positive
+from viform.cli._common import CatalogHelp, parse_settings
+from viform.cli._scenes import scene_set_option, scene_settings, with_scene_list
 from viform.cli.app import cli
 
 #: Frame-file suffixes.
 FRAME_FORMATS = (".npz", ".zarr")
 PREVIEW_FORMATS = (".png", ".mp4", ".gif")
-#: Sensors that are not in :func:`viform.sensors.presets.preset_names` but can capture.
-EXTRA_SENSORS = {
-    "cmos-short": "conventional CMOS, 1 ms exposure at 30 fps",
-    "highspeed": "high-speed camera (1 667 fps at 1280×720) with auto-exposure",
-    "gated": "range-gated CCD, 905 nm laser, 200 pulses a frame, gate from 40 m (scenes with range: night-road-fog)",
-}
 
 
 def capture_sensor_names() -> list[str]:
-    """Every name ``viform capture`` accepts."""
-    from viform.sensors.presets import preset_names
+    """Every name ``viform capture`` accepts: the sensor catalogue's."""
+    from viform.sensors.catalog import sensor_names
 
-    names = list(preset_names())
-    try:
-        from viform.sensors.spike_presets import SPIKE_PRESET_NAMES
-
-        names += [n for n in SPIKE_PRESET_NAMES if n not in names]
-    except ImportError:
-        pass
-    return names + [n for n in EXTRA_SENSORS if n not in names]
-
-
-def _spike_sensor(name: str):
-    from viform.sensors.presets import make_sensor
-
-    try:
-        from viform.sensors.spike_presets import SPIKE_PRESET_NAMES, load_spike_preset
-    except ImportError:
-        SPIKE_PRESET_NAMES = ()
-    if name in SPIKE_PRESET_NAMES:
-        return load_spike_preset(name).sensor(height=None, width=None)
-    return make_sensor(name)
-
-
-#: Resolution of built-in scenes for frame sensors (whose presets have none): the size ``compare`` uses.
-FRAME_DEFAULT_SHAPE = (64, 128)
+    return sensor_names()
 
 
 def default_resolution(sensor_name: str) -> tuple[int, int]:
-    """(rows, columns) of a built-in scene shot by ``sensor_name`` when the user gives none.
+    """(rows, columns) of a built-in scene shot by ``sensor_name`` when the user gives none: the
+    catalogue's ``scene_shape`` (a spike chip's own array, e.g. spikeone 250×400; 250×400 for the
+    spike model, as ``simulate``; 64×128 for frame cameras, as ``compare``)."""
+    from viform.sensors.catalog import entry
 
-    One rule with ``simulate --preset``: a spike preset's own resolution (spikeone 250×400),
-    the spike camera without a preset 250×400 (``simulate``'s default); frame sensors, whose
-    presets carry no resolution, :data:`FRAME_DEFAULT_SHAPE`.
-    """
-    if not is_spike(sensor_name):
-        return FRAME_DEFAULT_SHAPE
-    try:
-        from viform.sensors.spike_presets import SPIKE_PRESET_NAMES, load_spike_preset
-    except ImportError:
-        SPIKE_PRESET_NAMES = ()
-    if sensor_name in SPIKE_PRESET_NAMES:
-        preset = load_spike_preset(sensor_name)
-        return preset.height, preset.width
-    return 250, 400
+    return entry(sensor_name).scene_shape
 
 
 def is_spike(name: str) -> bool:
-    try:
-        from viform.sensors.spike_presets import SPIKE_PRESET_NAMES
-    except ImportError:
-        SPIKE_PRESET_NAMES = ()
-    return name == "spike" or name in SPIKE_PRESET_NAMES
+    from viform.sensors.catalog import entry
+
+    return entry(name).family == "spike"
 
 
 def save_frame_stack(path, frames, start_times_s, exposure_s, units: str, metadata: dict,
@@ -223,21 +184,22 @@ def _spike_preview(path, stream, rate_per_tick: float) -> float:
 
 def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int = 0, preview=None,
                 device: str = "cpu", settings: dict | None = None) -> dict:
-    """Shoot ``scene`` with ``sensor_name`` and save the output (see the module notes); returns a summary.
+    """Shoot ``scene`` with the catalogue's sensor ``sensor_name`` (with ``settings``) and save its
+    output (see the module notes); returns a summary.
 
     Spike streams are simulated block by block straight into the file (bounded memory).
     """
+    from viform.sensors.catalog import entry
     from viform.stream.sidecar import provenance
 
+    kind = entry(sensor_name)
+    sensor = kind.build(height=None, width=None, **(settings or {}))  # at the scene's resolution
     suffix = Path(out_path).suffix.lower()
-    if is_spike(sensor_name):
-        from viform.stream.io import FORMATS, save_spikes
+    if kind.family == "spike":
+        from viform.stream.io import FORMATS, open_spikes, save_spikes
 
         if suffix not in FORMATS:
             raise ViformError(f"--out = {str(out_path)!r}: a spike stream is saved as one of {', '.join(FORMATS)}")
-        from viform.stream.io import open_spikes
-
-        sensor = _spike_sensor(sensor_name)
         # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
         lazy = sensor.stream(scene, duration_s, seed=seed, progress=True, reuse_buffer=suffix in (".dat", ".zarr"),
                              device=device)
@@ -252,59 +214,29 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         return summary
     if suffix not in FRAME_FORMATS:
         raise ViformError(f"--out = {str(out_path)!r}: frames are saved as one of {', '.join(FRAME_FORMATS)}")
-    rate = {"highspeed": 1 / 600e-6, "gated": 25.0}.get(sensor_name)
-    if rate is None:
-        from viform.measure.comparison import make_compare_sensor
-        from viform.sensors.presets import make_sensor
-
-        sensor = make_compare_sensor(sensor_name) if sensor_name == "cmos-short" else \
-            make_sensor(sensor_name, **(settings or {}))
-        rate = sensor.frame_rate_hz
-    check_frame_budget(max(1.0, duration_s * rate), scene.height, scene.width)
+    if kind.family == "gated" and getattr(scene, "active", None) is None:
+        raise ViformError(f"SCENE = {scene.name!r} has no range: the gated camera needs a laser-lit scene with "
+                          "distances (built-in: night-road-fog)")
+    check_frame_budget(max(1.0, duration_s * sensor.frame_rate_hz), scene.height, scene.width)
     meta = {"scene": scene.describe(), "seed": seed, **provenance()}
     extra = {}
-    if sensor_name == "highspeed":
-        from dataclasses import replace
+    stack = sensor.capture(scene, duration_s, seed=seed)
+    frames, starts, exposures = stack.frames_dn, stack.start_times_s, stack.exposure_s
+    if kind.family == "highspeed":
+        from viform.isp.highspeed_pipeline import HighSpeedConfig, process_frames
 
-        from viform.isp.highspeed_pipeline import HighSpeedConfig, run_highspeed
-        from viform.sensors.highspeed_timing import lux13hs_timing
-
-        cfg = HighSpeedConfig()
-        timing = lux13hs_timing(cfg.mode, cfg.pixel_clock_hz)
-        period = timing.frame_period_s(timing.window(cfg.roi))
-        n = max(1, int(math.floor(duration_s / period + 1e-9)))
-        result = run_highspeed(scene, replace(cfg, n_frames=n, seed=seed))
-        frames, starts, exposures = result.gray8, result.frame_times_s - result.exposure_s, result.exposure_s
-        units = "8-bit gray: the high 8 bits of the 10-bit code (DN >> 2)"
-        meta["sensor"] = {**result.config, "timing": result.timing, "link": result.plan}
         # what leaves the camera: one frame in N over the link, equalized (seed 002 §3.2–3.3)
+        result = process_frames(stack, sensor, HighSpeedConfig(seed=seed), scene)
+        units = stack.metadata["units"]
+        meta["sensor"] = {**result.config, "timing": result.timing, "link": result.plan}
         extra = {"output_frames": result.output_frames, "output_frame_indices": result.transmitted_indices,
                  "auto_exposure_cycles": result.exposure_cycles}
         units += "; output_frames: equalized 8-bit frames sent over the link (indices in output_frame_indices)"
-    elif sensor_name == "gated":
-        from viform.measure.comparison import make_compare_sensor
-
-        active = getattr(scene, "active", None)
-        if active is None:
-            raise ViformError(f"SCENE = {scene.name!r} has no range: the gated camera needs a laser-lit scene with "
-                              "distances (built-in: night-road-fog)")
-        sensor = make_compare_sensor("gated")
-        stack = sensor.capture(active, duration_s, seed=seed)
-        frames, starts, exposures = stack.frames_dn, stack.start_times_s, stack.exposure_s
+    elif kind.family == "gated":
         units = (f"DN (sum of {sensor.pulses} gated exposures in the vertical register, black "
                  f"{sensor.parameters.pixel.black_offset_dn:g} DN); exposure_s = total gate-open time")
         meta["sensor"] = sensor.describe()
     else:
-        if sensor_name == "cmos-short":
-            from viform.measure.comparison import make_compare_sensor
-
-            sensor = make_compare_sensor("cmos-short")
-        else:
-            from viform.sensors.presets import make_sensor
-
-            sensor = make_sensor(sensor_name, **(settings or {}))
-        stack = sensor.capture(scene, duration_s, seed=seed)
-        frames, starts, exposures = stack.frames_dn, stack.start_times_s, stack.exposure_s
         p = sensor.parameters
         units = (f"DN ({p.adc_bits}-bit ADC, black offset {p.black_offset_dn:g} DN, "
                  f"K = {p.system_gain_dn_per_e:.4g} DN/e-)")
@@ -317,7 +249,7 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
             "first_start_s": float(starts[0]), "exposure_s": [float(x) for x in exposures[:8]]}
 
 
-@cli.command()
+@cli.command(cls=CatalogHelp)
 @click.argument("sensor")
 @click.argument("scene")
 @click.option("--duration", "duration_s", type=float, required=True, help="Length of the capture, seconds.")
@@ -339,52 +271,52 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
               help="Spike sensors: where the simulation runs (CPU cores, a CUDA GPU with the same bits, or a GPU "
                    "when one is found). Frame sensors run on the CPU.")
 @click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
-              help="Frame presets: change one parameter by name, e.g. --set parasitic_light_sensitivity=0.01 "
-                   "(repeatable; viform characterize SENSOR --set lists the names on a wrong one).")
+              help="Change one parameter of SENSOR by name, e.g. --set parasitic_light_sensitivity=0.01 or "
+                   "--set threshold_level=7 (repeatable; viform sensors show SENSOR lists every parameter with "
+                   "its unit, default and allowed values).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of a line of text.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
+@scene_set_option
+@with_scene_list
 def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, max_lux, frame_rate_hz, device,
-            settings, as_json, json_file):
+            settings, as_json, json_file, scene_set):
     """Shoot SCENE with SENSOR and save its output with every exposure window.
 
-    SENSOR: cmos, cmos-short, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
-    seed003-overflow, highspeed, gated, spike, spikeone, spiketwo, spiketwo-40k.
-    SCENE: a built-in scene (dilemma, night-road-fog, translating, rotating, hdr, ...), an
-    image, a video or a folder of images.
+    SENSOR: {sensors} (viform sensors describes each).
+    SCENE: {scenes}
     """
     from viform._io import check_json_file, check_output_folder, write_json
-    from viform.light.scenes import load_scene
+    from viform.light.catalog import load_scene
+    from viform.sensors.catalog import entry
     from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS
 
-    names = capture_sensor_names()
-    if sensor not in names:
-        raise ViformError(f"SENSOR = {sensor!r} is not allowed: choose one of {', '.join(names)}")
-    device = resolve_device(device, "--device") if is_spike(sensor) else "cpu"
+    kind = entry(sensor, what="SENSOR")
+    spike = kind.family == "spike"
+    device = resolve_device(device, "--device") if spike else "cpu"
     check_positive("--duration", duration_s)
     default_height, default_width = default_resolution(sensor)
     height = check_int("--height", default_height if height is None else height, 1)
     width = check_int("--width", default_width if width is None else width, 1)
     check_int("--seed", seed, 0)
     suffix = Path(out_path).suffix.lower()
-    allowed = FORMATS if is_spike(sensor) else FRAME_FORMATS
+    allowed = FORMATS if spike else FRAME_FORMATS
     if suffix not in allowed:
-        kind = "a spike stream" if is_spike(sensor) else "frames"
-        raise ViformError(f"--out = {out_path!r}: {kind} must be saved as one of {', '.join(allowed)}")
+        what = "a spike stream" if spike else "frames"
+        raise ViformError(f"--out = {out_path!r}: {what} must be saved as one of {', '.join(allowed)}")
     if preview and Path(preview).suffix.lower() not in PREVIEW_FORMATS:
         raise ViformError(f"--preview = {preview!r}: the suffix must be one of {', '.join(PREVIEW_FORMATS)}")
     check_output_folder("--out", Path(out_path).resolve().parent)
     if preview:
         check_output_folder("--preview", Path(preview).resolve().parent)
     check_json_file(json_file)
-    from viform.cli.frame import parse_settings
-
-    overrides = parse_settings(sensor, settings)  # frame presets only; names and values checked
+    overrides = parse_settings(kind, settings)  # names, units, ranges and the model's own limits checked
     from viform.cli.compare import announce_preparation
     from viform.report.compare_report import finite_json
 
-    light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz)
-    if is_spike(sensor):
+    light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
+                       settings=scene_settings(scene_set))
+    if spike:
         announce_preparation()
     summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview, device=device,
                           settings=overrides)

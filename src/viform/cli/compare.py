@@ -10,22 +10,55 @@ from pathlib import Path
 
 import click
 
-from viform._validate import ViformError
+from viform._validate import ViformError, check_positive
+from viform.cli._common import CatalogHelp
+from viform.cli._scenes import scene_options, scene_set_option, with_scene_list
 from viform.cli.app import cli
 
 
 def parse_sensors(text: str | None) -> list[str] | None:
-    from viform.measure.comparison import DEFAULT_SENSORS
+    """``--sensors a,b,c`` → names of the sensor catalogue (None: compare's default list)."""
+    from viform.measure.comparison import compare_entry
 
     if text is None:
         return None
     keys = [k.strip() for k in text.split(",") if k.strip()]
     if not keys:
-        raise ViformError("--sensors is empty: give sensor names separated by commas, e.g. --sensors spike,cmos")
+        raise ViformError("--sensors is empty: give sensor names separated by commas, e.g. --sensors spikeone,cmos")
     for k in keys:
-        if k not in DEFAULT_SENSORS:
-            raise ViformError(f"--sensors: {k!r} is not allowed: choose from {', '.join(DEFAULT_SENSORS)}")
+        compare_entry(k, what="--sensors")
     return keys
+
+
+def parse_sensor_settings(items, sensors, flag: str = "--set") -> dict[str, dict]:
+    """``--set [SENSOR:]NAME=VALUE`` → {sensor: {parameter: value}}; without ``SENSOR:`` the parameter is
+    set on every sensor of ``sensors`` that has it (at least one must)."""
+    import re
+
+    from viform.cli._common import parse_settings
+    from viform.measure.comparison import compare_entry
+
+    by: dict[str, list] = {}
+    for item in items or ():
+        m = re.fullmatch(r"\s*(?:([\w.-]+):)?([^=:]+=.*)", str(item))
+        if m is None:
+            raise ViformError(f"{flag} {item!r} is not allowed: write [SENSOR:]NAME=VALUE, e.g. "
+                              f"{flag} cmos:exposure_s=0.002")
+        who, rest = m.group(1), m.group(2)
+        name = rest.partition("=")[0].strip()
+        if who is not None:
+            if who not in sensors:
+                raise ViformError(f"{flag} {item!r}: sensor {who!r} is not compared here (--sensors gives "
+                                  f"{', '.join(sensors)})")
+            targets = [who]
+        else:
+            targets = [k for k in sensors if name in compare_entry(k).parameters]
+            if not targets:
+                raise ViformError(f"{flag} {item!r}: {name!r} is a parameter of none of {', '.join(sensors)} "
+                                  "(viform sensors show NAME lists a sensor's parameters)")
+        for k in targets:
+            by.setdefault(k, []).append(rest)
+    return {k: parse_settings(compare_entry(k), texts, flag) for k, texts in by.items()}
 
 
 def parse_instants(text: str | None) -> list[float] | None:
@@ -67,16 +100,17 @@ def command_start() -> float:
 def kernels_cached() -> bool:
     """Whether numba's on-disk cache holds the spike simulation kernels for the current source.
 
-    Cheap check: an index file (``*.nbi``) of ``viform/sensors/spike.py`` no older than the source,
-    in ``__pycache__`` next to it or under ``NUMBA_CACHE_DIR`` when that is set.
+    Cheap check: an index file (``*.nbi``) of the kernels' module ``viform/sensors/_spike_kernels.py`` no
+    older than the source, in ``__pycache__`` next to it or under ``NUMBA_CACHE_DIR`` when that is set.
     """
     import os
 
     import viform.sensors as sensors
 
-    src = Path(sensors.__file__).with_name("spike.py")
+    src = Path(sensors.__file__).with_name("_spike_kernels.py")
     where = os.environ.get("NUMBA_CACHE_DIR")
-    found = Path(where).rglob("spike.*.nbi") if where else (src.parent / "__pycache__").glob("spike.*.nbi")
+    pattern = f"{src.stem}.*.nbi"
+    found = Path(where).rglob(pattern) if where else (src.parent / "__pycache__").glob(pattern)
     try:
         made = src.stat().st_mtime
         return any(p.stat().st_mtime >= made for p in found)
@@ -135,11 +169,11 @@ def _echo_vision(doc: dict) -> None:
         click.echo(f"- {line}")
 
 
-@cli.command()
+@cli.command(cls=CatalogHelp)
 @click.argument("scene")
 @click.option("--sensors", default=None,
-              help="Comma-separated sensors (default: all): spike, cmos-short, cmos, seed001-2seg, seed001-3seg, "
-                   "seed003-4t, seed003-overflow, highspeed, gated.")
+              help="Comma-separated sensors (default: spikeone, cmos-short, cmos, seed001-2seg, seed001-3seg, "
+                   "seed003-4t, seed003-overflow, highspeed, gated); any of: {sensors}.")
 @click.option("--duration", "duration_s", type=float, default=0.04, show_default=True, help="Clip length, s.")
 @click.option("--at", "at", default=None, help="Instants to compare, s, comma-separated (default: 30/50/70 %).")
 @click.option("--out", "out_dir", type=click.Path(), default="viform-compare", show_default=True,
@@ -151,20 +185,30 @@ def _echo_vision(doc: dict) -> None:
 @click.option("--speed", type=float, default=None, help="Factor on the dilemma scene's speeds.")
 @click.option("--visibility-m", type=float, default=None, help="Fog visibility of night-road-fog, m.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Noise seed.")
+@click.option("--set", "settings", multiple=True, metavar="[SENSOR:]NAME=VALUE",
+              help="Change one parameter of a sensor by name, e.g. --set cmos:exposure_s=0.002, or of every "
+                   "compared sensor that has it: --set read_noise_electrons=10 (repeatable; viform sensors show "
+                   "SENSOR lists the parameters).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(), default=None, help="Also write the JSON summary here.")
-def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, speed, visibility_m, seed, as_json,
-            json_file):
+@scene_set_option
+@with_scene_list
+def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, speed, visibility_m, seed, settings,
+            as_json, json_file, scene_set):
     """Shoot SCENE with every sensor and write a self-contained report.html and metrics.json.
 
     SCENE: dilemma (high speed and high dynamic range at once), night-road-fog (with range,
-    for the gated camera), another built-in scene, an image or a video.
+    for the gated camera), another scene. {scenes}
     """
     started = command_start()
     from viform.report.compare_report import compare as run
 
     keys = parse_sensors(sensors)
+    from viform.measure.comparison import DEFAULT_SENSORS
+
+    changed = parse_sensor_settings(settings, keys or list(DEFAULT_SENSORS))
     instants = parse_instants(at)
+    check_positive("--duration", duration_s)
     check_outputs(out_dir, json_file)
     options = {k: v for k, v in (("brightness", brightness), ("speed", speed), ("visibility_m", visibility_m))
                if v is not None}
@@ -175,8 +219,9 @@ def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, 
         raise ViformError("--speed applies to the dilemma scene only")
     if visibility_m is not None and scene != "night-road-fog":
         raise ViformError("--visibility-m applies to the night-road-fog scene only")
+    options.update(scene_options(scene, scene_set))
     announce_preparation()
     doc = run(scene, out_dir, keys, duration_s, height, width, seed, instants, progress=True,
               command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "", scene_options=options,
-              started_s=started)
-    finish(doc, out_dir, time.perf_counter() - started, as_json, json_file)
+              started_s=started, settings=changed)
+    finish(doc, out_dir, time.perf_counter() - started, as_json, json_file, {"settings": changed} if changed else None)

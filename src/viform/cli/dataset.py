@@ -7,6 +7,7 @@ import json
 import click
 
 from viform._validate import ViformError
+from viform.cli._common import CatalogHelp
 from viform.cli.app import cli
 
 
@@ -14,7 +15,7 @@ def _sig(value: float) -> str:
     return f"{value:.4g}"
 
 
-@cli.command("dataset")
+@cli.command("dataset", cls=CatalogHelp)
 @click.argument("src", type=click.Path(file_okay=False), required=False)
 @click.option("--scenes", default=None, metavar="NAME[,NAME…]",
               help="Instead of SRC: make clips from built-in scenes with parameters drawn per clip (speeds, "
@@ -28,13 +29,20 @@ def _sig(value: float) -> str:
                    "no photon noise, no fixed-pattern noise) for denoising.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), required=True,
               help="Dataset folder to write (an unfinished one made with the same options is resumed).")
-@click.option("--preset", default=None, help="Spike camera: a preset name (default spikeone) or a preset .json file.")
+@click.option("--preset", default=None,
+              help="Spike camera: {sensors:spike} (default spikeone), or a preset .json file (viform calibrate).")
+@click.option("--set", "sensor_settings", multiple=True, metavar="NAME=VALUE",
+              help="Change one parameter of the spike camera by name, e.g. --set threshold_level=7 (repeatable; "
+                   "viform sensors show spikeone lists them).")
 @click.option("--height", type=int, default=None, help="Sensor rows (default: the preset's).")
 @click.option("--width", type=int, default=None, help="Sensor columns (default: the preset's).")
 @click.option("--workers", type=int, default=None,
               help="Local worker processes, one clip each at a time (default: the number of CPU cores).")
 @click.option("--scheduler", default=None, help="Address of a running dask scheduler (tcp://HOST:PORT) "
               "to use instead of local workers.")
+@click.option("--connect-timeout", "connect_timeout_s", type=float, default=20.0, show_default=True,
+              help="Seconds to keep trying to reach --scheduler, at the start and after losing it; then the run "
+                   "stops with one line saying what is done (running the command again resumes).")
 @click.option("--worker-memory", default="auto", show_default=True,
               help="Memory limit of each local worker, e.g. 2GiB (auto: the machine's memory shared evenly).")
 @click.option("--gt-every", type=int, default=1, show_default=True,
@@ -59,8 +67,8 @@ def _sig(value: float) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, out_dir, preset, height, width,
-            workers, scheduler, worker_memory, gt_every, seed, frame_rate_hz, max_lux, interpolation,
-            light_sample_ticks, block_ticks, device, no_progress, as_json, json_file):
+            workers, scheduler, connect_timeout_s, worker_memory, gt_every, seed, frame_rate_hz, max_lux,
+            interpolation, light_sample_ticks, block_ticks, device, no_progress, as_json, json_file, sensor_settings):
     """Convert SRC, a folder of videos or of frame folders, into a spike dataset in --out;
     or, with --scenes, make one from built-in scenes with exact truth.
 
@@ -73,6 +81,7 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
     command is run again. Exit status 1 when a clip failed (the others are still written).
     """
     from viform._io import check_json_file, write_json
+    from viform.cli._common import announce_connection
     from viform.datasets.build import build_dataset, make_settings, scene_clips
     from viform.sensors.spike_cuda import resolve_device
 
@@ -91,16 +100,22 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
         for flag, value in (("--clips", clips_per_scene), ("--duration", duration_s)):
             if value is None:
                 raise ViformError(f"--scenes needs {flag}")
+    from viform.cli._common import parse_settings
+    from viform.sensors.catalog import SENSORS
+
+    camera = SENSORS.get(preset or "spikeone")
+    overrides = parse_settings(camera if camera is not None and camera.family == "spike" else SENSORS["spike"],
+                               sensor_settings, skip_build=True)
     settings = make_settings(preset, height=height, width=width, seed=seed, gt_every=gt_every,
                              frame_rate_hz=frame_rate_hz, max_lux=max_lux, interpolation=interpolation,
                              light_sample_ticks=light_sample_ticks,
-                             truth_every_ticks=truth_every_ticks if scenes is not None else None)
+                             truth_every_ticks=truth_every_ticks if scenes is not None else None, **overrides)
     _check_max_lux(settings)
     if scenes is not None:
         src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs)
     summary = build_dataset(src, out_dir, settings, workers=workers, scheduler=scheduler,
                             memory_limit=worker_memory, block_ticks=block_ticks, progress=not no_progress,
-                            device=device)
+                            device=device, connect_timeout_s=connect_timeout_s, on_connect=announce_connection)
     if json_file is not None:
         write_json(json_file, summary)
     if as_json:
@@ -109,7 +124,10 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
         rows = [
             ("dataset", summary["out"]),
             ("sensor", f"{settings.width}×{settings.height} px, {_sig(settings.parameters.clock_hz / 1e3)} kHz, "
-                       f"full scale {_sig(settings.max_lux)} lux"),
+                       f"Q = {_sig(settings.parameters.threshold_electrons)} e-, full scale {_sig(settings.max_lux)} "
+                       f"lux"),
+            ("preset", settings.preset + ("" if preset is not None else " (the dataset default; give --preset to "
+                                          "change it — viform simulate's default is Q = 100 e-)")),
             ("clips", f"{summary['clips']} (converted {summary['converted']}, skipped {summary['skipped']} "
                       f"already done, failed {len(summary['failed'])}"
                       + (f": {', '.join(f['clip'] for f in summary['failed'])}" if summary["failed"] else "") + ")"),
@@ -121,6 +139,11 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
                      f"worker{'' if summary['workers'] == 1 else 's'}"),
             ("speed", f"{_sig(summary['clips_per_s'])} clips/s, {_sig(summary['pixel_ticks_per_s'])} pixel-ticks/s"),
         ]
+        dark = summary.get("too_dark", [])
+        if dark:
+            rows.append(("too dark", f"{len(dark)} clip{'s' if len(dark) > 1 else ''} fire less than once a pixel "
+                                     f"per truth step at this preset ({', '.join(dark[:6])}"
+                                     + (", …" if len(dark) > 6 else "") + "): flagged too_dark in the manifest"))
         for name, value in rows:
             click.echo(f"{name:<12} {value}")
     for fail in summary["failed"]:

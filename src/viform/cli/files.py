@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import click
 
+from viform._validate import UnverifiedDataWarning
 from viform.cli._common import open_source as _open
 from viform.cli._common import spike_file_options
 from viform.cli.app import cli
@@ -166,16 +168,23 @@ def info(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, 
     if summary is None:
         source = _open(file, height, width, clock_hz, flip=not no_flip, allow_partial=allow_partial, axes=axes,
                        key=key)
-        summary = {"file": str(file), "format": source.metadata.get("format"), **source.summary()}
+        with warnings.catch_warnings():  # the table's "verified" row says it
+            warnings.simplefilter("ignore", UnverifiedDataWarning)
+            summary = {"file": str(file), "format": source.metadata.get("format"), **source.summary()}
         meta = source.metadata
         for field in ("scene", "seed", "viform_version", "utc_date"):
             if meta.get(field) is not None:
                 summary[field] = meta[field].get("name", meta[field]) if isinstance(meta[field], dict) else meta[field]
         summary.update(_verification(source))
     else:
+        # info does not decode the segments: a header edited with its CRC recomputed (another width, another
+        # mode) passes every checksum and only a decode shows it, so only verify says "verified"
         summary = dict(summary)
-        summary.setdefault("verified", False)
-        summary.setdefault("verification", "segment checksums not checked here: run viform verify")
+        checked = summary.get("verification") if summary.get("verified") else None
+        summary["verified"] = False
+        summary["verification"] = ("header, end record and segment checksums match, but the segments are not "
+                                   "decoded here: run viform verify" if checked
+                                   else "segments not decoded here: run viform verify")
     if _emit_json(summary, as_json, json_file):
         return
     _table(summary)
@@ -192,8 +201,8 @@ def _verification(source) -> dict:
         if getattr(source, "_blocks", None) is not None:
             return {"verified": True, "verification": "header checksum, block CRC-32s and zip CRC-32 of the spike "
                                                       "array checked; values are 0/1"}
-        return {"verified": True, "verification": "zip CRC-32 of the spike array checked (no block checksums: "
-                                                  "not written by this viform); values are 0/1"}
+        return {"verified": False, "verification": "no viform checksums (another tool's .npz, or viform's header "
+                                                   "removed): read unverified; values are 0/1"}
     if fmt == "dat":
         if getattr(source, "sidecar", None) is None:
             return {"verified": False, "verification": "no sidecar: nothing to check the file against"}
@@ -209,21 +218,37 @@ def _verification(source) -> dict:
 def verify(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, allow_partial):
     """Check that FILE (.dat with its sidecar, .npz, .zarr or .vfc) is whole and consistent.
 
-    Reads everything: a .dat against the size and checksum in its sidecar, every member of a
-    .npz against its zip checksum, every chunk of a zarr store against its checksum manifest,
-    every segment of a .vfc. Exit status 0 when whole, 2 (with one line naming the damage)
-    otherwise.
+    Reads everything: a .dat against the size, BLAKE2b and block CRC-32s in its sidecar, a .npz
+    against the block CRC-32s in its header and every member's zip checksum, every chunk of a
+    zarr store against its checksum manifest, every segment of a .vfc.
+
+    \b
+    Exit status:
+      0  whole: every byte checked against the checksums viform wrote
+      2  damaged, edited or unreadable (one line on stderr names what)
+      3  readable, but not verifiable: the file carries no viform checksums (another
+         tool's file, a .dat without its sidecar, or a file whose checksums were removed)
     """
     from viform.stream.io import verify_spikes
 
     result = _verify_coded(file)
     if result is None:
-        result = verify_spikes(file, height=height, width=width, clock_hz=clock_hz, allow_partial=allow_partial,
-                               key=key, axes=axes, flip=None if not no_flip else False)
-    if _emit_json(result, as_json, json_file):
-        return
+        with warnings.catch_warnings():  # the result says whether it was verified
+            warnings.simplefilter("ignore", UnverifiedDataWarning)
+            result = verify_spikes(file, height=height, width=width, clock_hz=clock_hz,
+                                   allow_partial=allow_partial, key=key, axes=axes,
+                                   flip=None if not no_flip else False)
+    if not _emit_json(result, as_json, json_file):
+        if result["verified"]:
+            click.echo(f"{file}: OK ({'; '.join(result['checks'])})")
+        else:
+            click.echo(f"{file}: readable, but not verified: {'; '.join(result['checks'])}")
     if not result["verified"]:
-        click.echo(f"{file}: readable, but not verified: {'; '.join(result['checks'])}")
-        return
-    click.echo(f"{file}: OK ({'; '.join(result['checks'])})")
+        from viform.cli import ExitStatus
+
+        raise ExitStatus(UNVERIFIED_EXIT)
+
+
+#: Exit status of ``verify`` for a file that is readable but carries no viform checksums.
+UNVERIFIED_EXIT = 3
 

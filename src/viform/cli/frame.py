@@ -1,4 +1,4 @@
-"""CLI commands: frame sensors (issue 3) — ``viform characterize SENSOR [--out DIR] [--json] [--json-file FILE]``.
+"""CLI commands: frame sensors — ``viform characterize SENSOR [--out DIR] [--json] [--json-file FILE]``.
 
 Registered on :data:`viform.cli.app.cli`.
 """
@@ -12,6 +12,7 @@ import click
 import numpy as np
 
 from viform._io import check_json_file, check_output_folder
+from viform.cli._common import CatalogHelp, parse_settings
 from viform.cli.app import cli
 
 
@@ -23,6 +24,7 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
     """The seed's measured figures next to this model's, for the seed presets."""
     from viform.measure.emva1288 import measure_response, plateau_onset
     from viform.sensors import presets
+    from viform.sensors.catalog import make_sensor
 
     if name in ("seed001-2seg", "seed001-3seg"):
         two = name == "seed001-2seg"
@@ -30,9 +32,9 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
         units = np.geomspace(1.0, 1000.0, 360)
         sat = {}
         for key in ("seed001-normal", name):
-            r = measure_response(presets.make_sensor(key), units * unit, height=size, width=size, seed=seed)
+            r = measure_response(make_sensor(key), units * unit, height=size, width=size, seed=seed)
             sat[key] = plateau_onset(units, r["signal_dn"])
-        hdr = presets.make_sensor(name, noise=False)
+        hdr = make_sensor(name, noise=False)
         knees = hdr.knee_lux()
         knee_dn = hdr.expected_charge_electrons(knees[:-1]) * hdr.parameters.system_gain_dn_per_e
         seed_vals = (
@@ -82,8 +84,8 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
     if name == "seed003-overflow":
         from viform.light.radiometry import ELEMENTARY_CHARGE_C
 
-        over = presets.make_sensor(name, height=size, width=size)
-        four_t = presets.make_sensor("seed003-4t")
+        over = make_sensor(name, height=size, width=size)
+        four_t = make_sensor("seed003-4t")
         currents = np.geomspace(1e-14, 3e-8, 260)
         lux = over.parameters.optics.lux_from_electrons_per_s(currents / ELEMENTARY_CHARGE_C)
         sat = {}
@@ -186,16 +188,16 @@ _ROWS = {
 def _comparison_curves(size: int, seed: int, skip_spike: bool = False) -> dict:
     """Normal, segmented, overflow (and spike) responses on a common illuminance axis."""
     from viform.report.response_plots import frame_response_curve, spike_response_curve
-    from viform.sensors import presets
+    from viform.sensors.catalog import make_sensor
 
     lux = np.geomspace(0.01, 1e6, 120)
     curves = {}
     for key, label in COMPARISON_LABELS.items():
         kw = {"height": size, "width": size} if key == "seed003-overflow" else {}
-        curves[label] = frame_response_curve(presets.make_sensor(key, **kw), lux, size=size, seed=seed)
-    if presets.spike_available() and not skip_spike:
+        curves[label] = frame_response_curve(make_sensor(key, **kw), lux, size=size, seed=seed)
+    if not skip_spike:
         curves["spike camera, Q = 100 e⁻ (spikes per tick)"] = spike_response_curve(
-            presets.make_sensor("spike"), np.geomspace(0.01, 1e4, 60), seed=seed
+            make_sensor("spike"), np.geomspace(0.01, 1e4, 60), seed=seed
         )
     return curves
 
@@ -214,41 +216,58 @@ def _jsonable(obj):
     return obj
 
 
-def parse_settings(sensor: str, settings) -> dict:
-    """``--set NAME=VALUE`` pairs → keyword arguments of :func:`viform.sensors.presets.make_sensor`."""
+#: Families ``characterize`` measures: EMVA 1288 for frame cameras, the interval dynamic range for spike
+#: cameras. The high-speed camera's auto-exposure changes its exposure every frame and the gated CCD
+#: records laser returns: their own commands measure them.
+CHARACTERIZED = ("frame", "segmented", "overflow", "spike")
+ELSEWHERE = {"highspeed": "its auto-exposure changes the exposure every frame; viform highspeed-figures prints its "
+                          "published figures next to the model's, and viform highspeed SCENE runs it",
+             "gated": "it records laser returns; viform gated runs seed 004's field test with it"}
+
+
+def characterized_entry(sensor: str):
+    """The catalogue entry of a sensor ``characterize`` measures (others are refused with where to go)."""
     from viform._validate import ViformError
-    from viform.sensors import presets
+    from viform.sensors.catalog import SENSORS, entry, sensor_names
 
-    if not settings:
-        return {}
-    if sensor not in presets.PRESETS:
-        raise ViformError(f"--set is not allowed for {sensor!r}: it changes frame presets only "
-                          f"({', '.join(presets.PRESETS)})")
-    allowed = [f for f in presets.preset_fields(sensor) if f not in ("height", "width")]
-    out = {}
-    for item in settings:
-        name, sep, text = item.partition("=")
-        name = name.strip()
-        if not sep or name not in allowed:
-            # quoted: the CLI would otherwise read a field such as frame_rate_hz as its own flag's name
-            raise ViformError(f"--set {item!r} is not allowed: give NAME=VALUE with NAME one of "
-                              f"{', '.join(repr(name) for name in allowed)}")
-        text = text.strip()
-        low = text.lower()
-        if low in ("true", "false"):
-            value = low == "true"
-        else:
-            try:
-                value = int(text) if text.lstrip("+-").isdigit() else float(text)
-            except ValueError:
-                raise ViformError(f"--set {item!r} is not allowed: {text!r} is not a number "
-                                  "(or true/false)") from None
-        out[name] = value
-    presets.make_sensor(sensor, **out)  # validates the values, naming the field
-    return out
+    family = SENSORS[sensor].family if sensor in SENSORS else None
+    if family in ELSEWHERE:
+        raise ViformError(f"sensor = {sensor!r} is not characterized here ({ELSEWHERE[family]}); characterize "
+                          f"takes {', '.join(sensor_names(*CHARACTERIZED))}")
+    return entry(sensor, choices=sensor_names(*CHARACTERIZED))
 
 
-@cli.command("characterize")
+def _characterize_spike(sensor: str, dev, size: int, seed: int, result: dict, figures: dict) -> list[str]:
+    """The spike camera's interval dynamic range and SNR (into ``result["spike"]`` and ``figures``);
+    returns the lines ``characterize`` prints."""
+    from viform.measure.dynamic_range import CLIP_LENGTHS_S, clip_limited_dynamic_range_db, clip_limited_lines
+    from viform.measure.spike_characterization import characterize_spike_sensor
+    from viform.report import response_plots as plots
+
+    # 2·τ̂ of dark on 16×16 pixels: ~500 dark spikes, τ̂ to ±5 % (0.4 dB).
+    dark_s = 2 * dev.parameters.longest_signal_interval_s
+    ticks = dark_s * dev.parameters.clock_hz
+    click.echo(f"{sensor}: simulating {dark_s:.3g} s of darkness ({ticks:.3g} ticks on "
+               f"{min(size, 16)}×{min(size, 16)} pixels) to find the longest interval, then an "
+               "illuminance sweep; long dark intervals take minutes", err=True)
+    r = characterize_spike_sensor(dev, height=min(size, 16), width=min(size, 16), seed=seed, dark_duration_s=dark_s)
+    result["spike"] = r
+    c = r["snr_curve"]
+    figures["snr.png"] = plots.snr_figure({"spike (interval SNR)": {"lux": c["lux"], "snr": c["snr"]}})
+    lines = [
+        f"interval DR  {r['dynamic_range_db']:.4g} dB (expected "
+        f"{r['expected']['dynamic_range_db']:.4g} dB: longest interval = threshold / dark current = "
+        f"{r['longest_interval_s']:.3g} s, shortest = one tick = {r['shortest_interval_s'] * 1e6:.3g} µs)"
+    ]
+    r["clip_limited_dr_db"] = {f"{t:g} s": clip_limited_dynamic_range_db(r["shortest_interval_s"],
+                                                                        r["longest_interval_s"], t)
+                               for t in CLIP_LENGTHS_S}
+    lines += [f"  {line}" for line in clip_limited_lines(r["shortest_interval_s"], r["longest_interval_s"],
+                                                         r["dynamic_range_db"])]
+    return lines
+
+
+@cli.command("characterize", cls=CatalogHelp)
 @click.argument("sensor")
 @click.option(
     "--out",
@@ -274,20 +293,19 @@ def parse_settings(sensor: str, settings) -> dict:
 )
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
 @click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
-              help="Change one parameter of a frame preset by name, e.g. --set read_noise_electrons=10 "
-                   "--set parasitic_light_sensitivity=0.01 --set comparator_noise_v=0.005 (repeatable; "
-                   "the published-figure comparison keeps the preset's own values).")
+              help="Change one parameter of SENSOR by name, e.g. --set read_noise_electrons=10 "
+                   "--set parasitic_light_sensitivity=0.01 --set threshold_level=7 (repeatable; viform sensors "
+                   "show SENSOR lists them; the published-figure comparison keeps the preset's own values).")
 def characterize(sensor, out_dir, as_json, json_path, size, seed, settings):
-    """Characterize a preset SENSOR (EMVA 1288 R4.0 for frame sensors; interval dynamic range for spike sensors).
+    """Characterize SENSOR (EMVA 1288 R4.0 for frame sensors; interval dynamic range for spike sensors).
 
-    SENSOR is one of: cmos, seed001-normal, seed001-2seg, seed001-3seg, seed003-4t,
-    seed003-overflow, seed003-overflow-ktc, seed003-lofic, spike, spikeone, spiketwo, spiketwo-40k.
+    SENSOR is one of: {sensors:frame,segmented,overflow,spike}.
     """
     from viform._io import save_figure, write_json
     from viform._validate import ViformError, check_int
     from viform.measure import emva1288 as emva
     from viform.report import response_plots as plots
-    from viform.sensors import presets
+    from viform.sensors.catalog import make_sensor
     from viform.sensors.frame import FrameSensor
 
     size = check_int("--size", size, 4, 512)
@@ -295,47 +313,18 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed, settings):
     if out_dir is not None:
         check_output_folder("--out", Path(out_dir))
     check_json_file(json_path)
-    presets.describe_preset(sensor)  # clear error for an unknown name
-    overrides = parse_settings(sensor, settings)
-    result: dict = {"sensor": sensor, "description": presets.describe_preset(sensor)}
+    kind = characterized_entry(sensor)  # clear error for an unknown name
+    overrides = parse_settings(kind, settings)
+    result: dict = {"sensor": sensor, "description": kind.description}
     if overrides:
         result["settings"] = overrides
     figures = {}
-    if sensor == "spike" or sensor.startswith("spike"):  # chip presets too
-        from viform.measure.spike_characterization import characterize_spike_sensor
-
-        dev = presets.make_sensor(sensor, height=None, width=None)  # any test size
-        # 2·τ̂ of dark on 16×16 pixels: ~500 dark spikes, τ̂ to ±5 % (0.4 dB).
-        dark_s = 2 * dev.parameters.longest_signal_interval_s
-        ticks = dark_s * dev.parameters.clock_hz
-        click.echo(f"{sensor}: simulating {dark_s:.3g} s of darkness ({ticks:.3g} ticks on "
-                   f"{min(size, 16)}×{min(size, 16)} pixels) to find the longest interval, then an "
-                   "illuminance sweep; long dark intervals take minutes", err=True)
-        r = characterize_spike_sensor(
-            dev,
-            height=min(size, 16),
-            width=min(size, 16),
-            seed=seed,
-            dark_duration_s=dark_s,
-        )
-        result["spike"] = r
-        c = r["snr_curve"]
-        figures["snr.png"] = plots.snr_figure({"spike (interval SNR)": {"lux": c["lux"], "snr": c["snr"]}})
-        lines = [
-            f"interval DR  {r['dynamic_range_db']:.4g} dB (expected "
-            f"{r['expected']['dynamic_range_db']:.4g} dB: longest interval = threshold / dark current = "
-            f"{r['longest_interval_s']:.3g} s, shortest = one tick = {r['shortest_interval_s'] * 1e6:.3g} µs)"
-        ]
-        from viform.measure.dynamic_range import CLIP_LENGTHS_S, clip_limited_dynamic_range_db, clip_limited_lines
-
-        r["clip_limited_dr_db"] = {f"{t:g} s": clip_limited_dynamic_range_db(r["shortest_interval_s"],
-                                                                            r["longest_interval_s"], t)
-                                   for t in CLIP_LENGTHS_S}
-        lines += [f"  {line}" for line in clip_limited_lines(r["shortest_interval_s"], r["longest_interval_s"],
-                                                             r["dynamic_range_db"])]
+    if kind.family == "spike":
+        dev = kind.build(height=None, width=None, **overrides)  # any test size
+        lines = _characterize_spike(sensor, dev, size, seed, result, figures)
     else:
-        kw = {"height": min(size, 64), "width": min(size, 64)} if sensor.startswith("seed003-overflow") else {}
-        dev = presets.make_sensor(sensor, **kw, **overrides)
+        kw = {"height": min(size, 64), "width": min(size, 64)} if kind.family == "overflow" else {}
+        dev = kind.build(**kw, **overrides)
         lines = []
         if type(dev) is FrameSensor:
             r = emva.characterize_frame_sensor(dev, height=size, width=size, seed=seed)
@@ -396,7 +385,7 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed, settings):
         label = COMPARISON_LABELS.get(sensor)
         if label is None:  # this sensor is not among the comparison curves: add it, bold
             label = f"{sensor} (this sensor)"
-            if sensor.startswith("spike"):
+            if kind.family == "spike":
                 curves[label] = plots.spike_response_curve(dev, np.geomspace(0.01, 1e4, 40), seed=seed)
             else:
                 curves[label] = own
@@ -420,7 +409,7 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed, settings):
                     three_segment_family([0.0095, 0.01, 0.015, 0.02, 0.03, 0.04]))
             spread = SegmentedExposureSensor(dev.parameters, dev.segment_times_s, dev.clamp_levels_electrons,
                                              frame_rate_hz=60.0, barrier_spread_fraction=0.02)
-            figures["snr_knees.png"] = plots.snr_knees_figure(dev, presets.make_sensor("seed001-normal"), spread,
+            figures["snr_knees.png"] = plots.snr_knees_figure(dev, make_sensor("seed001-normal"), spread,
                                                               measured=own)
         out = Path(out_dir)
         for fname, fig in figures.items():

@@ -28,13 +28,16 @@ def run_gated(
     threshold: float = 5.0,
     seed: int = 0,
     out=None,
-    parameters=None,
+    **sensor_kw,
 ) -> dict:
     """Compute everything ``viform gated`` reports; write figures to ``out`` if given.
 
-    ``parameters`` (an :class:`~viform.sensors.gated_ccd.InterlineCCDParameters`) replaces the
-    default CCD everywhere (field test, pulse counts, sweep, depth, fog)."""
-    from viform.light.active import Medium, field_test_scene, fog_scene
+    ``sensor_kw`` (``parameters``: an :class:`~viform.sensors.gated_ccd.InterlineCCDParameters`,
+    ``laser``, ``receiver``, ``noise``, ``fixed_pattern_seed``) go to every
+    :class:`~viform.sensors.gated_ccd.GatedInterlineCCD` of the run (field test, pulse counts,
+    sweep, depth, fog)."""
+    from viform.light.active import field_test_scene
+    from viform.light.laser import Receiver
     from viform.measure.gated_metrics import (
         expected_glint_visibility,
         gate_sweep,
@@ -49,7 +52,7 @@ def run_gated(
     check_non_negative("ambient_lux", ambient_lux)
     check_positive("fog_visibility_m", fog_visibility_m)
     scene = field_test_scene(ambient_lux=ambient_lux, visibility_m=visibility_m)
-    ccd = GatedInterlineCCD(pulses=pulses, gate_range_m=gate_m, frame_rate_hz=25.0, parameters=parameters)
+    ccd = GatedInterlineCCD(pulses=pulses, gate_range_m=gate_m, frame_rate_hz=25.0, **sensor_kw)
     result = {
         "gate": ccd.timing.to_dict(),
         "pulses": pulses,
@@ -68,10 +71,10 @@ def run_gated(
             pulses=pulses,
             gate_range_m=gate_m,
             mode=mode,
-            parameters=parameters,
+            **sensor_kw,
             frame_rate_hz=1.0
             / GatedInterlineCCD(pulses=1, gate_range_m=gate_m, mode=mode, frame_rate_hz=1e-3,
-                                parameters=parameters).frame_time_s(
+                                **sensor_kw).frame_time_s(
                 pulses, mode
             ),
         )
@@ -100,90 +103,110 @@ def run_gated(
 
     # 2. pulses needed vs ambient at 300 m and 800 m (accumulate mode)
     ambients = sorted({1e5, 1e4, 1e3, 1.0, 1e-3, float(ambient_lux)}, reverse=True)
-    result["pulses_needed"] = pulses_needed_vs_ambient((300.0, 800.0), ambients, threshold, parameters=parameters)
+    result["pulses_needed"] = pulses_needed_vs_ambient((300.0, 800.0), ambients, threshold, **sensor_kw)
     for row in result["pulses_needed"]:
         row["seed_figure"] = SEED_PULSES.get(row["range_m"]) if row["ambient_lux"] == 1e5 else None
 
     # 2b. the same counts read as thresholds and as operating points
-    result["pulses_both_ways"] = pulses_both_ways(threshold, ambient_lux, parameters=parameters)
+    # the seed's two receivers are what this table compares: a receiver setting does not apply to it
+    both_kw = {k: v for k, v in sensor_kw.items() if k != "receiver"}
+    result["pulses_both_ways"] = pulses_both_ways(threshold, ambient_lux, **both_kw)
+    if sensor_kw.get("receiver") is not None and sensor_kw["receiver"] != Receiver():
+        result["pulses_both_ways_note"] = ("the two-way reading compares the seed's two receivers (default and "
+                                           "operating point): the receiver settings given do not apply to it")
 
     # 2c. the field procedure: raise the gate until each glint vanishes
-    sw = gate_sweep(scene, np.arange(0.0, 401.0, 10.0), pulses, threshold, parameters=parameters)
+    sw = gate_sweep(scene, np.arange(0.0, 401.0, 10.0), pulses, threshold, **sensor_kw)
     result["gate_sweep"] = sw
 
     result["seed_figures"] = seed_figure_status(result)
 
     # 3. fog: gated vs un-gated
-    fog = fog_scene(visibility_m=fog_visibility_m, ambient_lux=min(ambient_lux, 1.0))
-    first = min(float(fog.range_m.min()), 1e9)
-    fog_gate = max(0.0, first - 10.0)
-    fog_x = min(pulses, 200)
-    fog_rows, fog_imgs = {}, {}
-    for mode in ("ungated", "accumulate"):
-        sensor = GatedInterlineCCD(pulses=fog_x, gate_range_m=fog_gate, mode=mode, frame_rate_hz=25.0,
-                                   parameters=parameters)
-        fimg = sensor.capture_frame(fog, seed=seed).electrons
-        fog_imgs[f"{mode}, X={fog_x}"] = fimg
-        budget = sensor.electron_budget(fog)
-        signs = fog.retro_coefficient_per_sr > 0
-        bg = ~signs
-        fog_rows[mode] = {
-            "sign_mean_electrons": float(budget["photo"][signs].mean()),
-            "background_mean_electrons": float(budget["photo"][bg].mean()),
-            "backscatter_electrons": float(
-                (budget["photo"] - sensor.electron_budget(fog.with_(medium=Medium(0.0)))["photo"])[bg].mean()
-            ),
-            "sign_contrast": float((fimg[signs].mean() - fimg[bg].mean()) / max(fimg[bg].std(ddof=1), 1e-9)),
-        }
-    result["fog"] = {"visibility_m": fog_visibility_m, "gate_range_m": fog_gate, "pulses": fog_x, "modes": fog_rows}
+    result["fog"], fog_imgs = fog_comparison(fog_visibility_m, ambient_lux, pulses, seed, **sensor_kw)
 
     if out is not None:
-        from viform.report import gated_plots as gp
-
-        out = Path(out)
-        prof = gp.range_intensity_profile(ccd, Medium.from_visibility(fog_visibility_m))
-        gp.plot_range_intensity(
-            out / "range_intensity.png",
-            prof,
-            f"gate {gate_m:g} m: window {prof['gate_window_m'][0]:.0f}–"
-            f"{prof['gate_window_m'][1]:.0f} m (fog V = {fog_visibility_m:g} m)",
-        )
-        gp.plot_images(
-            out / "fog_gated_vs_ungated.png",
-            fog_imgs,
-            f"signs at {', '.join(f'{r:g}' for r in (60, 90, 120))} m in fog V = {fog_visibility_m:g} m"
-            " (one grey scale for both)",
-            shared_scale=True,
-        )
-        gp.plot_modes(
-            out / "modes.png",
-            {f"{m}, X={pulses}": im for m, im in frames.items()},
-            ccd.parameters.pixel.full_well_electrons,
-            f"reflectors 50/100/200/300 m, gate {gate_m:g} m, {ambient_lux:g} lx",
-        )
-        gp.plot_cnr(
-            out / "cnr.png",
-            [{"target": r["label"], "mode": m, "cnr": r["cnr"], "saturated": r["saturated"]}
-             for m in MODES for r in modes[m]["targets"]],
-            threshold,
-            f"glint contrast-to-noise ratio per reflector and mode, X = {pulses} pulses, gate {gate_m:g} m",
-        )
-        sweep = result["gate_sweep"]
-        gp.plot_gate_sweep(out / "gate_sweep.png", sweep)
-        from viform.light.active import depth_scene
-        from viform.measure.gated_metrics import depth_from_sweep
-
-        dscene = depth_scene()
-        depth = depth_from_sweep(dscene, np.arange(10.0, 101.0, 2.0), pulses=250, seed=seed, parameters=parameters)
-        gp.plot_depth(out / "depth.png", depth, "depth from a gate sweep (10–100 m in 2 m steps, X = 250, "
-                      "night): ground, boards at 45/52/58 m, reflectors")
-        ok = depth["valid"] & np.isfinite(dscene.range_m)
-        err = np.abs(depth["depth_m"][ok] - dscene.range_m[ok])
-        result["depth_from_sweep"] = {"valid_fraction": float(ok.mean()),
-                                      "median_abs_error_m": float(np.median(err)) if err.size else None,
-                                      "p95_abs_error_m": float(np.percentile(err, 95)) if err.size else None}
-        result["figures"] = sorted(str(p) for p in out.glob("*.png"))
+        _write_figures(Path(out), result, ccd, frames, fog_imgs, gate_m, pulses, ambient_lux, fog_visibility_m,
+                       threshold, seed, **sensor_kw)
     return result
+
+
+def _write_figures(out: Path, result: dict, ccd, frames: dict, fog_imgs: dict, gate_m: float, pulses: int,
+                   ambient_lux: float, fog_visibility_m: float, threshold: float, seed: int, **sensor_kw) -> None:
+    """The figures of ``viform gated --out`` (range profile, fog, modes, CNR, gate sweep, depth) into ``out``;
+    adds the depth figures and the list of figures to ``result``."""
+    from viform.light.active import Medium, depth_scene
+    from viform.measure.gated_metrics import depth_from_sweep
+    from viform.report import gated_plots as gp
+    from viform.sensors.gated_ccd import MODES
+
+    modes = result["modes"]
+    prof = gp.range_intensity_profile(ccd, Medium.from_visibility(fog_visibility_m))
+    gp.plot_range_intensity(
+        out / "range_intensity.png",
+        prof,
+        f"gate {gate_m:g} m: window {prof['gate_window_m'][0]:.0f}–"
+        f"{prof['gate_window_m'][1]:.0f} m (fog V = {fog_visibility_m:g} m)",
+    )
+    gp.plot_images(
+        out / "fog_gated_vs_ungated.png",
+        fog_imgs,
+        f"signs at {', '.join(f'{r:g}' for r in (60, 90, 120))} m in fog V = {fog_visibility_m:g} m"
+        " (one grey scale for both)",
+        shared_scale=True,
+    )
+    gp.plot_modes(
+        out / "modes.png",
+        {f"{m}, X={pulses}": im for m, im in frames.items()},
+        ccd.parameters.pixel.full_well_electrons,
+        f"reflectors 50/100/200/300 m, gate {gate_m:g} m, {ambient_lux:g} lx",
+    )
+    gp.plot_cnr(
+        out / "cnr.png",
+        [{"target": r["label"], "mode": m, "cnr": r["cnr"], "saturated": r["saturated"]}
+         for m in MODES for r in modes[m]["targets"]],
+        threshold,
+        f"glint contrast-to-noise ratio per reflector and mode, X = {pulses} pulses, gate {gate_m:g} m",
+    )
+    sweep = result["gate_sweep"]
+    gp.plot_gate_sweep(out / "gate_sweep.png", sweep)
+    dscene = depth_scene()
+    depth = depth_from_sweep(dscene, np.arange(10.0, 101.0, 2.0), pulses=250, seed=seed, **sensor_kw)
+    gp.plot_depth(out / "depth.png", depth, "depth from a gate sweep (10–100 m in 2 m steps, X = 250, "
+                  "night): ground, boards at 45/52/58 m, reflectors")
+    ok = depth["valid"] & np.isfinite(dscene.range_m)
+    err = np.abs(depth["depth_m"][ok] - dscene.range_m[ok])
+    result["depth_from_sweep"] = {"valid_fraction": float(ok.mean()),
+                                  "median_abs_error_m": float(np.median(err)) if err.size else None,
+                                  "p95_abs_error_m": float(np.percentile(err, 95)) if err.size else None}
+    result["figures"] = sorted(str(p) for p in out.glob("*.png"))
+
+
+def fog_comparison(fog_visibility_m: float, ambient_lux: float, pulses: int, seed: int = 0,
+                   **sensor_kw) -> tuple[dict, dict]:
+    """Signs in fog (seed 004's motivation), un-gated against gated (accumulate) from 10 m before the
+    nearest surface: expected electrons of signs, background and backscatter, and the simulated signs'
+    contrast; returns (the figures, the two images in electrons)."""
+    from viform.light.active import Medium, fog_scene
+    from viform.sensors.gated_ccd import GatedInterlineCCD
+
+    fog = fog_scene(visibility_m=fog_visibility_m, ambient_lux=min(ambient_lux, 1.0))
+    fog_gate = max(0.0, min(float(fog.range_m.min()), 1e9) - 10.0)
+    fog_x = min(pulses, 200)
+    rows, images = {}, {}
+    signs = fog.retro_coefficient_per_sr > 0
+    bg = ~signs
+    for mode in ("ungated", "accumulate"):
+        sensor = GatedInterlineCCD(pulses=fog_x, gate_range_m=fog_gate, mode=mode, frame_rate_hz=25.0,
+                                   **sensor_kw)
+        image = images[f"{mode}, X={fog_x}"] = sensor.capture_frame(fog, seed=seed).electrons
+        photo = sensor.electron_budget(fog)["photo"]
+        clear = sensor.electron_budget(fog.with_(medium=Medium(0.0)))["photo"]
+        rows[mode] = {"sign_mean_electrons": float(photo[signs].mean()),
+                      "background_mean_electrons": float(photo[bg].mean()),
+                      "backscatter_electrons": float((photo - clear)[bg].mean()),
+                      "sign_contrast": float((image[signs].mean() - image[bg].mean())
+                                             / max(image[bg].std(ddof=1), 1e-9))}
+    return {"visibility_m": fog_visibility_m, "gate_range_m": fog_gate, "pulses": fog_x, "modes": rows}, images
 
 
 def seed_figure_status(res: dict) -> list[dict]:
@@ -262,6 +285,8 @@ def format_report(res: dict) -> str:
                      "pulses at 300 m) and its 50 nm filter lets in so much sun that at 800 m the CNR levels off "
                      f"below 3; a 0.7 cd/lx reflector behind a 50 mm f/1.8 lens and a 10 nm filter (last rows) "
                      f"needs {ths} pulses")
+    if res.get("pulses_both_ways_note"):
+        lines.append(f"  note: {res['pulses_both_ways_note']}")
     lines.append("status of each published figure (predicted / fitted / refuted):")
     for f in res.get("seed_figures", []):
         lines.append(f"  {f['figure']}: {f['status']}")
@@ -317,8 +342,9 @@ def format_report(res: dict) -> str:
 @click.option("--part", type=click.Choice(["icx618", "icx445", "icx279", "icx659", "all"]), default="icx618",
               show_default=True, help="CCD whose drive --waveforms writes.")
 @click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
-              help="Change one CCD parameter by name, e.g. --set gate_jitter_s=5e-9 --set readout_pulse_s=0.5e-6 "
-                   "--set transfer_smear=true --set read_noise_electrons=20 (repeatable).")
+              help="Change one parameter of the gated camera by name: the CCD, its pixel, the laser (laser_*) or "
+                   "the receiver (receiver_*), e.g. --set gate_jitter_s=5e-9 --set transfer_smear=true --set "
+                   "laser_peak_power_w=100 (repeatable; viform sensors show gated lists them).")
 @click.option("--json", "as_json", is_flag=True, help="Print all numbers as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON to this file.")
 def gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold, seed, out, waveforms, part,
@@ -329,13 +355,13 @@ def gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold
 
     if not math.isfinite(threshold) or threshold <= 0:
         check_positive("threshold", threshold)
-    parameters, changed = ccd_parameters_from_settings(settings)
+    sensor_kw, changed = gated_sensor_kw(settings)
     if waveforms:
         res = run_waveforms(part, gate_m, pulses, out or "gated_waveforms")
         text = format_waveforms(res)
     else:
         res = run_gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold, seed, out,
-                        parameters=parameters)
+                        **sensor_kw)
         text = format_report(res)
     if changed:
         res["settings"] = changed
@@ -345,43 +371,46 @@ def gated(gate_m, pulses, visibility_m, ambient_lux, fog_visibility_m, threshold
     click.echo(json.dumps(res, indent=2, default=_jsonable) if as_json else text)
 
 
-#: CCD fields ``viform gated --set`` may change (the frame-level ones, interlacing and blooming,
-#: are simulated by ``GatedInterlineCCD.capture_frame`` but not by the expected-CNR tables).
-GATED_SETTABLE = ("min_transfer_time_s", "readout_pulse_s", "readout_time_s", "shutter_leak_ratio", "gate_jitter_s",
-                  "sub_fall_time_s", "laser_rise_time_s", "transfer_smear")
+#: Parameters of the catalogue's gated camera that ``viform gated`` sets itself, with where to set them.
+GATED_OWN = {"pulses": "--pulses", "gate_range_m": "--gate-m",
+             "mode": "the field test runs every mode (ungated, sum, accumulate)",
+             "frame_rate_hz": "the field test fits each mode's frame to its pulses (25 Hz for the fog and sweeps)"}
+#: CCD effects the expected contrast-to-noise tables do not model (they are simulated in the frames of
+#: ``viform capture gated`` and ``viform compare``).
+GATED_FRAME_ONLY = ("bloom", "interlaced")
 
 
-def ccd_parameters_from_settings(settings):
-    """``--set NAME=VALUE`` pairs → (InterlineCCDParameters or None, the changes)."""
-    import dataclasses
+def gated_sensor_kw(settings) -> tuple[dict, dict]:
+    """``--set NAME=VALUE`` pairs → (keyword arguments of every :class:`GatedInterlineCCD` the field test
+    builds — ``parameters``, ``laser``, ``receiver``, ``noise``, ``fixed_pattern_seed`` — the changes).
 
+    Any parameter of the catalogue's ``gated`` sensor (``viform sensors show gated``) but those the
+    command sets itself (:data:`GATED_OWN`) and the frame-only effects (:data:`GATED_FRAME_ONLY`).
+    """
     from viform._validate import ViformError
-    from viform.sensors.frame import FramePixelParameters
-    from viform.sensors.gated_ccd import InterlineCCDParameters
+    from viform.cli._common import parse_settings
+    from viform.sensors.catalog import entry
 
-    if not settings:
-        return None, {}
-    pixel_fields = [f.name for f in dataclasses.fields(FramePixelParameters)
-                    if f.name not in ("optics", "readout_time_s", "parasitic_light_sensitivity",
-                                      "storage_leakage_e_per_s", "black_sun_fraction", "reset_sample_time_s")]
-    allowed = list(GATED_SETTABLE) + pixel_fields
-    ccd_kw, pixel_kw = {}, {}
-    for item in settings:
-        name, sep, text = item.partition("=")
-        name, text = name.strip(), text.strip()
-        if not sep or name not in allowed:
-            raise ViformError(f"--set {item!r} is not allowed: give NAME=VALUE with NAME one of {', '.join(allowed)}")
-        if text.lower() in ("true", "false"):
-            value = text.lower() == "true"
-        else:
-            try:
-                value = int(text) if text.lstrip("+-").isdigit() else float(text)
-            except ValueError:
-                raise ViformError(f"--set {item!r} is not allowed: {text!r} is not a number (or true/false)") from None
-        (ccd_kw if name in GATED_SETTABLE else pixel_kw)[name] = value
-    base = InterlineCCDParameters()
-    pixel = dataclasses.replace(base.pixel, **pixel_kw) if pixel_kw else base.pixel
-    return dataclasses.replace(base, pixel=pixel, **ccd_kw), {**ccd_kw, **pixel_kw}
+    kind = entry("gated")
+    changed = parse_settings(kind, settings)
+    for name, value in changed.items():
+        value = kind.parameters[name].default_text() if value is None else str(value).lower() \
+            if isinstance(value, bool) else value
+        if name in GATED_OWN:
+            where = GATED_OWN[name]
+            raise ViformError(f"--set {name}={value}: give {where}" if where.startswith("--") else
+                              f"--set {name}={value} is not allowed here: {where}")
+        if name in GATED_FRAME_ONLY and changed[name]:
+            raise ViformError(f"--set {name}={value} is not allowed here: the field test's contrast-to-noise "
+                              f"tables are expected values without it; frames with it: viform capture gated "
+                              f"night-road-fog --set {name}=true, or viform compare night-road-fog --set "
+                              f"gated:{name}=true")
+    if not changed:
+        return {}, {}
+    ccd = kind.build(**changed)
+    kw = {"parameters": ccd.parameters, "laser": ccd.laser, "receiver": ccd.receiver, "noise": ccd.noise,
+          "fixed_pattern_seed": ccd.fixed_pattern_seed}
+    return kw, changed
 
 
 def _jsonable(v):

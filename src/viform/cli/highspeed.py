@@ -1,4 +1,4 @@
-"""CLI commands: highspeed (registered on viform.cli.app.cli) — seed 002, issue 4.
+"""CLI commands: highspeed (registered on viform.cli.app.cli) — seed 002.
 
 ``viform highspeed SCENE``: the LUX13HS-like camera shoots SCENE with auto-exposure and
 histogram equalization, buffers in DDR, decimates for the link and writes the video, a plot
@@ -14,7 +14,9 @@ from pathlib import Path
 
 import click
 
-from viform._validate import ViformError, check_choice, check_positive, check_range
+from viform._validate import ViformError, check_choice, check_int, check_positive, check_range
+from viform.cli._common import parse_settings
+from viform.cli._scenes import with_scene_list
 from viform.cli.app import cli
 
 
@@ -57,7 +59,11 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
                    "or with the previous transmitted frame's (flashes after a light step).")
 @click.option("--eq-method", type=click.Choice(["shift", "float"]), default="shift", show_default=True,
               help="Equalization arithmetic: integer bit shifts (as in the camera's FPGA) or floating point.")
-@click.option("--frames", "n_frames", type=int, default=200, show_default=True, help="Sensor frames to capture.")
+@click.option("--duration", "duration_s", type=float, default=None,
+              help="Length of the capture, s: every sensor frame that ends in it  [default: 200 frames, 0.12 s at "
+                   "the default window].")
+@click.option("--frames", "n_frames", type=int, default=None,
+              help="Sensor frames to capture, instead of --duration.")
 @click.option("--exposure-us", type=float, default=100.0, show_default=True,
               help="Initial exposure (fixed with --no-ae), µs.")
 @click.option("--render", default="320x180", show_default=True,
@@ -72,16 +78,21 @@ def _parse_size(text: str, name: str) -> tuple[int, int]:
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed of the simulated noise.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="highspeed_out", show_default=True,
               help="Folder for the video, exposure.png and report.json.")
+@click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
+              help="Change one parameter of the camera by name, e.g. --set read_noise_electrons=20 --set "
+                   "parasitic_light_sensitivity=0.01 (repeatable; viform sensors show highspeed lists them). The "
+                   "flags above set their own parameters (--roi: roi, --target: target_gray, …); give each once.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON instead of the summary.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None,
               help="Also write the report JSON to this file (OUT/report.json is always written).")
-def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray, band_gray,
-              ae_saturated_cut, equalize, eq_source, eq_method, n_frames, exposure_us, render, lux, steps, scene_fps,
-              video_format, seed, out_dir, as_json, json_file):
+@click.pass_context
+@with_scene_list
+def highspeed(ctx, scene, roi, mode, clock_mhz, interface, decimation, max_decimation, ae, meter, target_gray,
+              band_gray, ae_saturated_cut, equalize, eq_source, eq_method, duration_s, n_frames, exposure_us, render,
+              lux, steps, scene_fps, video_format, seed, settings, out_dir, as_json, json_file):
     """Shoot SCENE with a LUX13HS-like high-speed camera (1280x864, up to 3 500 fps).
 
-    SCENE is a built-in scene (translating, moving-edge, rotating, hdr, step, flicker), an
-    image or a video. Writes OUT/video.gif|mp4 (the frames leaving the link), OUT/exposure.png
+    SCENE: {scenes} Writes OUT/video.gif|mp4 (the frames leaving the link), OUT/exposure.png
     and OUT/report.json (frames captured, buffered, transmitted, dropped).
     """
     from tqdm import tqdm
@@ -95,16 +106,37 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         write_outputs,
     )
     from viform.isp.link import INTERFACES, link_plan
-    from viform.light.scenes import load_scene
-    from viform.sensors.highspeed_timing import lux13hs_timing
+    from viform.light.catalog import load_scene
+    from viform.sensors.catalog import entry
 
     check_choice("interface", interface, tuple(INTERFACES))
     check_positive("lux", lux)
-    timing = lux13hs_timing(mode, None if clock_mhz is None else check_positive("clock_mhz", clock_mhz) * 1e6)
-    window = timing.window(roi)
+    kind = entry("highspeed")
+    # the camera's parameters: its flags (those given, and the defaults of the others), then --set
+    clock_hz = None if clock_mhz is None else check_positive("clock_mhz", clock_mhz) * 1e6
+    flags = {"roi": ("roi", roi), "mode": ("mode", mode), "clock_mhz": ("pixel_clock_hz", clock_hz),
+             "ae": ("ae", ae), "meter": ("meter", meter), "target_gray": ("target_gray", target_gray),
+             "band_gray": ("band_gray", band_gray), "ae_saturated_cut": ("ae_saturated_cut", ae_saturated_cut),
+             "exposure_us": ("exposure_s", check_positive("exposure_us", exposure_us) * 1e-6)}
+    check_range("--target", target_gray, 0, 255)
+    if ae_saturated_cut is not None:
+        check_range("ae_saturated_cut", ae_saturated_cut, 0, 1, low_open=True, high_open=True)
+    changed = parse_settings(kind, settings, skip_build=True)
+    for option, (name, _) in flags.items():
+        given = ctx.get_parameter_source(option) not in (click.core.ParameterSource.DEFAULT, None)
+        if name in changed and given:
+            flag = next(p for p in ctx.command.params if p.name == option).opts[0]
+            raise ViformError(f"--set {f'{name}={changed[name]}'!r} and {flag} set the same parameter: give one "
+                              "of them")
+    camera_settings = {name: value for name, value in flags.values() if name not in changed} | changed
+    camera = kind.build(**camera_settings)
+    if duration_s is not None and n_frames is not None:
+        raise ViformError("--duration and --frames both set the length of the capture: give one of them")
+    n_frames = camera.frames_in(duration_s) if duration_s is not None else 200 if n_frames is None else n_frames
+    timing, window = camera.timing, camera.window
     rh, rw = _parse_size(render, "render")
     rh, rw = min(rh, window.height), min(rw, window.width)
-    from viform.light.scenes import BUILTIN_SCENES
+    from viform.light.catalog import BUILTIN_SCENES
 
     if scene in BUILTIN_SCENES:
         base = load_scene(scene, rh, rw, max_lux=1.0, frame_rate_hz=scene_fps)
@@ -123,26 +155,20 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
     sc = ScaledScene(base, lux / mean0)
     if step_list:
         sc = StepsScene(sc, step_list)
-    cfg = HighSpeedConfig(roi=window, mode=mode, pixel_clock_hz=timing.pixel_clock_hz, interface=interface,
-                          decimation=decimation, max_decimation=max_decimation, ae=ae, meter=meter,
-                          target_gray=target_gray, band_gray=band_gray, ae_saturated_cut=ae_saturated_cut,
-                          equalize=equalize,
-                          eq_source=eq_source, eq_method=eq_method,
-                          exposure_s=check_positive("exposure_us", exposure_us) * 1e-6, n_frames=n_frames,
-                          seed=seed)
+    cfg = HighSpeedConfig(interface=interface, decimation=decimation, max_decimation=max_decimation,
+                          equalize=equalize, eq_source=eq_source, eq_method=eq_method, n_frames=n_frames, seed=seed)
     # Check everything before the progress bar starts, so an error is a single clean line.
-    check_range("--target", target_gray, 0, 255)
-    if ae_saturated_cut is not None:
-        check_range("ae_saturated_cut", ae_saturated_cut, 0, 1, low_open=True, high_open=True)
-    timing.exposure_cycles(cfg.exposure_s, window)
+    check_int("--frames", n_frames, 1)
     plan = link_plan(timing.frame_rate_hz(window), window.height, window.width, interface, 8, decimation,
                      max_decimation)
     if decimation is not None and decimation < plan["decimation_strict"]:
         click.echo(f"note: {decimation}:1 over {interface} is faster than the link ({plan['decimation_strict']}:1 "
                    "fits); the DDR ring will overflow and frames will be lost", err=True)
     with tqdm(total=n_frames, desc="frames", file=sys.stderr, leave=False) as bar:
-        result = run_highspeed(sc, cfg, timing, progress=bar.update)
+        result = run_highspeed(sc, cfg, progress=bar.update, camera=camera)
     report = write_outputs(result, out_dir, video_format, [t for t, _ in step_list])
+    if changed:
+        report["settings"] = changed
     if json_file:
         from viform._io import write_json
 
@@ -151,7 +177,9 @@ def highspeed(scene, roi, mode, clock_mhz, interface, decimation, max_decimation
         click.echo(json.dumps(report, indent=2, default=float))
         return
     lk = report["link"]
-    click.echo(f"sensor: {window.width}x{window.height} {mode} @ {timing.pixel_clock_hz / 1e6:g} MHz -> "
+    if changed:
+        click.echo(f"changed: {', '.join(f'{k} = {v}' for k, v in changed.items())}")
+    click.echo(f"sensor: {window.width}x{window.height} {camera.mode} @ {timing.pixel_clock_hz / 1e6:g} MHz -> "
                f"{report['sensor_frame_rate_hz']:.1f} fps ({report['timing']['cycles_per_frame']} cycles/frame)")
     click.echo(f"link: {interface} max {lk['link_max_frame_rate_hz']:.1f} fps; DDR ring "
                f"{lk['buffer_capacity_frames']} frames ({lk['buffer_record_s']:.3f} s)")
@@ -207,14 +235,36 @@ def format_figures(fig: dict) -> str:
         ("equalization worst error", f"{eq['max_abs_error_uncompensated']:.1f} → "
          f"{eq['max_abs_error_compensated']:.2f} levels", "'close to 0'"),
     ]
+    status = fig.get("status", {})
+    keys = ["reduced_1280x720_100MHz", "normal_full_1280x864_133MHz", "reduced_166MHz", "reduced_2500fps_full_frame",
+            "cameralink_seed", "ddr", "decimation", "equalization_shift", "equalization_shift"]
+    sh = fig.get("shutter")
+    if sh:
+        shares = ", ".join(f"{100 * v:.3g} % at {float(t) * 1e6:g} µs" for t, v in sh["parasitic_share_at_exposure"]
+                           .items())
+        rows += [("shutter efficiency (parasitic light)", f"{100 * sh['shutter_efficiency']:g} %, readout "
+                  f"{sh['readout_time_s'] * 1e6:.0f} µs: +{sh['parasitic_exposure_equivalent_s'] * 1e6:.2f} µs "
+                  "of exposure on average", "99 %"),
+                 ("parasitic share of a frame", shares + (f" (simulated at 10 µs: "
+                  f"{100 * sh['simulated_parasitic_share_at_10us']:.3g} %)"
+                  if "simulated_parasitic_share_at_10us" in sh else ""), "-"),
+                 ("brightest light at 1 clock of exposure",
+                  f"{sh['brightest_lux_shortest_exposure']['with_parasitic_light']:.3g} lux "
+                  f"(without parasitic light {sh['brightest_lux_shortest_exposure']['without_parasitic_light']:.3g})",
+                  "-")]
+        keys += ["shutter", "shutter_consequences", "shutter_consequences"]
     for s in fig.get("ae_10x_steps_latency1", []):
         n = s["settle_frames"]
         rows.append((f"AE after 10x step at {s['step_time_s'] * 1e3:g} ms",
                      "not settled" if n is None else f"{n} frames ({s['settle_s'] * 1e3:.2f} ms)", "-"))
+        keys.append("ae_10x_steps_latency1")
+    labels = [status.get(k, "").split(":")[0].split(" (")[0] for k in keys]
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
-    head = f"{'quantity':<{w0}}  {'model':<{w1}}  published"
-    return "\n".join([head, "-" * len(head)] + [f"{a:<{w0}}  {b:<{w1}}  {c}" for a, b, c in rows])
+    w2 = max(len(r[2]) for r in rows)
+    head = f"{'quantity':<{w0}}  {'model':<{w1}}  {'published':<{w2}}  status"
+    return "\n".join([head, "-" * len(head)] + [f"{a:<{w0}}  {b:<{w1}}  {c:<{w2}}  {d}"
+                                                 for (a, b, c), d in zip(rows, labels, strict=True)])
 
 
 @cli.command("highspeed-figures")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -46,8 +47,8 @@ def _display_note(display: str, method: str, scale: float) -> str:
     """Which grey-level mapping the PNGs/video use, and how to get the published one."""
     if display == "8bit" and scale == 0.6:
         return "display: 8bit, rate × 255 / 0.6 (the convention of published spike-camera numbers)"
-    what = {"linear": "linear (white = the first image's 99.9th percentile)", "255-tau": "255-tau",
-            "inverse": "inverse (1/τ)", "8bit": f"8bit with --scale {scale:g}"}[display]
+    what = {"linear": "linear", "255-tau": "255-tau", "inverse": "inverse (1/τ)",
+            "8bit": f"8bit with --scale {scale:g}"}[display]
     return (f"display: {what}; to compare with published spike-camera numbers (8-bit, rate × 255 / 0.6"
             + ("; PSNRs of this linear display come out 4–10 dB lower" if display == "linear" else "")
             + f") add {PUBLISHED_DISPLAY}")
@@ -67,6 +68,119 @@ def _no_measurement(source) -> str:
             f"of at least {2 * interval:,.0f} ticks ({2 * interval / source.clock_hz * 1e3:.3g} ms) with the instant "
             "in its middle gives a typical pixel an interval, or use --method accumulation (a spike count, no "
             "interval needed)")
+
+
+def default_output(file, method: str, times) -> str:
+    """Where ``reconstruct`` writes when neither --out nor --video is given: in the working folder, named
+    after the input file — ``STEM_METHOD_T.png`` for one instant, the folder ``STEM_METHOD/`` for several."""
+    stem = Path(file).name.split(".")[0] or "spikes"
+    if len(times) == 1:
+        return f"{stem}_{method}_{times[0]:.6f}s.png"
+    return f"{stem}_{method}"
+
+
+@contextlib.contextmanager
+def _light_npz(path, n_frames: int, shape, arrays: dict):
+    """A :class:`~viform.imaging.sequence.NpzFrameWriter` on a temporary name, renamed onto ``path`` on success."""
+    from viform._io import atomic_path
+    from viform.imaging.sequence import NpzFrameWriter
+
+    with atomic_path(path) as tmp:
+        writer = NpzFrameWriter(tmp, n_frames, shape, arrays)
+        try:
+            yield writer
+        except BaseException:
+            writer.abort()
+            raise
+        writer.close()
+
+
+@contextlib.contextmanager
+def _video_file(path: Path, fps: float):
+    """An imageio video writer on a temporary name, renamed onto ``path`` on success."""
+    import imageio.v2 as imageio
+
+    from viform._io import atomic_path
+
+    with atomic_path(path) as tmp:
+        kwargs = {"fps": fps, "macro_block_size": 2} if path.suffix.lower() == ".mp4" else \
+            {"duration": 1000.0 / fps, "loop": 0}
+        writer = imageio.get_writer(tmp, **kwargs)
+        try:
+            yield writer
+        finally:
+            writer.close()
+
+
+def _write_images(source, method, ticks, times, out, folder, video, fps, no_png, display, scale, *,
+                  window_ticks, align, spikes_per_side, adaptive, files):
+    """Reconstruct the instants and write PNGs, ``light.npz`` and the video; ``files`` collects what was written.
+
+    Returns the per-instant summary rows, the linear display's white level (spikes a tick) and the lux per
+    spike a tick of the first image (light ∝ firing rate), or None where the stream has no lux scale.
+    """
+    from viform._io import save_image
+    from viform.imaging.sequence import reconstruct_ticks
+    from viform.imaging.units import sensor_parameters_of
+
+    peak = lux_per_rate = None
+    rows = []
+    with contextlib.ExitStack() as stack:
+        writer = video_writer = None
+        arrays = {}
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            params = sensor_parameters_of(source)
+            arrays = {"spikes_per_s": np.float32}
+            if params is not None or source.threshold_electrons is not None:
+                arrays["electrons_per_s"] = np.float32
+            if params is not None:
+                arrays["lux"] = np.float32
+            arrays["censored"] = np.bool_
+            writer = stack.enter_context(_light_npz(folder / "light.npz", len(ticks),
+                                                    (source.height, source.width), arrays))
+            writer.add_array("times_s", np.array(times))
+            writer.add_array("ticks", np.array(ticks))
+        if video is not None:
+            video_writer = stack.enter_context(_video_file(Path(video), fps))
+        frames = reconstruct_ticks(source, method, ticks, window_ticks=window_ticks, align=align,
+                                   spikes_per_side=spikes_per_side, adaptive=adaptive, progress=len(ticks) > 1)
+        for (k, image), t in zip(frames, times, strict=True):
+            rate = image.spikes_per_s / source.clock_hz
+            if peak is None:
+                peak = float(np.percentile(rate, 99.9)) or float(rate.max()) or 1.0
+                if image.lux is not None and float(np.mean(rate)) > 0:
+                    lux_per_rate = float(np.mean(image.lux)) / float(np.mean(rate))
+            png = _png(method, display, scale, image, rate, peak)
+            if writer is not None:
+                writer.append("spikes_per_s", image.spikes_per_s)
+                if "electrons_per_s" in arrays:
+                    writer.append("electrons_per_s", image.electrons_per_s)
+                if "lux" in arrays:
+                    writer.append("lux", image.lux)
+                writer.append("censored", np.zeros(rate.shape, bool) if image.censored is None else image.censored)
+                if not no_png:
+                    path = folder / f"{method}_{k:07d}_{t:.6f}s.png"
+                    save_image(path, png)
+                    files.append(str(path))
+            elif out is not None:
+                save_image(out, png)
+                files.append(str(out))
+            if video_writer is not None:
+                video_writer.append_data(png)
+            # a censored pixel's interval is cut by an end of the stream: its light is only an upper
+            # bound, so it is left out of the means (and counted)
+            measured = np.ones(rate.shape, bool) if image.censored is None else ~np.asarray(image.censored)
+            n_measured = int(measured.sum())
+            rows.append((k, t, float(np.mean(rate[measured])) if n_measured else None,
+                         None if image.lux is None or not n_measured else float(np.mean(image.lux[measured])),
+                         n_measured / measured.size))
+        # leaving the stack closes the video, then light.npz, each renamed onto its name only now
+        if writer is not None:
+            files.append(str(folder / "light.npz"))
+        if video_writer is not None:
+            files.append(str(video))
+    return rows, peak, lux_per_rate
 
 
 @cli.command()
@@ -92,7 +206,9 @@ def _no_measurement(source) -> str:
               help="multi-interval: spikes used on each side of the instant (K; 2K − 1 intervals).")
 @click.option("--fixed-k", is_flag=True, help="multi-interval: always use K spikes a side (no adaptive shrinking).")
 @click.option("--out", "out_path", type=click.Path(), default=None,
-              help="A .png for one instant, or a folder (PNGs + light.npz with spikes/s, e-/s and lux).")
+              help="A .png for one instant, or a folder (PNGs + light.npz with spikes/s, e-/s and lux). "
+                   "Default (without --out and --video): STEM_METHOD_Ts.png for one instant, the folder "
+                   "STEM_METHOD for several, in the working folder (STEM: the input file's name).")
 @click.option("--video", "video", type=click.Path(), default=None,
               help="Also write the images as a video (.mp4 or .gif).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of --video.")
@@ -120,20 +236,14 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
     the REDS video data set is --method accumulation --display 8bit --scale 0.6 (41 ticks). Whole-stream output
     (--every N) is written frame by frame in bounded memory, with a progress bar.
     """
-    from viform._io import atomic_path, check_json_file, check_output_folder, save_image, write_json
-    from viform.imaging.sequence import NpzFrameWriter, reconstruct_ticks
+    from viform._io import check_json_file, check_output_folder, write_json
 
-    # ---- validate everything before any work
+    # ---- validate everything before any work: options first, then the file and its instants, then outputs
     if (at is None) == (every is None):
         raise ViformError("give either --at (instants in seconds) or --every N (ticks, whole stream), not both "
                           "or neither")
     if every is not None and every < 1:
         raise ViformError(f"--every = {every!r} is not allowed: give a whole number of ticks ≥ 1")
-    if out_path is None and video is None:
-        raise ViformError("nothing to write: give --out (a .png or a folder) and/or --video (.mp4 or .gif)")
-    out = Path(out_path) if out_path is not None else None
-    if out is not None and out.suffix.lower() != ".png" and out.suffix and not out.is_dir():
-        raise ViformError(f"--out = {out_path!r} is not allowed: give a .png file (one instant) or a folder")
     if video is not None and Path(video).suffix.lower() not in VIDEO_SUFFIXES:
         raise ViformError(f"--video = {video!r} is not allowed: give a path ending in {' or '.join(VIDEO_SUFFIXES)}")
     if not fps > 0:
@@ -147,114 +257,53 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         raise ViformError(f"--spikes-per-side = {spikes_per_side!r} is not allowed: give a whole number ≥ 1")
     if window_s is not None and not window_s > 0:
         raise ViformError(f"--window = {window_s!r} is not allowed: it must be > 0 seconds")
-    if out is not None:
-        check_output_folder("--out", (out.parent if out.suffix.lower() == ".png" else out).resolve())
-    if video is not None:
-        check_output_folder("--video", Path(video).resolve().parent)
     check_json_file(json_file)
+    times = _parse_times(at) if at is not None else None
     source = _open(file, height, width, clock_hz, flip=not no_flip, key=key, axes=axes)
-    if at is not None:
-        times = _parse_times(at)
+    if times is not None:
         ticks = [source.tick_of(t, "--at") for t in times]
     else:
         ticks = list(range(every // 2, source.n_ticks, every)) or [source.n_ticks // 2]
         times = [source.start_time_s + (k + 0.5) / source.clock_hz for k in ticks]
     if len(set(ticks)) != len(ticks) or ticks != sorted(ticks):
         raise ViformError(f"--at = {at!r} is not allowed: give instants in increasing order, one per tick")
-    if out is not None and out.suffix.lower() == ".png" and len(ticks) != 1:
-        raise ViformError(f"--out = {out_path!r} is one PNG but there are {len(ticks)} instants: give a folder")
     if window_s is not None and window_s * source.clock_hz > source.n_ticks:
         raise ViformError(f"--window = {window_s:g} s is not allowed: it is longer than the stream "
                           f"({source.n_ticks / source.clock_hz:g} s, {source.n_ticks} ticks)")
     window_ticks = 41 if window_s is None else max(1, int(round(window_s * source.clock_hz)))
+    if out_path is None and video is None:  # the default output: beside the working folder, named after the input
+        out_path = default_output(file, method, times)
+    out = Path(out_path) if out_path is not None else None
+    if out is not None and out.suffix.lower() != ".png" and out.suffix and not out.is_dir():
+        raise ViformError(f"--out = {out_path!r} is not allowed: give a .png file (one instant) or a folder")
+    if out is not None and out.suffix.lower() == ".png" and len(ticks) != 1:
+        raise ViformError(f"--out = {out_path!r} is one PNG but there are {len(ticks)} instants: give a folder")
+    if out is not None:
+        check_output_folder("--out", (out.parent if out.suffix.lower() == ".png" else out).resolve())
+    if video is not None:
+        check_output_folder("--video", Path(video).resolve().parent)
+    from viform.imaging.support import imaging_need, spike_support
 
-    # ---- reconstruct and write frame by frame
-    files = []
+    # the firing measured near the instants only (a damaged file's far ticks are not read for it)
+    need_window, need = imaging_need(method, source.n_ticks, window_ticks, spikes_per_side)
+    near = max(window_ticks, 256)
+    warning = spike_support(source, need_window, need, ticks[0] - near, ticks[-1] + near + 1).warning(
+        f"{method} images", "brighten the scene or lower the threshold Q (simulate -q / --threshold-level)"
+        + (", or give a longer --window" if method == "accumulation" else ", or record a longer stream"))
+    if warning:
+        click.echo(warning, err=True)
+
+    # ---- reconstruct and write frame by frame; on any failure no partial set of files is left
     folder = out if out is not None and out.suffix.lower() != ".png" else None
-    writer = video_writer = None
-    npz_context = None
-    peak = None
-    lux_per_rate = None  # lux per spike a tick of the first image (light ∝ firing rate)
-    summary_rows = []
     made_folder = folder is not None and not folder.exists()
+    files: list[str] = []
     try:
-        if folder is not None:
-            folder.mkdir(parents=True, exist_ok=True)
-            npz_context = atomic_path(folder / "light.npz")
-            tmp = npz_context.__enter__()
-            from viform.imaging.units import sensor_parameters_of
-
-            params = sensor_parameters_of(source)
-            arrays = {"spikes_per_s": np.float32}
-            if params is not None or source.threshold_electrons is not None:
-                arrays["electrons_per_s"] = np.float32
-            if params is not None:
-                arrays["lux"] = np.float32
-            arrays["censored"] = np.bool_
-            writer = NpzFrameWriter(tmp, len(ticks), (source.height, source.width), arrays)
-            writer.add_array("times_s", np.array(times))
-            writer.add_array("ticks", np.array(ticks))
-        if video is not None:
-            import imageio.v2 as imageio
-
-            video_context = atomic_path(Path(video))
-            video_tmp = video_context.__enter__()
-            kwargs = {"fps": fps, "macro_block_size": 2} if Path(video).suffix.lower() == ".mp4" else \
-                {"duration": 1000.0 / fps, "loop": 0}
-            video_writer = imageio.get_writer(video_tmp, **kwargs)
-        frames = reconstruct_ticks(source, method, ticks, window_ticks=window_ticks, align=align,
-                                   spikes_per_side=spikes_per_side, adaptive=not fixed_k,
-                                   progress=len(ticks) > 1)
-        for (k, image), t in zip(frames, times, strict=True):
-            rate = image.spikes_per_s / source.clock_hz
-            if peak is None:
-                peak = float(np.percentile(rate, 99.9)) or float(rate.max()) or 1.0
-                if image.lux is not None and float(np.mean(rate)) > 0:
-                    lux_per_rate = float(np.mean(image.lux)) / float(np.mean(rate))
-            png = _png(method, display, scale, image, rate, peak)
-            if folder is not None:
-                writer.append("spikes_per_s", image.spikes_per_s)
-                if "electrons_per_s" in arrays:
-                    writer.append("electrons_per_s", image.electrons_per_s)
-                if "lux" in arrays:
-                    writer.append("lux", image.lux)
-                writer.append("censored", np.zeros(rate.shape, bool) if image.censored is None else image.censored)
-                if not no_png:
-                    path = folder / f"{method}_{k:07d}_{t:.6f}s.png"
-                    save_image(path, png)
-                    files.append(str(path))
-            elif out is not None:
-                save_image(out, png)
-                files.append(str(out))
-            if video_writer is not None:
-                video_writer.append_data(png)
-            # a censored pixel's interval is cut by an end of the stream: its light is only an upper
-            # bound, so it is left out of the means (and counted)
-            measured = np.ones(rate.shape, bool) if image.censored is None else ~np.asarray(image.censored)
-            n_measured = int(measured.sum())
-            summary_rows.append((k, t, float(np.mean(rate[measured])) if n_measured else None,
-                                 None if image.lux is None or not n_measured else float(np.mean(image.lux[measured])),
-                                 n_measured / measured.size))
-        if writer is not None:
-            writer.close()
-            writer = None
-            npz_context.__exit__(None, None, None)
-            npz_context = None
-            files.append(str(folder / "light.npz"))
-        if video_writer is not None:
-            video_writer.close()
-            video_writer = None
-            video_context.__exit__(None, None, None)
-            files.append(str(video))
-    except BaseException as exc:
-        if video_writer is not None:
-            video_writer.close()
-            video_context.__exit__(type(exc), exc, exc.__traceback__)
-        if writer is not None:
-            writer.abort()
-        if npz_context is not None:
-            npz_context.__exit__(type(exc), exc, exc.__traceback__)
-        for written in files:  # e.g. damage found at a later instant: no partial set of images is left
+        summary_rows, peak, lux_per_rate = _write_images(
+            source, method, ticks, times, out, folder, video, fps, no_png, display, scale,
+            window_ticks=window_ticks, align=align, spikes_per_side=spikes_per_side, adaptive=not fixed_k,
+            files=files)
+    except BaseException:
+        for written in files:  # e.g. damage found at a later instant
             Path(written).unlink(missing_ok=True)
         if made_folder and folder.is_dir() and not any(folder.iterdir()):
             folder.rmdir()
@@ -296,8 +345,10 @@ def reconstruct(file, method, at, every, window_s, align, spikes_per_side, fixed
         click.echo(summary["no_measurement"])
     if summary.get("white_firing_rate_per_tick") is not None:
         lux_text = "" if summary["white_lux"] is None else f" ≈ {summary['white_lux']:.3g} lux"
+        why = ("the first image's 99.9th percentile, kept for every image" if display == "linear"
+               else "--scale")
         click.echo(f"grey scale: black = no spikes, white = {summary['white_firing_rate_per_tick']:.3g} spikes a "
-                   f"tick{lux_text}")
+                   f"tick{lux_text} ({why})")
     elif display == "255-tau":
         click.echo("grey scale: 255 − the interval in ticks (short interval = bright)")
     click.echo(summary["display_note"])

@@ -9,6 +9,8 @@ from pathlib import Path
 import click
 
 from viform._validate import ViformError
+from viform.cli._common import CatalogHelp
+from viform.cli._scenes import scene_set_option, scene_settings, with_scene_list
 from viform.cli.app import cli
 
 #: sensor options → SpikeSensorParameters fields (None: not given, keep the preset's / default)
@@ -36,9 +38,14 @@ def _sensor_from_options(preset, threshold_level, quantum_efficiency, pixel_pitc
 
     loaded = None
     if preset is not None:
-        from viform.sensors.spike_presets import load_spike_preset
+        from viform.sensors.catalog import SENSORS
+        from viform.sensors.spike_presets import SpikePreset, load_spike_preset
 
-        loaded = load_spike_preset(preset)  # its errors name --preset and the offending key
+        camera = SENSORS.get(preset)
+        if camera is not None and camera.family == "spike":  # a spike camera of the sensor catalogue
+            loaded = SpikePreset(preset, camera.description, *camera.scene_shape, camera.build().parameters)
+        else:
+            loaded = load_spike_preset(preset)  # its errors name --preset and the offending key
     base = loaded.parameters if loaded is not None else SpikeSensorParameters()
     if threshold_level is not None:
         from viform.sensors.spike_presets import threshold_level_electrons
@@ -77,8 +84,8 @@ def _sensor_from_options(preset, threshold_level, quantum_efficiency, pixel_pitc
 
 sensor_options = [
     click.option("--preset", default=None, metavar="NAME|FILE.json",
-                 help="Start from a spike-camera preset: spikeone (400×250, 40 kHz), spiketwo (1000×1000, "
-                      "20 kHz), spiketwo-40k, or a preset file (e.g. from viform calibrate). Options given "
+                 help="Start from a spike camera of the sensor catalogue ({sensors:spike}; viform sensors "
+                      "describes them) or a preset file (e.g. from viform calibrate). Options given "
                       "below override it."),
     click.option("--threshold-level", type=int, default=None,
                  help="The chip's threshold level 0–15 (sets the threshold Q)."),
@@ -132,7 +139,7 @@ def _apply(options):
     return decorator
 
 
-@cli.command()
+@cli.command(cls=CatalogHelp)
 @click.argument("scene")
 @click.option("--duration", "duration_s", type=float, default=None,
               help="Length of the stream, seconds [default: a video's or image folder's own length; required for "
@@ -167,17 +174,22 @@ def _apply(options):
                    "bits for the same seed), or a GPU when one is found.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
+@scene_set_option
 @_apply(sensor_options)
+@with_scene_list
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
-             light_sample_ticks, truth_dir, truth_every_ticks, force, device, as_json, json_file, **sensor_kw):
-    """Shoot SCENE (a built-in name, an image or a video) with the spike camera and save the spike stream.
+             light_sample_ticks, truth_dir, truth_every_ticks, force, device, as_json, json_file, scene_set,
+             **sensor_kw):
+    """Shoot SCENE (a built-in name, a scene description, an image or a video) with the spike camera and save
+    the spike stream.
 
-    Built-in scenes: translating, moving-edge, rotating, hdr, step, flicker.
+    {scenes}
     Memory stays bounded (blocks of about 50 MB) whatever the resolution and duration.
     """
     from viform._io import check_json_file, check_output_folder, write_json
     from viform.cli._types import check_simulation_work
-    from viform.light.scenes import VideoScene, load_scene
+    from viform.light.catalog import load_scene
+    from viform.light.scenes import VideoScene
     from viform.sensors.spike_cuda import resolve_device
     from viform.stream.io import FORMATS, save_spikes
 
@@ -195,14 +207,14 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     fit = (height, width)  # files: resized only when the user asked
     height = height if height is not None else (preset.height if preset is not None else 250)
     width = width if width is not None else (preset.width if preset is not None else 400)
-    if duration_s is None and not Path(scene).exists():
+    if duration_s is None and not Path(scene).exists() and not scene.lower().endswith((".yaml", ".yml", ".json")):
         raise ViformError(f"--duration is required: SCENE = {scene!r} is a built-in scene, which has no length of "
                           "its own (a video or image folder gives its own)")
     # the size is known before the scene loads
     if duration_s is not None and (all(v is not None for v in fit) or not Path(scene).exists()):
         check_simulation_work(duration_s, sensor.parameters.clock_hz, height * width, force)
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
-                       interpolation=interpolation, fit=fit)
+                       interpolation=interpolation, fit=fit, settings=scene_settings(scene_set))
     if truth_dir is not None:
         from viform._validate import check_int
 
@@ -272,11 +284,13 @@ def _write_truth(folder, clip: str, scene, stream, sensor, step_ticks: int) -> d
     from viform._io import atomic_path, write_json
     from viform.datasets.build import full_scale_lux
     from viform.datasets.scene_clips import write_truth
+    from viform.vision.detectability import spike_detectability_of
 
     full_scale = full_scale_lux(sensor.parameters, 1.0)
     with atomic_path(folder, directory=True) as tmp:
         Path(tmp).mkdir()
-        written = write_truth(tmp, clip, scene, stream.n_ticks, step_ticks, stream.clock_hz, full_scale)
+        written = write_truth(tmp, clip, scene, stream.n_ticks, step_ticks, stream.clock_hz, full_scale,
+                              detectability=spike_detectability_of(stream))
         meta = {"scene": scene.describe(), "step_ticks": step_ticks, "clock_hz": stream.clock_hz,
                 "gt_full_scale_lux": full_scale, **written,
                 "frame_time": "frame k: the end of step k, t = k·step_ticks / clock_hz (s)",

@@ -16,7 +16,7 @@ from viform.cli.app import cli
 
 def scene_from_metadata(metadata: dict):
     """The built-in scene a simulated stream was shot from (its sidecar records it), or None."""
-    from viform.light.scenes import BUILTIN_SCENES, builtin_scene
+    from viform.light.catalog import BUILTIN_SCENES, builtin_scene
 
     described = (metadata or {}).get("scene")
     if not isinstance(described, dict) or described.get("name") not in BUILTIN_SCENES:
@@ -114,8 +114,12 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
     times = mot.step_times_s(n_frames, every, source.clock_hz, source.start_time_s)
     scene = None
     gt = None
+    per = 1  # result frames per truth frame
+    notes = []
     if truth_path is not None:
         gt = mot.read_gt(truth_path)
+        per, note = _align_truth(truth_path, gt, every, n_frames, source)
+        notes += [note] if note else []
         truth_from = str(truth_path)
     else:
         scene = scene_from_metadata(source.metadata)
@@ -127,20 +131,40 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
         raise ViformError(f"the file's scene is {scene.height}×{scene.width} but the stream is "
                           f"{source.height}×{source.width}: give --truth gt.txt")
     if scene is not None:
-        gt = mot.gt_rows(scene, times, clip_to_field=True)
+        from viform.vision.detectability import spike_detectability_of
+
+        gt = mot.gt_rows(scene, times, detectability=spike_detectability_of(source),
+                         start_time_s=source.start_time_s)
+    if gt is not None and not len(gt):
+        if scores:
+            raise ViformError(f"--scores: the truth ({truth_from}) holds no object in view during the stream: "
+                              "there is nothing to score; drop --scores")
+        notes.append(f"the truth ({truth_from}) holds no object in view during the stream: not scored")
+        gt = None
     want_scores = gt is not None and scores is not False
 
-    mean_rate = np.zeros((source.height, source.width))
     result = track_spikes(source, every)
-    for _, block in source.iter_blocks(4096):
-        mean_rate += block.sum(axis=0)
-    mean_rate /= max(source.n_ticks, 1)
+    mean_rate = result.spike_counts / max(source.n_ticks, 1)
+    from viform.imaging.support import support_from_rates
+    from viform.vision.tracking import TrackerParameters
+
+    # the tracker follows each pixel's light by its intervals: one (2 spikes) per background time constant
+    warning = support_from_rates(mean_rate, round(TrackerParameters().background_ticks), 2, source.n_ticks).warning(
+        "tracking", "brighten the scene or lower the threshold Q (simulate -q / --threshold-level)")
+    if warning:
+        click.echo(warning, err=True)
 
     summary = {"file": str(file), "every_ticks": every, "frames": n_frames, "frame_rate_hz": source.clock_hz / every,
                "tracks": int(len(np.unique(result.rows[:, 1]))) if len(result.rows) else 0,
-               "boxes": int(len(result.rows)), "detections": result.detections, "truth": truth_from, "files": []}
+               "boxes": int(len(result.rows)), "detections": result.detections, "truth": truth_from,
+               "notes": notes, "files": []}
     if want_scores:
-        s = score_tracking(gt, result.rows, times, source.clock_hz, source.start_time_s)
+        rows, score_times = result.rows, times
+        if per > 1:  # scored at the truth's frames: result frame k·per is truth frame k
+            rows = rows[rows[:, 0] % per == 0].copy()
+            rows[:, 0] //= per
+            score_times = times[per - 1::per]
+        s = score_tracking(gt, rows, score_times, source.clock_hz, source.start_time_s)
         summary["scores"] = s
     if out_dir is not None:
         out = Path(out_dir)
@@ -152,7 +176,7 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
                                    classes=mot.class_ids_of(scene, times) if scene is not None else None)]
         if gt is not None and truth_path is None:
             files.append(mot.write_gt(out / "gt.txt", gt))
-        _overlay(out / "overlay.png", mean_rate, result, gt,
+        _overlay(out / "overlay.png", mean_rate, result, gt if per == 1 else None,
                  f"{Path(file).name}: tracks every {every} ticks (colour, last box), truth dashed")
         files.append(out / "overlay.png")
         if want_scores:
@@ -166,16 +190,71 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
         return
     click.echo(f"tracked {file}: {n_frames} frames of {every} ticks ({summary['frame_rate_hz']:g} per second), "
                f"{summary['tracks']} tracks, {summary['boxes']} boxes")
+    for note in notes:
+        click.echo(f"note: {note}")
     if want_scores:
-        s = summary["scores"]
-        click.echo(f"against {truth_from}: HOTA {s['hota']:.3f} (DetA {s['deta']:.3f}, AssA {s['assa']:.3f}), "
-                   f"MOTA {s['mota']:.3f}, IDF1 {s['idf1']:.3f}, ID switches {s['id_switches']}")
-        click.echo(f"{'object':>6} {'speed px/s':>11} {'found after':>12} {'IoU≥0.5 after':>14} {'error px':>9}")
-        for oid, o in s["objects"].items():
-            def ticks(v):
-                return "never" if v is None else f"{v} ticks"
-            err = "—" if o["position_error_px"] is None else f"{o['position_error_px']:.2f}"
-            click.echo(f"{oid:>6} {o['speed_px_per_s']:>11.0f} {ticks(o['latency_found_ticks']):>12} "
-                       f"{ticks(o['latency_match_ticks']):>14} {err:>9}")
+        _print_scores(summary["scores"], truth_from)
     if summary["files"]:
         click.echo(f"wrote {len(summary['files'])} file(s) to {out_dir}")
+
+
+def _align_truth(truth_path, gt, every: int, n_frames: int, source):
+    """Result frames per truth frame (1, or the whole ratio of the truth's step to ``--every``) and a note.
+
+    The truth's ``seqinfo.ini`` (beside gt.txt or one folder up, the MOTChallenge layout) records its
+    step in ticks; results are scored only at instants the truth has. Without it the truth's frames
+    are taken as steps of ``--every``, which is refused where the truth runs past the stream's steps.
+    """
+    from viform.vision import motchallenge as mot
+
+    folder = Path(truth_path).resolve().parent
+    info_path = next((p for p in (folder / "seqinfo.ini", folder.parent / "seqinfo.ini") if p.is_file()), None)
+    last = int(gt[:, 0].max()) if len(gt) else 0
+    if info_path is None:
+        if last > n_frames:
+            raise ViformError(f"--truth {str(truth_path)!r} has frames up to {last} but the stream has {n_frames} "
+                              f"steps of --every {every} ticks, and no seqinfo.ini beside it records its step: "
+                              "give the --every its frames were written with")
+        return 1, (f"no seqinfo.ini beside {str(truth_path)!r}: its frames are taken as steps of --every {every} "
+                   "ticks")
+    info = mot.read_seqinfo(info_path)
+    step, clock = info["step_ticks"], info["clock_hz"]
+    if (info["width"], info["height"]) != (source.width, source.height):
+        raise ViformError(f"--truth: {str(info_path)!r} is for {info['height']}×{info['width']} images but the stream "
+                          f"is {source.height}×{source.width}")
+    if clock is not None and abs(clock - source.clock_hz) > 1e-6 * source.clock_hz:
+        raise ViformError(f"--truth: {str(info_path)!r} records a {clock:g} Hz clock but the stream's is "
+                          f"{source.clock_hz:g} Hz")
+    if step is None:
+        step = int(round(source.clock_hz / info["frame_rate_hz"])) if info["frame_rate_hz"] > 0 else every
+    if step == every:
+        return 1, None
+    if step % every:
+        raise ViformError(f"--truth: {str(info_path)!r} records {step} ticks a frame, which --every {every} does "
+                          f"not divide: frames would be scored at the wrong instants; give --every {step} "
+                          "(or a divisor of it)")
+    return step // every, (f"the truth has a frame every {step} ticks: results are scored at those instants "
+                           f"(one result frame in {step // every})")
+
+
+def _print_scores(s: dict, truth_from: str) -> None:
+    click.echo(f"against {truth_from}: HOTA {s['hota']:.3f} (DetA {s['deta']:.3f}, AssA {s['assa']:.3f}), "
+               f"MOTA {s['mota']:.3f}, IDF1 {s['idf1']:.3f}, ID switches {s['id_switches']}")
+    d = s.get("detectable")
+    if d is not None:
+        never = d["never_detectable"]
+        click.echo(f"over the objects the sensor shows (detectability ≥ 1; {d['undetectable_rows']} rows excused"
+                   + (f", never shown: {', '.join(map(str, never))}" if never else "")
+                   + f"): HOTA {d['hota']:.3f}, MOTA {d['mota']:.3f}, IDF1 {d['idf1']:.3f}, "
+                   f"ID switches {d['id_switches']}")
+    click.echo(f"{'object':>6} {'speed px/s':>11} {'found after':>12} {'IoU≥0.5 after':>14} {'error px':>9}")
+
+    def ticks(v):
+        return "never" if v is None else f"{v} ticks"
+
+    for oid, o in s["objects"].items():
+        err = "—" if o["position_error_px"] is None else f"{o['position_error_px']:.2f}"
+        speed = "—" if o["speed_px_per_s"] is None or not np.isfinite(o["speed_px_per_s"]) \
+            else f"{o['speed_px_per_s']:.0f}"
+        click.echo(f"{oid:>6} {speed:>11} {ticks(o['latency_found_ticks']):>12} "
+                   f"{ticks(o['latency_match_ticks']):>14} {err:>9}")

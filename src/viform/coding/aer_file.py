@@ -90,6 +90,10 @@ MAX_PIXELS = 1 << 22
 PIXELS_PER_BYTE = 11_000
 #: Most segment ticks a header may state (a segment is decoded whole).
 MAX_SEGMENT_TICKS = 1 << 30
+#: Every field a header may hold (what the writers of all versions write): any other is refused, as
+#: a field this reader does not know could change what the data means.
+HEADER_FIELDS = ("format", "version", "height", "width", "clock_hz", "threshold_electrons", "start_time_s", "mode",
+                 "k", "slack_ticks", "segment_ticks", "metadata", "band_rows")
 
 
 # ---------------------------------------------------------------------------- writer
@@ -389,6 +393,11 @@ class CodedFile(SpikeSource):
         def bad(key, allowed):
             self._fail(f"header is invalid: field {key!r} = {h.get(key)!r} is not allowed: {allowed}", offset)
 
+        unknown = sorted(key for key in h if key not in HEADER_FIELDS)
+        if unknown:
+            self._fail(f"header is invalid: field {unknown[0]!r} is not one this viform writes or reads (the header "
+                       "was edited, or written by a newer viform)", offset)
+
         def whole(key, low, high):
             v = h.get(key)
             if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
@@ -407,6 +416,8 @@ class CodedFile(SpikeSource):
             bad("k", f"it must be a number in [0, {MAX_K:g}]")
         if "slack_ticks" in h:
             whole("slack_ticks", 0, MAX_SEGMENT_TICKS)
+        if h["mode"] == "statistical" and k > 0 and h["threshold_electrons"] is None:
+            bad("threshold_electrons", "the statistical mode's tolerance k·τ/√Q needs Q (a number)")
         if not isinstance(h.get("metadata") or {}, dict):
             bad("metadata", "it must be an object")
         if version >= 4 and h["mode"] == "strict":

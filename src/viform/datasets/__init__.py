@@ -10,5 +10,7 @@
 
 from viform.datasets.build import DatasetSettings, build_dataset, convert_serially, make_settings
 from viform.datasets.layout import clip_seed, read_config
+from viform.datasets.loaders import SpikeFolder, open_dataset
 
-__all__ = ["DatasetSettings", "build_dataset", "convert_serially", "make_settings", "clip_seed", "read_config"]
+__all__ = ["DatasetSettings", "build_dataset", "convert_serially", "make_settings", "clip_seed", "read_config",
+           "SpikeFolder", "open_dataset"]

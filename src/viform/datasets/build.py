@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import logging
 import math
 import os
 import time
@@ -33,6 +32,14 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open, check_output_folder, save_image, write_json
+from viform._parallel import (
+    DEFAULT_CONNECT_TIMEOUT_S,
+    SchedulerLost,
+    completed,
+    one_line_warnings,
+    open_client,
+    parse_memory,
+)
 from viform._validate import ViformError, check_choice, check_int, check_positive, one_line
 from viform.datasets.layout import (
     CONFIG_NAME,
@@ -107,28 +114,28 @@ def _jsonable(value):
 # ---------------------------------------------------------------------- settings
 
 def resolve_preset(spec: str | None, height: int | None = None, width: int | None = None, **overrides):
-    """Sensor parameters and resolution from a spike preset name or JSON file.
+    """Sensor parameters and resolution from a spike camera of the sensor catalogue or a preset JSON file.
 
-    Uses :func:`viform.sensors.spike_presets.load_spike_preset`; ``height``/``width`` override
-    the preset's resolution and ``overrides`` its parameter fields.
+    ``spec``: a name of :mod:`viform.sensors.catalog` of the spike family (default
+    :data:`DEFAULT_PRESET`), or a ``.json`` preset (:func:`viform.sensors.spike_presets.load_spike_preset`).
+    ``height``/``width`` override its resolution (the catalogue's ``scene_shape`` for a name) and
+    ``overrides`` its parameters (any of ``viform sensors show spike``, e.g. ``threshold_level``).
     """
-    from dataclasses import replace
+    from viform.sensors.catalog import SENSORS, sensor_names, spike_sensor
+    from viform.sensors.spike_presets import load_spike_preset
 
     spec = spec or DEFAULT_PRESET
-    try:
-        from viform.sensors.spike_presets import load_spike_preset
-    except ImportError:  # presets not installed yet: the default chip only
-        load_spike_preset = None
-    if load_spike_preset is not None:
+    if spec in SENSORS:
+        entry = SENSORS[spec]
+        if entry.family != "spike":
+            raise ViformError(f"--preset = {spec!r} is not allowed: a dataset is recorded by a spike camera: "
+                              f"{', '.join(sensor_names('spike'))}, or a preset .json file")
+        params, (h, w) = entry.build(height=None, width=None, **overrides).parameters, entry.scene_shape
+    else:
         preset = load_spike_preset(spec)
         params, h, w = preset.parameters, preset.height, preset.width
-    else:
-        from viform.sensors.spike import SpikeSensorParameters
-
-        check_choice("--preset", spec, (DEFAULT_PRESET,))
-        params, h, w = SpikeSensorParameters(), 250, 400
-    if overrides:
-        params = replace(params, **overrides)
+        if overrides:
+            params = spike_sensor(params, **overrides).parameters
     h = check_int("--height", h if height is None else height, 1)
     w = check_int("--width", w if width is None else width, 1)
     if (h * w) % 8:
@@ -330,8 +337,15 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
     seed = clip_seed(s.seed, spec.get("twin_of", clip.name))
     source = sensor.stream(scene, spec["duration_s"], seed=seed, light_sample_ticks=s.light_sample_ticks,
                            reuse_buffer=True)
-    truth = write_truth(out, clip.name, scene, source.n_ticks, s.truth_every_ticks, source.clock_hz, s.max_lux)
+    from viform.vision.detectability import SpikeDetectability
+
+    detect = SpikeDetectability(parameters.threshold_electrons, parameters.optics.electrons_per_lux_second)
+    truth = write_truth(out, clip.name, scene, source.n_ticks, s.truth_every_ticks, source.clock_hz, s.max_lux,
+                        detectability=detect)
     spikes, digest = _write_dat(task, dat, source)
+    from viform.datasets.scene_clips import too_dark
+
+    darkness = too_dark(spikes, source.n_ticks, s.height * s.width, s.truth_every_ticks)
     full_scale_rate = float(sensor.expected_firing_rate_per_tick(np.array(s.max_lux)))
     record = {
         "clip": clip.name, "source": clip.path, "seed": seed, "ticks": source.n_ticks,
@@ -339,7 +353,7 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
         "height": s.height, "width": s.width, "clock_hz": source.clock_hz, "n_frames": len(truth["frames"]),
         "frame_rate_hz": source.clock_hz / s.truth_every_ticks, "rate": full_scale_rate,
         "gt_frames": truth["frames"], "settings_sha256": s.fingerprint(),
-        "scene": spec["scene"], "scene_parameters": spec["parameters"], "clean": spec["clean"],
+        "scene": spec["scene"], "scene_parameters": spec["parameters"], "clean": spec["clean"], **darkness,
         "truth": {"kinds": truth["kinds"], "step_ticks": s.truth_every_ticks, "mot": truth["mot"],
                   "frame_time": "frame k: the end of step k, t = k·step_ticks / clock_hz (s)",
                   "flow": "forward flow from frame k to frame k + 1, px, Middlebury .flo (unknown = 1e10)",
@@ -456,7 +470,7 @@ def _label_types(clips) -> list:
     types = [1]
     scenes = [c for c in clips if c.kind == "scene"]
     if scenes:
-        from viform.light.scenes import builtin_scene
+        from viform.light.catalog import builtin_scene
 
         kinds = set()
         for name in {json.loads(c.path)["scene"] for c in scenes}:
@@ -496,38 +510,10 @@ def _check_existing_config(out: Path, config: dict) -> None:
                       "use a new --out folder, or the same options to resume it")
 
 
-def _parse_memory(memory_limit) -> str | int:
-    if memory_limit in (None, "auto"):
-        return "auto"
-    from dask.utils import parse_bytes
-
-    try:
-        value = parse_bytes(str(memory_limit))
-    except (ValueError, TypeError):
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: give a size such as 2GiB, "
-                          "or auto") from None
-    if value < 64 << 20:
-        raise ViformError(f"--worker-memory = {memory_limit!r} is not allowed: at least 64MiB per worker")
-    return value
-
-
-def _open_client(workers: int, scheduler: str | None, memory_limit):
-    """A dask client: on an existing scheduler, or on a new LocalCluster (processes, 1 thread each)."""
-    from distributed import Client, LocalCluster
-
-    if scheduler:
-        try:
-            return Client(scheduler, timeout="20s"), None
-        except (OSError, TimeoutError) as exc:
-            raise ViformError(f"--scheduler {scheduler!r}: could not connect ({one_line(exc)})") from None
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                           dashboard_address=":0", silence_logs=logging.ERROR)
-    return Client(cluster), cluster
-
-
 def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,
                   client=None, memory_limit="auto", block_ticks: int = 4096, progress: bool = True,
-                  crash: tuple[str, int] | None = None, device: str = "cpu") -> dict:
+                  crash: tuple[str, int] | None = None, device: str = "cpu",
+                  connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None) -> dict:
     """Convert every clip of ``src`` into the spike dataset ``out``; returns a summary.
 
     Parameters
@@ -552,6 +538,15 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
         One tqdm progress bar (stderr) for the whole dataset.
     device : {"cpu", "cuda", "auto"}
         Where each clip's spike kernels run (a GPU: same bits, see :mod:`viform.sensors.spike_cuda`).
+    connect_timeout_s : float
+        Seconds to keep trying to reach the scheduler, at the start and after losing it.
+    on_connect : callable (scheduler, connect_timeout_s), optional
+        Called once the inputs are checked, just before a ``scheduler`` is reached (the CLI says so).
+
+    Faults: a worker that dies mid-clip is replaced and the clip converted again from the start
+    (its partial files removed first; the bits are the same). A lost scheduler (or one without a
+    worker for ``connect_timeout_s``) stops the run with one line saying how many clips are done;
+    each finished clip is whole on disk, and running the command again converts only the others.
 
     Returns
     -------
@@ -573,7 +568,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     if workers is None:
         workers = max(1, min(os.cpu_count() or 1, len(clips)))
     workers = check_int("--workers", workers, 1, 1024)
-    memory_limit = _parse_memory(memory_limit)
+    memory_limit = parse_memory(memory_limit)
     check_output_folder("--out", out)
     if out.exists() and not out.is_dir():
         raise ViformError(f"--out {str(out)!r} is a file, not a folder")
@@ -584,7 +579,9 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     own_client = client is None
     own_cluster = None
     if own_client:
-        client, own_cluster = _open_client(workers, scheduler, memory_limit)
+        if scheduler is not None and on_connect is not None:
+            on_connect(scheduler, connect_timeout_s)
+        client, own_cluster = open_client(workers, scheduler, memory_limit, connect_timeout_s)
     try:
         (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
         (out / GT_DIR).mkdir(parents=True, exist_ok=True)
@@ -617,28 +614,30 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     try:
         n_workers = len(client.scheduler_info().get("workers", {}))
         started = time.perf_counter()  # rates count conversion, not the cluster's start-up
-        from distributed import as_completed
         from tqdm import tqdm
 
         bar = tqdm(total=len(tasks), unit="clip", desc="dataset", disable=not progress, leave=True)
         token = uuid.uuid4().hex[:8]
-        futures = {client.submit(_convert_or_report, t, key=f"viform-clip-{t.clip.name}-{token}", pure=False): t
-                   for t in tasks}
-        for fut in as_completed(futures):
-            task = futures[fut]
-            try:
-                result = fut.result()
-                if result.get("status") == "failed":
+        futures = {client.submit(one_line_warnings(_convert_or_report), t, key=f"viform-clip-{t.clip.name}-{token}",
+                                 pure=False): t for t in tasks}
+        try:
+            for fut, result in completed(client, futures, connect_timeout_s):
+                task = futures[fut]
+                if isinstance(result, ViformError):
+                    record(task, None, str(result))
+                elif isinstance(result, BaseException):  # a worker lost too often, an unexpected failure
+                    record(task, None, f"{type(result).__name__}: {one_line(result)}")
+                elif result.get("status") == "failed":
                     record(task, None, result["error"])
                 else:
                     record(task, result, None)
-            except ViformError as exc:
-                record(task, None, str(exc))
-            except Exception as exc:  # a worker lost too often, an unexpected failure: report, go on
-                record(task, None, f"{type(exc).__name__}: {one_line(exc)}")
-            bar.update(1)
-            if failed:
-                bar.set_postfix(failed=len(failed))
+                bar.update(1)
+                if failed:
+                    bar.set_postfix(failed=len(failed))
+        except SchedulerLost as exc:
+            raise ViformError(f"{exc}: {len(rows)} of {len(tasks)} clips are done and listed in "
+                              f"{str(out / MANIFEST_NAME)!r} (every clip file written is whole); run the same command "
+                              "again: it keeps the finished clips and converts the others") from None
     finally:
         if bar is not None:
             bar.close()
@@ -652,7 +651,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
 
 
 #: Manifest keys of scene clips: what was drawn, and where the truth is.
-_SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth")
+_SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth", "too_dark", "spikes_per_pixel_per_truth_step")
 
 
 def _write_manifest(out: Path, settings: DatasetSettings, rows: dict, failed: dict) -> None:
@@ -686,6 +685,7 @@ def _summary(out, clips, rows, failed, seconds, workers) -> dict:
         "pixel_ticks_per_s": pixel_ticks / seconds if seconds > 0 else 0.0,
         "workers": workers,
         "manifest": str(Path(out) / MANIFEST_NAME),
+        "too_dark": sorted(c for c, r in rows.items() if r.get("too_dark")),
         # how the source frames were fitted to the sensor (scaled, centre-cropped: never stretched)
         "fits": sorted({describe_fit(r["fit"]) for r in rows.values() if r.get("fit")}),
     }

@@ -12,7 +12,9 @@ ticks [(k − 1)·N, k·N) and its truth is taken at the end of the step, t_k = 
 
 ::
 
-    gt/<clip>_<k>.png        8-bit light at t_k (full scale = the dataset's max lux)
+    gt/<clip>_<k>.png        the light at t_k for a person to look at: sRGB-encoded, white = the clip's
+                             display scale (its 99.5th percentile of lux, recorded as display_white_lux)
+    gt_lux/<clip>_<k>.npy    the light at t_k in lux, float32 (the truth itself)
     flow/<clip>_<k>.flo      forward flow t_k → t_{k+1}, px, Middlebury .flo (what SCFlow/SpikeCV
                              read); occluded or leaving pixels stored as unknown (1e10)
     depth/<clip>_<k>.npy     range (m) per pixel, float32, inf where no surface (scenes with range)
@@ -32,9 +34,12 @@ import numpy as np
 from viform._io import atomic_open, save_image
 from viform._validate import ViformError, check_int
 from viform.datasets.layout import GT_DIR, clip_seed, sha256_file
-from viform.light.scenes import BUILTIN_SCENES, builtin_scene
+from viform.light.catalog import BUILTIN_SCENES, builtin_scene
 
 FLOW_DIR = "flow"
+LUX_DIR = "gt_lux"
+#: A clip is flagged too dark for its preset when a pixel fires, on average, less than once per truth step.
+DARK_SPIKES_PER_STEP = 1.0
 DEPTH_DIR = "depth"
 MOT_DIR = "mot"
 #: Suffix of a clip's clean twin (same light and seed, photon noise and fixed patterns off).
@@ -112,8 +117,11 @@ def truth_name(clip: str, frame: int, suffix: str) -> str:
     return f"{clip}_{frame:06d}{suffix}"
 
 
-def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: float, max_lux: float) -> dict:
+def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: float, max_lux: float,
+                detectability=None) -> dict:
     """Write a clip's truth files under ``out`` (layout in the module notes); returns their records.
+
+    ``detectability`` (:mod:`viform.vision.detectability`) fills gt.txt's detectability column.
 
     Returns
     -------
@@ -121,18 +129,24 @@ def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: 
         ``frames``: per step {frame, time_s, tick (the step's last tick), file, sha256, flow,
         flow_sha256, depth, depth_sha256}; ``mot``: {gt, seqinfo, sha256} or None; ``kinds``.
     """
-    from viform.datasets.sources import lux_to_gt_image
     from viform.vision.flow import write_flo
 
     out = Path(out)
     kinds = scene.truth_kinds()
     times = truth_times(n_ticks, step_ticks, clock_hz)
     frames = []
+    white = display_white_lux(scene, times)
     for k, t in enumerate(times, start=1):
         record = {"frame": k, "time_s": float(t), "tick": int(k * step_ticks - 1)}
+        lux = scene.illuminance_lux(float(t))
         name = truth_name(clip, k, ".png")
-        save_image(out / GT_DIR / name, lux_to_gt_image(scene.illuminance_lux(float(t)), max_lux))
-        record.update(file=name, sha256=sha256_file(out / GT_DIR / name))
+        save_image(out / GT_DIR / name, display_image(lux, white))
+        record.update(file=name, sha256=sha256_file(out / GT_DIR / name), display_white_lux=white,
+                      display_transfer="srgb")
+        name = truth_name(clip, k, ".npy")
+        with atomic_open(out / LUX_DIR / name, "wb") as f:
+            np.save(f, lux.astype(np.float32))
+        record.update(lux_file=name, lux_sha256=sha256_file(out / LUX_DIR / name))
         if "motion" in kinds and k < len(times):
             flow = scene.optical_flow_px(float(t), float(times[k]))
             name = truth_name(clip, k, ".flo")
@@ -150,7 +164,7 @@ def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: 
 
         classes = class_ids_of(scene, times)
         folder = out / MOT_DIR / clip
-        write_gt(folder / "gt" / "gt.txt", gt_rows(scene, times, classes))
+        write_gt(folder / "gt" / "gt.txt", gt_rows(scene, times, classes, detectability=detectability))
         write_seqinfo(folder / "seqinfo.ini", name=clip, n_frames=len(times), step_ticks=step_ticks,
                       clock_hz=clock_hz, width=scene.width, height=scene.height, classes=classes)
         digest = hashlib.sha256()
@@ -161,11 +175,42 @@ def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: 
     return {"frames": frames, "mot": mot, "kinds": list(kinds)}
 
 
+def display_white_lux(scene, times) -> float:
+    """The lux shown as white in a clip's display PNGs: the 99.5th percentile of its light at its first,
+    middle and last truth instants (one scale for the whole clip, so frames compare)."""
+    if len(times) == 0:
+        return 1.0
+    picks = sorted({0, len(times) // 2, len(times) - 1})
+    values = np.concatenate([scene.illuminance_lux(float(times[i])).ravel() for i in picks])
+    white = float(np.percentile(values, 99.5))
+    return white if white > 0 else max(float(values.max()), 1e-12)
+
+
+def display_image(lux: np.ndarray, white_lux: float) -> np.ndarray:
+    """8-bit sRGB-encoded image of a lux frame: 255·srgb(clip(lux / white_lux, 0, 1)) (IEC 61966-2-1)."""
+    v = np.clip(lux / white_lux, 0.0, 1.0)
+    encoded = np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+    return np.rint(255.0 * encoded).astype(np.uint8)
+
+
+def too_dark(spikes: int, ticks: int, pixels: int, step_ticks: int) -> dict:
+    """Whether a clip is too dark for its preset: a pixel fires fewer than :data:`DARK_SPIKES_PER_STEP`
+    times per truth step on average, so most pixels hold no spike in a truth frame."""
+    per_step = spikes / max(1, ticks * pixels) * step_ticks
+    return {"too_dark": bool(per_step < DARK_SPIKES_PER_STEP), "spikes_per_pixel_per_truth_step": per_step}
+
+
 def truth_intact(out, record: dict) -> bool:
     """True when every truth file a finished clip's record names is on disk with its recorded hash."""
     out = Path(out)
     for frame in record.get("gt_frames", []):
-        for key, folder in (("flow", FLOW_DIR), ("depth", DEPTH_DIR)):
+        for key, folder in (("flow", FLOW_DIR), ("depth", DEPTH_DIR), ("lux", LUX_DIR)):
+            if key == "lux":
+                name = frame.get("lux_file")
+                if name is not None and (not (out / folder / name).is_file()
+                                         or sha256_file(out / folder / name) != frame.get("lux_sha256")):
+                    return False
+                continue
             name = frame.get(key)
             if name is not None:
                 path = out / folder / name

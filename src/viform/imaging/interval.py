@@ -127,7 +127,8 @@ def interval_image(source: SpikeSource, t_s: float, sensor_parameters=None,
     k = source.tick_of(t_s)
     tau, censored = interval_ticks(source, [k], lookahead_ticks)
     tau_s = tau[0] / source.clock_hz
-    image = light_from_rate(1.0 / tau_s, source, sensor_parameters, censored=censored[0], method="interval")
+    image = light_from_rate(1.0 / tau_s, source, sensor_parameters, censored=censored[0], method="interval",
+                            spikes_per_side=1)
     image.info["tau_ticks"] = tau[0]
     return image
 

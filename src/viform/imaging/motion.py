@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, prange
 
 from viform._validate import ViformError, check_choice, check_int, check_positive, check_range
-from viform.imaging.units import LightImage, light_from_rate
+from viform.imaging.units import LightImage, light_from_rate, sensor_parameters_of
 from viform.stream.container import SpikeSource
 
 FLOW_METHODS = ("ilk", "tvl1")
@@ -255,16 +255,33 @@ def motion_compensated_image(source: SpikeSource, t_s: float, *, half_span_ticks
                                                 flow=flow, flow_downscale=down, tolerance=tolerance)
     dim = rate * used < min_spikes
     censored = np.zeros(rate.shape, dtype=bool)
+    image = light_from_rate(rate * source.clock_hz, source, sensor_parameters, censored=censored,
+                            method="motion", half_span_ticks=span, window_ticks=np.maximum(used, 1))
     if dim.any() or multi_interval_weight > 0:
         # the multi-interval estimate, its spikes searched as far as needed: alone where too
-        # few spikes were accumulated (dim light), averaged in elsewhere
-        from viform.imaging.multi_interval import multi_interval_rate
+        # few spikes were accumulated (dim light), averaged in elsewhere. Each estimate's light
+        # is made unbiased on its own (a count over the ticks used; K spikes a side), then the
+        # lights are averaged, so the mean stays unbiased.
+        from viform.imaging.multi_interval import multi_interval_rate, spikes_used
 
-        nearest, _, near_censored = multi_interval_rate(source, k, MULTI_INTERVAL_SPIKES_PER_SIDE, adaptive=True)
-        rate = np.where(dim, nearest, (1 - multi_interval_weight) * rate + multi_interval_weight * nearest)
-        censored = dim & near_censored
-    image = light_from_rate(rate * source.clock_hz, source, sensor_parameters, censored=censored,
-                            method="motion", half_span_ticks=span)
+        nearest, n_used, near_censored = multi_interval_rate(source, k, MULTI_INTERVAL_SPIKES_PER_SIDE,
+                                                             adaptive=True)
+        near = light_from_rate(nearest * source.clock_hz, source, sensor_parameters,
+                               spikes_per_side=spikes_used(n_used, MULTI_INTERVAL_SPIKES_PER_SIDE))
+        weight = np.where(dim, 1.0, multi_interval_weight)
+        image.spikes_per_s = (1 - weight) * image.spikes_per_s + weight * near.spikes_per_s
+        image.censored = dim & near_censored
+        if image.electrons_per_s is not None:
+            image.electrons_per_s = (1 - weight) * image.electrons_per_s + weight * near.electrons_per_s
+            image.saturated = np.where(weight == 1, near.saturated, image.saturated | near.saturated)
+            image.unresolved = near.unresolved & (weight > 0)
+            image.info["rate_law"]["estimator"] = ("count along the motion (second-order correction) averaged with "
+                                                   "K = 4 spikes a side (unbiased), as lights")
+            image.info["rate_law"]["unresolved_pixels"] = int(np.count_nonzero(image.unresolved))
+            params = sensor_parameters_of(source, sensor_parameters)
+            if params is not None:
+                image.lux = params.optics.lux_from_electrons_per_s(
+                    np.maximum(image.electrons_per_s - params.dark_current_e_per_s, 0.0))
     image.info["reach_ticks"] = reach
     image.info["multi_interval_pixels"] = dim
     return image

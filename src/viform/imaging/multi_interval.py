@@ -223,6 +223,13 @@ def multi_interval_rate(source: SpikeSource, tick: int, spikes_per_side: int = D
     return rate.reshape(shape), used.reshape(shape), censored.reshape(shape)
 
 
+def spikes_used(intervals, spikes_per_side: int) -> np.ndarray:
+    """Spikes a side each pixel's rate used, from its intervals n (2K − 1 when the span grew
+    equally on both sides; an adaptive span that stopped early on one side is taken at the
+    K of its shorter side and a half, (n + 1) // 2), between 1 and ``spikes_per_side``."""
+    return np.clip((np.asarray(intervals) + 1) // 2, 1, spikes_per_side)
+
+
 def multi_interval_image(source: SpikeSource, t_s: float, spikes_per_side: int = DEFAULT_SPIKES_PER_SIDE, *,
                          adaptive: bool = False, tolerance: float = 3.0, sensor_parameters=None,
                          noise_threshold_electrons: float | None = None,
@@ -256,7 +263,9 @@ def multi_interval_image(source: SpikeSource, t_s: float, spikes_per_side: int =
                                                noise_threshold_electrons=noise_threshold_electrons,
                                                lookahead_ticks=lookahead_ticks)
     image = light_from_rate(rate * source.clock_hz, source, sensor_parameters, censored=censored,
-                            method="multi-interval", spikes_per_side=spikes_per_side, adaptive=adaptive)
+                            method="multi-interval", spikes_per_side=spikes_used(used, spikes_per_side),
+                            adaptive=adaptive)
+    image.info["spikes_per_side"] = spikes_per_side
     image.info["intervals"] = used
     return image
 

@@ -95,7 +95,8 @@ def _interval_stream(source, ticks, sensor_parameters):
 
 
 def _interval_image(source, tau, censored, sensor_parameters):
-    image = light_from_rate(source.clock_hz / tau, source, sensor_parameters, censored=censored, method="interval")
+    image = light_from_rate(source.clock_hz / tau, source, sensor_parameters, censored=censored, method="interval",
+                            spikes_per_side=1)
     image.info["tau_ticks"] = tau
     return image
 
@@ -139,13 +140,15 @@ def reconstruct_ticks(source: SpikeSource, method: str, ticks, *, window_ticks: 
 
 def _per_instant(source, method, ticks, spikes_per_side, adaptive, sensor_parameters, motion_options):
     from viform.imaging.motion import motion_compensated_image
-    from viform.imaging.multi_interval import DEFAULT_SPIKES_PER_SIDE, multi_interval_frames
+    from viform.imaging.multi_interval import DEFAULT_SPIKES_PER_SIDE, multi_interval_frames, spikes_used
 
     if method == "multi-interval":
         k_side = spikes_per_side or DEFAULT_SPIKES_PER_SIDE
         for k, rate, used, censored in multi_interval_frames(source, ticks, k_side, adaptive=adaptive):
             image = light_from_rate(rate * source.clock_hz, source, sensor_parameters, censored=censored,
-                                    method="multi-interval", spikes_per_side=k_side, adaptive=adaptive)
+                                    method="multi-interval", spikes_per_side=spikes_used(used, k_side),
+                                    adaptive=adaptive)
+            image.info["spikes_per_side"] = k_side
             image.info["intervals"] = used
             yield k, image
         return

@@ -39,7 +39,13 @@ class LightImage:
         Method and window.
     saturated : ndarray of bool or None
         Pixels whose firing rate reached the readout's ceiling (one spike every tick it
-        can give): their e⁻/s and lux are lower bounds. None when Q is unknown.
+        can give): their e⁻/s and lux are lower bounds (accumulation) or the interval
+        estimator's value for that outcome. None when Q is unknown.
+    unresolved : ndarray of bool or None
+        Interval-based light (interval, multi-interval, motion): pixels whose light lies at the
+        rate law's flat end, where no function of their K spikes a side is unbiased to 0.3 %
+        (:func:`~viform.imaging.rate_law.unbiased_electrons_per_tick`; ``info["rate_law"]``
+        gives the bias left there). None where not computed.
     """
 
     spikes_per_s: np.ndarray
@@ -48,6 +54,7 @@ class LightImage:
     censored: np.ndarray | None = None
     info: dict = field(default_factory=dict)
     saturated: np.ndarray | None = None
+    unresolved: np.ndarray | None = None
 
 
 def sensor_parameters_of(source: SpikeSource, sensor_parameters=None):
@@ -71,28 +78,59 @@ def sensor_parameters_of(source: SpikeSource, sensor_parameters=None):
 
 
 def light_from_rate(spikes_per_s, source: SpikeSource, sensor_parameters=None, censored=None,
-                    **info) -> LightImage:
+                    *, spikes_per_side=None, window_ticks=None, **info) -> LightImage:
     """Wrap a firing-rate image with its e⁻/s and lux equivalents where they are known.
 
-    The e⁻/s invert the tick readout's rate law (:func:`~viform.imaging.rate_law.electrons_per_tick_from_rate`)
-    for the sensor's Q, reset and dead time (self-reset, no dead time when only Q is
-    known); ``saturated`` marks pixels at the law's ceiling, whose light is a lower bound.
+    The e⁻/s invert the tick readout's rate law for the sensor's Q, reset and dead time
+    (self-reset, no dead time when only Q is known). A noisy rate through the law's convex
+    inverse reads high, so (:mod:`~viform.imaging.rate_law`):
+
+    * ``spikes_per_side`` (K, one value or per pixel; K = 1 for interval imaging): the rate
+      is an interval estimate from K spikes a side and the light is the unbiased estimator
+      of :func:`~viform.imaging.rate_law.unbiased_electrons_per_tick`; ``unresolved`` marks
+      pixels at the law's flat end, where it cannot be;
+    * ``window_ticks`` (n, one value or per pixel): the rate is a count over n ticks and the
+      light is corrected to second order (:func:`~viform.imaging.rate_law.accumulation_electrons_per_tick`);
+    * neither: the plain inverse.
+
+    ``saturated`` marks pixels at the law's ceiling.
     """
-    from viform.imaging.rate_law import electrons_per_tick_from_rate
+    from viform.imaging import rate_law
 
     params = sensor_parameters_of(source, sensor_parameters)
     q = params.threshold_electrons if params is not None else source.threshold_electrons
     rate = np.asarray(spikes_per_s, dtype=np.float64)
-    electrons = saturated = lux = None
+    electrons = saturated = lux = unresolved = None
     if q is not None:
         clock = float(params.clock_hz if params is not None else source.clock_hz)
         dead_ticks = float(getattr(params, "dead_time_s", 0.0)) * clock
         reset = getattr(params, "reset", "self")
         noise = bool(getattr(params, "photon_noise", True))
-        per_tick, saturated = electrons_per_tick_from_rate(rate / clock, float(q), dead_ticks, reset, noise)
+        if spikes_per_side is not None:
+            per_tick, saturated, unresolved = rate_law.unbiased_electrons_per_tick(
+                rate / clock, float(q), dead_ticks, reset, noise, spikes_per_side)
+            estimator = "interval: unbiased for K spikes a side"
+        elif window_ticks is not None:
+            per_tick, saturated = rate_law.accumulation_electrons_per_tick(rate / clock, window_ticks, float(q),
+                                                                           dead_ticks, reset, noise)
+            estimator = "count over a window: second-order correction"
+        else:
+            per_tick, saturated = rate_law.electrons_per_tick_from_rate(rate / clock, float(q), dead_ticks, reset,
+                                                                         noise)
+            estimator = "plain inverse"
         electrons = per_tick * clock
         info["rate_law"] = {"threshold_electrons": float(q), "reset": reset, "dead_time_ticks": dead_ticks,
-                            "photon_noise": noise, "saturated_pixels": int(np.count_nonzero(saturated))}
+                            "photon_noise": noise, "saturated_pixels": int(np.count_nonzero(saturated)),
+                            "estimator": estimator}
+        if unresolved is not None:
+            info["rate_law"]["unresolved_pixels"] = int(np.count_nonzero(unresolved))
+            if noise:
+                k = int(np.max(spikes_per_side))
+                est = rate_law.light_estimator(float(q), dead_ticks, reset, k)
+                info["rate_law"]["unresolved_from_electrons_per_s"] = est.unresolved_from_electrons_per_tick * clock
     if params is not None and electrons is not None:
         lux = params.optics.lux_from_electrons_per_s(np.maximum(electrons - params.dark_current_e_per_s, 0.0))
-    return LightImage(rate, electrons, lux, censored, dict(info), saturated)
+    for name, value in (("spikes_per_side", spikes_per_side), ("window_ticks", window_ticks)):
+        if value is not None and np.ndim(value) == 0:
+            info[name] = int(value)
+    return LightImage(rate, electrons, lux, censored, dict(info), saturated, unresolved)

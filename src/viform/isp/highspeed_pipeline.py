@@ -22,39 +22,14 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from viform._validate import ViformError, check_int, check_positive
-from viform.isp.auto_exposure import AutoExposure, make_meter, settle_frames
-from viform.isp.histogram import StreamEqualizer, to_gray8
+from viform.isp.histogram import StreamEqualizer
 from viform.isp.link import RingBuffer, link_plan
-from viform.light.radiometry import PixelOptics
 from viform.light.scenes import Scene
+from viform.sensors.auto_exposure import settle_frames
+from viform.sensors.base import FrameStack
 from viform.sensors.frame import FramePixelParameters, FrameSensor
-from viform.sensors.highspeed_timing import ReadoutTiming, Window, lux13hs_timing
-
-
-def lux13hs_pixel_parameters(**overrides) -> FramePixelParameters:
-    """LUX13HS-like pixel (seed 002, Table 1).
-
-    QE 45 % (at 550 nm), 13.7 µm pitch, full well 30 ke⁻, read noise 15 e⁻, conversion gain
-    40 µV/e⁻, 10-bit column ADC. Mapping of the datasheet's relative figures:
-
-    * PRNU 1.5 % rms → ``prnu_fraction = 0.015`` (relative gain spread, as defined);
-    * DSNU 0.5 % rms → ``dsnu_electrons = 0.005 × 30 000 = 150 e⁻``: datasheets quote DSNU
-      as a fraction of the saturation (full-swing) signal;
-    * ADC input range = full well × conversion gain = 1.2 V, so K = 40 µV/e⁻ · 1023 / 1.2 V
-      = 0.0341 DN/e⁻; black offset 8 DN (2 gray levels in 8 bit) so DSNU and read noise
-      are not clipped at zero;
-    * dark current 1 000 e⁻/s (not in the seed; negligible at sub-millisecond exposures).
-
-    The datasheet's 25 V/(lux·s) responsivity is not imposed: our 555 nm monochromatic lux
-    conversion gives 13.8 V/(lux·s) for this pixel (white light has more photons per lux).
-    """
-    base = dict(optics=PixelOptics(pixel_pitch_m=13.7e-6, fill_factor=1.0, quantum_efficiency=0.45),
-                full_well_electrons=30_000.0, conversion_gain_v_per_e=40e-6,
-                read_noise_electrons=15.0, dark_current_e_per_s=1_000.0,
-                dsnu_electrons=0.005 * 30_000.0, prnu_fraction=0.015, analog_gain=1.0, adc_bits=10,
-                black_offset_dn=8.0, adc_range_v=30_000.0 * 40e-6)
-    base.update(overrides)
-    return FramePixelParameters(**base)
+from viform.sensors.highspeed import HighSpeedCamera, lux13hs_pixel_parameters, to_gray8
+from viform.sensors.highspeed_timing import Window, lux13hs_timing
 
 
 @dataclass
@@ -80,7 +55,7 @@ class HighSpeedConfig:
         Frames between the metered frame and the one that gets the new exposure; 1 because
         frame k+1 is already exposing while frame k is read out (seed 002 §3.2.4).
     ae_saturated_cut : float or None
-        k of the optional saturation-aware step (A2) of :mod:`viform.isp.auto_exposure`;
+        k of the optional saturation-aware step (A2) of :mod:`viform.sensors.auto_exposure`;
         None (default) runs the seed's eq. (6) alone.
     equalize : bool
     eq_source, eq_method, eq_compensate : see :class:`viform.isp.histogram.StreamEqualizer`.
@@ -114,6 +89,17 @@ class HighSpeedConfig:
     seed: int = 0
     pixel_parameters: FramePixelParameters = field(default_factory=lux13hs_pixel_parameters)
 
+    def camera(self) -> HighSpeedCamera:
+        """The sensor of these settings (:data:`SENSOR_FIELDS`)."""
+        kw = {k: getattr(self, k) for k in SENSOR_FIELDS}
+        return HighSpeedCamera(kw.pop("pixel_parameters"), **kw)
+
+
+#: Fields of :class:`HighSpeedConfig` that set the sensor (:class:`~viform.sensors.highspeed.HighSpeedCamera`);
+#: the others set the link, the sampling, the equalization and the run.
+SENSOR_FIELDS = ("pixel_parameters", "roi", "mode", "pixel_clock_hz", "ae", "meter", "target_gray", "band_gray",
+                 "ae_latency_frames", "ae_saturated_cut", "exposure_s", "scene_samples")
+
 
 @dataclass
 class HighSpeedResult:
@@ -134,58 +120,41 @@ class HighSpeedResult:
     config: dict
 
 
-def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None,
-                  timing: ReadoutTiming | None = None, progress=None) -> HighSpeedResult:
+def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None, progress=None,
+                  camera: HighSpeedCamera | None = None) -> HighSpeedResult:
     """Shoot ``scene`` with the LUX13HS-like camera and return every stage's output.
 
     The scene is rendered at its own resolution (the rendered grid); the window's size sets
-    the timing, the link and the buffer.
+    the timing, the link and the buffer. ``progress(1)`` is called after each sensor frame.
+    ``camera`` (e.g. the catalogue's ``highspeed`` with settings) replaces the sensor that
+    ``config``'s sensor fields describe; ``config`` still gives the frames, seed, link and ISP.
     """
     cfg = config or HighSpeedConfig()
-    timing = timing or lux13hs_timing(cfg.mode, cfg.pixel_clock_hz)
-    window = timing.window(cfg.roi)
+    camera = camera if camera is not None else cfg.camera()
     n = check_int("n_frames", cfg.n_frames, 1)
-    period_s = timing.frame_period_s(window)
-    rate_hz = timing.frame_rate_hz(window)
-    plan = link_plan(rate_hz, window.height, window.width, cfg.interface, 8, cfg.decimation,
+    window = camera.window
+    plan = link_plan(camera.frame_rate_hz, window.height, window.width, cfg.interface, 8, cfg.decimation,
                      cfg.max_decimation)
-    n_cycles = timing.exposure_cycles(check_positive("exposure_s", cfg.exposure_s), window)
-    params = cfg.pixel_parameters
-    sensor = FrameSensor(params, exposure_s=period_s * 0.5, frame_rate_hz=rate_hz)
-    pixels = sensor.pixel_array(scene.height, scene.width)
-    black_gray = params.black_offset_dn / (1 << (params.adc_bits - 8))
-    controller = AutoExposure(timing.max_exposure_cycles(window), cfg.target_gray, cfg.band_gray,
-                              make_meter(cfg.meter), black_level_gray=black_gray,
-                              saturated_cut=cfg.ae_saturated_cut)
-    latency = check_int("ae_latency_frames", cfg.ae_latency_frames, 0, 8)
+    stack = camera.capture_frames(scene, n, seed=cfg.seed, progress=progress)
+    return process_frames(stack, camera, cfg, scene, plan)
 
-    gray = np.empty((n, scene.height, scene.width), dtype=np.uint8)
-    cycles = np.empty(n, dtype=np.int64)
-    metered = np.empty(n)
-    ends = (np.arange(n) + 1) * period_s
-    scheduled: dict[int, int] = {}
-    command = n_cycles  # the latest exposure sent to the sensor
-    for k in range(n):
-        cycles[k] = scheduled.pop(k, n_cycles)
-        n_cycles = int(cycles[k])
-        t_exp = n_cycles * timing.clock_period_s
-        lux = scene.mean_illuminance_lux(ends[k] - t_exp, ends[k], samples=cfg.scene_samples)
-        rng = pixels.rng(cfg.seed, k)
-        dn = pixels.digitize(pixels.collect_electrons(lux, t_exp, rng), rng)
-        gray[k] = to_gray8(dn, params.adc_bits)
-        metered[k], nxt = controller.update(gray[k], n_cycles)
-        if cfg.ae:
-            # Frames k+1 … k+latency already have their exposure; the new N starts after them.
-            for j in range(k + 1, k + 1 + latency):
-                scheduled.setdefault(j, n_cycles)
-            # A frame exposed with a superseded N (the command was sent while it was
-            # already exposing) is not fed back: otherwise two interleaved loops form.
-            if n_cycles != command:
-                nxt = command
-            scheduled[k + 1 + latency] = command = nxt
-        if progress is not None:
-            progress(1)
 
+def process_frames(stack: FrameStack, camera: HighSpeedCamera, config: HighSpeedConfig | None = None,
+                   scene: Scene | None = None, plan: dict | None = None) -> HighSpeedResult:
+    """What the camera's FPGA does with the sensor's frames (``camera.capture``): every frame into
+    the DDR ring, one in N read out for the link, equalized (seed 002 §3.2–3.3).
+
+    ``config`` gives the link, sampling and equalization settings (its sensor settings are
+    ``camera``'s); ``scene`` is recorded in the result's ``config``.
+    """
+    cfg = config or HighSpeedConfig()
+    window = camera.window
+    rate_hz = camera.frame_rate_hz
+    if plan is None:
+        plan = link_plan(rate_hz, window.height, window.width, cfg.interface, 8, cfg.decimation, cfg.max_decimation)
+    gray = stack.frames_dn
+    n = len(stack)
+    meta = stack.metadata
     ring = RingBuffer(plan["buffer_capacity_frames"], rate_hz, plan["link_max_frame_rate_hz"],
                       plan["decimation"])
     account = ring.run(n)
@@ -195,16 +164,19 @@ def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None,
         out = np.stack([eq(gray[i]) for i in sent]) if sent.size else gray[:0]
     else:
         out = gray[sent]
-    exposure_s = cycles * timing.clock_period_s
+    described = {k: v for k, v in cfg.__dict__.items() if k not in ("pixel_parameters", "roi")}
+    described.update({k: getattr(camera, k) for k in SENSOR_FIELDS if k not in ("pixel_parameters", "roi")})
+    described["n_frames"] = n
     return HighSpeedResult(
-        gray8=gray, exposure_cycles=cycles, exposure_s=exposure_s, metered_gray=metered,
-        mean_gray=gray.reshape(n, -1).mean(axis=1), frame_times_s=ends, transmitted_indices=sent,
-        output_frames=out, timing=timing.summary(window), plan=plan, account=account.to_dict(),
+        gray8=gray, exposure_cycles=meta["exposure_cycles"], exposure_s=stack.exposure_s,
+        metered_gray=meta["metered_gray"], mean_gray=gray.reshape(n, -1).mean(axis=1),
+        frame_times_s=meta["frame_end_s"], transmitted_indices=sent,
+        output_frames=out, timing=camera.timing.summary(window), plan=plan, account=account.to_dict(),
         equalizer={"on": cfg.equalize, "source": cfg.eq_source, "method": cfg.eq_method,
                    "compensate": cfg.eq_compensate},
-        config={k: v for k, v in cfg.__dict__.items() if k not in ("pixel_parameters", "roi")}
-        | {"roi": asdict(window), "pixel_parameters": params.to_dict(),
-           "render_shape": [scene.height, scene.width], "scene": scene.describe()})
+        config=described | {"roi": asdict(window), "pixel_parameters": camera.parameters.to_dict(),
+                            "render_shape": list(gray.shape[1:]),
+                            **({"scene": scene.describe()} if scene is not None else {})})
 
 
 # ----------------------------------------------------------------------------- scenes
@@ -577,6 +549,57 @@ def write_outputs(result: HighSpeedResult, out_dir, video_format: str = "gif", s
 
 # ----------------------------------------------------------------------------- figures
 
+def shutter_figures(timing, roi, pixel: FramePixelParameters | None = None,
+                    exposures_s=(1e-6, 10e-6, 100e-6, 590e-6)) -> dict:
+    """What the global shutter's 99 % efficiency costs (seed 002 Table 1), predicted from the pixel
+    and the readout timing.
+
+    After the frame transfer row r of H waits w_r = (r + 1)/H · T_read in its storage node (T_read
+    the window's readout, data cycles / clock), where PLS = 1 − efficiency of the photo-rate still
+    reaches it. For still light that is an extra exposure of PLS·w_r: on average PLS·T_read·(H + 1)/(2H)
+    (``parasitic_exposure_equivalent_s``), so a frame of exposure t carries the parasitic share
+    PLS·w̄/(t + PLS·w̄); and the brightest light the last row holds below its full well at the shortest
+    exposure (one clock) falls from FW/(η·Φ·T_H) to FW/(η·Φ·(T_H + PLS·T_read)).
+    """
+    p = pixel or lux13hs_pixel_parameters()
+    w = timing.window(roi)
+    read = timing.readout_time_s(w)
+    pls = p.parasitic_light_sensitivity
+    mean_wait = read * (w.height + 1) / (2 * w.height)
+    equivalent = pls * mean_wait
+    per_lux_s = p.optics.electrons_per_lux_second  # e⁻ per lux·s of the pixel
+    shortest = timing.clock_period_s
+    return {"shutter_efficiency": 1.0 - pls, "parasitic_light_sensitivity": pls, "readout_time_s": read,
+            "mean_wait_s": mean_wait, "parasitic_exposure_equivalent_s": equivalent,
+            "parasitic_share_at_exposure": {f"{t:g}": equivalent / (t + equivalent) for t in exposures_s},
+            "brightest_lux_shortest_exposure": {
+                "without_parasitic_light": p.full_well_electrons / (per_lux_s * shortest),
+                "with_parasitic_light": p.full_well_electrons / (per_lux_s * (shortest + pls * read))},
+            "seed": "99 % shutter efficiency (Table 1); readout 57 600 cycles at 100 MHz (§3.1.1)"}
+
+
+def simulated_parasitic_share(exposure_s: float, lux: float = 200.0, shape=(36, 64), seed: int = 0) -> float:
+    """The parasitic share measured on the simulated camera: one frame of still uniform light at
+    ``exposure_s``, with and without the shutter's parasitic light, mean electrons (DN above black
+    / gain) − 1 over the with-light mean, the same noise seeds."""
+    from viform.light.scenes import StillScene
+
+    scene = StillScene(np.full(shape, float(lux)))
+    means = []
+    for pls in (0.0, lux13hs_pixel_parameters().parasitic_light_sensitivity):
+        px = lux13hs_pixel_parameters(parasitic_light_sensitivity=pls, read_noise_electrons=0.0, dsnu_electrons=0.0,
+                                      dark_current_e_per_s=0.0, prnu_fraction=0.0, adc_bits=16,
+                                      adc_range_v=30_000.0 * 40e-6)
+        cam = HighSpeedCamera(px, ae=False, exposure_s=exposure_s)
+        pixels = FrameSensor(cam.parameters, exposure_s=exposure_s, frame_rate_hz=cam.frame_rate_hz).pixel_array(
+            *shape)
+        rng = pixels.rng(seed, 0)
+        e = pixels.collect_electrons(scene.mean_illuminance_lux(0.0, exposure_s), exposure_s, rng)
+        e = e + pixels.storage_electrons(scene, exposure_s, rng)
+        means.append(float(e.mean()))
+    return 1.0 - means[0] / means[1]
+
+
 def seed_figures(include_simulation: bool = True) -> dict:
     """The seed-002 numbers next to this model's (``viform highspeed-figures``)."""
     from viform.isp.histogram import shift_error
@@ -613,14 +636,21 @@ def seed_figures(include_simulation: bool = True) -> dict:
         "equalization_shift": {**eq, "seed": "<<8, >>20 (net >>12); error 0.00003*c; + >>15; "
                                              "compensated error 'close to 0'"},
     }
-    # every published figure's status (issue 28): predicted from the paper's parameters, or
+    # every published figure's status: predicted from the paper's parameters, or
     # fitted to the figure (the 2,500 fps clock is back-solved from it)
     fig["status"] = {"reduced_1280x720_100MHz": "predicted", "normal_full_1280x864_133MHz": "predicted",
                      "reduced_166MHz": "predicted",
                      "reduced_2500fps_full_frame": "fitted: the pixel clock is solved from the 2,500 fps figure",
                      "cameralink_seed": "predicted", "ddr": "predicted", "decimation": "predicted",
                      "equalization_shift": "predicted"}
+    fig["shutter"] = shutter_figures(red, SEED_ROI)
+    fig["status"]["shutter"] = "input: the seed's 99 % shutter efficiency (Table 1) and its readout timing"
+    fig["status"]["shutter_consequences"] = ("predicted: the parasitic share of a frame and the brightest light "
+                                             "(no published number)")
     if include_simulation:
+        fig["shutter"]["simulated_parasitic_share_at_10us"] = simulated_parasitic_share(10e-6)
+        fig["status"]["ae_10x_steps_latency1"] = ("predicted (the seed shows the loop only in images; the "
+                                                  "exposure includes the shutter's parasitic light)")
         base = TranslatingScene(36, 64, velocity_px_per_s=(0.0, 0.0), min_lux=50.0, max_lux=400.0)
         scene = StepsScene(base, [(0.02, 10.0), (0.05, 0.1)])
         r = run_highspeed(scene, HighSpeedConfig(n_frames=130, exposure_s=200e-6, equalize=False))

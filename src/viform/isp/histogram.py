@@ -25,15 +25,9 @@ import math
 import numpy as np
 
 from viform._validate import ViformError, check_choice, check_int
+from viform.sensors.highspeed import to_gray8  # noqa: F401 - the camera's 8-bit output, equalized here
 
 LEVELS = 256
-
-
-def to_gray8(frames_dn, adc_bits: int) -> np.ndarray:
-    """The high 8 bits of an ``adc_bits`` code (seed 002 §2.1: the LUX13HS outputs the high 8
-    and low 2 bits of its 10-bit code on separate channels; the 8-bit path keeps the high 8)."""
-    adc_bits = check_int("adc_bits", adc_bits, 8, 16)
-    return (np.asarray(frames_dn).astype(np.uint16) >> (adc_bits - 8)).astype(np.uint8)
 
 
 def _check_gray8(gray) -> np.ndarray:

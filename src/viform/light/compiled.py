@@ -17,6 +17,10 @@ the simulator then works from it:
   texture's two gratings, sin/cos tables along x and along y (angle addition:
   sin(a + b) = sin a·cos b + cos a·sin b), so no transcendental is evaluated per pixel.
 
+* ``"sampled"`` — light that renders itself per light sample, only where it can change
+  (:mod:`viform.light.sampled`): the simulator runs the pixels it leaves static as one run of
+  constant light per stretch of ticks, the others one run per light sample.
+
 * ``"dilemma"`` — the comparison scene :class:`~viform.light.dilemma.DilemmaScene`: a static
   background with a vehicle (a box whose front moves), propeller blades (pixels of a disc whose
   angle to the nearest of three blades is < 14°), a Gaussian blob added over a small moving box,
@@ -64,7 +68,7 @@ class CompiledLight:
 
     Attributes
     ----------
-    kind : {"frames", "frames-modulated", "video-linear", "pattern"}
+    kind : {"frames", "frames-modulated", "video-linear", "pattern", "dilemma", "sampled"}
     frames : ndarray, (F, H, W)
         Lux frames: "frames" (float64), "frames-modulated" (one frame times m(t)),
         "video-linear"; the kernels read them as float64.
@@ -94,12 +98,15 @@ class CompiledLight:
     motion: tuple = ("translate", 0.0, 0.0, 0.0, 0.0)
     modulation: tuple = ("none",)
     dilemma: dict | None = None  # "dilemma": the scene's constants, by :data:`DILEMMA_PARAMETERS`
+    sampler: object = None  # "sampled": a :class:`~viform.light.sampled.LightSampler`
 
     @property
     def lux_max(self) -> float:
         """An upper bound of the light, lux (for the fixed-point range check)."""
         if self.kind == "dilemma":
             return self.max_lux
+        if self.kind == "sampled":
+            return float(self.sampler.lux_max)
         peak = float(self.frames.max()) if self.frames is not None else self.max_lux
         kind = self.modulation[0]
         if kind == "step":

@@ -592,7 +592,7 @@ class NightRoadFogScene(Scene):
         return d
 
 
-#: Scenes registered in :data:`viform.light.scenes.BUILTIN_SCENES`.
+#: Scenes registered in :data:`viform.light.catalog.BUILTIN_SCENES`.
 BUILTIN = {
     "dilemma": lambda height, width, **kw: DilemmaScene(height, width, **kw),
     "night-road-fog": lambda height, width, **kw: NightRoadFogScene(height, width, **kw),

@@ -250,8 +250,12 @@ class MultiObjectScene(Scene):
             x0, y0, x1, y1 = self.rect_px(spec, t_s)
             if x1 <= 0 or y1 <= 0 or x0 >= self.width or y0 >= self.height:
                 continue  # entirely outside the field
+            r0, r1 = max(0, int(math.floor(y0))), min(self.height, int(math.ceil(y1)))
+            c0, c1 = max(0, int(math.floor(x0))), min(self.width, int(math.ceil(x1)))
             out.append(ObjectTruth(spec.object_id, spec.class_name, x0, y0, x1 - x0, y1 - y0,
-                                   self._visible_fraction(spec, t_s), self.velocity_px_per_s(spec, t_s)))
+                                   self._visible_fraction(spec, t_s), self.velocity_px_per_s(spec, t_s),
+                                   lux=self.object_lux(spec),
+                                   background_lux=float(self._background[r0:r1, c0:c1].mean())))
         return out
 
     def motion_px_per_s(self, t_s: float) -> np.ndarray:

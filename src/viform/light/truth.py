@@ -55,6 +55,9 @@ class ObjectTruth:
     velocity_px_per_s : tuple[float, float]
         Image-plane velocity (vx, vy) of the object's centroid, px/s (for an object in pure
         translation, that of its box centre too).
+    lux, background_lux : float or None
+        Mean illuminance of the object's surface and of the background it covers, lux (None
+        where the scene does not say): what a sensor can see of it (its contrast).
     """
 
     object_id: int
@@ -65,6 +68,8 @@ class ObjectTruth:
     height_px: float
     visible_fraction: float
     velocity_px_per_s: tuple[float, float]
+    lux: float | None = None
+    background_lux: float | None = None
 
     @property
     def box_xywh(self) -> tuple[float, float, float, float]:

@@ -1,20 +1,9 @@
 """One scene, every sensor: shoot, turn each output into lux at chosen instants, score against the truth.
 
-The sensors are the project's documented models (seed 000 spike camera; a conventional
-CMOS at a short and a long exposure; seed 001 segmented exposure; seed 003 plain 4T and
-conditional overflow; seed 002 high-speed camera with auto-exposure; seed 004 range-gated
-CCD where the scene has range). Each output becomes an illuminance estimate (lux) by
-inverting the sensor's own noise-free response:
-
-* linear frame cameras: E = ((DN − black)/K − I_dark·T) / (η_lux · T) (EMVA 1288 linear model);
-* segmented exposure (seed 001 §3.3, fig. 6) and conditional overflow (seed 003 eqs. 1–6):
-  the inverse of the piecewise-linear response, tabulated on a fine lux grid;
-* high-speed camera (seed 002): its 8-bit frames with the exposure the AE chose per frame;
-* spike camera (seed 000 §3.3): accumulation (count·Q / window) and interval (Q/τ) imaging,
-  and the best method the imaging package offers.
-
-The image "at instant t" of a frame camera is the frame whose exposure contains t, or else
-the last frame started before t (what a viewer holds on screen). Metrics, per sensor,
+Any sensor of the catalogue (:mod:`viform.sensors.catalog`; :data:`DEFAULT_SENSORS` when none is
+named) shoots the scene with its own ``capture``; its family turns the output into illuminance
+estimates (:mod:`viform.measure.estimates`, each inverting the sensor's noise-free response) and
+says how fast it is (:data:`SHOTS`: time resolution, latency, data rate). Metrics, per sensor,
 against the analytic truth at the same instants:
 
 * PSNR and SSIM of log10-illuminance (``skimage.metrics``), both images clipped to the
@@ -25,8 +14,18 @@ against the analytic truth at the same instants:
 * flicker error: |estimate − truth| of the PWM LED over its on/off swing, 0 (right) … 1 (wrong);
 * dynamic range captured: 20·lg(max/min) of the true illuminances that the sensor renders
   within a factor of 2 without saturating or dropping below its floor (0.1–99.9 percentile);
-* data rate (MB/s) of the raw output at this resolution, and latency (worst-case time from
-  a light change to an image that shows it).
+* data rate (MB/s) of the raw output at this resolution;
+* time resolution (``time_resolution_s``, "integration time"): how long the sensor's pixel
+  integrates the light behind one reading — a frame camera's exposure (the auto-exposure's
+  median for the high-speed camera, the gate's total open time for the gated camera); a spike
+  pixel integrates until it holds Q electrons, so its integration time is its own inter-spike
+  interval τ = Q/(η·E) (seed 000 §3.3), read at each scored instant (the interval containing
+  it) and reported as the median over the pixels where the scene moves at those instants
+  (:func:`spike_timing`). It is the sensor's, so every reconstruction of one spike stream
+  reports the same value; how a reconstruction combines intervals shows in its edge width;
+* latency (``latency_s``): the time from a change of light to a reading that shows it — a
+  frame camera's frame period; a spike pixel's next spike (at most its interval τ) plus the
+  readout tick, median over the same pixels as the time resolution.
 """
 
 from __future__ import annotations
@@ -36,38 +35,38 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from viform._validate import ViformError, check_choice
+from viform._validate import ViformError, one_line
+from viform.imaging import interval_image
+from viform.measure.dynamic_range import clip_limited_dynamic_range_db, dynamic_range_db
+from viform.measure.estimates import (  # noqa: F401 - also the comparison's API
+    ACCUMULATION_WINDOW_S,
+    BEST_METHODS,
+    ESTIMATORS,
+    Estimate,
+    best_spike_image,
+    best_spike_method_name,
+    complete_frames,
+    firing_every_tick,
+    frame_at,
+    frame_estimates,
+    gated_estimates,
+    highspeed_estimates,
+    light_estimates,
+    spike_estimates,
+)
+from viform.sensors import catalog
 
-#: Sensors of the comparison, in report order, with a one-line description for users.
-SENSOR_DESCRIPTIONS = {
-    "spike": "spike camera (self-reset pixels, 40 kHz readout; the SpikeOne chip preset)",
-    "cmos-short": "conventional CMOS, 1 ms exposure at 30 fps",
-    "cmos": "conventional CMOS, 10 ms exposure at 30 fps",
-    "seed001-2seg": "segmented exposure, two segments, 130 µs at 60 fps",
-    "seed001-3seg": "segmented exposure, three segments, 130 µs at 60 fps",
-    "seed003-4t": "plain 4T pixel, 33.3 ms integration at 30 fps",
-    "seed003-overflow": "conditional-overflow pixel, three integrations in 33.3 ms",
-    "highspeed": "high-speed camera with auto-exposure, 1 667 fps",
-    "gated": "range-gated CCD, 905 nm laser, 200 pulses a frame, gate from 40 m (scenes with range only)",
-}
-DEFAULT_SENSORS = tuple(SENSOR_DESCRIPTIONS)
-#: Short labels for tables and figures (the key, as given to ``--sensors``, in brackets).
-SENSOR_LABELS = {
-    "cmos-short": "CMOS 1 ms (cmos-short)",
-    "cmos": "CMOS 10 ms (cmos)",
-    "seed001-2seg": "segmented, 2 segments (seed001-2seg)",
-    "seed001-3seg": "segmented, 3 segments (seed001-3seg)",
-    "seed003-4t": "plain 4T 33 ms (seed003-4t)",
-    "seed003-overflow": "conditional overflow (seed003-overflow)",
-    "highspeed": "high-speed 1 667 fps, AE (highspeed)",
-    "gated": "gated CCD, laser returns (gated)",
-}
-#: Gated camera of the comparison: laser pulses per frame and near edge of the gate, m.
-GATED_PULSES, GATED_RANGE_M = 200, 40.0
+#: Sensors of a comparison when none are named, in report order (names of :data:`viform.sensors.catalog.SENSORS`;
+#: any sensor of the catalogue can be compared).
+DEFAULT_SENSORS = ("spikeone", "cmos-short", "cmos", "seed001-2seg", "seed001-3seg", "seed003-4t", "seed003-overflow",
+                   "highspeed", "gated")
+#: Names whose meaning changed, with where they went: ``compare``/``sweep`` called the SpikeOne chip
+#: "spike", which every command now takes for seed 000's Q = 100 e⁻ model.
+RENAMED = {"spike": "in compare and sweep this name meant the SpikeOne chip, which is now 'spikeone' "
+                    "('spike' is seed 000's Q = 100 e⁻ model in every command; it is refused here so that an old "
+                    "command line does not silently compare another camera)"}
 #: Spike reconstructions reported as separate rows.
 SPIKE_METHODS = ("accumulation", "interval", "best")
-#: Accumulation window of the spike camera's accumulation image, s.
-ACCUMULATION_WINDOW_S = 1e-3
 #: Metric keys, in table order, with units for the report.
 METRICS = {
     "psnr_log_db": ("PSNR (log-lux)", "dB"),
@@ -84,23 +83,14 @@ METRICS = {
 }
 
 
-def spike_preset():
-    """The spike camera: the ``spikeone`` preset when the project has it, else the defaults.
-
-    Its pixel and readout are the preset's; the resolution is the scene's (every sensor of a
-    comparison sees the same pixels).
-    """
-    try:
-        from viform.sensors.spike_presets import load_spike_preset
-    except ImportError:  # preset module not there: the documented defaults
-        from viform.sensors.presets import make_sensor
-
-        return make_sensor("spike"), "spike defaults"
-    return load_spike_preset("spikeone").sensor(height=None, width=None), "spikeone"
+#: A sensor meets a scene's range when the range it renders is within this many dB of the scene's
+#: (a factor of 2 in light): the verdict's and the demo's rule.
+RANGE_MARGIN_DB = 6.0
 
 
 #: How presets are named for users.
-PRESET_DISPLAY_NAMES = {"spikeone": "SpikeOne", "spiketwo": "SpikeTwo", "spiketwo-40k": "SpikeTwo 40 kHz"}
+PRESET_DISPLAY_NAMES = {"spikeone": "SpikeOne", "spiketwo": "SpikeTwo", "spiketwo-40k": "SpikeTwo 40 kHz",
+                        "spike": "seed 000 model"}
 
 
 def _grouped(v: float) -> str:
@@ -140,41 +130,19 @@ def spike_exposure_note(sensor, preset: str, duration_s: float) -> dict:
             "text": text}
 
 
-def make_compare_sensor(key: str, scene=None):
-    """The sensor behind a comparison key (see :data:`SENSOR_DESCRIPTIONS`)."""
-    check_choice("sensor", key, DEFAULT_SENSORS)
-    from viform.sensors.frame import FramePixelParameters, FrameSensor
-    from viform.sensors.presets import make_sensor
+def compare_entry(name: str, what: str = "sensor"):
+    """The catalogue entry of a comparison's sensor ``name`` (names that changed meaning are refused)."""
+    return catalog.entry(name, renamed=RENAMED, what=what)
 
-    if key == "spike":
-        return spike_preset()[0]
-    if key == "cmos-short":
-        return FrameSensor(FramePixelParameters(), exposure_s=1e-3, frame_rate_hz=30.0)
-    if key == "highspeed":
-        from viform.isp.highspeed_pipeline import HighSpeedConfig
 
-        return HighSpeedConfig()
-    if key == "gated":
-        from viform.sensors.gated_ccd import GatedInterlineCCD
-
-        # 200 pulses accumulated in the vertical register (fits a 25 fps frame), gate from 40 m:
-        # the fog closer than 40 m, which would veil everything, is not recorded (seed 004).
-        return GatedInterlineCCD(pulses=GATED_PULSES, gate_range_m=GATED_RANGE_M)
-    return make_sensor(key)
+def make_compare_sensor(name: str, **settings):
+    """The sensor ``name`` as a comparison shoots it: at the scene's resolution, with the entry's
+    comparison settings (:attr:`~viform.sensors.catalog.SensorEntry.compare_settings`) and ``settings``."""
+    entry = compare_entry(name)
+    return entry.build(height=None, width=None, **{**entry.compare_settings, **settings})
 
 
 # ------------------------------------------------------------------ shots
-@dataclass
-class Estimate:
-    """One sensor's light estimate at one instant."""
-
-    lux: np.ndarray
-    saturated: np.ndarray
-    underexposed: np.ndarray
-    source_time_s: tuple  # (start, end) of the light this image integrates
-    integration_s: np.ndarray | None = None  # per pixel, where each pixel integrates its own time
-
-
 @dataclass
 class Shot:
     """One sensor (or one spike reconstruction) on the scene."""
@@ -191,171 +159,62 @@ class Shot:
     lux_units: bool = True
     skipped: str | None = None
     metrics: dict = field(default_factory=dict)
-    raw: object = None
+    raw: object = None  # the sensor's native output (its capture)
+    name: str = ""  # the catalogue's name of the sensor
+    family: str = ""  # its family (viform.sensors.catalog.FAMILIES)
+    sensor: object = None  # the sensor that shot it
 
 
-def frame_at(starts_s, exposures_s, t_s: float) -> int:
-    """Index of the frame shown at ``t_s``: the one exposing at t, else the last started before t."""
-    starts = np.asarray(starts_s)
-    ends = starts + np.asarray(exposures_s)
-    inside = np.flatnonzero((starts <= t_s) & (t_s < ends))
-    if inside.size:
-        return int(inside[-1])
-    before = np.flatnonzero(starts <= t_s)
-    return int(before[-1]) if before.size else 0
+def frames_in_lux(shot: Shot, duration_s: float):
+    """(light images, report instants) of a frame camera's shot: each frame that ends in the clip, in lux,
+    reported at the end of its exposure (the earliest it exists); None for other outputs."""
+    raw = shot.raw
+    if shot.family not in ("frame", "segmented", "overflow", "highspeed") or not hasattr(raw, "frames_dn"):
+        return None
+    n = complete_frames(raw, duration_s)
+    if n == 0:
+        return None
+    mids = raw.start_times_s[:n] + raw.exposure_s[:n] / 2
+    ests = light_estimates(shot.family, shot.sensor, raw, mids, duration_s=duration_s)
+    return [e.lux for e in ests], raw.start_times_s[:n] + raw.exposure_s[:n]
 
 
-def _linear_lux(params, dn, exposure_s):
-    k = params.system_gain_dn_per_e
-    electrons = (np.asarray(dn, dtype=np.float64) - params.black_offset_dn) / k
-    signal = electrons - params.dark_current_e_per_s * exposure_s
-    return signal, np.maximum(signal, 0.0) / (params.optics.electrons_per_lux_second * exposure_s)
+def moving_pixels(scene, t_s: float, shape) -> np.ndarray:
+    """Pixels where the scene moves at ``t_s``: its ``moving_mask``, else where its motion truth is not
+    zero; every pixel when it says neither, or nothing moves."""
+    mask = None
+    if hasattr(scene, "moving_mask"):
+        mask = np.asarray(scene.moving_mask(t_s), bool)
+    elif "motion" in (scene.truth_kinds() if hasattr(scene, "truth_kinds") else ()):
+        try:
+            mask = np.hypot(*np.asarray(scene.motion_px_per_s(t_s), np.float64)[:2]) > 0
+        except ViformError:  # a scene whose motion truth is unavailable at t (TruthUnavailable): no mask
+            mask = None
+    if mask is None or mask.shape != tuple(shape) or not mask.any():
+        return np.ones(shape, bool)
+    return mask
 
 
-def _noise_floor_electrons(params, exposure_s) -> float:
-    """Temporal noise with no light, e⁻: a signal below it has SNR < 1."""
-    return max(1.0, math.sqrt(params.read_noise_electrons ** 2 + params.dark_current_e_per_s * exposure_s
-                              + 1.0 / (12 * params.system_gain_dn_per_e ** 2)))
+def spike_timing(stream, scene, instants_s) -> tuple[float, float, list]:
+    """(time resolution s, latency s, per-pixel intervals s at each instant) of a spike stream.
 
-
-def _inverse_table(sensor, kind):
-    """(electrons kept, lux) of the noise-free response on a fine lux grid, for inversion."""
-    lux = np.logspace(-6, 7, 4000)
-    if kind == "segmented":
-        kept = sensor.expected_charge_electrons(lux) - sensor.parameters.dark_current_e_per_s * sensor.exposure_s
-    else:  # overflow: CDS signal (dark included), minus the dark part at zero light
-        kept = sensor.expected_signal_electrons(sensor.photocurrent_a(lux))
-        kept = kept - sensor.expected_signal_electrons(sensor.photocurrent_a(np.zeros(1)))[0]
-    top = int(np.argmax(kept >= kept.max() * (1 - 1e-9)))  # first point of the final plateau
-    return kept[: top + 1], lux[: top + 1]
-
-
-def complete_frames(stack, duration_s: float) -> int:
-    """Number of leading frames whose exposure ends inside the clip ``[0, duration_s]``.
-
-    A frame still exposing when the clip ends would integrate light the clip does not hold.
+    A spike pixel integrates its photo-charge until it reaches Q and fires: its integration time
+    is its inter-spike interval, τ = Q/(η·E) at steady light E (seed 000 §3.3), so it falls as Q
+    falls or the light rises, down to one readout tick. The interval containing each instant is
+    read from the spikes (:func:`viform.imaging.interval_image`; one cut by the clip's ends is
+    the part inside the clip); the time resolution is the median of τ over the pixels where the
+    scene moves (:func:`moving_pixels`) at each instant, then over the instants. A change of light
+    reaches the output at the pixel's next spike, at most τ later, and is read at the next tick:
+    latency = time resolution + one tick.
     """
-    ends = np.asarray(stack.start_times_s) + np.asarray(stack.exposure_s)
-    return int(np.count_nonzero(ends <= duration_s * (1 + 1e-9) + 1e-12))
-
-
-def frame_estimates(sensor, stack, instants_s, kind: str = "linear", duration_s: float | None = None) -> list:
-    """Light estimates of a frame camera's :class:`~viform.sensors.base.FrameStack` at ``instants_s``.
-
-    With ``duration_s``, only frames whose exposure ends inside the clip are shown.
-    """
-    p = sensor.parameters
-    out = []
-    table = None if kind == "linear" else _inverse_table(sensor, kind)
-    n = len(stack.start_times_s) if duration_s is None else max(1, complete_frames(stack, duration_s))
-    for t in instants_s:
-        i = frame_at(stack.start_times_s[:n], stack.exposure_s[:n], t)
-        dn = stack.frames_dn[i]
-        exposure = float(stack.exposure_s[i])
-        signal, lux = _linear_lux(p, dn, exposure)
-        if table is not None:
-            lux = np.interp(np.maximum(signal, 0.0), table[0], table[1], left=0.0)
-            ceiling = table[0][-1]
-        else:
-            ceiling = p.full_well_electrons - p.dark_current_e_per_s * exposure
-        saturated = (signal >= 0.98 * ceiling) | (dn >= p.max_dn)
-        under = signal < _noise_floor_electrons(p, exposure)
-        out.append(Estimate(lux, saturated, under, (float(stack.start_times_s[i]),
-                                                     float(stack.start_times_s[i]) + exposure)))
-    return out
-
-
-def spike_estimates(stream, instants_s, method: str, window_s: float = ACCUMULATION_WINDOW_S) -> list:
-    """Light estimates of a spike stream by ``method`` ("accumulation", "interval", "best")."""
-    from viform.imaging import accumulation_image, interval_image
-
-    out = []
     tick = 1.0 / stream.clock_hz
+    intervals, medians = [], []
     for t in instants_s:
-        if method == "accumulation":
-            img = accumulation_image(stream, t, window_s)
-            n = img.info.get("window_ticks", round(window_s * stream.clock_hz))
-            count = img.spikes_per_s * n * tick
-            saturated = count >= 0.98 * n
-            under = count < 0.5
-            # the window the imaging package used (centred on t by default; ending at t in older trees)
-            k0 = img.info.get("first_tick", stream.tick_of(t) + 1 - n)
-            out.append(Estimate(img.lux, saturated, under, (k0 * tick, (k0 + n) * tick)))
-        elif method == "interval":
-            img = interval_image(stream, t)
-            tau = img.info["tau_ticks"]
-            saturated = firing_every_tick(stream, t)
-            under = img.censored if img.censored is not None else np.zeros(tau.shape, bool)
-            out.append(Estimate(img.lux, saturated, under, (t, t), tau * tick))
-        else:
-            best = best_spike_image(stream, t)
-            out.append(best)
-    return out
-
-
-#: Public reconstructions of :mod:`viform.imaging` better than accumulation and interval, best first.
-BEST_METHODS = ("motion_compensated_image", "multi_interval_image")
-
-
-def firing_every_tick(stream, t_s: float, ticks: int = 8) -> np.ndarray:
-    """Pixels that fired at every one of the ``ticks`` ticks around ``t_s``: at the spike camera's
-    ceiling (Q·f electrons per second). A single 1-tick interval is not enough: a pixel at 0.6 of
-    the ceiling alternates 1- and 2-tick intervals."""
-    from viform.imaging import spike_counts
-
-    k = stream.tick_of(t_s)
-    k0 = max(0, min(k - ticks // 2, stream.n_ticks - ticks))
-    k1 = min(stream.n_ticks, k0 + ticks)
-    return spike_counts(stream, k0, k1) >= (k1 - k0)
-
-
-def best_spike_method_name() -> str | None:
-    """Name of the reconstruction used as "best" (the imaging package's best public method), or
-    None when the package offers nothing beyond accumulation and interval imaging."""
-    import viform.imaging as imaging
-
-    for name in BEST_METHODS:
-        if hasattr(imaging, name):
-            return name.replace("_image", "").replace("_", "-")
-    return None
-
-
-def best_spike_image(stream, t_s: float) -> Estimate:
-    """The imaging package's best reconstruction at ``t_s``."""
-    import viform.imaging as imaging
-
-    name = next(n for n in BEST_METHODS if hasattr(imaging, n))
-    img = getattr(imaging, name)(stream, t_s)
-    lux = np.nan_to_num(img.lux) if img.lux is not None else np.zeros(stream.shape[1:])
-    window = img.info.get("window_ticks")
-    if window:
-        count = img.spikes_per_s * window / stream.clock_hz
-        sat, under = count >= 0.98 * window, count < 0.5
-    else:
-        sat = firing_every_tick(stream, t_s)
-        under = img.censored if img.censored is not None else ~(lux > 0)
-    integration = None
-    if "reach_ticks" in img.info:  # motion-compensated: ticks accumulated before and after the instant
-        integration = (np.asarray(img.info["reach_ticks"]).sum(axis=0) + 1) / stream.clock_hz
-    return Estimate(lux, sat, under, (t_s, t_s), integration)
-
-
-def highspeed_estimates(result, config, instants_s) -> list:
-    """Light estimates from the high-speed camera's 8-bit sensor frames (before equalization)."""
-    p = config.pixel_parameters
-    shift = p.adc_bits - 8
-    starts = result.frame_times_s - result.exposure_s
-    out = []
-    for t in instants_s:
-        i = frame_at(starts, result.exposure_s, t)
-        gray = result.gray8[i].astype(np.float64)
-        dn = gray * (1 << shift) + ((1 << shift) - 1) / 2.0  # middle of the dropped low bits
-        exposure = float(result.exposure_s[i])
-        signal, lux = _linear_lux(p, dn, exposure)
-        saturated = result.gray8[i] >= 255
-        under = signal < max(_noise_floor_electrons(p, exposure), (1 << shift) / p.system_gain_dn_per_e)
-        out.append(Estimate(lux, saturated, under, (float(starts[i]), float(result.frame_times_s[i]))))
-    return out
+        tau = interval_image(stream, t).info["tau_ticks"] * tick
+        intervals.append(tau)
+        medians.append(float(np.median(tau[moving_pixels(scene, t, tau.shape)])))
+    resolution = float(np.median(medians))
+    return resolution, resolution + tick, intervals
 
 
 def data_rate_mb_per_s(height: int, width: int, bits_per_pixel: float, rate_hz: float) -> float:
@@ -363,115 +222,101 @@ def data_rate_mb_per_s(height: int, width: int, bits_per_pixel: float, rate_hz: 
 
 
 def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sensor=None,
-          spike_methods=None) -> list:
-    """Shoot ``scene`` with sensor ``key``; return its :class:`Shot` (several for the spike camera).
+          spike_methods=None, device: str = "cpu") -> list:
+    """Shoot ``scene`` with the catalogue's sensor ``key``; return its :class:`Shot` (one per
+    reconstruction for a spike camera).
 
-    ``sensor`` replaces the comparison's own sensor of that key (the same model at other settings,
-    as :mod:`viform.measure.sweep` builds it; a ``HighSpeedConfig`` for "highspeed");
-    ``spike_methods`` limits the spike reconstructions (default: every one of :data:`SPIKE_METHODS`).
+    ``sensor`` replaces the comparison's own sensor of that name (the same model at other settings,
+    as :mod:`viform.measure.sweep` builds it); ``spike_methods`` limits the spike reconstructions
+    (default: every one of :data:`SPIKE_METHODS`). The sensor's ``capture`` gives its output; its
+    family turns the output into light (:data:`ESTIMATORS`) and says how fast it is (:data:`SHOTS`).
+    ``device`` ("cpu" or "cuda") runs a spike camera's simulation there (the same algorithm and
+    bits, :mod:`viform.sensors.spike_cuda`); the other families run on the CPU.
     """
-    override = sensor
-    h, w = scene.shape
-    desc = SENSOR_DESCRIPTIONS[key]
-    if key == "gated":
-        active = getattr(scene, "active", None)
-        if active is None:
-            return [Shot(key, SENSOR_LABELS[key], desc, skipped="the scene has no range (the gated camera needs a "
-                                                   "laser-lit scene with distances, e.g. night-road-fog)")]
-        sensor = override if override is not None else make_compare_sensor(key)
-        frame = sensor.capture_frame(active, seed=seed)
-        e = frame.electrons
-        p = sensor.parameters.pixel
-        est = Estimate(np.maximum(e, 0.0), frame.dn >= p.max_dn * frame.readouts,
-                       e < _noise_floor_electrons(p, 0.0), (0.0, sensor.frame_time_s()))
-        shot = Shot(key, SENSOR_LABELS[key], desc, [est] * len(instants_s), sensor.describe(),
-                    time_resolution_s=sensor.pulses * sensor.timing.width_s,
-                    latency_s=1.0 / sensor.frame_rate_hz + sensor.frame_time_s(),
-                    data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
-                    frame_rate_hz=sensor.frame_rate_hz, lux_units=False, raw=frame)
-        return [shot]
-    if key == "spike":
-        sensor, preset = spike_preset()
-        sensor = override if override is not None else sensor
-        stream = sensor.capture(scene, duration_s, seed=seed)
-        par = sensor.parameters
-        rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
-        shots = []
-        methods = [m for m in (spike_methods or SPIKE_METHODS) if m != "best" or best_spike_method_name() is not None]
-        head = spike_label(sensor, preset)
-        note = spike_exposure_note(sensor, preset, duration_s)
-        from viform.measure.dynamic_range import clip_limited_dynamic_range_db, dynamic_range_db
-
-        # the range this clip can show (no interval longer than the clip) beside the formula's (Q / dark current)
-        longest = par.threshold_electrons / par.dark_current_e_per_s if par.dark_current_e_per_s > 0 else math.inf
-        range_limits = {"clip_s": duration_s, "longest_interval_s": longest,
-                        "formula_dr_db": dynamic_range_db(1 / par.clock_hz, longest),
-                        "clip_limited_dr_db": clip_limited_dynamic_range_db(1 / par.clock_hz, longest, duration_s)}
-        for method in methods:
-            label = {"accumulation": f"{head} · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
-                     "interval": f"{head} · interval", "best": f"{head} · {best_spike_method_name()}"}[method]
-            ests = spike_estimates(stream, instants_s, method)
-            if method == "accumulation":
-                tres = ACCUMULATION_WINDOW_S
-                lat = ACCUMULATION_WINDOW_S + 1 / par.clock_hz
-            else:
-                # Each pixel integrates its own time: report the median where the scene moves (all
-                # pixels if it does not); a pixel shows a change at its next spike.
-                from viform.imaging import interval_image
-
-                taus = []
-                for t, est in zip(instants_s, ests, strict=True):
-                    tau = est.integration_s
-                    if tau is None:
-                        tau = interval_image(stream, t).info["tau_ticks"] / par.clock_hz
-                        est.integration_s = tau  # the intervals its light is measured over
-                    mask = scene.moving_mask(t) if hasattr(scene, "moving_mask") else np.ones(tau.shape, bool)
-                    taus.append(np.median(tau[mask] if mask.any() else tau))
-                tres = float(np.median(taus))
-                lat = tres + 1 / par.clock_hz
-            shots.append(Shot(f"spike-{method}", label, f"{desc}, {preset}", ests,
-                              {**sensor.describe(), "preset": preset, "reconstruction": method,
-                               "exposure_note": note, **range_limits},
-                              time_resolution_s=tres, latency_s=lat, data_rate_mb_per_s=rate,
-                              frame_rate_hz=par.clock_hz, raw=stream))
-        return shots
-    if key == "highspeed":
-        from dataclasses import replace
-
-        from viform.isp.highspeed_pipeline import HighSpeedConfig, run_highspeed
-
-        base = override if override is not None else HighSpeedConfig()
-        from viform.sensors.highspeed_timing import lux13hs_timing
-
-        timing = lux13hs_timing(base.mode, base.pixel_clock_hz)
-        period = timing.frame_period_s(timing.window(base.roi))
-        n = max(1, int(math.floor(duration_s / period + 1e-9)))
-        config = replace(base, n_frames=n, seed=seed, scene_samples=8)
-        result = run_highspeed(scene, config)
-        ests = highspeed_estimates(result, config, instants_s)
-        return [Shot(key, SENSOR_LABELS[key], desc, ests,
-                     {**result.config, "timing": result.timing, "link": result.plan},
-                     time_resolution_s=float(np.median(result.exposure_s)), latency_s=period,
-                     data_rate_mb_per_s=data_rate_mb_per_s(h, w, config.pixel_parameters.adc_bits, 1 / period),
-                     frame_rate_hz=1 / period, raw=result)]
-    sensor = override if override is not None else make_compare_sensor(key)
+    entry = compare_entry(key)
+    sensor = sensor if sensor is not None else make_compare_sensor(key)
+    on_device = {"device": device} if device != "cpu" and entry.family == "spike" else {}
     try:
-        stack = sensor.capture(scene, duration_s, seed=seed)
-    except ViformError as exc:
-        return [Shot(key, SENSOR_LABELS[key], desc, skipped=str(exc))]
+        output = sensor.capture(scene, duration_s, seed=seed, **on_device)
+    except ViformError as exc:  # this sensor cannot shoot this scene (a scene without range for the gated CCD …)
+        return [Shot(key, entry.label, entry.description, skipped=one_line(exc), name=key, family=entry.family,
+                     sensor=sensor)]
+    shots = SHOTS[entry.family](entry, sensor, output, scene, duration_s, list(instants_s), spike_methods)
+    for shot in shots:
+        shot.name, shot.family, shot.sensor = key, entry.family, sensor
+    return shots
+
+
+def _frame_shots(entry, sensor, stack, scene, duration_s, instants_s, spike_methods) -> list:
+    h, w = scene.shape
     if complete_frames(stack, duration_s) == 0:  # its first frame integrates light beyond the clip's end
         frame_s = float(stack.exposure_s[0])
-        return [Shot(key, SENSOR_LABELS[key], desc,
+        return [Shot(entry.name, entry.label, entry.description,
                      skipped=f"its frame ({frame_s * 1e3:.3g} ms of exposure) is longer than the clip "
                              f"({duration_s * 1e3:.3g} ms); give --duration {frame_s:.4g} or more")]
-    kind = {"seed001-2seg": "segmented", "seed001-3seg": "segmented", "seed003-overflow": "overflow"}.get(key,
-                                                                                                         "linear")
-    ests = frame_estimates(sensor, stack, instants_s, kind, duration_s)
+    ests = light_estimates(entry.family, sensor, stack, instants_s, duration_s=duration_s)
     p = sensor.parameters
-    return [Shot(key, SENSOR_LABELS[key], desc, ests, sensor.describe(), time_resolution_s=sensor.exposure_s,
-                 latency_s=1.0 / sensor.frame_rate_hz,
+    return [Shot(entry.name, entry.label, entry.description, ests, sensor.describe(),
+                 time_resolution_s=sensor.exposure_s, latency_s=1.0 / sensor.frame_rate_hz,
                  data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
                  frame_rate_hz=sensor.frame_rate_hz, raw=stack)]
+
+
+def _highspeed_shots(entry, sensor, stack, scene, duration_s, instants_s, spike_methods) -> list:
+    h, w = scene.shape
+    period = sensor.frame_period_s
+    ests = light_estimates("highspeed", sensor, stack, instants_s)
+    return [Shot(entry.name, entry.label, entry.description, ests, sensor.describe(),
+                 time_resolution_s=float(np.median(stack.exposure_s)), latency_s=period,
+                 data_rate_mb_per_s=data_rate_mb_per_s(h, w, sensor.parameters.adc_bits, 1 / period),
+                 frame_rate_hz=1 / period, raw=stack)]
+
+
+def _gated_shots(entry, sensor, stack, scene, duration_s, instants_s, spike_methods) -> list:
+    h, w = scene.shape
+    p = sensor.parameters.pixel
+    return [Shot(entry.name, entry.label, entry.description, light_estimates("gated", sensor, stack, instants_s),
+                 sensor.describe(), time_resolution_s=sensor.pulses * sensor.timing.width_s,
+                 latency_s=1.0 / sensor.frame_rate_hz + sensor.frame_time_s(),
+                 data_rate_mb_per_s=data_rate_mb_per_s(h, w, p.adc_bits, sensor.frame_rate_hz),
+                 frame_rate_hz=sensor.frame_rate_hz, lux_units=False, raw=stack)]
+
+
+def _spike_shots(entry, sensor, stream, scene, duration_s, instants_s, spike_methods) -> list:
+    h, w = scene.shape
+    preset = entry.name
+    par = sensor.parameters
+    rate = data_rate_mb_per_s(h, w, 1, par.clock_hz)
+    methods = [m for m in (spike_methods or SPIKE_METHODS) if m != "best" or best_spike_method_name() is not None]
+    head = spike_label(sensor, preset)
+    note = spike_exposure_note(sensor, preset, duration_s)
+    # the range this clip can show (no interval longer than the clip) beside the formula's (Q / dark current)
+    longest = par.threshold_electrons / par.dark_current_e_per_s if par.dark_current_e_per_s > 0 else math.inf
+    range_limits = {"clip_s": duration_s, "longest_interval_s": longest,
+                    "formula_dr_db": dynamic_range_db(1 / par.clock_hz, longest),
+                    "clip_limited_dr_db": clip_limited_dynamic_range_db(1 / par.clock_hz, longest, duration_s)}
+    # the sensor's own integration time and latency, the same for every reconstruction of the stream
+    tres, lat, intervals = spike_timing(stream, scene, instants_s)
+    shots = []
+    for method in methods:
+        label = {"accumulation": f"{head} · accumulation {ACCUMULATION_WINDOW_S * 1e3:g} ms",
+                 "interval": f"{head} · interval", "best": f"{head} · {best_spike_method_name()}"}[method]
+        ests = light_estimates("spike", sensor, stream, instants_s, method=method)
+        for est, tau in zip(ests, intervals, strict=True):
+            est.integration_s = tau  # each pixel's own integration time at the instant
+        shots.append(Shot(f"{entry.name}-{method}", label, f"{entry.description}, {preset}", ests,
+                          {**sensor.describe(), "preset": preset, "reconstruction": method,
+                           "exposure_note": note, **range_limits},
+                          time_resolution_s=tres, latency_s=lat, data_rate_mb_per_s=rate,
+                          frame_rate_hz=par.clock_hz, raw=stream))
+    return shots
+
+
+#: Per family: the shots of one capture, with what the sensor's timing and data say (time resolution,
+#: latency, data rate): ``(entry, sensor, output, scene, duration_s, instants_s, spike_methods) → [Shot]``.
+SHOTS = {"frame": _frame_shots, "segmented": _frame_shots, "overflow": _frame_shots, "highspeed": _highspeed_shots,
+         "gated": _gated_shots, "spike": _spike_shots}
+assert set(SHOTS) == set(ESTIMATORS) == set(catalog.FAMILIES)
 
 
 # ------------------------------------------------------------------ metrics
@@ -668,7 +513,7 @@ def _timing(shot) -> str:
 
 def _blur_cause(shot) -> str:
     dark = shot.metrics.get("edge_dark_integration_s")
-    if shot.key.startswith("spike-") and isinstance(dark, float) and math.isfinite(dark):
+    if shot.family == "spike" and isinstance(dark, float) and math.isfinite(dark):
         return (f"its pixels on the dark side of the edge fire only every {_ms(dark)} (dim light, long intervals) "
                 f"and each image spans a whole interval, although the median integration where the scene moves "
                 f"is {_ms(shot.time_resolution_s)}")
@@ -715,7 +560,7 @@ def verdict(shots, demand: dict | None) -> list[str]:
         lines.append(text + ".")
     for s in image_rows:  # a spike image's blur comes from its dimmest pixels' long intervals: say so
         dark = s.metrics.get("edge_dark_integration_s")
-        if s.key.startswith("spike-") and isinstance(dark, float) and math.isfinite(s.metrics.get("edge_width_px",
+        if s.family == "spike" and isinstance(dark, float) and math.isfinite(s.metrics.get("edge_width_px",
                                                                                                   math.nan)) \
                 and dark > 2 * s.time_resolution_s and s not in (found[2] if found else []):
             lines.append(f"{s.label}: {VERDICT_FORMATS['edge_width_px'](s.metrics['edge_width_px'])} of edge blur, "
@@ -755,7 +600,7 @@ def verdict(shots, demand: dict | None) -> list[str]:
                      + (f"{len(others)} of {len(cnr)} sensors see none." if others else "every sensor sees some."))
     if demand and image_rows:
         meets = [r.label for r in image_rows
-                 if r.metrics.get("dr_captured_db", 0) >= demand["dynamic_range_db"] - 6
+                 if r.metrics.get("dr_captured_db", 0) >= demand["dynamic_range_db"] - RANGE_MARGIN_DB
                  and r.time_resolution_s <= demand["time_resolution_s"]]
         lines.append("Meets both the scene's range and its speed: " + (", ".join(meets) + "." if meets else
                      "no sensor compared here, at these settings."))

@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from viform._validate import ViformError, check_int, check_positive
+from viform.sensors.subthreshold import subthreshold_dynamic_range_db
 
 
 def dynamic_range_db(shortest_s: float, longest_s: float) -> float:
@@ -83,22 +84,6 @@ def longest_signal_interval_s(threshold_electrons: float, dark_current_e_per_s: 
 def dynamic_range_from_dark_db(threshold_electrons: float, shortest_s: float, dark_current_e_per_s: float) -> float:
     """DR = 20·lg(Q/(τ̌·I_d)) dB (seed 000 §4.4)."""
     return dynamic_range_db(shortest_s, longest_signal_interval_s(threshold_electrons, dark_current_e_per_s))
-
-
-def subthreshold_dynamic_range_db(shortest_s: float, sensitivity_s: float, levels: int) -> float:
-    """DR = 20·lg(τ̆/τ̌·N) dB with sub-threshold quantization to N levels (seed 000 §4.5).
-
-    Examples
-    --------
-    >>> round(subthreshold_dynamic_range_db(10e-9, 10e-3, 100), 6)
-    160.0
-    """
-    shortest = check_positive("shortest_s", shortest_s)
-    sens = check_positive("sensitivity_s", sensitivity_s)
-    n = check_int("levels", levels, 1)
-    if sens < shortest:
-        raise ViformError(f"sensitivity_s = {sensitivity_s!r} must be ≥ shortest_s = {shortest_s!r}")
-    return 20.0 * math.log10(sens / shortest * n)
 
 
 def levels_for_dynamic_range(shortest_s: float, sensitivity_s: float, target_db: float) -> int:

@@ -374,7 +374,7 @@ OPERATING_POINT_OPTICS = {"focal_length_m": 50e-3, "f_number": 1.8, "filter_band
 
 
 def pulses_both_ways(threshold: float = CNR_THRESHOLD, ambient_lux: float = 1e5,
-                     seed_pulses=((300.0, (15, 20)), (800.0, (70, 90))), parameters=None) -> list[dict]:
+                     seed_pulses=((300.0, (15, 20)), (800.0, (70, 90))), **sensor_kw) -> list[dict]:
     """Seed 004's pulse counts read two ways, for the default optics and for
     :data:`OPERATING_POINT_OPTICS`.
 
@@ -386,8 +386,9 @@ def pulses_both_ways(threshold: float = CNR_THRESHOLD, ambient_lux: float = 1e5,
     :data:`OPERATING_POINT_OPTICS` were *fitted*: chosen so that the thresholds fall at 2 and 84
     with a 1.135 µs collection window (the seed's t_нак, readout pulse not counted). With the
     drawn gate (the light also counts during the 1 µs readout pulse) the same optics need more
-    pulses at 800 m; each row says so in ``status``. ``parameters`` (an
-    :class:`~viform.sensors.gated_ccd.InterlineCCDParameters`) overrides the CCD.
+    pulses at 800 m; each row says so in ``status``. ``sensor_kw`` (``parameters``: an
+    :class:`~viform.sensors.gated_ccd.InterlineCCDParameters`, ``laser``, ``noise``,
+    ``fixed_pattern_seed``) go to every CCD; the receivers are the two compared here.
     """
     from viform.light.active import field_test_scene
     from viform.light.laser import Receiver
@@ -405,7 +406,7 @@ def pulses_both_ways(threshold: float = CNR_THRESHOLD, ambient_lux: float = 1e5,
     for name, (kw, retro) in sets.items():
         for rng, xs in seed_pulses:
             gate = max(0.0, rng - 50.0)
-            ccd = GatedInterlineCCD(pulses=1, gate_range_m=gate, parameters=parameters, **kw)
+            ccd = GatedInterlineCCD(pulses=1, gate_range_m=gate, **{**sensor_kw, **kw})
             scene = field_test_scene(ranges_m=(rng,), ambient_lux=ambient_lux, background_range_m=rng + 700.0,
                                      retro=retro)
             rr = scene.retroreflectors[0]

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open, save_figure, write_json
-from viform._validate import ViformError, check_choice, check_int, check_positive
+from viform._validate import ViformError, check_int, check_positive
 from viform.measure import comparison as cmp
 
 #: Most bytes of spike clip a comparison holds in memory.
@@ -33,12 +33,12 @@ ERROR_SPAN_DECADES = 2.0
 
 
 def check_sensors(sensors) -> list[str]:
-    """Validate a list of comparison sensor keys (from ``--sensors``)."""
+    """Validate a list of comparison sensor names (from ``--sensors``): names of the sensor catalogue."""
     keys = list(sensors) if sensors else list(cmp.DEFAULT_SENSORS)
     if not keys:
         raise ViformError("--sensors is empty: give at least one sensor")
     for k in keys:
-        check_choice("--sensors", k, cmp.DEFAULT_SENSORS)
+        cmp.compare_entry(k, what="--sensors")
     return list(dict.fromkeys(keys))
 
 
@@ -48,14 +48,19 @@ def default_instants(duration_s: float) -> list[float]:
 
 
 def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed: int = 0,
-                   progress: bool = True) -> dict:
-    """Shoot ``scene`` with each sensor and score it; returns shots, metrics and the verdict."""
+                   progress: bool = True, settings: dict | None = None) -> dict:
+    """Shoot ``scene`` with each sensor and score it; returns shots, metrics and the verdict.
+
+    ``settings`` maps a sensor's name to its parameters' values ({name: {parameter: value}}).
+    """
     duration_s = check_positive("--duration", duration_s)
     keys = check_sensors(sensors)
-    if "spike" in keys:  # the spike clip is held in memory (1 byte per pixel-tick) for the reconstructions
-        from viform.measure.comparison import spike_preset
-
-        need = scene.height * scene.width * duration_s * spike_preset()[0].parameters.clock_hz
+    settings = settings or {}
+    models = {k: cmp.make_compare_sensor(k, **settings.get(k, {})) for k in keys}  # bad settings: refused now
+    for k, model in models.items():  # a spike clip is held in memory (1 byte per pixel-tick) for the reconstructions
+        if cmp.compare_entry(k).family != "spike":
+            continue
+        need = scene.height * scene.width * duration_s * model.parameters.clock_hz
         if need > MAX_SPIKE_BYTES:
             raise ViformError(f"--duration {duration_s:g} s of a {scene.height}×{scene.width} spike clip needs "
                               f"{need / 1e9:.3g} GB in memory, more than the {MAX_SPIKE_BYTES / 1e9:g} GB limit; "
@@ -78,7 +83,7 @@ def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed
             if bar is not None:
                 bar.set_postfix_str(key)
             started = time.perf_counter()
-            for shot in cmp.shoot(key, scene, duration_s, instants, seed=seed):
+            for shot in cmp.shoot(key, scene, duration_s, instants, seed=seed, sensor=models[key]):
                 shot.metrics = cmp.score(shot, scene, instants)
                 shots.append(shot)
             timings[key] = time.perf_counter() - started
@@ -327,6 +332,18 @@ def figure_dilemma(result):
     return fig
 
 
+def _wrap_label(label: str, chars: int) -> str:
+    """A legend label on lines of at most ``chars``; a long sensor label breaks at its " · " (the imaging
+    method goes on its own line), so no line ends in a dangling separator that reads as a cut."""
+    if len(label) <= chars:
+        return label
+    head, *parts = label.split(" · ")
+    lines = textwrap.wrap(head, chars, subsequent_indent="      ")
+    for part in parts:
+        lines += textwrap.wrap("· " + part, chars, initial_indent="      ", subsequent_indent="        ")
+    return "\n".join(lines)
+
+
 def _legend_at_right(fig, ax, chars: int = 44) -> None:
     """The axes' legend on the figure's right, labels wrapped; the axes shrink so it fits.
 
@@ -336,7 +353,7 @@ def _legend_at_right(fig, ax, chars: int = 44) -> None:
     handles, labels = ax.get_legend_handles_labels()
     if not handles:
         return
-    wrapped = [textwrap.fill(lb, chars, subsequent_indent="      ") for lb in labels]
+    wrapped = [_wrap_label(lb, chars) for lb in labels]
     leg = fig.legend(handles, wrapped, fontsize=8, loc="center right", bbox_to_anchor=(0.995, 0.5))
     box = leg.get_window_extent(fig.canvas.get_renderer())
     if box.height > 0.98 * fig.bbox.height:  # many sensors: a taller figure, same legend
@@ -638,12 +655,13 @@ def metrics_table(doc: dict) -> str:
 
 def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, height: int = 64,
             width: int = 128, seed: int = 0, instants_s=None, progress: bool = True, command: str = "",
-            scene_options: dict | None = None, started_s: float | None = None) -> dict:
+            scene_options: dict | None = None, started_s: float | None = None, settings: dict | None = None) -> dict:
     """Load the scene, run the comparison, write the report; return the metrics document.
 
     ``started_s``: ``time.perf_counter()`` at the command's start; the reported wall time runs from it.
+    ``settings``: {sensor name: {parameter: value}} (see :func:`run_comparison`).
     """
-    from viform.light.scenes import BUILTIN_SCENES, builtin_scene, load_scene
+    from viform.light.catalog import BUILTIN_SCENES, builtin_scene, load_scene
 
     height = check_int("--height", height, 32)
     width = check_int("--width", width, 48)
@@ -653,7 +671,7 @@ def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, he
     if scene_spec in BUILTIN_SCENES:
         scene = builtin_scene(scene_spec, height, width, **(scene_options or {}))
     else:
-        scene = load_scene(scene_spec, height, width, resize=True)
+        scene = load_scene(scene_spec, height, width, resize=True, settings=scene_options or None)
     started = time.perf_counter() if started_s is None else started_s
-    result = run_comparison(scene, duration_s, keys, instants_s, seed, progress)
+    result = run_comparison(scene, duration_s, keys, instants_s, seed, progress, settings)
     return write_report(result, out_dir, command, started_s=started)

@@ -47,7 +47,9 @@ def plot_range_intensity(path, profile: dict, title: str = "") -> None:
     r = profile["range_m"]
     a.semilogy(r, np.maximum(profile["surface_ungated"], 1e-12), "k--", label="un-gated")
     a.semilogy(r, np.maximum(profile["surface_gated"], 1e-12), "C0", label="gated")
-    a.set_ylim(max(1e-9, profile["surface_ungated"].min() / 10), profile["surface_ungated"].max() * 3)
+    # no surface signal at all (a fog that hides everything) still gets a positive log range
+    surface_top = max(float(profile["surface_ungated"].max()) * 3, 1e-8)
+    a.set_ylim(min(max(1e-9, float(profile["surface_ungated"].min()) / 10), surface_top / 10), surface_top)
     a.set(xlabel="range (m)", ylabel="e⁻ per pulse per pixel", title="Lambertian surface")
     lo, hi = profile["gate_window_m"]
     for ax in (a, b):

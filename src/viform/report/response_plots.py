@@ -353,14 +353,14 @@ def seed003_fig5(size: int = 16, seed: int = 0, currents_a=None) -> dict:
     to its plateau (E3, E4), against the photocurrent. Returns the curves and the DRs."""
     from viform.light.radiometry import ELEMENTARY_CHARGE_C
     from viform.measure.emva1288 import dynamic_range_from_response
-    from viform.sensors import presets
+    from viform.sensors.catalog import make_sensor
 
     currents = np.geomspace(1e-16, 3e-8, 150) if currents_a is None else np.asarray(currents_a)
     out = {}
     for key, label in (("seed003-4t", "(a) plain 4T"), ("seed003-lofic", "(b) lateral overflow capacitor"),
                        ("seed003-overflow", "(c) conditional overflow (this paper)")):
         kw = {"height": size, "width": size} if key == "seed003-overflow" else {}
-        s = presets.make_sensor(key, **kw)
+        s = make_sensor(key, **kw)
         lux = s.parameters.optics.lux_from_electrons_per_s(currents / ELEMENTARY_CHARGE_C)
         c = frame_response_curve(s, lux, size=size, seed=seed)
         dr = dynamic_range_from_response(c["raw"])

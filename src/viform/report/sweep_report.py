@@ -39,7 +39,10 @@ PARAMETER_UNITS = (("_electrons", "e⁻"), ("_e_per_s", "e⁻/s"), ("_hz", "Hz")
 
 
 def parameter_label(name: str) -> str:
-    """A parameter's axis label with its unit (``exposure_s`` → "exposure (s)")."""
+    """A parameter's axis label with its unit (``exposure_s`` → "exposure (s)"; a varied scene parameter
+    ``scene.brightness`` → "scene brightness")."""
+    if name.startswith(sw.SCENE_PREFIX):
+        return "scene " + parameter_label(name[len(sw.SCENE_PREFIX):])
     for suffix, unit in PARAMETER_UNITS:
         if name.endswith(suffix):
             stem = name[: -len(suffix)] if unit != "fraction" else name
@@ -124,14 +127,19 @@ def _pareto_panel(ax, doc, records, colours, meeting, x_key, y_key):
     if ok.sum() >= 2:
         hx, hy = sw.METRIC_DIRECTIONS.get(x_key, True), sw.METRIC_DIRECTIONS.get(y_key, True)
         front = pareto_front(xs[ok], ys[ok], hx, hy)
-        ax.plot(xs[ok][front], ys[ok][front], color="0.35", lw=1.2, ls="--", zorder=2,
-                label="Pareto front (no point beats it on both)")
+        # the front's points are outlined, so a front of one point (or of two close ones) is still seen
+        ax.plot(xs[ok][front], ys[ok][front], color="0.35", lw=1.2, ls="--", zorder=2)
+        ax.scatter(xs[ok][front], ys[ok][front], marker="s", s=95, facecolor="none", edgecolor="0.25",
+                   linewidth=1.2, zorder=4, label="Pareto front: no point beats these\non both metrics "
+                                                  "(grey squares, dashed line)")
     for d in doc["answer"]["demands"]:
         metric, op, bound = _split_demand(d)
         if metric == x_key:
             ax.axvline(float(_shown(x_key, bound)), color="green", lw=1, ls=":")
         if metric == y_key:
             ax.axhline(float(_shown(y_key, bound)), color="green", lw=1, ls=":")
+    if doc["answer"]["demands"]:
+        ax.plot([], [], color="green", lw=1, ls=":", label="a demand's bound (--require)")
     if logx:
         ax.set_xscale("log")
     ax.set_xlabel(metric_label(x_key) + (", log scale" if logx else ""))
@@ -153,11 +161,14 @@ def _split_demand(text: str):
 
 
 def _axes_of(doc, key):
-    """(x parameter, [other swept parameters]) of a sensor's curves: x is the one with most values."""
-    grid = doc["vary"].get(key, {})
+    """(x parameter, [other swept parameters]) of a sensor's curves: x is the one with most values (the
+    varied scene parameters count as the sensor's)."""
+    grid = {**doc["vary"].get(key, {}),
+            **{sw.SCENE_PREFIX + n: v for n, v in (doc["vary"].get(sw.SCENE) or {}).items()}}
     if not grid:
         return None, []
-    x = max(sorted(grid), key=lambda n: len(grid[n]))
+    # most values; on a tie the sensor's own parameter (the designer's knob) before the scene's
+    x = max(sorted(grid), key=lambda n: (len(grid[n]), not n.startswith(sw.SCENE_PREFIX)))
     return x, [n for n in sorted(grid) if n != x]
 
 
@@ -176,6 +187,7 @@ def figure_curves(doc, key: str):
     fig, axes = plt.subplots(rows, cols, figsize=(13, 2.55 * rows + 0.9), squeeze=False)
     fig.subplots_adjust(left=0.06, right=0.985, bottom=0.1 if rows == 1 else 0.07, top=1 - 0.75 / (2.55 * rows + 0.9),
                         wspace=0.38, hspace=0.62)
+    xs_raw = [r["swept"].get(x_name) for r in records if r["swept"].get(x_name) is not None]
     xs_all = np.array([float(r["swept"].get(x_name, math.nan)) for r in records])
     logx = np.all(xs_all[np.isfinite(xs_all)] > 0) and np.nanmax(xs_all) / np.nanmin(xs_all) > 30
     meeting = set(doc["answer"]["meeting"])
@@ -186,7 +198,7 @@ def figure_curves(doc, key: str):
         groups.setdefault(tuple(r["swept"].get(n) for n in others), []).append(r)
     cmap = plt.get_cmap("viridis")
     for ax, metric in zip(axes.flat, metrics, strict=False):
-        for gi, (combo, rs) in enumerate(sorted(groups.items(), key=lambda kv: str(kv[0]))):
+        for gi, (combo, rs) in enumerate(sorted(groups.items(), key=lambda kv: _order(kv[0]))):
             rs = sorted(rs, key=lambda r: r["swept"][x_name])
             colour = cmap(gi / max(1, len(groups) - 1)) if len(groups) > 1 else "C0"
             label = ", ".join(f"{parameter_label(n)} = {_fmt_param(v)}" for n, v in zip(others, combo, strict=True))
@@ -196,13 +208,19 @@ def figure_curves(doc, key: str):
             if ring:
                 ax.scatter([r["swept"][x_name] for r in ring], [_value(r, metric) for r in ring], s=60,
                            facecolor="none", edgecolor="green", linewidth=1.4, zorder=5)
-        default = next((r for r in records if r["default"]), None)
-        if default is not None and default["swept"].get(x_name) is not None:
-            ax.scatter([default["swept"][x_name]], [_value(default, metric)], marker="*", s=150, color="gold",
-                       edgecolor="black", linewidth=0.7, zorder=6)
+        defaults = [r for r in records if r["default"] and r["swept"].get(x_name) is not None]  # one per scene setting
+        if defaults:
+            ax.scatter([r["swept"][x_name] for r in defaults], [_value(r, metric) for r in defaults], marker="*",
+                       s=150, color="gold", edgecolor="black", linewidth=0.7, zorder=6)
         if logx:
             ax.set_xscale("log")
-        ax.set_title(metric_label(metric), fontsize=9)
+        elif all(isinstance(v, int) and not isinstance(v, bool) for v in xs_raw):
+            from matplotlib.ticker import MaxNLocator
+
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # a count (threshold level): no 2.5
+        flat = _floor_span(ax, [_value(r, metric) for r in records])
+        ax.set_title(metric_label(metric) + (f"\nflat: every point within ±{flat:.2g}" if flat is not None else ""),
+                     fontsize=9)
         ax.set_xlabel(parameter_label(x_name), fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(True, which="both", alpha=0.3)
@@ -218,35 +236,68 @@ def figure_curves(doc, key: str):
     return fig
 
 
+#: The smallest y-span a metric's panel shows, as a fraction of the metric's size: a metric that varies
+#: less than this over the sweep is drawn flat, not stretched until rounding noise looks like structure.
+MIN_SPAN_FRACTION = 0.05
+
+
+def _order(combo) -> tuple:
+    """Sort key of a line's values: numbers by value (1, 6, 12 — not "1", "12", "6"), None last."""
+    return tuple((v is None, v if isinstance(v, (int, float)) else 0, str(v)) for v in combo)
+
+
+def _floor_span(ax, values) -> float | None:
+    """Widen a panel whose values vary by less than :data:`MIN_SPAN_FRACTION` of their size (or by less
+    than 1 display unit around 0); returns the half-range of the values when it did, else None."""
+    v = np.asarray([x for x in values if math.isfinite(x)], float)
+    if v.size == 0:
+        return None
+    lo, hi = float(v.min()), float(v.max())
+    centre = (lo + hi) / 2
+    floor = MIN_SPAN_FRACTION * abs(centre) if centre != 0 else 1.0
+    if hi - lo >= floor:
+        return None
+    ax.set_ylim(centre - floor / 2, centre + floor / 2)
+    return (hi - lo) / 2
+
+
 def _fmt_param(v) -> str:
     if isinstance(v, float) and v >= 1000:
         return f"{v / 1e3:g} k"
     return _fmt(v)
 
 
-def figure_best(doc, scene, out: Path):
-    """The truth and the best point of each sensor at the middle instant, one log-lux colour map."""
+def figure_best(doc, scene, out: Path, scenes=None):
+    """The truth and the best point of each sensor at the middle instant, one log-lux colour map; where
+    scene parameters are varied, a truth per scene setting (``scenes(settings)`` makes it) and its bests."""
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
 
     instants = doc["context"]["instants_s"]
     i = len(instants) // 2
     t = instants[i]
-    demand = scene.demand() if hasattr(scene, "demand") else None
-    truth = scene.illuminance_lux(t)
-    if demand:
-        norm = LogNorm(vmin=demand["min_lux"], vmax=demand["max_lux"])
-    else:
-        norm = LogNorm(vmin=max(float(truth.min()), 1e-4), vmax=float(truth.max()))
-    panels = [(_panel_title("truth", f"at {t * 1e3:.2f} ms"), truth)]
+    # one truth per varied scene setting (each answered apart), made by ``scenes(settings)``
+    groups = list(dict.fromkeys(tuple(sorted((v.get("scene") or {}).items()))
+                                for v in doc["answer"]["per_sensor"].values())) or [()]
+    truths = {g: (scene if not g or scenes is None else scenes(g)) for g in groups}
+    demands = [sc.demand() for sc in truths.values() if hasattr(sc, "demand")]
+    lows = [d["min_lux"] for d in demands] or [max(float(sc.illuminance_lux(t).min()), 1e-4) for sc in truths.values()]
+    highs = [d["max_lux"] for d in demands] or [float(sc.illuminance_lux(t).max()) for sc in truths.values()]
+    norm = LogNorm(vmin=min(lows), vmax=max(highs))
+    panels = []
     by_id = {r["point_id"]: r for r in doc["records"]}
-    for key, v in doc["answer"]["per_sensor"].items():
-        images = sw.load_images(out, v["best"])
-        if images is None or key == "gated":
-            continue
-        what = "best meeting the demands" if v["meets"] else ("nearest miss" if doc["answer"]["demands"]
-                                                              else f"best by {doc['answer']['objective']}")
-        panels.append((_panel_title(f"{by_id[v['best']]['label']}", what), images[i].astype(np.float64)))
+    for g in groups:
+        where = f"at {t * 1e3:.2f} ms" + (f"\n{sw.scene_text(dict(g))}" if g else "")
+        panels.append((_panel_title("truth", where), truths[g].illuminance_lux(t)))
+        for key, v in doc["answer"]["per_sensor"].items():
+            if tuple(sorted((v.get("scene") or {}).items())) != g:
+                continue
+            images = sw.load_images(out, v["best"])
+            if images is None or v.get("sensor", key) == "gated":
+                continue
+            what = "best meeting the demands" if v["meets"] else ("nearest miss" if doc["answer"]["demands"]
+                                                                  else f"best by {doc['answer']['objective']}")
+            panels.append((_panel_title(f"{by_id[v['best']]['label']}", what), images[i].astype(np.float64)))
     titles = [p[0] for p in panels]
     fig, axes, cax = _image_grid(len(panels), scene.shape, max(tt.count("\n") + 1 for tt in titles))
     cmap = plt.get_cmap(LUX_CMAP).with_extremes(bad=UNDER_COLOUR)
@@ -262,8 +313,12 @@ def figure_best(doc, scene, out: Path):
 
 
 # ------------------------------------------------------------------ HTML
-def write_sweep_report(doc, scene, out, command: str = "", started_s: float | None = None) -> Path:
-    """Write ``out/report.html`` (figures under ``out/figures``); returns its path."""
+def write_sweep_report(doc, scene, out, command: str = "", started_s: float | None = None,
+                       demand_notes: list[str] | None = None, scenes=None) -> Path:
+    """Write ``out/report.html`` (figures under ``out/figures``); returns its path.
+
+    ``demand_notes`` say where the demands come from (printed under them); ``scenes(settings)`` makes
+    the scene at varied scene settings (for their truths)."""
     out = Path(out)
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
@@ -277,7 +332,7 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
             save_figure(figs / f"curves_{key}.png", fig)
             paths[f"curves_{key}"] = (figs / f"curves_{key}.png", f"metrics of {key} over its settings")
     if any(not r.get("skipped") for r in doc["records"]):
-        save_figure(figs / "best.png", figure_best(doc, scene, out))
+        save_figure(figs / "best.png", figure_best(doc, scene, out, scenes))
         paths["best"] = (figs / "best.png", "best setting of each sensor beside the truth")
     e = html.escape
     ctx = doc["context"]
@@ -301,13 +356,18 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
                  f"{e(metric_label(ans['objective']))} among the points that meet every demand; nearest miss = "
                  "the point missing the fewest demands, then by the smallest relative shortfall. A metric not "
                  "defined for a sensor (n/a) counts as missed.</p>")
+    if demand_notes:
+        parts.append("<p class='note'>Where the demands come from:</p><ul class='note'>"
+                     + "".join(f"<li>{e(n)}</li>" for n in demand_notes) + "</ul>")
     parts.append("<table><tr><th>sensor</th><th>meets every demand</th><th>setting</th>"
                  f"<th>{e(metric_label(ans['objective']))}</th><th>points meeting / swept</th><th>misses</th></tr>")
     for key, v in ans["per_sensor"].items():
         misses = "; ".join(sw._miss_text(m) for m in v.get("misses", [])) or "—"
-        parts.append(f"<tr data-sensor='{e(key)}'><td>{e(key)}</td><td>{'yes' if v['meets'] else 'no'}</td>"
+        meets = "— (no demands)" if v["meets"] is None else ("yes" if v["meets"] else "no")
+        counted = f"— / {v['n_points']}" if v["meets"] is None else f"{v['n_meeting']} / {v['n_points']}"
+        parts.append(f"<tr data-sensor='{e(key)}'><td>{e(key)}</td><td>{meets}</td>"
                      f"<td>{e(sw._settings_text(v))}</td><td>{_fmt(_shown(ans['objective'], v['objective']))}</td>"
-                     f"<td>{v['n_meeting']} / {v['n_points']}</td><td>{e(misses)}</td></tr>")
+                     f"<td>{counted}</td><td>{e(misses)}</td></tr>")
     parts.append("</table></section>")
     parts.append("<section id='pareto'><h2>Trade-offs</h2><p class='note'>Each dot is one setting of one sensor; "
                  "the star is the sensor's default setting (what <code>viform compare</code> uses); green rings "
@@ -354,7 +414,11 @@ def console_lines(doc) -> list[str]:
              f"{doc['seconds']:.1f} s on {doc['workers'] or 'no'} dask workers, {doc['cpu_seconds']:.1f} CPU-s"]
     width = max([len(k) for k in ans["per_sensor"]] + [6])
     for key, v in ans["per_sensor"].items():
-        lines.append(f"  {key:<{width}}  {'meets' if v['meets'] else 'misses'}  {sw._settings_text(v)}  "
+        if v["meets"] is None:  # no demands: nothing "meets"; the best by the objective
+            lines.append(f"  {key:<{width}}  best    {sw._settings_text(v)}  "
+                         f"({ans['objective']} {_fmt(v['objective'])}; of {v['n_points']} points, no demands)")
+            continue
+        lines.append(f"  {key:<{width}}  {'meets ' if v['meets'] else 'misses'}  {sw._settings_text(v)}  "
                      f"({ans['objective']} {_fmt(v['objective'])}; {v['n_meeting']}/{v['n_points']} meet)")
     lines += [f"- {s}" for s in ans["sentences"]]
     return lines
@@ -362,11 +426,15 @@ def console_lines(doc) -> list[str]:
 
 def run_sweep_report(plan, out, *, workers=None, scheduler=None, client=None, memory_limit="auto",
                      progress: bool = True, command: str = "", started_s: float | None = None,
-                     crash_after_points: int | None = None) -> dict:
-    """Run a planned sweep into ``out`` and write its report; returns the sweep document."""
+                     crash_after_points: int | None = None, demand_notes: list[str] | None = None,
+                     device: str = "cpu", **run_options) -> dict:
+    """Run a planned sweep into ``out`` and write its report; returns the sweep document.
+
+    ``run_options`` go to :func:`viform.measure.sweep.sweep` (e.g. ``connect_timeout_s``)."""
     started = time.perf_counter() if started_s is None else started_s
     doc = sw.sweep(plan, out, workers=workers, scheduler=scheduler, client=client, memory_limit=memory_limit,
-                   progress=progress, crash_after_points=crash_after_points)
-    write_sweep_report(doc, plan.context.make_scene(), out, command, started)
+                   progress=progress, crash_after_points=crash_after_points, device=device, **run_options)
+    write_sweep_report(doc, plan.context.make_scene(), out, command, started, demand_notes,
+                       scenes=plan.context.make_scene)
     doc["report"] = str(Path(out) / "report.html")
     return doc

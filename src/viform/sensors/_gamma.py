@@ -19,10 +19,10 @@ up to the resolution of the uniforms: 26 bits each, i.e. a position within a bin
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
-from scipy import special
 
 #: Bins per table (a power of two: the bin index is the top bits of the hash).
 TABLE_BITS = 10
@@ -61,36 +61,114 @@ def build_tables(shapes) -> tuple[np.ndarray]:
     (edge), its width, the log of the maximum of x^(a−1)·e^(−x) over the bin, and the
     squeeze — the min/max density ratio over the bin, below which a draw is accepted
     without evaluating the density. The four values of a bin share a cache line.
+
+    The tables of up to :data:`TABLE_CACHE_MAX_SHAPES` shapes are kept on disk beside the
+    compiled kernels (:func:`table_cache_folder`), keyed by the shapes, the table size and the
+    SciPy build that computed them, so that a new process loads them instead of importing
+    ``scipy.special``; the loaded values are the computed ones, bit for bit.
     """
-    shapes = np.asarray(shapes, dtype=np.float64)
-    n, m = shapes.size, TABLE_SIZE
-    edges = np.empty((n, m))
-    widths = np.empty((n, m))
-    log_peak = np.empty((n, m))
-    squeeze = np.empty((n, m))
-    probabilities = np.arange(m + 1) / m
-    for i, a in enumerate(shapes):
-        q = special.gammaincinv(a, probabilities)
-        q[0], q[-1] = 0.0, np.inf
-        lo, hi = q[:-1], q[1:]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            log_f_lo = np.where(lo > 0, (a - 1) * np.log(np.where(lo > 0, lo, 1.0)) - lo,
-                                0.0 if a == 1 else -np.inf)
-            log_f_hi = (a - 1) * np.log(hi) - hi
-        mode = a - 1.0
-        log_f_mode = (a - 1) * np.log(mode) - mode if mode > 0 else 0.0
-        peak = np.maximum(log_f_lo, log_f_hi)
-        inside = (lo <= mode) & (mode <= hi)
-        peak = np.where(inside, log_f_mode, peak)
-        low = np.minimum(log_f_lo, log_f_hi)
-        edges[i] = lo
-        widths[i] = hi - lo
-        log_peak[i] = peak
-        squeeze[i] = np.exp(low - peak)
-        # the open last bin is sampled from its exponential envelope instead
-        widths[i, -1] = 0.0
-        squeeze[i, -1] = 0.0
-    return (np.ascontiguousarray(np.stack([edges, widths, log_peak, squeeze], axis=-1)),)
+    shapes = np.asarray(shapes, dtype=np.float64).ravel()
+    key = _cache_key(shapes) if shapes.size <= TABLE_CACHE_MAX_SHAPES else None
+    if key is not None and key in _TABLES:
+        return (_TABLES[key],)
+    tables = _load_tables(key, shapes.size) if key is not None else None
+    if tables is None:
+        tables = np.empty((shapes.size, TABLE_SIZE, 4))
+        for i, a in enumerate(shapes):
+            tables[i] = _table(a)
+        tables = np.ascontiguousarray(tables)
+        if key is not None:
+            _save_tables(key, tables)
+    if key is not None:
+        _TABLES[key] = tables  # shared by the sensors of this process: read, never written
+    return (tables,)
+
+
+#: Tables of at most this many shapes (one threshold, or a few levels) are cached on disk
+#: (a fixed-pattern threshold spread has thousands: those are computed each time).
+TABLE_CACHE_MAX_SHAPES = 64
+_TABLES: dict = {}
+_TABLE_FORMAT = 1
+
+
+def table_cache_folder() -> Path:
+    """Where the tables are kept: numba's cache folder when ``NUMBA_CACHE_DIR`` is set, else this
+    module's ``__pycache__`` (where numba keeps the kernels' machine code)."""
+    from numba.core import config
+
+    if config.CACHE_DIR:
+        return Path(config.CACHE_DIR) / "viform-gamma-tables"
+    return Path(__file__).resolve().parent / "__pycache__" / "viform-gamma-tables"
+
+
+def _scipy_build() -> str:
+    """SciPy's version record (the text of ``scipy/version.py``: version and git revision), read
+    without importing SciPy; '' when it cannot be read."""
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec("scipy")
+        return (Path(spec.origin).parent / "version.py").read_text()
+    except (ImportError, AttributeError, OSError, TypeError, ValueError):
+        return ""
+
+
+def _cache_key(shapes: np.ndarray) -> str:
+    import hashlib
+
+    digest = hashlib.sha256(f"{_TABLE_FORMAT} {TABLE_BITS} {_scipy_build()}".encode())
+    digest.update(shapes.astype("<f8").tobytes())
+    return digest.hexdigest()[:32]
+
+
+def _load_tables(key: str, n: int):
+    """The cached tables of ``key``, or None (absent, unreadable or not of the expected form)."""
+    try:
+        tables = np.load(table_cache_folder() / f"{key}.npy", allow_pickle=False)
+    except (OSError, ValueError, EOFError):
+        return None
+    if tables.dtype != np.float64 or tables.shape != (n, TABLE_SIZE, 4):
+        return None
+    return np.ascontiguousarray(tables)
+
+
+def _save_tables(key: str, tables: np.ndarray) -> None:
+    """Keep ``tables`` on disk, written atomically; a folder that cannot be written is skipped."""
+    from viform._io import atomic_open
+    from viform._validate import ViformError
+
+    try:
+        with atomic_open(table_cache_folder() / f"{key}.npy") as f:
+            np.save(f, tables, allow_pickle=False)
+    except (OSError, ViformError):
+        pass
+
+
+def _table(a: np.float64) -> np.ndarray:
+    """The (M, 4) table of Gamma(a, 1) (see :func:`build_tables`). scipy.special is imported here,
+    where it is used: commands that draw no photon noise do without it."""
+    from scipy import special
+
+    probabilities = np.arange(TABLE_SIZE + 1) / TABLE_SIZE
+    q = special.gammaincinv(a, probabilities)
+    q[0], q[-1] = 0.0, np.inf
+    lo, hi = q[:-1], q[1:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_f_lo = np.where(lo > 0, (a - 1) * np.log(np.where(lo > 0, lo, 1.0)) - lo,
+                            0.0 if a == 1 else -np.inf)
+        log_f_hi = (a - 1) * np.log(hi) - hi
+    mode = a - 1.0
+    log_f_mode = (a - 1) * np.log(mode) - mode if mode > 0 else 0.0
+    peak = np.maximum(log_f_lo, log_f_hi)
+    inside = (lo <= mode) & (mode <= hi)
+    peak = np.where(inside, log_f_mode, peak)
+    low = np.minimum(log_f_lo, log_f_hi)
+    widths = hi - lo
+    squeeze = np.exp(low - peak)
+    # the open last bin is sampled from its exponential envelope instead
+    widths[-1] = 0.0
+    squeeze[-1] = 0.0
+    return np.stack([lo, widths, peak, squeeze], axis=-1)
 
 
 def stream_keys(seed: int, n: int) -> np.ndarray:

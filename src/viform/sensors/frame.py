@@ -194,13 +194,14 @@ class FramePixelArray:
         return rows / self.height * self.parameters.readout_time_s
 
     def storage_electrons(self, scene: Scene, end_s: float, rng: np.random.Generator,
-                          noise: bool = True) -> np.ndarray | float:
+                          noise: bool = True, samples: int = 32) -> np.ndarray | float:
         """Charge a global shutter's storage nodes gather while they wait to be read (H, W).
 
         Row r waits w_r = (r + 1)/H · readout_time_s after the exposure ends at ``end_s``; it
         gathers PLS × the photo-rate of the light during [end_s, end_s + w_r] plus the storage
-        leakage, both Poisson: mean = PLS·η·Φ(lux)·w_r·(1 + PRNU) + leak·w_r. Returns 0.0 when
-        the effects are off.
+        leakage, both Poisson: mean = PLS·η·Φ(L̄_r)·w_r·(1 + PRNU) + leak·w_r, L̄_r the row's mean
+        light over its wait (:meth:`storage_light_lux`, ``samples`` looks at the scene). Returns
+        0.0 when the effects are off.
         """
         p = self.parameters
         if p.readout_time_s == 0 or (p.parasitic_light_sensitivity == 0 and p.storage_leakage_e_per_s == 0):
@@ -208,12 +209,45 @@ class FramePixelArray:
         wait = self.storage_wait_s()
         mean = p.storage_leakage_e_per_s * wait * np.ones((self.height, self.width))
         if p.parasitic_light_sensitivity > 0:
-            rows = np.empty((self.height, self.width))
-            for r in range(self.height):  # each row waits its own time under the scene's light
-                w = float(wait[r, 0])
-                rows[r] = scene.mean_illuminance_lux(end_s, end_s + w)[r]
-            mean = mean + p.parasitic_light_sensitivity * self.mean_signal_electrons(rows, 1.0) * wait
+            lux = self.storage_light_lux(scene, end_s, samples)
+            mean = mean + p.parasitic_light_sensitivity * self.mean_signal_electrons(lux, 1.0) * wait
         return rng.poisson(mean).astype(np.float64) if noise else mean
+
+    def storage_light_lux(self, scene: Scene, end_s: float, samples: int = 32) -> np.ndarray:
+        """Each row's mean light over its wait [end_s, end_s + w_r], lux (H, W).
+
+        The readout [end_s, end_s + T_read] is cut into M = min(H, ``samples``) equal segments,
+        each averaged by the scene (its own integral where it has one, else the midpoint rule
+        with ⌈samples/M⌉ points): ``samples`` light evaluations in all, not one per row. Row r's
+        integral is the segments before w_r plus the share of the one it ends in (the light
+        taken constant within a segment, T_read/M); with M = H every wait ends on a segment
+        edge and the rows are exact. Written as S₀ + Σ_k (S_k − S₀)·Δ_k/w_r, so still light
+        gives exactly its value.
+        """
+        samples = check_int("samples", samples, 1)
+        height, width = self.height, self.width
+        read_s = self.parameters.readout_time_s
+        n_seg = min(height, samples)
+        per_segment = -(-samples // n_seg)
+        seg_s = read_s / n_seg
+        # row r's wait in segment units: (r + 1)·M/H; it ends in segment ⌈·⌉ − 1
+        ends = (np.arange(1, height + 1) * n_seg) / height
+        last = np.minimum(np.ceil(ends - 1e-9).astype(np.int64) - 1, n_seg - 1)
+        first_light = None
+        acc = np.zeros((height, width))  # Σ_k (S_k − S₀)·(time of the row's wait in segment k)
+        for k in range(n_seg):
+            a = end_s + k * seg_s
+            light = np.asarray(scene.mean_illuminance_lux(a, a + seg_s, samples=per_segment), dtype=np.float64)
+            if first_light is None:
+                first_light = light
+                continue
+            rows = last >= k
+            if not rows.any():
+                break
+            span = np.clip(ends[rows] - k, 0.0, 1.0)[:, None] * seg_s  # the row's time in segment k
+            acc[rows] += (light[rows] - first_light[rows]) * span
+        wait = self.storage_wait_s()
+        return first_light + acc / wait
 
     def black_sun_electrons(self, electrons, mean_lux) -> np.ndarray:
         """CDS output with the reset sample eaten by the light (black sun), e⁻.

@@ -59,10 +59,12 @@ from viform._validate import (
     check_positive,
 )
 from viform.light.active import ActiveImagingGeometry, ActiveScene
-from viform.light.laser import PulsedLaser, Receiver, range_from_delay_m, round_trip_time_s
+from viform.light.laser import PulsedLaser, Receiver
 from viform.light.radiometry import PixelOptics
 from viform.sensors.base import FrameStack, Sensor
 from viform.sensors.frame import FramePixelArray, FramePixelParameters
+from viform.sensors.gate_timing import GateTiming
+from viform.sensors.gated_waveforms import DRIVES, drive_waveforms
 
 MODES = ("ungated", "sum", "accumulate")
 
@@ -191,8 +193,6 @@ def interline_ccd_parameters(part: str = "icx618", **overrides) -> InterlineCCDP
     the ICX618-like one of :func:`icx618_pixel_parameters` for every part (assumed: the seed gives
     no pixel data), so the parts differ here in format, field integration and timing only.
     """
-    from viform.sensors.gated_waveforms import DRIVES
-
     key = check_choice("part", str(part).lower(), tuple(DRIVES))
     d = DRIVES[key]
     kw = dict(part=key, interlaced=d.interlaced, sensor_height_px=d.rows * (2 if d.interlaced else 1),
@@ -200,109 +200,6 @@ def interline_ccd_parameters(part: str = "icx618", **overrides) -> InterlineCCDP
               readout_time_s=d.rows * d.line_time_s)
     kw.update(overrides)
     return InterlineCCDParameters(**kw)
-
-
-@dataclass(frozen=True)
-class GateTiming:
-    """The one timing model of a gate (seed 004, Fig. 3), from which both the physics
-    (:class:`GatedInterlineCCD`) and the drawn drive (:func:`~viform.sensors.gated_waveforms.drive_waveforms`)
-    are derived.
-
-    Instants after the laser pulse starts:
-
-    * ``open_s`` = 2R/c: SUB falls, the photodiodes start to integrate;
-    * ``transfer_start_s`` = open + τ + t_min: V2/V3 rise to +15 V (the seed's t_нак = τ + t_min
-      ends here, and its t_экспозиции = X·t_нак counts only this);
-    * ``close_s`` = transfer_start + ``readout_pulse_s``: V2/V3 fall and SUB rises again.
-
-    While the readout pulse is high the photodiode is connected to the vertical register, so
-    the charge it collects during the pulse is moved too (the seed itself says charge
-    accumulates again only "as soon as the positive potential stops being applied"); SUB
-    cannot rise earlier without draining the packet being transferred. The light is therefore
-    collected over [open_s, close_s] = τ + t_min + t_readout — 2.135 µs with the assumed 1 µs
-    pulse, not the seed's 1.135 µs. The seed's figure (only its caption survives in the text)
-    gives no pulse width; its text supports t_нак = τ + t_min as the *drawn* SUB→V2/V3 interval.
-
-    Raises :class:`ViformError` if the gate is not inside one pulse period (range beyond
-    the unambiguous range c/(2 f_rep)).
-    """
-
-    gate_range_m: float
-    laser: PulsedLaser
-    min_transfer_time_s: float
-    readout_pulse_s: float = 1.0e-6
-
-    def __post_init__(self):
-        r = self.gate_range_m
-        if isinstance(r, (int, float)) and r < 0:
-            raise ViformError(f"gate_range_m = {r!r} is not allowed: the gate range must be ≥ 0 m")
-        check_non_negative("gate_range_m", r)
-        check_positive("min_transfer_time_s", self.min_transfer_time_s)
-        check_positive("readout_pulse_s", self.readout_pulse_s)
-        if self.close_s >= self.laser.period_s:
-            raise ViformError(
-                f"gate_range_m = {r:g} m is beyond the unambiguous range: the gate would close "
-                f"{self.close_s * 1e6:.2f} µs after the pulse, after the next pulse "
-                f"({self.laser.period_s * 1e6:.1f} µs at {self.laser.repetition_hz:g} Hz); the largest "
-                f"gate range is "
-                f"{self.max_gate_range_m(self.laser, self.min_transfer_time_s, self.readout_pulse_s):.0f} m"
-            )
-
-    @staticmethod
-    def max_gate_range_m(laser: PulsedLaser, min_transfer_time_s: float, readout_pulse_s: float = 1.0e-6) -> float:
-        return range_from_delay_m(laser.period_s - laser.pulse_width_s - min_transfer_time_s - readout_pulse_s)
-
-    @property
-    def open_s(self) -> float:
-        """Gate delay t_откл = 2R/c (end of SUB), s."""
-        return round_trip_time_s(self.gate_range_m)
-
-    @property
-    def accumulation_s(self) -> float:
-        """The seed's t_нак = pulse width + minimum SUB → V2/V3 time, s (drawn, not collected)."""
-        return self.laser.pulse_width_s + self.min_transfer_time_s
-
-    @property
-    def transfer_start_s(self) -> float:
-        """Rising edge of the V2/V3 readout pulse, s after the pulse start."""
-        return self.open_s + self.accumulation_s
-
-    @property
-    def close_s(self) -> float:
-        """End of the readout pulse (SUB rises), s after the pulse start: light stops counting here."""
-        return self.transfer_start_s + self.readout_pulse_s
-
-    @property
-    def width_s(self) -> float:
-        """Collection window per pulse, s: t_нак + the readout pulse."""
-        return self.close_s - self.open_s
-
-    @property
-    def range_window_m(self) -> tuple[float, float]:
-        """Ranges with some return inside the gate: (R − cτ/2, R + c·width/2)."""
-        c_half = range_from_delay_m(1.0)
-        return (
-            max(0.0, self.gate_range_m - c_half * self.laser.pulse_width_s),
-            self.gate_range_m + c_half * self.width_s,
-        )
-
-    @property
-    def full_range_window_m(self) -> tuple[float, float]:
-        """Ranges whose whole return lies inside the gate: [R, R + c·(width − τ)/2]."""
-        return (self.gate_range_m, self.gate_range_m + range_from_delay_m(self.width_s - self.laser.pulse_width_s))
-
-    def to_dict(self) -> dict:
-        return {
-            "gate_range_m": self.gate_range_m,
-            "open_s": self.open_s,
-            "accumulation_s": self.accumulation_s,
-            "transfer_start_s": self.transfer_start_s,
-            "readout_pulse_s": self.readout_pulse_s,
-            "width_s": self.width_s,
-            "close_s": self.close_s,
-            "range_window_m": list(self.range_window_m),
-            "full_range_window_m": list(self.full_range_window_m),
-        }
 
 
 @dataclass
@@ -423,8 +320,6 @@ class GatedInterlineCCD(Sensor):
         """The drive (laser, SUB, V1–V4) of this sensor's gate, drawn from the same
         :class:`GateTiming` the physics uses (:func:`~viform.sensors.gated_waveforms.drive_waveforms`);
         ``part`` defaults to the CCD's own."""
-        from viform.sensors.gated_waveforms import drive_waveforms
-
         return drive_waveforms(part or self.parameters.part, pulses=self.pulses if pulses is None else pulses,
                                lines=lines, timing=self.timing)
 
@@ -580,9 +475,15 @@ class GatedInterlineCCD(Sensor):
         var = n * per * (per < p.full_well_electrons) + n * (p.read_noise_electrons**2 + 1.0 / (12 * k * k))
         return mean, var
 
-    def capture(self, scene: ActiveScene, duration_s: float, *, seed: int = 0) -> FrameStack:
-        """Frames at ``frame_rate_hz`` over ``duration_s`` (scene static), DN as float64."""
+    def capture(self, scene, duration_s: float, *, seed: int = 0) -> FrameStack:
+        """Frames at ``frame_rate_hz`` over ``duration_s`` (scene static), DN as float64.
+
+        ``scene`` is an :class:`ActiveScene` or a scene that carries one as ``scene.active`` (the
+        laser-lit scene with ranges, e.g. the built-in night-road-fog). ``metadata["readouts"]``
+        is the number of readouts summed in each frame (its black level is that many offsets).
+        """
         check_positive("duration_s", duration_s)
+        scene = active_scene(scene)
         n = max(1, int(math.floor(duration_s * self.frame_rate_hz + 1e-9)))
         b = self.electron_budget(scene)
         frames = np.stack([self.capture_frame(scene, seed=seed, frame_index=i, budget=b).dn for i in range(n)])
@@ -590,7 +491,7 @@ class GatedInterlineCCD(Sensor):
             frames,
             np.arange(n) / self.frame_rate_hz,
             np.full(n, self.pulses * self.timing.width_s),
-            {"sensor": self.describe(), "scene": scene.describe(), "seed": seed},
+            {"sensor": self.describe(), "scene": scene.describe(), "seed": seed, "readouts": b["readouts"]},
         )
 
     def describe(self) -> dict:
@@ -614,6 +515,17 @@ class GatedInterlineCCD(Sensor):
             "noise": self.noise,
             "pixel": par.pixel.to_dict(),
         }
+
+
+def active_scene(scene) -> ActiveScene:
+    """The laser-lit scene with ranges that a gated camera shoots: ``scene`` itself or ``scene.active``."""
+    if isinstance(scene, ActiveScene):
+        return scene
+    active = getattr(scene, "active", None)
+    if active is None:
+        raise ViformError("the scene has no range (the gated camera needs a laser-lit scene with distances, "
+                          "e.g. night-road-fog)")
+    return active
 
 
 def bloom_columns(electrons, capacity_electrons: float) -> np.ndarray:

@@ -40,6 +40,7 @@ import numpy as np
 
 from viform._validate import ViformError, check_choice, check_int, check_positive
 from viform.light.laser import PulsedLaser, round_trip_time_s
+from viform.sensors.gate_timing import GateTiming
 
 #: Levels the seed gives (seed 004, text under Fig. 2), volts.
 V_LOW_V = -5.5
@@ -188,7 +189,7 @@ def drive_waveforms(part: str = "icx618", gate_range_m: float = 150.0, pulses: i
                     target_range_m: float | None = None, timing=None) -> DriveTrace:
     """The four-stage drive of one gated frame (seed 004, Fig. 3).
 
-    Every gate instant comes from one :class:`~viform.sensors.gated_ccd.GateTiming` — the
+    Every gate instant comes from one :class:`~viform.sensors.gate_timing.GateTiming` — the
     same object the sensor model integrates light with: SUB falls at ``open_s``, V2/V3 (V1/V3
     on the interlaced parts) rise at ``transfer_start_s`` and fall at ``close_s``, where SUB
     rises again. SUB stays low through the readout pulse (raising it would drain the packet
@@ -216,8 +217,6 @@ def drive_waveforms(part: str = "icx618", gate_range_m: float = 150.0, pulses: i
     -------
     DriveTrace
     """
-    from viform.sensors.gated_ccd import GateTiming
-
     key = check_choice("part", str(part).lower(), tuple(DRIVES))
     drive = DRIVES[key]
     x = check_int("pulses", pulses, 1)

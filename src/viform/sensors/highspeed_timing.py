@@ -187,6 +187,13 @@ class ReadoutTiming:
         """Clock cycles per frame, (T1) (60 000 for the seed's 1280 × 720 reduced mode)."""
         return self.data_cycles(roi) + self.frame_overhead_cycles
 
+    def readout_time_s(self, roi: Window | str | None = None) -> float:
+        """Time to read the window out after the frame transfer, s: its data cycles / clock (576 µs
+        for 1280 × 720 at 100 MHz). Row r of H waits ≈ (r + 1)/H of it in its storage node (SG,
+        seed 002 §2.2), where the shutter's parasitic light reaches it (Table 1: 99 % shutter
+        efficiency)."""
+        return self.data_cycles(roi) / self.pixel_clock_hz
+
     def frame_period_s(self, roi: Window | str | None = None) -> float:
         return self.cycles_per_frame(roi) / self.pixel_clock_hz
 

@@ -48,7 +48,7 @@ Noise model: Poisson photo + dark charge per integration window (exact at small 
 PRNU/DSNU, read noise and ADC from :class:`~viform.sensors.frame.FramePixelArray`.
 Charge is tracked as the photodiode voltage drop in electrons, ``n = (V_res − V)·C_PD/q``,
 so the pixel's full well is ``(V_res − V_sat)·C_PD/q`` and its conversion gain q/C_PD.
-Reset (kTC) noise (issue 16), optional (``ktc_noise=True``): the seed's readout samples the
+Reset (kTC) noise, optional (``ktc_noise=True``): the seed's readout samples the
 signal *before* resetting the photodiode and the reset level after it (§3: "read the signal
 … then PM1 and NM3 reset the photodiode, read the reset noise"), so the two samples carry
 the kTC noise of two different resets and it does not cancel: √(kT·C_PD)/q = 120 e⁻ rms per
@@ -116,7 +116,7 @@ def share_charge_v(v_pd_v, v_cf_v: float, c_pd_f: float, c_f_f: float):
 
 
 class PhotodiodeJunction:
-    """The photodiode's charge–voltage law, linear or a reverse-biased junction (issue 28).
+    """The photodiode's charge–voltage law, linear or a reverse-biased junction.
 
     A junction's capacitance grows as its reverse bias falls, C(V) = C_res·((1 + V_res/φ)/(1 + V/φ))^m
     (m = 0.5 abrupt, 1/3 linearly graded; φ the built-in potential), equal to C_res at the reset

@@ -68,7 +68,7 @@ def check_segments(
         )
     for i, b in enumerate(levels):
         check_positive(f"clamp_levels_electrons[{i}]", b)
-        # checked before the order, so a barrier above the well is named as such (issue 28)
+        # checked before the order, so a barrier above the well is named as such
         if b > full_well_electrons * (1 + 1e-12):
             raise ViformError(
                 f"clamp_levels_electrons[{i}] = {b:g} exceeds the full well {full_well_electrons:g} e⁻; "

@@ -2,8 +2,8 @@
 
 One algorithm, two targets. The per-pixel functions the CPU kernels call — the counter-based
 Gamma draws of :mod:`viform.sensors._gamma`, the crossing handling of
-:mod:`viform.sensors.spike` (:func:`~viform.sensors.spike._fire` and what it calls, dead time,
-readout reset, saturated ticks), the compiled light :func:`~viform.light.compiled.pixel_lux` —
+:mod:`viform.sensors._spike_kernels` (:func:`~viform.sensors._spike_kernels._fire` and what it
+calls, dead time, readout reset, saturated ticks), the compiled light :func:`~viform.light.compiled.pixel_lux` —
 are compiled a second time as CUDA device functions from the same Python source; the initial
 state, the runs of constant light and the per-tick light scalars come from the same host code
 as on the CPU. So a pixel's k-th interval is the same draw from (seed, pixel, k) and its charge
@@ -39,6 +39,8 @@ from types import FunctionType
 import numpy as np
 
 from viform._validate import ViformError
+from viform.sensors import _gamma, _spike_kernels
+from viform.sensors._spike_kernels import _Segments
 
 #: Threads per CUDA block (a multiple of the warp size, 32).
 THREADS_PER_BLOCK = 256
@@ -170,7 +172,7 @@ def _warp_bits_shared(fired, scratch):
 
 def _kernel_runs(words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, keys, noise,
                  reset_readout, dead_ticks, mode):
-    """Runs of constant light (the GPU form of :func:`viform.sensors.spike._run_block`): thread p
+    """Runs of constant light (the GPU form of :func:`viform.sensors._spike_kernels._run_block`): thread p
     adds ``rates[s, p]`` each tick of run s and fires at its target; ``words[k, p // 32]`` gets
     the warp's bits."""
     scratch = cuda.shared.array(THREADS_PER_BLOCK, np.uint32)
@@ -210,7 +212,7 @@ def _kernel_runs(words, rates, seg_end, first_tick, charge, target, counter, q, 
 
 def _kernel_ticks(words, kind, scalars, xtab, ytab, frames, params, a, b, width, charge, target, counter, q, index,
                   bins, keys, noise, reset_readout, dead_ticks):
-    """Light computed per pixel and tick (the GPU form of :func:`viform.sensors.spike._run_block_ticks`):
+    """Light computed per pixel and tick (the GPU form of :func:`viform.sensors._spike_kernels._run_block_ticks`):
     the charge of a tick is rint(a·lux + b) in fixed point, lux from :func:`pixel_lux`."""
     scratch = cuda.shared.array(THREADS_PER_BLOCK, np.uint32)
     p = cuda.grid(1)
@@ -257,16 +259,15 @@ def kernels():
     from numba import cuda as numba_cuda
 
     from viform.light import compiled as light_module
-    from viform.sensors import _gamma, spike
 
     device_jit = numba_cuda.jit(device=True)
     simulated = simulator_enabled()
     device_np = {} if simulated else {"np": _device_numpy()}
     gamma_ns = dict(_gamma.__dict__, **device_np)
     _twins(_gamma, _GAMMA_FUNCTIONS, gamma_ns, device_jit)
-    spike_ns = dict(spike.__dict__, **device_np)
+    spike_ns = dict(_spike_kernels.__dict__, **device_np)
     spike_ns.update({name: gamma_ns[name] for name in _GAMMA_FUNCTIONS})
-    _twins(spike, _SPIKE_FUNCTIONS, spike_ns, device_jit)
+    _twins(_spike_kernels, _SPIKE_FUNCTIONS, spike_ns, device_jit)
     light_ns = dict(light_module.__dict__, **device_np)
     _twins(light_module, _LIGHT_FUNCTIONS, light_ns, device_jit)
     ns = dict(globals())
@@ -287,11 +288,9 @@ def packed_blocks_cuda(sensor, scene, duration_s, seed, block_ticks, light_sampl
     """As :meth:`SpikeSensor._packed_blocks`, on the GPU: (first tick, packed bits uint8 (T, 8·⌈H·W/64⌉))."""
     from numba import cuda
 
-    from viform.sensors.spike import _Segments
-
-    # pixel_lux does not draw the dilemma kind: the NumPy light, which gives the same bits
+    # pixel_lux does not draw the dilemma and sampled kinds: the scene's light per sample, which gives the same bits
     plan = sensor.run_plan(scene, duration_s, seed, block_ticks, light_sample_ticks, state, compiled_light, True,
-                           drop_light_kinds=("dilemma",))
+                           drop_light_kinds=("dilemma", "sampled"))
     p, n_ticks, height, width, pixels, row_bytes = (plan.p, plan.n_ticks, plan.height, plan.width, plan.pixels,
                                                     plan.row_bytes)
     sample, light, block_ticks, q, index, tables = (plan.sample, plan.light, plan.block_ticks, plan.q,

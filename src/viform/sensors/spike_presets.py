@@ -11,7 +11,7 @@ pixels are nearly pure tick-rounded integrate-and-fire, which needs an *effectiv
 threshold of order 10⁴ e⁻ (every per-spike charge noise — photon, reset, comparator —
 lumped into one Gamma(Q_eff) law, :mod:`viform.measure.calibration`). Light that changes
 during a recording only adds interval noise, so every recording bounds Q_eff from below:
-static recordings quoted in issue 10 give ≈ 9,500 e⁻ (RSD 0.025 at 17.9 ticks), and
+static recordings of the real chip give ≈ 9,500 e⁻ (RSD 0.025 at 17.9 ticks), and
 ``viform calibrate`` on the shared 40 kHz clip ``real_uhsr_250x250.npz`` gives
 Q_eff ≥ 15,903 e⁻ (95 % lower bound from its steadiest tiles; fit 19,260 e⁻; 16,188 before
 the clip's 3 % drift entered the rounding term). The
@@ -156,7 +156,7 @@ def _chip_parameters(clock_hz: float, **extra) -> SpikeSensorParameters:
 
 
 #: Pixel-to-pixel photo-response (gain) spread of a flat field, std/mean: ≈ 3 % in the flat
-#: regions of static real recordings (issue 10 "Realism"). The shared clip gives ≤ 8.1 %
+#: regions of static real recordings. The shared clip gives ≤ 8.1 %
 #: (``viform calibrate``: an upper bound, the displayed picture's grain included).
 CHIP_GAIN_SPREAD_FRACTION = 0.03
 

@@ -33,14 +33,32 @@ plain sensor gives with the same seed.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from viform._validate import check_int, check_positive
+from viform._validate import ViformError, check_int, check_positive
 from viform.light.scenes import Scene
+from viform.sensors.base import Sensor
 from viform.sensors.spike import FIXED_POINT_SCALE, SpikeSensor
 from viform.stream.container import SpikeStream
+
+
+def subthreshold_dynamic_range_db(shortest_s: float, sensitivity_s: float, levels: int) -> float:
+    """DR = 20·lg(τ̆/τ̌·N) dB with sub-threshold quantization to N levels (seed 000 §4.5).
+
+    Examples
+    --------
+    >>> round(subthreshold_dynamic_range_db(10e-9, 10e-3, 100), 6)
+    160.0
+    """
+    shortest = check_positive("shortest_s", shortest_s)
+    sens = check_positive("sensitivity_s", sensitivity_s)
+    n = check_int("levels", levels, 1)
+    if sens < shortest:
+        raise ViformError(f"sensitivity_s = {sensitivity_s!r} must be ≥ shortest_s = {shortest_s!r}")
+    return 20.0 * math.log10(sens / shortest * n)
 
 
 @dataclass
@@ -89,7 +107,7 @@ class SubthresholdCapture:
         return self.spikes.threshold_electrons * self.window_counts() / self.sensitivity_s
 
 
-class SubthresholdSpikeSensor:
+class SubthresholdSpikeSensor(Sensor):
     """A spike sensor with sub-threshold quantization readout every τ̆ (seed 000 §4.5).
 
     Parameters
@@ -101,15 +119,20 @@ class SubthresholdSpikeSensor:
         N, the number of sub-threshold quantization levels of Q.
     """
 
+    name = "spike-subthreshold"
+
     def __init__(self, sensor: SpikeSensor | None = None, sensitivity_ticks: int = 400, levels: int = 100):
         self.sensor = sensor or SpikeSensor()
         self.sensitivity_ticks = check_int("sensitivity_ticks", sensitivity_ticks, 1)
         self.levels = check_int("levels", levels, 1, 1 << 20)
 
+    def describe(self) -> dict:
+        """The spike sensor's parameters plus τ̆ (ticks) and N."""
+        return {**self.sensor.describe(), "model": self.name, "sensitivity_ticks": self.sensitivity_ticks,
+                "subthreshold_levels": self.levels, "dynamic_range_db": self.dynamic_range_db()}
+
     def dynamic_range_db(self) -> float:
         """20·lg(τ̆/τ̌·N), τ̌ = one tick (seed 000 §4.5)."""
-        from viform.measure.dynamic_range import subthreshold_dynamic_range_db
-
         p = self.sensor.parameters
         return subthreshold_dynamic_range_db(1 / p.clock_hz, self.sensitivity_ticks / p.clock_hz, self.levels)
 

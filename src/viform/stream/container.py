@@ -67,6 +67,18 @@ class SpikeSource(ABC):
     def read_ticks(self, start: int, stop: int) -> np.ndarray:
         """Spikes of ticks [start, stop) as a bool array (stop − start, H, W)."""
 
+    def _say_unverified(self, why: str) -> None:
+        """Warn once per source (:class:`~viform._validate.UnverifiedDataWarning`) that its data is
+        read without checksums viform can verify; ``why`` names the file and the reason."""
+        if getattr(self, "_unverified_said", False):
+            return
+        self._unverified_said = True
+        import warnings
+
+        from viform._validate import UnverifiedDataWarning
+
+        warnings.warn(UnverifiedDataWarning(f"{why}: its data is read unverified"), stacklevel=3)
+
     # ---- derived, shared by every source
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -46,8 +46,8 @@ def _agree(path, name, given, declared):
     if declared is None:
         return given
     if given is not None and int(given) != int(declared):
-        raise ViformError(f"--{name} = {given} contradicts the sidecar of {str(path)!r}, which declares "
-                          f"{name} = {int(declared)}; leave --{name} out")
+        raise ViformError(f"{name} = {given} contradicts the sidecar of {str(path)!r}, which gives "
+                          f"{int(declared)}: leave it out")
     return int(declared)
 
 
@@ -111,9 +111,11 @@ class DatFile(SpikeSource):
             if start_time_s is None:
                 start_time_s = side.get("start_time_s")
         if height is None or width is None:
-            raise ViformError(f"height and width are required to read {str(path)!r}: "
-                              f".dat files do not store them and {sidecar_path(path).name!r} (the sidecar "
-                              "viform writes) is absent; give e.g. --height 250 --width 400")
+            where = (f"its sidecar {sidecar_path(path).name!r} does not give "
+                     f"{' and '.join(k for k in ('height', 'width') if side.get(k) is None)}") if side is not None \
+                else f"{sidecar_path(path).name!r} (the sidecar viform writes) is absent"
+            raise ViformError(f"height and width are required to read {str(path)!r}: .dat files do not store "
+                              f"them and {where}; give them, e.g. height=250 width=400")
         self.height = check_int("height", height, 1, MAX_SIDE)
         self.width = check_int("width", width, 1, MAX_SIDE)
         size = path.stat().st_size
@@ -125,15 +127,17 @@ class DatFile(SpikeSource):
         if rest and not allow_partial:
             raise ViformError(
                 f"{str(path)!r} holds {size} bytes, not a whole number of {self.height}×{self.stored_width} "
-                f"frames ({self.frame_bytes} bytes each; {whole} whole frames and {rest} extra bytes): "
-                "check --height/--width, or keep the whole frames with --allow-partial")
+                f"frames ({self.frame_bytes} bytes each; {whole} whole frames and {rest} extra bytes)",
+                remedies={**({} if side is not None and side.get("height") is not None else
+                             {"height": f"check height={self.height} and width={self.width}"}),
+                          "allow_partial": "keep the whole frames with allow_partial=True"})
         if whole == 0:
             raise ViformError(f"{str(path)!r} holds no whole frame of {self.frame_bytes} bytes")
         if side is not None and side.get("n_ticks") is not None and int(side["n_ticks"]) != whole \
                 and not allow_partial:
             raise ViformError(f"{str(path)!r} holds {whole} frames but its sidecar declares "
-                              f"n_ticks = {int(side['n_ticks'])}: "
-                              "the file was cut or replaced (keep the whole frames with --allow-partial)")
+                              f"n_ticks = {int(side['n_ticks'])}: the file was cut or replaced",
+                              remedies={"allow_partial": "keep the whole frames with allow_partial=True"})
         self.path = path
         self._reader = None
         self._check_whole = False
@@ -177,10 +181,12 @@ class DatFile(SpikeSource):
         """
         checks = []
         if self.sidecar is None:
-            return {"verified": False, "checks": ["no sidecar: nothing to verify against"]}
+            return {"verified": False, "checks": [f"no sidecar {sidecar_path(self.path).name!r}: nothing to "
+                                                  "verify the data against"]}
         if self.sidecar.get("blake2b") is None:
-            return {"verified": False, "checks": ["another tool's sidecar, without checksums: nothing to verify "
-                                                  "against"]}
+            return {"verified": False, "checks": ["the sidecar holds no viform checksums (another tool's, or "
+                                                  "viform's with its fields removed): nothing to verify the "
+                                                  "data against"]}
         size = self.path.stat().st_size
         declared = self.sidecar.get("data_bytes")
         if declared is not None:
@@ -209,6 +215,13 @@ class DatFile(SpikeSource):
             self._check_whole = False
         return {"verified": bool(checks), "checks": checks or ["sidecar records no size or checksum"]}
 
+    def _unverified_reason(self) -> str:
+        name = sidecar_path(self.path).name
+        if self.sidecar is None:
+            return f"{str(self.path)!r} has no sidecar {name!r} (where viform records the data's checksums)"
+        return (f"{str(self.path)!r}: its sidecar {name!r} holds no viform checksums (another tool's sidecar, or "
+                "viform's with its fields removed)")
+
     def _pread(self, offset: int, count: int) -> bytes:
         with open(self.path, "rb") as f:
             return os.pread(f.fileno(), count, offset)
@@ -220,11 +233,19 @@ class DatFile(SpikeSource):
             return 416
         return self.width
 
-    def read_ticks(self, start: int, stop: int) -> np.ndarray:
+    def read_packed(self, start: int, stop: int) -> np.ndarray:
+        """The stored bytes of ticks [start, stop) as they are in the file: (T, frame bytes) uint8.
+
+        Each row holds ``height × stored_width`` bits, pixel k of the stored frame being bit
+        k mod 8 of byte k // 8 (least significant first); rows are bottom-up when ``flip``.
+        Checked against the sidecar's checksums exactly as :meth:`read_ticks`.
+        """
         start, stop = max(0, start), min(stop, self.n_ticks)
         # positioned reads rather than a memory map: the resident memory stays one block whatever
         # the file size (mapped pages of a long file count against the process)
         want = (stop - start) * self.frame_bytes if stop > start else 0
+        if not self.checked and want:
+            self._say_unverified(self._unverified_reason())
         if self._check_whole and want:
             self.verify()  # version 1 sidecar: no block checksums, the whole file first
         if self._reader is not None:  # the blocks holding these ticks, each checked before use
@@ -233,7 +254,10 @@ class DatFile(SpikeSource):
             data = self._pread(start * self.frame_bytes, want) if want else b""
         if len(data) != want:
             raise ViformError(f"{str(self.path)!r} was cut while being read (ticks {start}–{stop - 1})")
-        raw = np.frombuffer(data, np.uint8).reshape(-1, self.frame_bytes)
+        return np.frombuffer(data, np.uint8).reshape(-1, self.frame_bytes)
+
+    def read_ticks(self, start: int, stop: int) -> np.ndarray:
+        raw = self.read_packed(start, stop)
         bits = np.unpackbits(raw, axis=1, bitorder="little").view(bool)
         frames = bits.reshape(-1, self.height, self.stored_width)[:, :, : self.width]
         if self.flip:
@@ -287,9 +311,10 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     pending = pending_sidecar_path(path)
     pending.unlink(missing_ok=True)  # a killed writer's whose data never arrived
     renamed = False
-    body = old_side = None
+    body = old_side = written = None
     try:
         with atomic_open(path, "wb") as f:
+            written = os.fstat(f.fileno())  # the new data's identity: is it under ``path`` after an interrupt?
             if blocks is None:
                 blocks = ((first, pack_frames(block, flip)) for first, block in source.iter_blocks(block_ticks))
             for _, raw in blocks:
@@ -316,6 +341,7 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
         if body is not None:
             _finish_pair(pending, side, body)
     except BaseException:
+        renamed = renamed or _holds(path, written)  # an interrupt held during the data's rename comes after it
         if renamed and body is not None:  # interrupted between the renames: finish the pair
             _finish_pair(pending, side, body)
         else:
@@ -325,6 +351,17 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
                     f.write(old_side)
         raise
     return path
+
+
+def _holds(path: Path, written) -> bool:
+    """Whether the file at ``path`` is the one whose ``os.fstat`` is ``written``."""
+    if written is None:
+        return False
+    try:
+        now = os.stat(path)
+    except OSError:
+        return False
+    return (now.st_dev, now.st_ino) == (written.st_dev, written.st_ino)
 
 
 def _finish_pair(pending: Path, side: Path, body: dict) -> None:

@@ -34,7 +34,7 @@ def open_spikes(path, height: int | None = None, width: int | None = None, *,
     the file records. ``key`` and ``axes`` choose the array of a ``.npz`` and its axis order
     (see :class:`~viform.stream.npz.NpzSpikes`).
     """
-    from viform._io import clean_stale
+    from viform._io import clean_stale, store_set_aside
 
     _check_overrides(clock_hz, threshold_electrons)
     path = Path(path)
@@ -42,7 +42,10 @@ def open_spikes(path, height: int | None = None, width: int | None = None, *,
     if not path.exists():
         clean_stale(path)  # a writer killed between its two renames set the old store aside
         if not path.exists():
-            raise ViformError(f"spike file {str(path)!r} does not exist")
+            aside = store_set_aside(path)  # a live writer between its two renames: the old store is whole
+            if aside is None:
+                raise ViformError(f"spike file {str(path)!r} does not exist")
+            path = aside
     if not (path.is_file() or path.is_dir()):  # a FIFO or device would block the reader
         raise ViformError(f"{str(path)!r} is not a regular file or folder")
     if suffix in (".dat", ".npz") and path.is_dir():

@@ -15,9 +15,17 @@ costs memory (a shape that disagrees with the member's size is refused at open).
 Integrity: viform's header (written after ``spk``) holds ``format``, ``version``, the member's
 size, the CRC-32 of each block of it and the header's own BLAKE2b; every read checks the
 blocks it uses before decoding them, so a partial read (``reconstruct --at``) never returns
-damaged bits and costs only those blocks. Files of other tools (and of older viform) have no
-block checksums: the zip CRC-32 of the spike member is checked by one streamed pass before
-the first read.
+damaged bits and costs only those blocks. A header holding any field only viform writes (its
+integrity fields, or the provenance ``viform_version``, ``command_line``, ``utc_date``) must
+hold them all; fields viform does not write are refused. The archive must account for every
+byte of the file: bytes before the first member or after the zip's end record are refused.
+
+Files of other tools have no viform checksums: their data is read *unverified* (an
+:class:`~viform._validate.UnverifiedDataWarning` says so at the first read). The zip CRC-32 of a
+spike member of at most :data:`WHOLE_CHECK_BYTES` is checked by one streamed pass before the
+first read; a bigger member is read only as far as a read needs (the work of a partial read is
+bounded by what it reads; its zip CRC-32 is checked when a read reaches the member's end, as
+``verify`` does).
 
 Axis order: viform's own files declare it; the arrays named ``spk`` and ``spikes`` are
 (T, H, W) by the Spike-Zoo and viform conventions; any other array must be given an explicit
@@ -42,8 +50,10 @@ from viform._validate import ViformError
 from viform.stream.checksums import BlockCrcs, BlockReader, block_bytes_for, check_manifest, header_digest
 from viform.stream.container import SpikeSource, block_ticks_for
 from viform.stream.sidecar import (
+    HEADER_FIELDS,
     MAX_DIMENSION,
     MAX_TICKS,
+    check_consistent,
     source_metadata,
     stream_header,
     validate_header,
@@ -57,6 +67,14 @@ NPZ_FORMAT = "viform-spikes-npz"
 NPZ_VERSION = 2
 #: Header fields of viform's integrity scheme: a header holding one must hold all.
 _INTEGRITY_FIELDS = ("format", "version", "member_bytes", "block_bytes", "block_crc32", "header_blake2b")
+#: Fields only viform writes in the header (its integrity fields and provenance): a header holding
+#: any of them is viform's and must be whole.
+_MARKS = _INTEGRITY_FIELDS + ("viform_version", "command_line", "utc_date")
+#: Every field of the header viform writes.
+_HEADER_FIELDS = HEADER_FIELDS + ("axes",) + _INTEGRITY_FIELDS
+#: Largest spike member of another tool's file whose zip CRC-32 is checked by a pass over it before
+#: the first read (bytes; about 0.3 s of inflating). A bigger one is read as far as each read needs.
+WHOLE_CHECK_BYTES = 256 << 20
 #: Largest array loaded whole (one not stored as (T, H, W) in C order), bytes.
 MAX_WHOLE_BYTES = 256 << 20
 #: Largest small member (header, scalars) read, bytes.
@@ -104,6 +122,7 @@ class NpzSpikes(SpikeSource):
             if not zipfile.is_zipfile(path):
                 raise ViformError(f"{str(path)!r} is not a .npz file (not a zip archive)")
             self._zip = zipfile.ZipFile(path)
+            _check_layout(path, self._zip)
             infos = {i.filename: i for i in self._zip.infolist()}
             if len(infos) != len(self._zip.infolist()):  # readers disagree on which one counts
                 twice = sorted({i.filename for i in self._zip.infolist()
@@ -216,8 +235,9 @@ class NpzSpikes(SpikeSource):
                 item = np.asarray(value).item()
                 self.metadata[name] = item.decode() if isinstance(item, bytes) else item
         self.metadata.update({"source": str(path), "format": "npz"})
-        #: Every read is checked: block CRC-32s (viform's files) or the member's zip CRC-32 (others).
-        self.checked = True
+        #: True when every read is checked against viform's block CRC-32s (False: another tool's file,
+        #: read unverified; the zip CRC-32 of its member is still checked, see the module docstring).
+        self.checked = self._blocks is not None
 
     # ---- zip member access
     def _read_small(self, member: str):
@@ -330,9 +350,16 @@ class NpzSpikes(SpikeSource):
         """
         if self._blocks is not None:
             data = self._blocks.read(self._header_bytes + offset, count)
-        elif not self._zip_checked:  # the first read passes the whole member (its CRC-32 checked at the end)
-            data = self._check_member((self._header_bytes + offset, count))
+        elif not self._zip_checked and self._member_bytes <= WHOLE_CHECK_BYTES:
+            self._say_unverified(f"{str(self.path)!r} holds no viform checksums (another tool's .npz, or viform's "
+                                 "header removed; the zip CRC-32 of its spikes is checked)")
+            data = self._check_member((self._header_bytes + offset, count))  # one pass, CRC-32 at the end
         else:
+            if not self._zip_checked:
+                self._say_unverified(
+                    f"{str(self.path)!r} holds no viform checksums (another tool's .npz, or viform's header "
+                    f"removed), and the zip CRC-32 of its {self._member_bytes / 1e9:.3g} GB spike member is "
+                    "checked only by a read to its end (viform verify)")
             data = self._member_read(self._header_bytes + offset, count)
         if len(data) != count:
             raise ViformError(f"{str(self.path)!r}: array {self.key!r} is truncated (data ends "
@@ -380,7 +407,12 @@ class NpzSpikes(SpikeSource):
         yield from super().iter_blocks(block_ticks, start, stop)
 
     def verify(self) -> dict:
-        """Read every member to its end (zip CRC-32 checked) and the spikes (values 0/1)."""
+        """Read every member to its end (zip CRC-32 checked) and the spikes (values 0/1).
+
+        ``verified`` is True only for viform's files (every block against its CRC-32); another
+        tool's file is read whole, but nothing it carries can tell an edit from the original.
+        """
+        self._unverified_said = True  # the result says so
         for info in self._zip.infolist():
             if info.filename == self._member:
                 continue
@@ -395,8 +427,11 @@ class NpzSpikes(SpikeSource):
         if not self._zip_checked:
             self._check_member()
         checks = ["zip CRC-32 of every member matches; spikes are 0/1; shape matches the data size"]
-        if self._blocks is not None:
-            checks.append(f"{len(self._blocks.crcs)} block CRC-32s and the header checksum match")
+        if self._blocks is None:
+            checks.append("but the file holds no viform checksums (another tool's .npz, or viform's header "
+                          "removed): an edit cannot be told from the original")
+            return {"verified": False, "checks": checks}
+        checks.append(f"{len(self._blocks.crcs)} block CRC-32s and the header checksum match")
         return {"verified": True, "checks": checks}
 
     def close(self) -> None:
@@ -412,13 +447,14 @@ def _check_integrity_fields(header: dict, path) -> bool:
     or whose own BLAKE2b differs, is damaged. Headers of older viform files (no such field) are
     read like other tools' files (the member's zip CRC-32 checked before use).
     """
-    marks = [k for k in _INTEGRITY_FIELDS if k in header]
+    marks = [k for k in _MARKS if k in header]
     if not marks:
         return False
     where = f"{str(path)!r}: member {HEADER_KEY!r}"
     if header.get("format") != NPZ_FORMAT:
         raise ViformError(f"{where}: field 'format' = {header.get('format')!r} is not {NPZ_FORMAT!r}, though it "
-                          f"holds viform's field {marks[0]!r}: the file is damaged or was edited")
+                          f"holds viform's field {marks[0]!r}: the file is damaged or was edited (or written by "
+                          "an older viform: write it again)")
     version = header.get("version")
     if isinstance(version, bool) or version != NPZ_VERSION:
         raise ViformError(f"{where}: field 'version' = {version!r} is not supported (this viform reads version "
@@ -428,7 +464,32 @@ def _check_integrity_fields(header: dict, path) -> bool:
         raise ViformError(f"{where}: field {missing[0]!r} is missing: the file is damaged or was edited")
     if header["header_blake2b"] != header_digest(header):
         raise ViformError(f"{where}: the header is damaged or was edited (its BLAKE2b checksum differs)")
+    check_consistent(header, where, known=_HEADER_FIELDS)
+    if header.get("rows", "upright") != "upright" or header.get("axes", "thw") != "thw":
+        raise ViformError(f"{where}: fields rows = {header.get('rows')!r}, axes = {header.get('axes')!r}, but "
+                          "viform stores .npz spikes upright as (ticks, rows, columns): the header was edited")
     return True
+
+
+def _check_layout(path: Path, archive: zipfile.ZipFile) -> None:
+    """The archive accounts for the whole file: its end record (and comment) ends the file, and its
+    first member starts it (zip readers tolerate bytes around an archive; viform does not)."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        tail_len = min(size, 22 + 0xFFFF)
+        f.seek(size - tail_len)
+        tail = f.read(tail_len)
+    pos = tail.rfind(b"PK\x05\x06")
+    while pos >= 0:  # the end record whose comment ends exactly at the end of the file
+        if pos + 22 <= len(tail) and pos + 22 + int.from_bytes(tail[pos + 20:pos + 22], "little") == len(tail):
+            break
+        pos = tail.rfind(b"PK\x05\x06", 0, pos)
+    if pos < 0:
+        raise ViformError(f"{str(path)!r} is damaged or was edited: it holds bytes after the zip's end record")
+    first = min((info.header_offset for info in archive.infolist()), default=0)
+    if first != 0:
+        raise ViformError(f"{str(path)!r} is damaged or was edited: it holds {first} bytes before the first zip "
+                          "member (e.g. another file joined in front)")
 
 
 def _scalar(values: dict, name: str, path=None):

@@ -41,7 +41,15 @@ SIDECAR_VERSION = 2
 SIDECAR_VERSIONS = (1, 2)
 #: Fields only viform writes: a sidecar holding any of them must hold every checksum field.
 VIFORM_MARKS = ("format", "sidecar_blake2b", "blake2b", "data_bytes", "block_bytes", "block_crc32",
-                "viform_version")
+                "viform_version", "command_line", "utc_date")
+#: Fields of every header :func:`stream_header` makes (the ``.npz`` and zarr headers hold exactly
+#: these plus their format's own; a ``.dat`` sidecar may hold more, e.g. a dataset's records).
+HEADER_FIELDS = ("height", "width", "n_ticks", "clock_hz", "threshold_electrons", "start_time_s", "rows",
+                 "bit_order", "optics", "dark_current_e_per_s", "scene", "seed", "viform_version",
+                 "command_line", "utc_date", "metadata")
+#: Fields that hold a number (or a name) in every header viform writes: ``null`` there is an edit
+#: (``threshold_electrons``, ``optics`` and ``dark_current_e_per_s`` may be null: unknown).
+NOT_NULL_FIELDS = ("height", "width", "n_ticks", "clock_hz", "start_time_s", "rows", "bit_order")
 #: Largest height or width a header may declare (pixels).
 MAX_DIMENSION = 1 << 16
 #: Readout clock a header may declare, Hz: from 1 Hz (slower than any spike or frame sensor;
@@ -322,6 +330,29 @@ def check_marks(header: dict, path) -> None:
     if header[DIGEST_KEY] != _digest(header):
         raise ViformError(f"{where}: the sidecar is damaged or was edited (its checksum {DIGEST_KEY!r} differs); "
                           "write the file again with viform")
+    check_consistent(header, where)
+
+
+def check_consistent(header: dict, where: str, known: tuple | None = None) -> None:
+    """Checks of a viform header that need no key (a digest recomputed after an edit passes its own check).
+
+    ``null`` in a field of :data:`NOT_NULL_FIELDS` is refused (viform writes a value there);
+    a ``stored_width`` other than ``width`` is refused (viform stores rows without padding);
+    with ``known`` (the header's whole field list), any other field is refused.
+    """
+    nulls = [k for k in NOT_NULL_FIELDS if k in header and header[k] is None]
+    if nulls:
+        raise ViformError(f"{where}: field {nulls[0]!r} is null, but viform always writes a value there: the "
+                          "header was edited")
+    if header.get("stored_width") is not None and header.get("width") is not None \
+            and header["stored_width"] != header["width"]:
+        raise ViformError(f"{where}: field 'stored_width' = {header['stored_width']!r} differs from 'width' = "
+                          f"{header['width']!r}, but viform stores rows without padding: the header was edited")
+    if known is not None:
+        unknown = sorted(k for k in header if k not in known)
+        if unknown:
+            raise ViformError(f"{where}: field {unknown[0]!r} is not one this viform writes or reads in this "
+                              "format: the header was edited, or written by a newer viform")
 
 
 def _short(exc) -> str:

@@ -27,13 +27,15 @@ import numpy as np
 from viform._io import atomic_path, import_uninterrupted, interrupts_deferred
 from viform._validate import ViformError, check_int
 from viform.stream.container import SpikeSource
-from viform.stream.sidecar import source_metadata, stream_header, validate_header
+from viform.stream.sidecar import HEADER_FIELDS, check_consistent, source_metadata, stream_header, validate_header
 
 FORMAT_NAME = "viform-spikes"
 FORMAT_VERSION = 2
 #: Fields only version 2 writes (their presence in a "version 1" header means an edit).
 _MANIFEST_FIELDS = ("chunks", "chunk_ticks", "header_blake2b", "n_ticks", "viform_version", "utc_date",
                     "command_line")
+#: Every field of a version 2 header (others are refused).
+_HEADER_FIELDS = HEADER_FIELDS + ("format", "version", "chunk_ticks", "chunks", "header_blake2b")
 #: Bytes of packed bits per stored chunk at most (a chunk is read whole to check its CRC).
 CHUNK_BUDGET_BYTES = 4 << 20
 
@@ -147,6 +149,7 @@ class ZarrSpikeStore(SpikeSource):
             raise ViformError(f"{str(path)!r}: field 'chunks' must be a list of CRC-32 values")
         if _header_digest(header) != header["header_blake2b"]:
             raise ViformError(f"{str(path)!r}: the header is damaged or was edited (its BLAKE2b checksum differs)")
+        check_consistent(header, repr(str(path)), known=_HEADER_FIELDS)
         if int(header["n_ticks"]) != self.n_ticks:
             raise ViformError(f"{str(path)!r}: the header declares {header['n_ticks']} ticks but the array holds "
                               f"{self.n_ticks}")
@@ -181,8 +184,18 @@ class ZarrSpikeStore(SpikeSource):
             if zlib.crc32(chunk.tobytes()) != self._crcs[i]:
                 raise ViformError(f"{str(self.path)!r}: chunk {i} (ticks {a}–{b - 1}) is damaged "
                                   "(its CRC-32 differs from the manifest)")
+            self._check_padding(chunk, i, a, b)
             parts.append(chunk[max(start, a) - a: min(stop, b) - a])
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+    def _check_padding(self, chunk: np.ndarray, index: int, a: int, b: int) -> None:
+        """The bits past the declared width in each row's last byte are zero, as viform writes them:
+        a non-zero one means the data is wider than the header says (the width was edited)."""
+        spare = (-self.width) % 8
+        if spare and chunk.size and np.any(chunk[..., -1] & np.uint8((0xFF << (8 - spare)) & 0xFF)):
+            raise ViformError(f"{str(self.path)!r}: chunk {index} (ticks {a}–{b - 1}) holds spikes past the declared "
+                              f"width of {self.width} columns (its padding bits are not zero): the header was edited "
+                              "or the store is damaged")
 
     def _load(self, a: int, b: int) -> np.ndarray:
         try:
@@ -196,6 +209,8 @@ class ZarrSpikeStore(SpikeSource):
         start, stop = max(0, start), min(stop, self.n_ticks)
         if stop <= start:
             return np.zeros((0, self.height, self.width), bool)
+        if not self.checked:
+            self._say_unverified(f"{str(self.path)!r} is read without its checksums (verify=False)")
         packed = self._read_packed(start, stop)
         bits = np.unpackbits(packed, axis=-1, bitorder="little", count=self.width).view(bool)
         return bits[:, ::-1, :] if self.flip else bits

@@ -1,24 +1,55 @@
 """Optical flow from a spike stream, scored against a scene's exact truth (seed 000, abstract and §7).
 
-The estimator is classical and deliberately simple, so its failures are the sensor's, not a
-network's:
+The estimator is classical, so its failures are the sensor's, not a network's. From the
+spikes around the two instants t and t + dt:
 
-1. two images of the light, at t and at t + dt, from the spikes around each instant —
-   multi-interval imaging by default (seed 000 §3.3.2: the K spikes on each side of the
-   instant, light = (2K − 1)·Q / span), which follows each pixel's own time scale;
-2. both mapped to the same 8-bit scale of *log* light (one mapping for the pair, so a change
-   of brightness is not read as motion, and dim and bright texture both count);
-3. dense inverse search (DIS, Kroeger et al., ECCV 2016, as implemented in OpenCV:
-   ``cv2.DISOpticalFlow``), a coarse-to-fine patch matcher with variational refinement — the
-   fast classical flow of the field. Its ``fast`` preset is the default: on the tuning scene
-   (a texture translating at 2,000 px/s, SpikeOne preset, 1 ms) it gave EPE 0.10 px against
-   0.36 px for ``medium`` (whose finer refinement follows the images' photon noise); the other
-   scenes of ``benchmarks/bench_flow.py`` were not looked at for this choice.
+1. **Images whose time support follows the light.** Each pixel's rate at each instant is the
+   multi-interval estimate of :mod:`viform.imaging.multi_interval` (seed 000 §3.3.2: up to K
+   spikes on each side, the span growing one interval at a time and stopping at the first
+   interval inconsistent with the light so far — so the window is short where the light
+   changes, i.e. where something moves past, and long on still light). All instants of a
+   call are imaged in **one pass** over the spikes (a ring of each pixel's last 2K spike
+   ticks), spikes being looked for at most ``horizon_ticks`` from the instant. Each pixel also
+   gets its noise: a span of X ticks holding n intervals of threshold Q has
+   var(log rate) ≈ 1/(n·Q) (Gamma arrivals) + 1/(6·X²) (tick rounding at both ends) + 0.02²
+   (a floor for pixel-to-pixel gain spread).
+2. **Dense flow**: dense inverse search (DIS, Kroeger et al., ECCV 2016, OpenCV's
+   ``cv2.DISOpticalFlow``) on both images mapped to one 8-bit scale of log light. With
+   ``chain_steps`` > 1 the interval is split, where the flow exceeds ``chain_above_px``, into
+   steps whose flows are composed; off by default: DIS's coarse-to-fine search already finds
+   large displacements, and composing steps added their errors (textured EPE on the tuning
+   scenes: rotating 0.35 chained against 0.20 px; a 24-px translation 0.18 against 0.07).
+3. **Layered refinement** (the layered representation of Wang & Adelson, IEEE TIP 3(5), 1994;
+   model-based motion as in Bergen et al., ECCV 1992). Uniform regions — a saturated or
+   untextured object, whose interior tells nothing about its motion — move as a whole. The
+   image at t is cut into regions of similar light (neighbours merged smallest difference
+   first, each joining only a region whose mean it matches within the noise, in the spirit of
+   Felzenszwalb & Huttenlocher, IJCV 59(2), 2004). Each region whose surroundings changed is
+   tested for one motion over a still background: the cost of "this region moved by d, all
+   else still" — its pixels compared where they land, the background they uncover unknown, a
+   capped (robust) noise-normalized residual — is searched coarse to fine over
+   ± ``max_shift_px``; a motion is kept when it lowers the cost by more than
+   ``min_gain`` (in units of χ², the squared noise-normalized residual) and leaves less than
+   a quarter of its landings unexplained. It is then refined to sub-pixel precision by
+   Gauss–Newton (Lucas & Kanade, IJCAI 1981) on lightly smoothed images over the region's rim,
+   as an affine motion where that fits significantly better (a rotating blade).
+4. **Still background.** Pixels in no moving region whose local change between the two
+   images (mean χ² over 5×5) is what the noise gives get zero flow, so the dense flow's
+   spill from a moving object does not read as motion of what stands still.
+5. **Confidence** per pixel, in [0, 1]: how well the two images resolve the interval —
+   min(1, dt / support) for the longer of the two pixel's time supports, times the share of
+   the 2K − 1 intervals it found; 0 where a spike was missing (no spike within the horizon).
 
 The result is forward flow in px from t to t + dt, the convention of
 :mod:`viform.light.truth` and of flow benchmarks. Scores follow them too: the average endpoint
 error (EPE, px) and the KITTI outlier fraction Fl (EPE > 3 px *and* > 5 % of the true flow's
-length), over the pixels where the truth is valid.
+length), over the pixels where the truth is valid; :func:`motion_scores` splits them into the
+moving pixels (and each object), with the error relative to the true motion, and the still
+background (false motion), each beside the score of predicting zero flow.
+
+Choices made by looking at results were made on the tuning scenes of
+``benchmarks/bench_flow.py`` (translating, rotating, multi-object noise seed 0) and are
+reported on the others (multi-object seeds 1–2, dilemma, waving-hand).
 
 Files: Middlebury ``.flo`` (what the spike-camera flow sets SPIFT/PHM and SCFlow read: float32
 magic 202021.25, width, height, then (H, W, 2) u/v); unknown flow is stored as 1e10, the
@@ -46,6 +77,14 @@ FLO_UNKNOWN = 1e10
 IMAGE_METHODS = ("multi-interval", "interval", "accumulation")
 #: DIS presets of OpenCV (speed against accuracy).
 DIS_PRESETS = ("ultrafast", "fast", "medium")
+#: Refinements after the dense flow: the layered one (module notes, step 3–4) or none.
+REFINEMENTS = ("layered", "none")
+#: Q assumed for the noise of streams that do not record it (as multi-interval imaging does).
+DEFAULT_NOISE_THRESHOLD_ELECTRONS = 1.0e4
+#: Relative floor of each pixel's log-light noise (gain spread between pixels, ≈ 2 %).
+LOG_NOISE_FLOOR = 0.02
+#: True flow above this (px) makes a pixel "moving" in :func:`motion_scores`.
+MOVING_ABOVE_PX = 0.5
 
 
 # ---------------------------------------------------------------------- files
@@ -114,9 +153,15 @@ class FlowScores:
     pixels: int
     true_flow_px: float
 
+    @property
+    def relative_error(self) -> float:
+        """EPE as a share of the true flow's mean length (1.0: no better than zero flow); NaN if it is 0."""
+        return self.epe_px / self.true_flow_px if self.true_flow_px > 0 else math.nan
+
     def as_dict(self) -> dict:
         return {"epe_px": self.epe_px, "fl_outliers": self.fl_outliers, "pixels": self.pixels,
-                "true_flow_px": self.true_flow_px}
+                "true_flow_px": self.true_flow_px,
+                "relative_error": self.relative_error if math.isfinite(self.relative_error) else None}
 
 
 def flow_scores(estimate_px: np.ndarray, truth: FlowTruth, mask: np.ndarray | None = None) -> FlowScores:
@@ -155,6 +200,274 @@ def textured_mask(lux: np.ndarray, window_px: int = 7, min_log_contrast: float =
     return mask
 
 
+
+
+@dataclass
+class MotionScores:
+    """Flow scores split where the truth moves and where it stands still (:func:`motion_scores`).
+
+    Attributes
+    ----------
+    all : FlowScores
+        Every pixel with valid truth (inside the mask).
+    moving : FlowScores
+        Pixels whose true flow exceeds ``moving_above_px``; its ``relative_error`` is the
+        error as a share of the true motion (1.0: no better than reading zero flow).
+    still_median_px, still_p95_px : float
+        Median and 95th percentile of the estimated flow's length on the still pixels (true
+        flow exactly 0): false motion, px.
+    still_pixels : int
+        Still pixels scored.
+    objects : dict
+        ``"id class"`` → :class:`FlowScores` over each labelled object's pixels.
+    moving_above_px : float
+        The threshold used, px.
+    """
+
+    all: FlowScores
+    moving: FlowScores
+    still_median_px: float
+    still_p95_px: float
+    still_pixels: int
+    objects: dict = field(default_factory=dict)
+    moving_above_px: float = MOVING_ABOVE_PX
+
+    def as_dict(self) -> dict:
+        return {"all": self.all.as_dict(), "moving": self.moving.as_dict(),
+                "still": {"median_false_motion_px": self.still_median_px,
+                          "p95_false_motion_px": self.still_p95_px, "pixels": self.still_pixels},
+                "objects": {name: s.as_dict() for name, s in self.objects.items()},
+                "moving_above_px": self.moving_above_px}
+
+
+def motion_scores(estimate_px: np.ndarray, truth: FlowTruth, labels: np.ndarray | None = None,
+                  names: dict | None = None, mask: np.ndarray | None = None,
+                  moving_above_px: float = MOVING_ABOVE_PX) -> MotionScores:
+    """Scores of an estimated flow (2, H, W) on the moving pixels, each object and the still background.
+
+    Parameters
+    ----------
+    estimate_px : ndarray (2, H, W)
+        Estimated forward flow, px.
+    truth : FlowTruth
+        The exact flow between the same instants.
+    labels : ndarray (H, W) of int, optional
+        Object id per pixel at the first instant (0: background); each id > 0 is scored apart.
+    names : dict, optional
+        id → class name, for the keys of ``objects``.
+    mask : ndarray (H, W) of bool, optional
+        Pixels to score (all others left out of every figure).
+    moving_above_px : float
+        True flow (px) above which a pixel counts as moving (0.5).
+    """
+    estimate = np.asarray(estimate_px, dtype=np.float64)
+    if estimate.shape != truth.flow_px.shape:
+        raise ViformError(f"estimated flow {estimate.shape} and truth {truth.flow_px.shape} differ in shape")
+    moving_above_px = check_positive("moving_above_px", moving_above_px)
+    use = truth.valid & np.all(np.isfinite(estimate), axis=0)
+    if mask is not None:
+        use &= np.asarray(mask, bool)
+    length = np.hypot(*truth.flow_px)
+    moving = use & (length > moving_above_px)
+    still = use & (length == 0)
+    false_motion = np.hypot(*estimate[:, still]) if still.any() else np.empty(0)
+    objects = {}
+    if labels is not None:
+        labels = np.asarray(labels)
+        for obj in np.unique(labels[labels > 0]):
+            name = f"{int(obj)} {(names or {}).get(int(obj), 'object')}"
+            objects[name] = flow_scores(estimate, truth, use & (labels == obj))
+    return MotionScores(flow_scores(estimate, truth, use), flow_scores(estimate, truth, moving),
+                        float(np.median(false_motion)) if false_motion.size else math.nan,
+                        float(np.percentile(false_motion, 95)) if false_motion.size else math.nan,
+                        int(still.sum()), objects, moving_above_px)
+
+
+# ---------------------------------------------------------------------- images
+
+
+@dataclass
+class RateImage:
+    """A firing-rate image at one instant with the support behind each pixel's value.
+
+    Attributes
+    ----------
+    rate : ndarray (H, W), float32
+        Spikes per tick.
+    intervals : ndarray (H, W), int16
+        Intervals between spikes the rate was taken over (1 … 2K − 1).
+    span_ticks : ndarray (H, W), int32
+        Ticks those intervals span: the pixel's time support.
+    censored : ndarray (H, W), bool
+        No spike on one side of the instant within the search (the rate is a bound).
+    """
+
+    rate: np.ndarray
+    intervals: np.ndarray
+    span_ticks: np.ndarray
+    censored: np.ndarray
+
+    def log_light(self) -> np.ndarray:
+        """log(rate), with pixels of no measurable rate at the lowest the span allows."""
+        return np.log(np.maximum(self.rate, 1.0 / np.maximum(self.span_ticks, 1) / 4)).astype(np.float64)
+
+    def log_variance(self, threshold_electrons: float) -> np.ndarray:
+        """var(log rate) per pixel (module notes): 1/(n·Q) + 1/(6·X²) + floor²; 1 where censored."""
+        n = np.maximum(self.intervals, 1).astype(np.float64)
+        span = np.maximum(self.span_ticks, 1).astype(np.float64)
+        var = 1.0 / (n * threshold_electrons) + 1.0 / (6.0 * span * span) + LOG_NOISE_FLOOR ** 2
+        return np.where(self.censored, 1.0, var)
+
+
+def _block_ticks(pixels: int) -> int:
+    """Ticks per read: 256, fewer on large sensors (a block stays ≈ 8 MiB of bools)."""
+    return int(np.clip(2 ** 23 // max(1, pixels), 8, 256))
+
+
+def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool = True, tolerance: float = 3.0,
+                      horizon_ticks: int = 1024, noise_threshold_electrons: float | None = None):
+    """Multi-interval rate images at many instants, in one pass over the spikes: yields ``(tick, RateImage)``.
+
+    Parameters
+    ----------
+    source : SpikeSource
+        Any spike stream.
+    ticks : sequence of int
+        Instants (ticks, increasing; repeats allowed).
+    spikes_per_side : int
+        K: up to K spikes on each side of the instant (2K − 1 intervals).
+    adaptive : bool
+        Stop the span's growth at the first interval inconsistent with the light so far (the
+        test of :func:`viform.imaging.multi_interval.multi_interval_image`): short support
+        where the light changes, long where it is steady.
+    tolerance : float
+        That test's threshold, standard deviations.
+    horizon_ticks : int
+        Spikes are looked for at most this far from the instant; a pixel with none on a side
+        within it is ``censored`` (its rate a bound from the span searched).
+    noise_threshold_electrons : float, optional
+        Q in the adaptive test (default: the stream's, else 10⁴ e⁻).
+
+    Notes
+    -----
+    The stream is read once, in blocks, from where every pixel has K spikes before the first
+    instant (or ``horizon_ticks`` before it) to where every instant is complete; each
+    pixel keeps its last 2K spike ticks, and an instant's rate is computed as soon as the
+    pixel has K spikes after it. Memory: the instants pending within the horizon.
+    """
+    from viform.vision._flow_kernels import advance_rates, force_rates
+
+    k_side = check_int("spikes_per_side", spikes_per_side, 1)
+    check_positive("tolerance", tolerance)
+    horizon = check_int("horizon_ticks", horizon_ticks, 1)
+    q = noise_threshold_electrons or source.threshold_electrons or DEFAULT_NOISE_THRESHOLD_ELECTRONS
+    check_positive("noise_threshold_electrons", q)
+    instants = np.asarray([int(k) for k in np.atleast_1d(ticks)], dtype=np.int64)
+    if instants.size == 0:
+        raise ViformError("ticks is empty: give at least one instant")
+    if np.any(np.diff(instants) < 0):
+        raise ViformError("ticks must be in increasing order")
+    n_total = source.n_ticks
+    if instants[0] < 0 or instants[-1] >= n_total:
+        bad = instants[0] if instants[0] < 0 else instants[-1]
+        raise ViformError(f"ticks: {bad} is outside the stream's [0, {n_total})")
+    h, w = source.height, source.width
+    pixels = h * w
+    block = _block_ticks(pixels)
+    # where to start: every pixel's K spikes before the first instant, or the horizon
+    first = int(instants[0])
+    start = first + 1
+    counts = np.zeros(pixels, np.int64)
+    floor = max(0, first + 1 - horizon)
+    while start > floor and counts.min() < k_side:
+        a = max(floor, start - block)
+        counts += source.read_ticks(a, start).reshape(start - a, pixels).sum(axis=0, dtype=np.int64)
+        start = a
+        block = min(2 * block, _block_ticks(pixels) * 8)
+    block = _block_ticks(pixels)
+    lo_cut = start - 1  # a spike missing before the instant: taken just before the first tick read
+    span = max(int(instants[-1] - instants[0]), 1)
+    steps = np.diff(instants)
+    min_step = int(steps[steps > 0].min()) if np.any(steps > 0) else span
+    n_slots = int(min(instants.size, (horizon + block) // max(min_step, 1) + 2 + np.max(
+        np.bincount(instants - instants[0]))))
+    out_rate = np.empty((n_slots, pixels), np.float32)
+    out_used = np.empty((n_slots, pixels), np.int16)
+    out_span = np.empty((n_slots, pixels), np.int32)
+    out_cut = np.empty((n_slots, pixels), np.bool_)
+    ring = np.zeros((pixels, 1 << (2 * k_side - 1).bit_length()), np.int64)  # a power of two ≥ 2K per pixel
+    count = np.zeros(pixels, np.int64)
+    next_inst = np.zeros(pixels, np.int64)
+    emitted = 0
+    position = start
+    args = (k_side, bool(adaptive), float(q), float(tolerance))
+
+    def ready(upto):
+        nonlocal emitted
+        while emitted < upto:
+            s = emitted % n_slots
+            image = RateImage(out_rate[s].reshape(h, w).copy(), out_used[s].reshape(h, w).copy(),
+                              out_span[s].reshape(h, w).copy(), out_cut[s].reshape(h, w).copy())
+            yield int(instants[emitted]), image
+            emitted += 1
+
+    while emitted < instants.size:
+        if position >= n_total:
+            force_rates(ring, count, next_inst, instants, instants.size, *args, lo_cut, n_total,
+                        out_rate, out_used, out_span, out_cut)
+            yield from ready(instants.size)
+            break
+        stop = min(n_total, position + block)
+        if emitted + n_slots < instants.size:
+            # instants past the slots are not pending yet: read no further than the first of them
+            # (a pixel's ring holds only the spikes its pending instants need)
+            stop = min(stop, max(int(instants[emitted + n_slots]) + 1, position + 1))
+        bits = source.read_ticks(position, stop).reshape(stop - position, pixels).view(np.uint8)
+        advance_rates(bits, position, ring, count, next_inst, instants[: emitted + n_slots], *args, lo_cut,
+                      out_rate, out_used, out_span, out_cut)
+        position = stop
+        # instants whose horizon has passed are completed with what was found
+        late = int(np.searchsorted(instants, position - horizon, side="left"))
+        late = min(late, emitted + n_slots)
+        if late > 0:
+            force_rates(ring, count, next_inst, instants, late, *args, lo_cut, position,
+                        out_rate, out_used, out_span, out_cut)
+        done = int(next_inst.min())
+        yield from ready(min(done, instants.size))
+
+
+def rate_images(source, ticks, method: str = "multi-interval", spikes_per_side: int = 4, window_ticks: int = 41):
+    """Firing-rate images (spikes per tick) at ``ticks`` (sorted), yielded as ``(tick, rate)``.
+
+    ``multi-interval``: :func:`spike_rate_images` (one pass); ``accumulation``: the spikes of a
+    ``window_ticks`` window centred on each instant, counted directly; ``interval``: K = 1.
+    """
+    check_choice("method", method, IMAGE_METHODS)
+    if method == "accumulation":
+        from viform.imaging.accumulation import spike_counts, window_bounds
+
+        window_ticks = check_int("window_ticks", window_ticks, 1)
+        for k in ticks:
+            k0, k1 = window_bounds(int(k), window_ticks, source.n_ticks, "centre")
+            yield int(k), spike_counts(source, k0, k1) / (k1 - k0)
+        return
+    k_side = spikes_per_side if method == "multi-interval" else 1
+    for k, image in spike_rate_images(source, ticks, spikes_per_side=k_side):
+        yield k, image.rate.astype(np.float64)
+
+
+def _rate_image_of(source, ticks, method, spikes_per_side, window_ticks, horizon_ticks):
+    """RateImages at ``ticks`` for any method (accumulation: count n over the window)."""
+    if method == "accumulation":
+        for k, rate in rate_images(source, ticks, "accumulation", window_ticks=window_ticks):
+            counts = np.rint(rate * window_ticks)
+            yield k, RateImage(rate.astype(np.float32), np.maximum(counts, 1).astype(np.int16),
+                               np.full(rate.shape, window_ticks, np.int32), counts == 0)
+        return
+    k_side = spikes_per_side if method == "multi-interval" else 1
+    yield from spike_rate_images(source, ticks, spikes_per_side=k_side, horizon_ticks=horizon_ticks)
+
+
 # ---------------------------------------------------------------------- the estimator
 
 @dataclass
@@ -167,15 +480,18 @@ class FlowEstimate:
         Forward flow (u, v) from ``t0_s`` to ``t1_s``, px.
     t0_s, t1_s : float
         The two instants, s (the middles of the ticks they fall in).
+    confidence : ndarray (H, W), float32
+        In [0, 1]: how well the spikes resolve the interval at each pixel (module notes, step 5).
     images : tuple of ndarray
-        The two 8-bit log-light images the flow was computed on.
+        The two 8-bit log-light images the dense flow was computed on.
     info : dict
-        Image method, DIS preset, log-light range.
+        Image method, DIS preset, log-light range, the moving regions found (``regions``).
     """
 
     flow_px: np.ndarray
     t0_s: float
     t1_s: float
+    confidence: np.ndarray | None = None
     images: tuple = ()
     info: dict = field(default_factory=dict)
 
@@ -184,7 +500,7 @@ def _check_dis(preset: str):
     try:
         import cv2
     except ImportError:  # pragma: no cover - opencv is a dependency
-        raise ViformError("optical flow needs OpenCV: pip install opencv-python-headless") from None
+        raise ViformError("optical flow needs OpenCV: pip install opencv-python") from None
     check_choice("preset", preset, DIS_PRESETS)
     return cv2
 
@@ -214,7 +530,10 @@ def log_light_pair_8bit(rate0: np.ndarray, rate1: np.ndarray, floor: float | Non
 
 
 def flow_between_images(image0: np.ndarray, image1: np.ndarray, preset: str = "fast") -> np.ndarray:
-    """Forward flow (2, H, W) px from ``image0`` to ``image1`` (8-bit) by OpenCV's DIS."""
+    """Forward flow (2, H, W) px from ``image0`` to ``image1`` (8-bit) by OpenCV's DIS.
+
+    A new matcher each call: one reused across image sizes carries state that changes its result.
+    """
     cv2 = _check_dis(preset)
     dis = cv2.DISOpticalFlow_create({"ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
                                      "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
@@ -223,29 +542,22 @@ def flow_between_images(image0: np.ndarray, image1: np.ndarray, preset: str = "f
     return np.moveaxis(flow, -1, 0)
 
 
-def rate_images(source, ticks, method: str = "multi-interval", spikes_per_side: int = 4, window_ticks: int = 41):
-    """Firing-rate images (spikes per tick) at ``ticks`` (sorted), yielded as ``(tick, rate)``.
+def compose_flows(first_px: np.ndarray, second_px: np.ndarray) -> np.ndarray:
+    """Flow of two steps in a row: first(x) + second(x + first(x)) (second sampled bilinearly)."""
+    from scipy.ndimage import map_coordinates
 
-    Accumulation windows are counted directly around each instant (a window per instant, not
-    the every-tick sliding count a video needs); the other methods stream through
-    :func:`viform.imaging.sequence.reconstruct_ticks`.
+    h, w = first_px.shape[1:]
+    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
+    where = [rows + first_px[1], cols + first_px[0]]
+    second = np.stack([map_coordinates(second_px[i], where, order=1, mode="nearest") for i in range(2)])
+    return (first_px + second).astype(np.float32)
+
+
+def check_interval(source, t_s: float, dt_s: float, names=("t_s", "dt_s")) -> tuple[int, int]:
+    """The ticks of t and t + dt in ``source``; refuses dt ≤ 0 and instants outside the stream.
+
+    ``names`` are the two parameters' names in the messages (the CLI passes its flags).
     """
-    if method == "accumulation":
-        from viform.imaging.accumulation import spike_counts, window_bounds
-
-        for k in ticks:
-            k0, k1 = window_bounds(int(k), window_ticks, source.n_ticks, "centre")
-            yield int(k), spike_counts(source, k0, k1) / (k1 - k0)
-        return
-    from viform.imaging.sequence import reconstruct_ticks
-
-    kw = {"spikes_per_side": spikes_per_side} if method == "multi-interval" else {}
-    for k, image in reconstruct_ticks(source, method, ticks, **kw):
-        yield k, image.spikes_per_s / source.clock_hz
-
-
-def check_interval(source, t_s: float, dt_s: float, names=("--at", "--dt")) -> tuple[int, int]:
-    """The ticks of t and t + dt in ``source``; refuses dt ≤ 0 and instants outside the stream."""
     at_name, dt_name = names
     if not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and dt_s > 0):
         raise ViformError(f"{dt_name} = {dt_s!r} is not allowed: the flow interval must be a time > 0 seconds")
@@ -265,8 +577,262 @@ def check_interval(source, t_s: float, dt_s: float, names=("--at", "--dt")) -> t
     return tick0, tick1
 
 
+@dataclass(frozen=True)
+class LayeredOptions:
+    """Settings of the layered refinement (module notes, steps 3–4); defaults tuned on the tuning scenes.
+
+    Attributes
+    ----------
+    max_shift_px : int
+        Largest displacement searched for a region, px.
+    min_region_px, max_region_share : int, float
+        Regions tested: at least this many pixels and at most this share of the image.
+    min_gain : float
+        Cost decrease (χ² units) a region's motion must give over "still".
+    tolerance, slack : float
+        Region merging: within ``tolerance``·σ + ``slack`` (log light) of the other region's mean.
+    cap, unknown, exception : float
+        Robust cost: cap on a pixel's χ², cost of uncovered background, extra cost of leaving a
+        landing still (another object in the way).
+    max_unexplained : float
+        Largest share of a region's landings its motion may leave unexplained.
+    smooth_px : float
+        Gaussian σ of the images the sub-pixel (Gauss–Newton) step works on, px.
+    rim_px : int
+        Width of the rim of a region the sub-pixel step uses, px (its flat interior tells nothing).
+    still_chi2, still_below_px : float
+        A pixel outside moving regions is still where its mean χ² over 5×5 is below
+        ``still_chi2`` and the dense flow moves it less than ``still_below_px`` (a moving
+        texture's flat parts change little in the interval, yet move with the rest).
+    """
+
+    max_shift_px: int = 14
+    min_region_px: int = 12
+    max_region_share: float = 0.2
+    min_gain: float = 25.0
+    tolerance: float = 3.0
+    slack: float = 0.3
+    cap: float = 9.0
+    unknown: float = 3.0
+    exception: float = 2.0
+    max_unexplained: float = 0.25
+    smooth_px: float = 1.0
+    rim_px: int = 4
+    still_chi2: float = 2.0
+    still_below_px: float = 0.3
+
+
+def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var1: np.ndarray,
+                       dense_px: np.ndarray, options: LayeredOptions | None = None, frames=()):
+    """Refine a dense flow where regions move as wholes over a still background (module notes, 3–4).
+
+    Parameters
+    ----------
+    log0, log1 : ndarray (H, W)
+        Log light at the two instants (any log unit; the same for both).
+    var0, var1 : ndarray (H, W)
+        Their noise variances.
+    dense_px : ndarray (2, H, W)
+        The dense flow to refine, px.
+    options : LayeredOptions, optional
+    frames : sequence of (fraction, log light, variance)
+        Images between the two instants, at their fraction of the interval: the sub-pixel step
+        fits one constant velocity to all of them (more edges crossed, more spikes, and the
+        light's own pixel grid averaged out).
+
+    Returns
+    -------
+    flow : ndarray (2, H, W), float32
+    regions : list of dict
+        The moving regions kept: pixels, centre, motion (px; ``affine`` when it varies across
+        the region), gain (χ²).
+    info : dict
+        Regions tested, rejected (by reason), share of pixels set still.
+    """
+    from scipy import ndimage as ndi
+
+    from viform.vision._flow_kernels import (
+        best_shift,
+        gauss_newton_motion,
+        segment_log_light,
+        unexplained_share,
+        warp_costs,
+    )
+
+    o = options or LayeredOptions()
+    log0 = np.ascontiguousarray(log0, dtype=np.float64)
+    log1 = np.ascontiguousarray(log1, dtype=np.float64)
+    var0 = np.ascontiguousarray(var0, dtype=np.float64)
+    var1 = np.ascontiguousarray(var1, dtype=np.float64)
+    h, w = log0.shape
+    labels, n = segment_log_light(log0, np.sqrt(var0), o.tolerance, o.slack, 64)
+    chi2 = (log1 - log0) ** 2 / (var0 + var1)
+    still = np.minimum(chi2, o.cap)
+    changed = chi2 > 16.0
+    sizes = np.bincount(labels.ravel(), minlength=n)
+    boxes = ndi.find_objects(labels + 1)
+    flow = np.asarray(dense_px, dtype=np.float32).copy()
+    moving = np.zeros((h, w), bool)
+    smooth = lambda a: ndi.gaussian_filter(a, o.smooth_px, mode="nearest")  # noqa: E731
+    s0 = smooth(log0)
+    # the later images the sub-pixel step fits a constant velocity to: those between the two
+    # instants (``frames``, at their fraction of the interval), and the second instant's
+    later = [(f, np.asarray(lg, np.float64), np.asarray(vr, np.float64)) for f, lg, vr in (frames or ())] + [
+        (1.0, log1, var1)]
+    fractions = np.array([f for f, _, _ in later])
+    stack1 = np.stack([smooth(lg) for _, lg, _ in later])
+    grad_y1, grad_x1 = np.gradient(stack1, axis=(1, 2))
+    # Σ g² of a 2-D Gaussian of σ px is 1/(4πσ²): the smoothed images' noise variance
+    smooth_var0 = smooth(var0)
+    weight = np.stack([(4 * np.pi * o.smooth_px ** 2) / (smooth_var0 + smooth(vr)) for _, _, vr in later])
+    inverse_var = 1.0 / (var0 + var1)
+    # 1. every region whose surroundings changed: its best motion over a still background
+    candidates = []
+    tested = 0
+    for region in np.flatnonzero((sizes >= o.min_region_px) & (sizes <= o.max_region_share * h * w)):
+        box = boxes[region]
+        grown = (slice(max(0, box[0].start - 2), box[0].stop + 2), slice(max(0, box[1].start - 2), box[1].stop + 2))
+        if np.count_nonzero(changed[grown]) < 3:
+            continue  # nothing changed around it: still
+        tested += 1
+        inside = labels[box] == region
+        rows, cols = np.nonzero(inside)
+        rows = (rows + box[0].start).astype(np.int64)
+        cols = (cols + box[1].start).astype(np.int64)
+        # the coarse search's sample: up to 384 pixels of the rim (2 px) and 128 of the interior
+        core = ndi.binary_erosion(np.pad(inside, 1), iterations=2)[1:-1, 1:-1][inside]
+        rim_i, core_i = np.flatnonzero(~core), np.flatnonzero(core)
+        sample = np.concatenate([rim_i[::max(1, rim_i.size // 384)], core_i[::max(1, core_i.size // 128)]])
+        coarse = (rows[sample].copy(), cols[sample].copy())
+        dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, int(region), rows, cols, *coarse,
+                                  int(o.max_shift_px), o.cap, o.unknown, o.exception)
+        if -gain > o.min_gain and not dy == dx == 0.0:
+            candidates.append((-gain, int(region), box, inside, rows, cols, coarse, (dy, dx, gain)))
+    # 2. strongest first; what a kept motion explains (where its pixels land, what they uncover) is
+    # no longer a change for the others, so a region beside a moving one is not read as moving too
+    regions = []
+    rejected = {"explained by others": 0, "unexplained landings": 0, "dense flow as good": 0}
+    touched = np.zeros((h, w), bool)  # where kept motions changed the still costs
+    reach = int(o.max_shift_px) + 2
+    for _, region, box, inside, rows, cols, coarse, first in sorted(candidates, key=lambda c: -c[0]):
+        near = (slice(max(0, box[0].start - reach), box[0].stop + reach),
+                slice(max(0, box[1].start - reach), box[1].stop + reach))
+        if touched[near].any():  # else the search would find what it found before
+            first = best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, *coarse,
+                               int(o.max_shift_px), o.cap, o.unknown, o.exception)
+        dy, dx, gain = first
+        if -gain <= o.min_gain or dy == dx == 0.0:
+            rejected["explained by others"] += 1
+            continue
+        if unexplained_share(log0, log1, var0, var1, still, rows, cols, dy, dx, o.cap, o.exception) \
+                >= o.max_unexplained:
+            rejected["unexplained landings"] += 1
+            continue
+        # sub-pixel: Gauss–Newton on the rim (the interior of a uniform region tells nothing)
+        core = ndi.binary_erosion(np.pad(inside, 1), iterations=o.rim_px)[1:-1, 1:-1]
+        rim_r, rim_c = np.nonzero(inside & ~core)
+        rim_r = (rim_r + box[0].start).astype(np.int64)
+        rim_c = (rim_c + box[1].start).astype(np.int64)
+        start = np.array([dx, dy, 0, 0, 0, 0], float)
+        params, cost, used, cy, cx, scale = gauss_newton_motion(
+            s0, stack1, grad_x1, grad_y1, weight, fractions, rim_r, rim_c, start, False, 20, o.cap, 0.0)
+        affine, cost_a, _, _, _, _ = gauss_newton_motion(
+            s0, stack1, grad_x1, grad_y1, weight, fractions, rim_r, rim_c, params.copy(), True, 20, o.cap,
+            o.min_gain)
+        # an affine motion (a rotating blade) must lower the cost by min_gain and spread the motion by
+        # half a pixel or more across the region (less is within a translation's own error)
+        spread = np.abs(affine[2:]).reshape(2, 2).sum(axis=1).max()
+        if cost_a < cost - o.min_gain and spread >= 0.5 and abs(affine[0] - params[0]) + abs(
+                affine[1] - params[1]) < 1.0:
+            params = affine
+        if not (abs(params[0] - dx) <= 1.0 and abs(params[1] - dy) <= 1.0 and np.all(np.isfinite(params))):
+            params = np.array([dx, dy, 0, 0, 0, 0], float)  # the step wandered: keep the search's shift
+        xx = (cols - cx) / scale
+        yy = (rows - cy) / scale
+        u = params[0] + params[2] * xx + params[3] * yy
+        v = params[1] + params[4] * xx + params[5] * yy
+        # the region's motion replaces the dense flow where it explains the region's rim better by
+        # min_gain (a dense flow that already follows a textured region is kept), except at rim
+        # pixels the dense flow explains clearly better (another object's motion); judged on the
+        # images themselves (smoothing would mix in the other side of the region's edge)
+        trial = np.zeros((2, h, w), np.float32)
+        trial[0, rows, cols] = u
+        trial[1, rows, cols] = v
+        fit_cost = warp_costs(log0, log1, inverse_var, rim_r, rim_c, trial[0], trial[1], o.cap)
+        dense_cost = warp_costs(log0, log1, inverse_var, rim_r, rim_c, flow[0], flow[1], o.cap)
+        if np.sum(dense_cost - np.minimum(fit_cost, dense_cost + o.exception)) <= o.min_gain:
+            rejected["dense flow as good"] += 1
+            continue
+        # rim pixels the dense flow explains clearly better, over 5×5 of the rim (another object's motion,
+        # not one noisy pixel), keep it
+        better = np.zeros((h, w))
+        on_rim = np.zeros((h, w))
+        better[rim_r, rim_c] = fit_cost - dense_cost
+        on_rim[rim_r, rim_c] = 1.0
+        mean_better = ndi.uniform_filter(better, 5, mode="constant") / np.maximum(
+            ndi.uniform_filter(on_rim, 5, mode="constant"), 1e-9)
+        keep = np.zeros((h, w), bool)
+        keep[rim_r, rim_c] = mean_better[rim_r, rim_c] > o.exception
+        take = ~keep[rows, cols]
+        flow[0, rows[take], cols[take]] = u[take]
+        flow[1, rows[take], cols[take]] = v[take]
+        moving[rows[take], cols[take]] = True
+        land_r = np.rint(rows + v).astype(np.int64)
+        land_c = np.rint(cols + u).astype(np.int64)
+        inside_field = (land_r >= 0) & (land_r < h) & (land_c >= 0) & (land_c < w)
+        explained = np.zeros((h, w), bool)
+        explained[land_r[inside_field], land_c[inside_field]] = True
+        explained[rows, cols] = True  # its own place: landed on, or uncovered
+        still[explained] = np.minimum(still[explained], 1.0)
+        touched |= explained
+        regions.append({"pixels": int(rows.size), "centre_px": [float(cols.mean()), float(rows.mean())],
+                        "shift_px": [float(params[0]), float(params[1])],
+                        "affine": bool(params[2:].any()), "gain": float(-gain)})
+    quiet = ~moving & (ndi.uniform_filter(chi2, 5, mode="nearest") < o.still_chi2) & (
+        np.hypot(flow[0], flow[1]) < o.still_below_px)
+    flow[:, quiet] = 0.0
+    return flow, regions, {"regions_tested": tested, "regions_rejected": rejected,
+                           "still_share": float(quiet.mean())}
+
+
+def flow_confidence(image0: RateImage, image1: RateImage, dt_ticks: int, spikes_per_side: int) -> np.ndarray:
+    """Confidence in [0, 1] per pixel (module notes, step 5)."""
+    support = np.maximum(np.maximum(image0.span_ticks, image1.span_ticks), 1)
+    found = np.minimum(image0.intervals, image1.intervals) / max(2 * spikes_per_side - 1, 1)
+    conf = np.minimum(1.0, dt_ticks / support) * np.minimum(1.0, found)
+    return np.where(image0.censored | image1.censored, 0.0, conf).astype(np.float32)
+
+
+def _flow_from_images(images, ticks, q, preset, refine, options, chain_above_px, spikes_per_side):
+    """Flow from the first to the last of ``images`` (RateImages at ``ticks``), chained through the others."""
+    first, last = images[0], images[-1]
+    image0, image1, (lo, hi) = log_light_pair_8bit(first.rate, last.rate)
+    dense = flow_between_images(image0, image1, preset)
+    chained = 1
+    if len(images) > 2 and chain_above_px is not None and np.percentile(np.hypot(*dense), 99) > chain_above_px:
+        dense = None
+        for a, b in zip(images[:-1], images[1:], strict=True):
+            pa, pb, _ = log_light_pair_8bit(a.rate, b.rate)
+            step = flow_between_images(pa, pb, preset)
+            dense = step.astype(np.float32) if dense is None else compose_flows(dense, step)
+        chained = len(images) - 1
+    flow = dense.astype(np.float32)
+    info = {"log_rate_range": [lo, hi], "chained_steps": chained}
+    if refine == "layered":
+        # the intermediate images are not fitted (frames=()): on the tuning scenes a constant velocity
+        # through them read saturated edges, which move in whole pixels, worse than the two instants
+        flow, regions, extra = layered_refinement(first.log_light(), last.log_light(), first.log_variance(q),
+                                                  last.log_variance(q), flow, options)
+        info.update(extra)
+        info["regions"] = regions
+    confidence = flow_confidence(first, last, int(ticks[-1] - ticks[0]), spikes_per_side)
+    return flow, confidence, (image0, image1), info
+
+
 def estimate_flow(source, t_s: float, dt_s: float, *, method: str = "multi-interval", spikes_per_side: int = 4,
-                  window_ticks: int = 41, preset: str = "fast") -> FlowEstimate:
+                  window_ticks: int = 41, preset: str = "fast", refine: str = "layered",
+                  options: LayeredOptions | None = None, chain_steps: int = 1, chain_above_px: float = 6.0,
+                  horizon_ticks: int = 1024) -> FlowEstimate:
     """Forward optical flow (px) from ``t_s`` to ``t_s + dt_s`` estimated from a spike stream.
 
     Parameters
@@ -276,13 +842,24 @@ def estimate_flow(source, t_s: float, dt_s: float, *, method: str = "multi-inter
     t_s, dt_s : float
         First instant and flow interval, s (both instants inside the stream).
     method : {"multi-interval", "interval", "accumulation"}
-        How the light at each instant is imaged (see :mod:`viform.imaging`).
+        How the light at each instant is imaged (module notes, step 1; ``interval`` is K = 1).
     spikes_per_side : int
-        Multi-interval K (4: 7 intervals).
+        Multi-interval K (4: up to 7 intervals).
     window_ticks : int
         Accumulation window, ticks.
     preset : {"ultrafast", "fast", "medium"}
-        OpenCV DIS preset (``fast``: see the module notes).
+        OpenCV DIS preset of the dense flow.
+    refine : {"layered", "none"}
+        The layered refinement and still background (module notes, steps 3–4), or DIS alone.
+    options : LayeredOptions, optional
+        The refinement's settings.
+    chain_steps : int
+        Steps the interval is split into where the dense flow exceeds ``chain_above_px`` (1: no
+        chaining, the default; module notes, step 2).
+    chain_above_px : float
+        99th percentile of the dense flow's length (px) above which it is chained.
+    horizon_ticks : int
+        How far from each instant spikes are looked for (:func:`spike_rate_images`).
 
     Returns
     -------
@@ -290,39 +867,56 @@ def estimate_flow(source, t_s: float, dt_s: float, *, method: str = "multi-inter
         The flow is measured between the middles of the two instants' ticks.
     """
     check_choice("method", method, IMAGE_METHODS)
+    check_choice("refine", refine, REFINEMENTS)
+    _check_dis(preset)
     spikes_per_side = check_int("spikes_per_side", spikes_per_side, 1)
     window_ticks = check_int("window_ticks", window_ticks, 1)
+    chain_steps = check_int("chain_steps", chain_steps, 1)
+    chain_above_px = check_positive("chain_above_px", chain_above_px)
+    horizon_ticks = check_int("horizon_ticks", horizon_ticks, 1)
     tick0, tick1 = check_interval(source, t_s, dt_s, names=("t_s", "dt_s"))
-    (_, rate0), (_, rate1) = rate_images(source, [tick0, tick1], method, spikes_per_side, window_ticks)
-    image0, image1, (lo, hi) = log_light_pair_8bit(rate0, rate1)
-    flow = flow_between_images(image0, image1, preset).astype(np.float32)
+    steps = min(chain_steps, tick1 - tick0)
+    ticks = sorted({int(round(tick0 + i * (tick1 - tick0) / steps)) for i in range(steps + 1)})
+    images = [image for _, image in _rate_image_of(source, ticks, method, spikes_per_side, window_ticks,
+                                                   horizon_ticks)]
+    q = source.threshold_electrons or DEFAULT_NOISE_THRESHOLD_ELECTRONS
+    flow, confidence, pair, info = _flow_from_images(images, ticks, q, preset, refine, options, chain_above_px,
+                                                     spikes_per_side if method == "multi-interval" else 1)
     # each image stands for the middle of its tick
     t0 = source.start_time_s + (tick0 + 0.5) / source.clock_hz
     t1 = source.start_time_s + (tick1 + 0.5) / source.clock_hz
-    return FlowEstimate(flow, t0, t1, (image0, image1),
-                        {"method": method, "spikes_per_side": spikes_per_side, "preset": preset,
-                         "log_rate_range": [lo, hi], "ticks": [tick0, tick1]})
+    info.update({"method": method, "spikes_per_side": spikes_per_side, "preset": preset, "refine": refine,
+                 "ticks": [tick0, tick1]})
+    return FlowEstimate(flow, t0, t1, confidence, pair, info)
 
 
 def flow_sequence(source, step_ticks: int, *, method: str = "multi-interval", spikes_per_side: int = 4,
-                  window_ticks: int = 41, preset: str = "fast", start_tick: int = 0, stop_tick: int | None = None):
+                  window_ticks: int = 41, preset: str = "fast", refine: str = "layered",
+                  options: LayeredOptions | None = None, start_tick: int = 0, stop_tick: int | None = None,
+                  horizon_ticks: int = 1024):
     """Yield ``(tick0, tick1, flow (2, H, W))`` between instants ``step_ticks`` apart over a stream.
 
-    Images are reconstructed once each (consecutive pairs share one), so a stream of N
-    instants costs N images and N − 1 flow fields.
+    The images of all instants come from one pass over the spikes (:func:`spike_rate_images`)
+    and each is used by the two fields it bounds, so N instants cost N images and N − 1
+    fields; each field equals :func:`estimate_flow` between its instants without chaining.
     """
     check_choice("method", method, IMAGE_METHODS)
+    check_choice("refine", refine, REFINEMENTS)
+    _check_dis(preset)
     step_ticks = check_int("step_ticks", step_ticks, 1)
-    stop = source.n_ticks if stop_tick is None else min(stop_tick, source.n_ticks)
+    stop = source.n_ticks if stop_tick is None else min(check_int("stop_tick", stop_tick, 1), source.n_ticks)
     ticks = list(range(check_int("start_tick", start_tick, 0), stop, step_ticks))
     if len(ticks) < 2:
         raise ViformError(f"the stream has fewer than two instants {step_ticks} ticks apart")
+    q = source.threshold_electrons or DEFAULT_NOISE_THRESHOLD_ELECTRONS
+    k_side = spikes_per_side if method == "multi-interval" else 1
     previous = None
-    for tick, rate in rate_images(source, ticks, method, spikes_per_side, window_ticks):
+    for tick, image in _rate_image_of(source, ticks, method, spikes_per_side, window_ticks, horizon_ticks):
         if previous is not None:
-            image0, image1, _ = log_light_pair_8bit(previous[1], rate)
-            yield previous[0], tick, flow_between_images(image0, image1, preset)
-        previous = (tick, rate)
+            flow, _, _, _ = _flow_from_images([previous[1], image], [previous[0], tick], q, preset, refine, options,
+                                              None, k_side)
+            yield previous[0], tick, flow
+        previous = (tick, image)
 
 
 # ---------------------------------------------------------------------- pictures
@@ -344,7 +938,7 @@ def flow_to_rgb(flow_px: np.ndarray, max_flow_px: float | None = None) -> tuple[
 
 
 def flow_figure(path, estimate_px: np.ndarray, *, truth: FlowTruth | None = None, title: str = "",
-                scores: FlowScores | None = None) -> Path:
+                scores: FlowScores | MotionScores | None = None) -> Path:
     """PNG: the estimated flow on a colour wheel, the truth beside it on the same scale, the wheel as legend."""
     import matplotlib
 
@@ -378,7 +972,13 @@ def flow_figure(path, estimate_px: np.ndarray, *, truth: FlowTruth | None = None
     wheel.set_ylabel("v (px, down +)", fontsize=8)
     wheel.tick_params(labelsize=7)
     text = title
-    if scores is not None and scores.pixels:
+    if isinstance(scores, MotionScores):
+        if scores.moving.pixels:
+            text += (f"\nmoving pixels: EPE {scores.moving.epe_px:.3g} px = {100 * scores.moving.relative_error:.0f} % "
+                     f"of their motion ({scores.moving.true_flow_px:.3g} px)")
+        if scores.still_pixels:
+            text += f"; still background: median false motion {scores.still_median_px:.3g} px"
+    elif scores is not None and scores.pixels:
         text += f"\nEPE {scores.epe_px:.3g} px, Fl {100 * scores.fl_outliers:.3g} % over {scores.pixels:,} px"
     fig.suptitle(text, fontsize=10)
     fig.tight_layout()
@@ -387,6 +987,6 @@ def flow_figure(path, estimate_px: np.ndarray, *, truth: FlowTruth | None = None
     return Path(path)
 
 
-def check_dt(dt_s, name: str = "--dt") -> float:
-    """A flow interval > 0 s."""
+def check_dt(dt_s, name: str = "dt_s") -> float:
+    """A flow interval > 0 s (``name``: the parameter's name in the message)."""
     return check_positive(name, dt_s)

@@ -4,9 +4,13 @@ The multi-object tracking benchmarks (MOT15–MOT20; read by TrackEval, py-motme
 trackers) store one text line per object per frame. viform writes the same files so any MOT
 evaluator scores a tracker against viform's exact truth:
 
-* ``gt.txt``: ``frame, id, x, y, w, h, conf, class, visibility`` — ``conf`` is the
-  "consider" flag (1 = scored, 0 = ignored), ``class`` an integer (the names are listed in
-  ``seqinfo.ini``), ``visibility`` the visible fraction in [0, 1];
+* ``gt.txt``: ``frame, id, x, y, w, h, conf, class, visibility, detectability`` — boxes clipped
+  to the image (what any camera can report; the part outside is counted in the visibility),
+  ``conf`` 1 where any part of the object is visible and 0 where it is entirely hidden (such rows
+  need not be found), ``class`` an integer (the names are listed in ``seqinfo.ini``),
+  ``visibility`` the visible fraction of the whole object in [0, 1], and ``detectability`` the
+  evidence the sensor's pixels hold about it (:mod:`viform.vision.detectability`: ≥ 1 the
+  sensor shows it; −1 unknown). Evaluators that read nine columns ignore the tenth;
 * results: ``frame, id, x, y, w, h, conf, -1, -1, -1``.
 
 Frames count from 1: frame k is output step k (step k covers ticks [(k − 1)·N, k·N) of a
@@ -29,7 +33,7 @@ from viform._io import atomic_open
 from viform._validate import ViformError, check_int, check_positive
 
 #: Columns of a ground-truth array (0-based x, y in memory).
-GT_COLUMNS = ("frame", "id", "x", "y", "w", "h", "conf", "class", "visibility")
+GT_COLUMNS = ("frame", "id", "x", "y", "w", "h", "conf", "class", "visibility", "detectability")
 #: Columns of a results array (0-based x, y in memory); the file adds three −1 columns.
 RESULT_COLUMNS = ("frame", "id", "x", "y", "w", "h", "conf")
 
@@ -63,7 +67,8 @@ def class_ids_of(scene, times_s) -> dict[str, int]:
     return ids
 
 
-def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, clip_to_field: bool = False) -> np.ndarray:
+def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, detectability=None,
+            start_time_s: float = 0.0) -> np.ndarray:
     """Ground-truth rows from any scene's :meth:`~viform.light.scenes.Scene.objects`.
 
     Parameters
@@ -75,44 +80,58 @@ def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, clip_to_
         Instant of each frame; frame k (from 1) is ``times_s[k − 1]`` (see :func:`step_times_s`).
     class_ids : dict, optional
         Class name → integer id (default :func:`class_ids_of`).
-    clip_to_field : bool
-        Clip boxes to the image (what any camera can report) instead of the object's whole
-        projected box, which may extend past the border.
+    detectability : callable, optional
+        ``detectability(object, seen_s)`` → the sensor's evidence about the object
+        (:class:`~viform.vision.detectability.SpikeDetectability` or ``FrameDetectability``);
+        ``seen_s`` is the time since it came into view (since ``start_time_s`` for objects in
+        view in frame 1; else since the frame before the first that shows it). None: −1 (unknown).
+    start_time_s : float
+        The start of the recording, s.
 
     Returns
     -------
-    ndarray, shape (N, 9), float64
-        Columns :data:`GT_COLUMNS`, x and y 0-based; ``conf`` is 1 where any part of the object
-        is visible, 0 where it is entirely hidden (MOT's "ignore" flag); sorted by frame, id.
+    ndarray, shape (N, 10), float64
+        Columns :data:`GT_COLUMNS`, x and y 0-based, boxes clipped to the image (what a camera can
+        report; rows of objects wholly outside it are left out); ``conf`` is 1 where any part of
+        the object is visible, 0 where it is entirely hidden; ``visibility`` the visible fraction
+        of the whole object; ``detectability`` −1 where unknown. Sorted by frame, id.
     """
     times = np.asarray(times_s, dtype=np.float64).ravel()
     if class_ids is None:
         class_ids = class_ids_of(scene, times)
-    rows = []
+    rows, since = [], {}
     for k, t in enumerate(times, start=1):
         for obj in sorted(scene.objects(float(t)), key=lambda o: o.object_id):
             x0, y0, w, h = obj.box_xywh
-            if clip_to_field:
-                x1, y1 = min(x0 + w, scene.width), min(y0 + h, scene.height)
-                x0, y0 = max(x0, 0.0), max(y0, 0.0)
-                w, h = x1 - x0, y1 - y0
-                if w <= 0 or h <= 0:
-                    continue
+            x1, y1 = min(x0 + w, scene.width), min(y0 + h, scene.height)
+            x0, y0 = max(x0, 0.0), max(y0, 0.0)
+            w, h = x1 - x0, y1 - y0
+            if w <= 0 or h <= 0:
+                continue
             if obj.class_name not in class_ids:
                 raise ViformError(f"class {obj.class_name!r} of object {obj.object_id} has no id in class_ids")
+            since.setdefault(obj.object_id, float(start_time_s) if k == 1 else float(times[k - 2]))
+            d = -1.0
+            if detectability is not None:
+                d = float(detectability(obj, float(t) - since[obj.object_id]))
+                d = -1.0 if math.isnan(d) else d
             rows.append((k, obj.object_id, x0, y0, w, h, 1.0 if obj.visible_fraction > 0 else 0.0,
-                         class_ids[obj.class_name], obj.visible_fraction))
+                         class_ids[obj.class_name], obj.visible_fraction, d))
     return np.array(rows, dtype=np.float64).reshape(-1, len(GT_COLUMNS))
 
 
-def _format(value: float) -> str:
-    return str(int(value)) if float(value).is_integer() else f"{value:.4f}".rstrip("0")
+def _format(value: float, digits: int = 4) -> str:
+    """A number as MOTChallenge files print it: integers bare, others to ``digits`` decimals, no trailing zeros."""
+    text = f"{float(value):.{digits}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
 
 
 def _check_rows(rows, columns, what) -> np.ndarray:
     rows = np.asarray(rows, dtype=np.float64)
     if rows.size == 0:
         return rows.reshape(0, len(columns))
+    if rows.ndim == 2 and columns is GT_COLUMNS and rows.shape[1] == len(columns) - 1:
+        rows = np.column_stack([rows, np.full(len(rows), -1.0)])  # nine MOTChallenge columns: unknown
     if rows.ndim != 2 or rows.shape[1] != len(columns):
         raise ViformError(f"{what} rows must have shape (N, {len(columns)}): {', '.join(columns)}; got {rows.shape}")
     if not np.all(np.isfinite(rows)):
@@ -128,7 +147,8 @@ def write_gt(path, rows) -> Path:
     lines = []
     for r in rows:
         fields = [int(r[0]), int(r[1]), r[2] + 1, r[3] + 1, r[4], r[5], int(r[6]), int(r[7]), r[8]]
-        lines.append(",".join(_format(v) for v in fields))
+        detect = "-1" if r[9] < 0 else _format(r[9], 3)
+        lines.append(",".join(_format(v) for v in fields) + "," + detect)
     with atomic_open(path, "w") as f:
         f.write("".join(line + "\n" for line in lines))
     return Path(path)
@@ -146,7 +166,7 @@ def write_results(path, rows) -> Path:
     return Path(path)
 
 
-def _read(path, n_columns: int, what: str) -> np.ndarray:
+def _read(path, n_columns: int, what: str, keep: int | None = None) -> np.ndarray:
     path = Path(path)
     try:
         text = path.read_text()
@@ -163,8 +183,10 @@ def _read(path, n_columns: int, what: str) -> np.ndarray:
         if len(values) < n_columns:
             raise ViformError(f"{what} file {str(path)!r} line {number} has {len(values)} values; "
                               f"MOTChallenge {what} lines have at least {n_columns}")
-        rows.append(values[:n_columns])
-    rows = np.array(rows, dtype=np.float64).reshape(-1, n_columns)
+        if keep is not None:  # optional trailing columns: −1 where absent
+            values = (values + [-1.0] * keep)[:keep]
+        rows.append(values[: keep or n_columns])
+    rows = np.array(rows, dtype=np.float64).reshape(-1, keep or n_columns)
     if rows.size and (not np.all(np.isfinite(rows)) or rows[:, 0].min() < 1):
         raise ViformError(f"{what} file {str(path)!r} holds a frame < 1 or a value that is not finite")
     rows[:, 2:4] -= 1.0  # back to 0-based pixels
@@ -172,8 +194,11 @@ def _read(path, n_columns: int, what: str) -> np.ndarray:
 
 
 def read_gt(path) -> np.ndarray:
-    """Read a MOTChallenge ``gt.txt``: (N, 9) rows of :data:`GT_COLUMNS`, x and y 0-based."""
-    return _read(path, len(GT_COLUMNS), "ground-truth")
+    """Read a MOTChallenge ``gt.txt``: (N, 10) rows of :data:`GT_COLUMNS`, x and y 0-based.
+
+    Files with the nine standard columns (other tools) read with detectability −1 (unknown).
+    """
+    return _read(path, len(GT_COLUMNS) - 1, "ground-truth", len(GT_COLUMNS))
 
 
 def read_results(path) -> np.ndarray:

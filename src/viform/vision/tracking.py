@@ -47,11 +47,11 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit, prange
-from scipy.ndimage import binary_dilation, gaussian_filter, median_filter
+from scipy.ndimage import binary_closing, binary_opening, gaussian_filter, maximum_filter, median_filter
 from scipy.optimize import linear_sum_assignment
 
-from viform._validate import ViformError, check_int, check_non_negative, check_positive
+from viform._validate import ViformError, check_int, check_positive
+from viform.vision import _spike_front as _front
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,10 @@ class TrackerParameters:
     ----------
     threshold_log : float
         |ln(light / background)| above which a pixel is foreground (0.4: ×1.5 either way).
+    left_log : float
+        A foreground pixel brighter than its background stops being so once its silence passes
+        e^``left_log`` times the intervals it had (the object has left it), and a pixel's last
+        interval that long against its others reads as light that fell.
     background_ticks : float
         Time constant of the background level, in ticks (spike) — frames use the same
         time in seconds, converted with the stream's clock.
@@ -72,64 +76,66 @@ class TrackerParameters:
         Foreground pixels closer than this (px) belong to one detection.
     min_pixels : int
         Smallest detection, foreground pixels (isolated noise is dropped).
-    min_hits : int
-        Matched steps before a track is confirmed (reported).
+    min_hits, confirm_pixels : int
+        Matched steps before a track is confirmed (reported); a track born on a detection of at
+        least ``confirm_pixels`` pixels is confirmed at once (no noise makes one that large).
     max_coast_ticks : int
         Longest gap without a detection (ticks) a track survives, coasting on its prediction.
     gate_px : float
         Largest distance (px) between a prediction's and a detection's centres for a match,
         on top of the two boxes' half-diagonals.
-    min_speed_px_per_s, still_ticks : float, int
-        A track whose box centre moved slower than this over the last ``still_ticks`` ticks is
-        not reported (a ghost, or an object that stopped). 0 (the default) reports every track:
-        with the start-up seeding there are few ghosts left, and slow objects (100 px/s) count.
-    merged_keep_alive : bool
-        A confirmed track with no detection whose predicted box lies at least half inside a
-        detection matched to another track is merged with (or hidden by) that object: it does
-        not age while that lasts (the ball behind the truck keeps its id), and is not reported.
+    merged_keep_alive, report_merged : bool
+        A confirmed track whose prediction lies inside another object's foreground (merged with
+        it, or hidden by it) does not age while that lasts, so the ball behind the truck keeps its
+        id; ``report_merged``: where the foreground holding both is split (:meth:`Tracker._regroup`),
+        it is reported at its prediction.
     seed_ticks, seed_measured_fraction : int, float
-        When to seed: at the first of ``seed_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to
-        ``hold_ticks``, at which at least this fraction of the pixels has measured an interval
-        (later at a high threshold Q).
+        Seeding checks at ``seed_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to ``hold_ticks``,
+        until at least this fraction of the pixels has measured an interval (later at a high
+        threshold Q).
     seed_window_px, seed_threshold_log, seed_unsure : int, float, bool
-        Objects already in view when tracking starts: when seeded,
-        a pixel whose learned light differs (|ln ratio| > ``seed_threshold_log``) from the median
-        over ``seed_window_px`` px around it (wider than any object, on the assumption that the
-        background is smoother than the objects on it) takes the background interpolated from
-        the pixels around it, so the object is foreground at once and the place it leaves is not
-        a ghost (:func:`seed_background`); with ``seed_unsure``, pixels that differ from that
-        background by more than ``threshold_log`` only may return to it without being flagged.
-        Frames apply it to their first frame.
+        Objects already in view when tracking starts: at each check, a pixel whose light
+        differs (|ln ratio| > ``seed_threshold_log``) from the median over ``seed_window_px``
+        px around it (wider than any object, on the assumption that the background is smoother
+        than the objects on it) takes the background interpolated from the pixels around it,
+        so the object is foreground at once and the place it leaves is not a ghost
+        (:meth:`SpikeChangeDetector._seed`, :func:`seed_background`); with ``seed_unsure``,
+        pixels that differ from that background by more than ``threshold_log`` only may return
+        to it without being flagged. Frames apply it to their starting background, and give a
+        seeded group none of whose pixels changes within ``seed_confirm_ticks`` its own light back
+        (objects in view move; static texture that a dim 8-bit image shows strongly does not).
     """
 
     threshold_log: float = 0.4
-    background_ticks: float = 80.0
+    left_log: float = 0.4
+    background_ticks: float = 400.0
     hold_ticks: int = 2000
     merge_px: int = 2
     min_pixels: int = 12
     min_hits: int = 2
+    confirm_pixels: int = 48
     max_coast_ticks: int = 600
     gate_px: float = 8.0
-    min_speed_px_per_s: float = 0.0
-    still_ticks: int = 400
-    seed_ticks: int = 20
+    merged_keep_alive: bool = True
+    report_merged: bool = True
+    seed_ticks: int = 8
     seed_window_px: int = 96
     seed_threshold_log: float = 0.7
     seed_unsure: bool = True
     seed_measured_fraction: float = 0.9
-    merged_keep_alive: bool = True
+    seed_confirm_ticks: int = 200
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
+        check_positive("left_log", self.left_log)
         check_positive("background_ticks", self.background_ticks)
         check_int("hold_ticks", self.hold_ticks, 1)
         check_int("merge_px", self.merge_px, 0)
         check_int("min_pixels", self.min_pixels, 1)
         check_int("min_hits", self.min_hits, 1)
+        check_int("confirm_pixels", self.confirm_pixels, 1)
         check_int("max_coast_ticks", self.max_coast_ticks, 0)
         check_positive("gate_px", self.gate_px)
-        check_non_negative("min_speed_px_per_s", self.min_speed_px_per_s)
-        check_int("still_ticks", self.still_ticks, 1)
         check_int("seed_ticks", self.seed_ticks, 0)
         check_int("seed_window_px", self.seed_window_px, 1)
         check_positive("seed_threshold_log", self.seed_threshold_log)
@@ -139,158 +145,154 @@ class TrackerParameters:
 
 # --------------------------------------------------------------------------- spike front end
 
-#: Two intervals spanning fewer ticks than this are averaged over four instead (bright pixels).
-_SHORT_SPAN_TICKS = 8
+def pack_spikes(spikes: np.ndarray) -> np.ndarray:
+    """Spike bits (T, H, W) as packed words (T, ⌈H·W/64⌉) uint64: pixel r·W + c is bit k mod 64 of word k // 64."""
+    spikes = np.asarray(spikes, dtype=np.bool_)
+    t = spikes.shape[0]
+    packed = np.packbits(spikes.reshape(t, -1), axis=1, bitorder="little")
+    return _words(packed)
 
-@njit(parallel=True, cache=True)
-def _spike_change_block(spikes, first_tick, step_ticks, last1, last2, last3, last4, ref, prev, censored,
-                        flag_since, pending, out, k_lo, k_hi, k_seed, background_ticks, hold_ticks):  # pragma: no cover
-    # Intervals in ticks, compared by ratio (k_lo = e^−threshold, k_hi = e^threshold): no logarithm
-    # per spike. The background interval follows an exponential mean with weight τ/(T + τ) per
-    # interval τ (time constant T ticks).
-    T, H, W = spikes.shape
-    for r in prange(H):
-        step = 0
-        l1, l2, l3, l4, rf, pv = last1[r], last2[r], last3[r], last4[r], ref[r], prev[r]
-        cs, fs, pd = censored[r], flag_since[r], pending[r]
-        for t in range(T):
-            tick = first_tick + t
-            row = spikes[t, r]
-            for c in range(W):
-                if not row[c]:
-                    continue
-                p1 = l1[c]
-                if p1 < 0:  # first spike: the interval is at least the stream so far (censored)
-                    rf[c] = tick + 1.0
-                    cs[c] = True
-                    l1[c] = tick
-                    continue
-                p2 = l2[c]
-                p4 = l4[c]
-                if p4 >= 0 and tick - p2 < _SHORT_SPAN_TICKS:
-                    # intervals of a few ticks: the one-tick quantization dominates, so average four of
-                    # them (a saturated object spiking every tick is told from a background every 2 ticks)
-                    n = 4.0
-                    span = float(tick - p4)
-                else:
-                    n = 2.0 if p2 >= 0 else 1.0
-                    span = float(tick - p2) if p2 >= 0 else float(tick - p1)
-                tau = span / n
-                b = rf[c]
-                # the readout knows each spike to a tick: the span of n intervals is (span − 1, span + 1)
-                # ticks, so only a change beyond that slack counts (short intervals are coarse)
-                brighter = (span + 1.0) / n < b * k_lo
-                darker = (span - 1.0) / n > b * k_hi
-                if cs[c]:
-                    flagged = brighter  # only "brighter" is known against a lower bound
-                    if not flagged:  # the first measured interval replaces the bound
-                        q = pv[c]
-                        if q > 0.0 and ((span - 1.0) / n > q * k_seed or (span + 1.0) / n < q / k_seed):
-                            # no interval yet when the background was seeded, and far from the background
-                            # seeded around it: on an object since the start (seed_background)
-                            rf[c] = q
-                            pv[c] = 0.0
-                            pd[c] = True
-                            fs[c] = tick
-                        else:
-                            rf[c] = tau
-                            fs[c] = -1
-                        cs[c] = False
-                        l4[c] = l3[c]
-                        l3[c] = p2
-                        l2[c] = p1
-                        l1[c] = tick
-                        continue
-                else:
-                    flagged = brighter or darker
-                q = pv[c]
-                if flagged and q > 0.0 and q * k_lo <= tau <= q * k_hi:
-                    # back to the background it had before something stayed on it: not an object's trail
-                    rf[c] = q
-                    pv[c] = 0.0
-                    flagged = False
-                    b = q
-                if flagged:
-                    if fs[c] < 0:
-                        fs[c] = tick
-                    if tick - fs[c] > hold_ticks:  # stayed different: it is the background now
-                        if q <= 0.0:
-                            pv[c] = b
-                        rf[c] = b + tau / (background_ticks + tau) * (tau - b)
-                        cs[c] = False
-                    pd[c] = True
-                else:
-                    fs[c] = -1
-                    rf[c] = b + tau / (background_ticks + tau) * (tau - b)
-                l4[c] = l3[c]
-                l3[c] = p2
-                l2[c] = p1
-                l1[c] = tick
-            if (tick + 1) % step_ticks == 0:  # end of an output step: darker pixels, then emit
-                for c in range(W):
-                    p1 = l1[c]
-                    if p1 >= 0 and not cs[c]:
-                        silence = float(tick - p1)  # the interval in progress is longer (one tick of slack)
-                        q = pv[c]
-                        if silence > rf[c] * k_hi and not (q > 0.0 and silence <= q * k_hi):
-                            pd[c] = True
-                            if fs[c] < 0:
-                                fs[c] = tick
-                    out[step, r, c] = pd[c]
-                    pd[c] = False
-                step += 1
+
+def _words(packed: np.ndarray) -> np.ndarray:
+    """Packed bytes (T, n_bytes) as little-endian uint64 words (T, ⌈n_bytes/8⌉), zero-padded."""
+    t, n_bytes = packed.shape
+    n_words = -(-n_bytes // 8)
+    if n_bytes != n_words * 8:
+        padded = np.zeros((t, n_words * 8), np.uint8)
+        padded[:, :n_bytes] = packed
+        packed = padded
+    return np.ascontiguousarray(packed).view("<u8").astype(np.uint64, copy=False)
 
 
 class SpikeChangeDetector:
-    """Foreground masks from a spike stream, one per output step of ``step_ticks`` ticks.
+    """Foreground from a spike stream, one mask per output step of ``step_ticks`` ticks.
 
-    Feed blocks of consecutive ticks to :meth:`feed`; it returns the masks of the steps
-    completed by the block (a step may span blocks: the state carries over), so the same
-    masks come out whatever the block size.
+    Per pixel the detector keeps its last spike, the window of intervals since the last step
+    and a background interval; per spike it touches only that pixel's window (the spikes come
+    as packed bits, 64 pixels a word); once per step each pixel's window becomes its interval
+    estimate, compared with the background (module notes). Feed consecutive blocks of ticks to
+    :meth:`feed` (bool arrays) or :meth:`feed_words` (packed): the state carries over, so the
+    same masks come out whatever the block size.
+
+    Parameters
+    ----------
+    height, width : int
+        Image size.
+    step_ticks : int
+        Output step, ticks.
+    parameters : TrackerParameters, optional
+    stored_width : int, optional
+        Pixels per row in the packed words (≥ ``width``; wider rows hold padding).
+    flip : bool
+        The packed rows are stored bottom-up (the ``.dat`` layout of the cameras).
     """
 
-    def __init__(self, height: int, width: int, step_ticks: int, parameters: TrackerParameters | None = None):
+    def __init__(self, height: int, width: int, step_ticks: int, parameters: TrackerParameters | None = None,
+                 stored_width: int | None = None, flip: bool = False):
+        from numba import get_num_threads
+
         self.parameters = parameters or TrackerParameters()
         self.step_ticks = check_int("step_ticks", step_ticks, 1)
-        shape = (check_int("height", height, 1), check_int("width", width, 1))
-        self.last1 = np.full(shape, -1, np.int64)
-        self.last2 = np.full(shape, -1, np.int64)
-        self.last3 = np.full(shape, -1, np.int64)
-        self.last4 = np.full(shape, -1, np.int64)
-        self.ref = np.zeros(shape, np.float64)  # background interval, ticks
-        self.prev = np.zeros(shape, np.float64)  # the background before the last absorption (0: none)
-        self.censored = np.zeros(shape, np.bool_)
-        self.flag_since = np.full(shape, -1, np.int64)
-        self.pending = np.zeros(shape, np.bool_)
+        self.height, self.width = check_int("height", height, 1), check_int("width", width, 1)
+        self.stored_width = self.width if stored_width is None else check_int("stored_width", stored_width, self.width)
+        self.flip = bool(flip)
+        self.n_pixels = self.height * self.stored_width
+        self.n_words = -(-self.n_pixels // 64)
+        n = self.n_words * 64
+        self.spk = np.zeros((n, 4), np.int64)  # per spike: last spike, the one before, step's first, intervals
+        self.spk[:, _front.LAST] = -1
+        self.spk[:, _front.BEFORE] = -1
+        self.total = np.zeros(n, np.int64)  # spikes so far
+        self.fired = np.zeros(self.n_words, np.uint64)  # pixels that fired in the current step
+        self.fg_bits = np.zeros(self.n_words, np.uint64)
+        self.word_due = np.full(self.n_words, -np.inf)  # the soonest due tick in each word
+        self.anchor = np.full(n, -1, np.int64)
+        self.span1 = np.zeros(n, np.int64)
+        self.n1 = np.zeros(n, np.int64)
+        self.win_span = np.zeros(n, np.int64)
+        self.win_n = np.zeros(n, np.int64)
+        self.mixed = np.zeros(n, np.bool_)  # the window is one interval during which the light fell
+        self.bg = np.zeros(n, np.float64)  # background interval, ticks
+        self.censored = np.zeros(n, np.bool_)  # bg is a lower bound
+        self.fg = np.zeros(n, np.int8)
+        self.flag_since = np.full(n, -1, np.int64)
+        self.prev = np.zeros(n, np.float64)  # the background before the last absorption, or seeded (0: none)
+        self.due = np.full(n, np.inf)  # the tick from which silence alone could change the pixel's state
+        chunks = max(1, min(get_num_threads(), self.n_words))
+        edges = np.linspace(0, self.n_words, chunks + 1).round().astype(np.int64)
+        self._chunks = (edges[:-1].copy(), edges[1:].copy())
         self.next_tick = 0
         self.seeded = False
+        self._seeded_ever = None
+        self._index = None
+
+    def upright(self, flat: np.ndarray) -> np.ndarray:
+        """A per-pixel state array (stored order) as an upright (H, W) view."""
+        grid = flat[: self.n_pixels].reshape(self.height, self.stored_width)[:, : self.width]
+        return grid[::-1] if self.flip else grid
 
     def feed(self, spikes: np.ndarray) -> np.ndarray:
         """Process the next ``spikes`` block (T, H, W) bool; returns (steps completed, H, W) bool masks."""
-        spikes = np.ascontiguousarray(spikes, dtype=np.bool_)
+        if self.flip or self.stored_width != self.width:
+            raise ViformError("feed() takes upright (T, H, W) spikes; this detector reads a stored layout: "
+                              "use feed_words()")
+        bits = self.feed_words(pack_spikes(spikes))
+        return np.stack([self.mask(b) for b in bits]) if len(bits) else np.zeros((0, self.height, self.width), bool)
+
+    def mask(self, bits: np.ndarray) -> np.ndarray:
+        """One step's packed foreground as an upright (H, W) bool mask."""
+        ys, xs = self.pixels(bits)
+        m = np.zeros((self.height, self.width), bool)
+        m[ys, xs] = True
+        return m
+
+    def pixels(self, bits: np.ndarray):
+        """Rows and columns (upright, scan order) of one step's foreground pixels."""
+        return _front.foreground_pixels(bits, self.height, self.width, self.stored_width, self.flip)
+
+    def components(self, bits: np.ndarray, merge_px: int, min_pixels: int):
+        """Detections of one step: boxes (N, 4), pixel counts (N,), and the pixels (ys, xs, component)."""
+        ys, xs = self.pixels(bits)
+        if self._index is None:
+            self._index = np.full((self.height, self.width), -1, np.int64)
+        boxes, counts, labels = _front.components_of_pixels(ys, xs, self.height, self.width, 2 * merge_px + 1,
+                                                            min_pixels, self._index)
+        return boxes, counts, (ys, xs, labels)
+
+    def feed_words(self, words: np.ndarray) -> np.ndarray:
+        """Process the next block of packed ticks (T, n_words) uint64; returns (steps completed, n_words) bits."""
+        words = np.ascontiguousarray(words, dtype=np.uint64)
+        if words.ndim != 2 or words.shape[1] != self.n_words:
+            raise ViformError(f"packed spikes must have shape (T, {self.n_words}); got {words.shape}")
         outs, start = [], 0
         while True:  # split at the seeding checks: the same ticks whatever the blocks
             check = self._next_seed_check()
-            end = spikes.shape[0] if check is None else min(spikes.shape[0], start + check - self.next_tick)
-            outs.append(self._feed(spikes[start:end]))
+            end = words.shape[0] if check is None else min(words.shape[0], start + check - self.next_tick)
+            at_check = check is not None and self.next_tick + (end - start) == check
+            outs.append(self._feed(words[start:end], at_check))
             start = end
-            if check is not None and self.next_tick == check:
+            if at_check:
                 self._seed()
-            if start >= spikes.shape[0]:
+            if start >= words.shape[0]:
                 return np.concatenate(outs)
 
-    def _feed(self, spikes):
+    def _feed(self, words, evaluate_at_end=False):
         first = self.next_tick
-        n_out = (first + spikes.shape[0]) // self.step_ticks - first // self.step_ticks
-        out = np.zeros((n_out,) + self.ref.shape, np.bool_)
-        p = self.parameters
-        _spike_change_block(spikes, first, self.step_ticks, self.last1, self.last2, self.last3, self.last4, self.ref,
-                            self.prev, self.censored,
-                            self.flag_since, self.pending, out, math.exp(-p.threshold_log),
-                            math.exp(p.threshold_log), math.exp(p.seed_threshold_log), p.background_ticks,
-                            p.hold_ticks)
-        self.next_tick += spikes.shape[0]
-        return out
+        t = words.shape[0]
+        n_out = (first + t) // self.step_ticks - first // self.step_ticks
+        extra = evaluate_at_end and t > 0 and (first + t) % self.step_ticks != 0
+        out = np.zeros((n_out + extra, self.n_words), np.uint64)
+        if t:
+            p = self.parameters
+            _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
+                                     self.n_pixels, self.spk, self.total, self.fired, self.fg_bits, self.word_due,
+                                     self.anchor, self.span1, self.n1, self.win_span, self.win_n, self.mixed, self.bg,
+                                     self.censored, self.fg, self.flag_since, self.prev, self.due, out,
+                                     math.exp(-p.threshold_log), math.exp(p.threshold_log),
+                                     math.exp(p.seed_threshold_log), math.exp(p.left_log),
+                                     float(p.background_ticks), int(p.hold_ticks))
+        self.next_tick += t
+        return out[:n_out]
 
     def _next_seed_check(self):
         """The next tick (``seed_ticks``·2^k) at which to try seeding the background, or None."""
@@ -303,93 +305,377 @@ class SpikeChangeDetector:
         return check if check <= self.parameters.hold_ticks else None  # past that, give up
 
     def _seed(self):
-        """Seed the background (:func:`seed_background`) once enough pixels have measured an interval."""
+        """Objects in view since the start: set the background of pixels that stand out from their surroundings.
+
+        Run at the seeding checks (the state is evaluated at the check's tick). Each pixel's
+        current interval is measured (a window of intervals) or only bounded from below (no
+        complete interval yet: at least the time since the stream started, or since its only
+        spike). A pixel whose interval is more than ×e^``seed_threshold_log`` shorter than the
+        robust median over ``seed_window_px`` around it is on a brighter object (valid even
+        where that median is only a lower bound): its background becomes the level interpolated
+        from the clear pixels around it, kept as a lower bound, so only "brighter" is tested
+        against it until its first interval after the object has gone replaces it. A pixel longer
+        by that factor than a *measured* median is on a darker object: it takes the measured
+        level around it. Repeated at every check until ``seed_measured_fraction`` of the pixels
+        are measured.
+        """
         p = self.parameters
-        measured = ~self.censored & (self.last1 >= 0)
-        if measured.mean() < p.seed_measured_fraction:
-            return  # a high threshold Q or dim light: wait for more intervals
-        self.seeded = True
-        # intervals are inverse light: the same test on ln τ
-        log_ref = np.log(np.where(measured, self.ref, 1.0))
-        seeded, unsure, around, weight = seed_background(log_ref, measured, p.seed_threshold_log,
-                                                         p.seed_window_px, p.threshold_log, weights=True)
-        self.ref[seeded] = np.exp(around)[seeded]
-        self.prev[seeded] = 0.0
-        self.flag_since[seeded] = -1
+        t = self.next_tick - 1  # the state was evaluated at this tick
+        up = self.upright
+        last, n_win, s_win = up(self.spk[:, _front.LAST]), up(self.win_n), up(self.win_span)
+        bg, censored, prev, flag_since = up(self.bg), up(self.censored), up(self.prev), up(self.flag_since)
+        k_hi = math.exp(p.threshold_log)
+        tau = np.where(n_win > 0, s_win / np.maximum(n_win, 1), 0.0)
+        silence = t - last
+        measured = (n_win > 0) & (silence <= tau * k_hi + 1.0)
+        bound = np.where(last < 0, t + 1.0, np.maximum(last + 1.0, silence))  # the interval is longer than this
+        value = np.where(measured, tau, np.maximum(bound, np.where(n_win > 0, tau, 0.0)))
+        log_v = np.log(np.maximum(value, 1e-3))
+        H, W = log_v.shape
+        # the robust median around, and whether it is measured: bounds above the median do not move it
+        # (on 16-px blocks: the window is 96 px)
+        b = 2 * _SEED_BLOCK_PX
+        size = max(1, p.seed_window_px // b) | 1
+        med_b = median_filter(np.median(_blocks(log_v, block=b), axis=2), size=size, mode="nearest")
+        median = _nearest(med_b, H, W, b)
+        low_frac = median_filter(_blocks(~measured & (log_v < median), block=b).mean(axis=2), size=size,
+                                 mode="nearest")
+        median_measured = _nearest(low_frac, H, W, b) < 0.1
+        thr = p.seed_threshold_log
+        upper = np.log((s_win + 1.0) / np.maximum(n_win, 1))  # the longest the measured interval can be
+        lower = np.log(np.maximum(np.where(measured, (s_win - 1.0) / np.maximum(n_win, 1), bound), 1e-3))
+        # objects are at least 3 px across (an opening removes thin lines of static texture)
+        bright = _opened(measured & ~up(self.mixed) & (upper < median - thr))  # not a falling transition
+        dark = _opened(median_measured & (lower > median + thr))
+        # a background learned from an object that has since moved on (its current light may agree)
+        known = ~censored & (bg > 0)
+        log_bg = np.log(np.where(known, bg, 1.0))
+        stale = known & ((log_bg < median - thr) | (median_measured & (log_bg > median + thr)))
+        # ... kept where wide enough to be an object, or at the edge of where one stood (anti-aliased edges)
+        if self._seeded_ever is None:
+            self._seeded_ever = np.zeros(stale.shape, bool)
+        self._seeded_ever |= bright | dark
+        stale &= _opened(stale) | _grown(self._seeded_ever)
+        seeded = bright | dark | stale
+        clear = ~_grown(bright | dark) & ~stale
+        around, weight, measured_around = _interpolate_clear(log_v, clear, p.seed_window_px, measured)
+        around_measured = measured_around > 0.9
+        level = np.exp(around)
+        bg[seeded] = level[seeded]
+        # a lower bound unless measured around (only "brighter" is tested against it until the pixel's first
+        # interval replaces it), and always under a brighter object: replaced by its first interval after
+        censored[seeded] = (~around_measured | bright)[seeded]
+        prev[seeded] = 0.0
+        flag_since[seeded] = -1
+        silent = dark & ~measured  # no interval yet: darker once silent for longer than the level around allows
+        prev[silent] = level[silent]
         if p.seed_unsure:
-            self.prev[unsure] = np.exp(around)[unsure]
-        # no interval yet (dim pixels): their first one is compared with the background seeded around them,
-        # where enough pixels around were measured
-        later = ~measured & (weight > 0.5)
-        self.prev[later] = np.exp(around)[later]
+            unsure = ~seeded & around_measured & ((measured & (np.abs(log_v - around) > p.threshold_log))
+                                                  | (known & (np.abs(log_bg - around) > p.threshold_log)))
+            prev[unsure] = level[unsure]
+        later = ~measured & ~seeded & around_measured & (weight > 0.5)
+        prev[later] = level[later]
+        self.word_due[:] = -np.inf  # every pixel evaluated at the next step, against its new background
+        if measured.mean() >= p.seed_measured_fraction:
+            self.seeded = True
+
+#: A frame pixel counts as changed only beyond this many standard deviations of its own noise.
+NOISE_SIGMAS = 4.0
+#: ... and is taken for an object in view at the start only beyond this many median absolute
+#: deviations of the background's texture around it.
+TEXTURE_SIGMAS = 3.0
 
 
 class FrameChangeDetector:
     """Foreground masks from frames (any unit proportional to light), one per frame.
 
     The rule of :class:`SpikeChangeDetector` on ln(light): a pixel is foreground where
-    |ln(E / background)| > threshold; the background follows unflagged pixels with time
+    |ln(E / background)| > ``threshold_log``; the background follows unflagged pixels with time
     constant ``background_s`` and absorbs pixels flagged for longer than ``hold_s``.
-    ``floor`` (same unit as the frames) keeps the logarithm finite in the dark.
+
+    A frame carries, besides its light, which pixels it measured: a pixel under its noise floor
+    or saturated says only that the light is below (or above) some level, and a camera whose
+    auto-exposure is still settling delivers frames where many pixels are such. Unmeasured pixels
+    are never flagged and never move the background. The background is not learned from one
+    frame: it starts from the per-pixel median of the first ``init_frames`` frames that measure at
+    least ``seed_measured_fraction`` of the pixels, so no single frame — an auto-exposure start-up, a frame that
+    blinked — sets it; the masks of those first frames are given once it is known. Objects in view
+    there are seeded as for spikes (:func:`seed_background`), a saturated pixel counting as at least
+    as bright as its value (a bright object saturates most of its pixels). Seeded pixels are grouped
+    (touching, brighter and darker than the background apart); a group none of whose pixels changes
+    within ``seed_confirm_ticks`` gets its own light back (static texture), and a seeded pixel whose
+    light has left its starting level and holds still over two frames, nearer the background around
+    than that level, has been uncovered: that light is its background. A pixel unmeasured there
+    takes the light around it (an object in view) or its first measured light.
+    Each pixel also learns its noise (the spread of ln light while it agrees with the background;
+    at first its spread over those frames, at least the typical one): a change must exceed
+    :data:`NOISE_SIGMAS` standard deviations too, so the quantization of dim 8-bit pixels is not
+    read as motion. A frame that measures fewer than ``seed_measured_fraction`` of its pixels
+    gives an empty mask.
+
+    Parameters
+    ----------
+    background_s, hold_s : float
+        Time constant of the background and time after which a change is absorbed, s.
+    parameters : TrackerParameters, optional
+    floor : float
+        Smallest light kept (same unit as the frames): it keeps the logarithm finite in the dark.
+    init_frames : int
+        Frames the starting background is the median of.
     """
 
     def __init__(self, background_s: float, hold_s: float, parameters: TrackerParameters | None = None,
-                 floor: float = 1e-3):
+                 floor: float = 1e-3, init_frames: int = 3):
         self.parameters = parameters or TrackerParameters()
         self.background_s = check_positive("background_s", background_s)
         self.hold_s = check_positive("hold_s", hold_s)
         self.floor = check_positive("floor", floor)
+        self.init_frames = check_int("init_frames", init_frames, 1)
         self.ref = None
+        self.known = None
         self.flag_since = None
         self.last_t = None
+        self._pending = []  # frames seen before the background is known: (log light, measured, t, saturated)
+        self._group = None  # seeded groups still to confirm (labels), their light before seeding, which moved
+        self.confirm_s = self.parameters.seed_confirm_ticks * self.hold_s / self.parameters.hold_ticks
 
-    def feed(self, frame: np.ndarray, t_s: float) -> np.ndarray:
-        """One frame (H, W) seen at ``t_s``: its foreground mask (all False for the first frame)."""
+    def feed(self, frame: np.ndarray, t_s: float, measured: np.ndarray | None = None,
+             saturated: np.ndarray | None = None) -> list[np.ndarray]:
+        """One frame (H, W) seen at ``t_s``.
+
+        ``measured``: its pixels with a measurement (default all); ``saturated``: pixels whose
+        light is at least the frame's value (a saturated pixel is brighter than a background
+        below that, and never moves it). Returns the foreground masks now decided, in order: none
+        while the starting background is gathered, then those of every frame held back, then one
+        per frame.
+        """
         cur = np.log(np.maximum(np.asarray(frame, dtype=np.float64), self.floor))
+        ok = np.ones(cur.shape, bool) if measured is None else np.asarray(measured, bool)
+        sat = np.zeros(cur.shape, bool) if saturated is None else np.asarray(saturated, bool)
+        ok = ok & ~sat
         if self.ref is None:
-            self.ref, self.flag_since, self.last_t = cur.copy(), np.full(cur.shape, np.nan), t_s
-            p = self.parameters
-            if p.seed_ticks > 0:  # objects in the first frame: the background around them, as for spikes
-                seeded, _, around = seed_background(cur, np.ones(cur.shape, bool), p.seed_threshold_log,
-                                                    p.seed_window_px, p.threshold_log)
-                self.ref[seeded] = around[seeded]
+            self._pending.append((cur, ok, float(t_s), sat))
+            usable = [f for f in self._pending if f[1].mean() >= self.parameters.seed_measured_fraction]
+            if len(usable) < self.init_frames:
+                return []
+            self._start(usable)
+            held, self._pending = self._pending, []
+            return [self._step(*f) for f in held]
+        return [self._step(cur, ok, float(t_s), sat)]
+
+    def finish(self) -> list[np.ndarray]:
+        """The masks of frames still held back when the frames end (the background from what was seen)."""
+        if self.ref is not None or not self._pending:
+            return []
+        usable = [f for f in self._pending if f[1].mean() >= self.parameters.seed_measured_fraction]
+        self._start(usable or self._pending)
+        held, self._pending = self._pending, []
+        return [self._step(*f) for f in held]
+
+    def _start(self, frames):
+        stack = np.stack([np.where(f[1], f[0], np.nan) for f in frames])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # pixels never measured: all-NaN
+            ref = np.nanmedian(stack, axis=0)
+            # what each pixel showed, saturated values included (lower bounds of their light)
+            seen = np.nanmedian(np.stack([np.where(f[1] | f[3], f[0], np.nan) for f in frames]), axis=0)
+        self.known = np.isfinite(ref)
+        self.ref = np.where(self.known, ref, 0.0)
+        # each pixel's noise (ln light): its spread over those frames, at least the typical one
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            var = np.nanmean((stack - ref) ** 2, axis=0)
+        typical = float(np.nanmedian(var)) if np.isfinite(var).any() else 0.0
+        self.var = np.where(np.isfinite(var), np.maximum(var, typical), typical)
+        noise = NOISE_SIGMAS * math.sqrt(typical)  # (a pixel's own spread over the frames counts motion too)
+        self.flag_since = np.full(ref.shape, np.nan)
+        self.last_t = frames[0][2]
+        p = self.parameters
+        if p.seed_ticks > 0 and self.known.any():  # objects in view: the background around them, as for spikes
+            # a saturated pixel is at least as bright as its value: one that stands out above the background
+            # around is on an object for sure (a bright object in view saturates most of its pixels, and seen
+            # only through its unsaturated edges it would be learned as background and leave a ghost)
+            shown = np.isfinite(seen)
+            seen = np.where(self.known, self.ref, np.where(shown, seen, 0.0))
+            seeded, _, around, weight = seed_background(seen, self.known | shown, max(p.seed_threshold_log, noise),
+                                                        p.seed_window_px, p.threshold_log, weights=True,
+                                                        min_pixels=p.min_pixels, texture_sigmas=TEXTURE_SIGMAS)
+            # an object in view moves: a group of seeded pixels none of which changes within confirm_s is
+            # background after all (static texture the image shows strongly), and gets its own light back
+            if seeded.any():
+                # groups of touching pixels, brighter and darker than the background apart (a dark strip of
+                # background beside a bright object in view is not that object, and it does not move)
+                self._group = np.full(seeded.shape, -1, np.int64)
+                n = 0
+                for part in (seeded & (seen > around), seeded & (seen <= around)):
+                    if part.any():
+                        ys, xs = np.nonzero(part)
+                        _, _, label = _components_of_mask(part, 0, 1)  # touching pixels only
+                        self._group[ys, xs] = label + n
+                        n += int(label.max()) + 1
+                self._moved = np.zeros(n, bool)
+                self._prior = seen  # (saturated pixels: their lower bound)
+                self._around = around
+                self._last = None  # the previous frame (log light, measured)
+                self._confirm_at = self.last_t + self.confirm_s
+            self.ref[seeded] = around[seeded]
+            # pixels never measured (saturated, or under the floor, on an object in view): the background around
+            fill = ~self.known & (seeded | (weight > 0.5))
+            self.ref[fill] = around[fill]
+            self.known |= fill
+
+    def _confirm(self, cur, ok, t_s, limit):
+        """Seeded pixels: note the groups that changed; past ``confirm_s``, give the still ones their own light
+        back; a seeded pixel whose light has left its starting level and holds still (two frames alike) nearer
+        the background around it than that level has been uncovered: that light is its background."""
+        g = self._group
+        moved = ok & (g >= 0) & (np.abs(cur - self._prior) > limit)
+        self._moved[g[moved]] = True
+        steady = np.zeros_like(moved) if self._last is None else self._last[1] & (np.abs(cur - self._last[0]) < limit)
+        uncovered = moved & steady & (np.abs(cur - self._around) < np.abs(cur - self._prior))
+        self._last = (cur, ok)
+        self.ref[uncovered] = cur[uncovered]
+        self.flag_since[uncovered] = np.nan
+        g[uncovered] = -1
+        if self._confirm_at is not None and t_s >= self._confirm_at:
+            still = (g >= 0) & ~self._moved[np.maximum(g, 0)]
+            self.ref[still] = self._prior[still]
+            self.flag_since[still] = np.nan
+            g[still] = -1
+            self._confirm_at = None
+        if not (g >= 0).any():
+            self._group = None
+
+    def _step(self, cur, ok, t_s, sat):
+        if ok.mean() < self.parameters.seed_measured_fraction:
+            # a frame that measures too few pixels (auto-exposure still settling): nothing is read from it
             return np.zeros(cur.shape, bool)
+        new = ok & ~self.known  # first measurement of a pixel unmeasured so far: its background
+        self.ref[new] = cur[new]
+        self.known |= new
+        # beyond the change threshold and beyond the pixel's own noise (NOISE_SIGMAS standard deviations)
+        limit = np.maximum(self.parameters.threshold_log, NOISE_SIGMAS * np.sqrt(self.var))
+        if self._group is not None:
+            self._confirm(cur, ok, t_s, limit)
         d = cur - self.ref
-        flagged = np.abs(d) > self.parameters.threshold_log
+        flagged = ok & ~new & (np.abs(d) > limit)
+        flagged |= sat & self.known & (d > limit)  # at least that bright
         self.flag_since[flagged & np.isnan(self.flag_since)] = t_s
-        self.flag_since[~flagged] = np.nan
+        self.flag_since[ok & ~flagged] = np.nan
         gain = 1.0 - math.exp(-max(t_s - self.last_t, 0.0) / self.background_s)
-        update = ~flagged | (t_s - np.nan_to_num(self.flag_since, nan=t_s) > self.hold_s)
+        update = ok & ~new & (~flagged | (t_s - np.nan_to_num(self.flag_since, nan=t_s) > self.hold_s))
+        quiet = update & ~flagged
+        self.var[quiet] += gain * (d[quiet] ** 2 - self.var[quiet])
         self.ref[update] += gain * d[update]
-        self.last_t = t_s
+        self.last_t = max(self.last_t, t_s)
         return flagged
 
 
 # --------------------------------------------------------------------------- start-up background
 
-_SEED_BLOCK_PX = 4  # the robust background is computed on blocks of 4×4 px (the background is smooth)
+_SEED_BLOCK_PX = 8  # the start-up background is computed on blocks of 8×8 px (the background is smooth)
+
+
+def _blocks(a: np.ndarray, fill=None, block: int = _SEED_BLOCK_PX) -> np.ndarray:
+    """(H, W) → (H/b, W/b, b²) blocks of b × b px (edges padded with ``fill``, or the edge values)."""
+    H, W = a.shape
+    b = block
+    hb, wb = -(-H // b), -(-W // b)
+    if fill is None:
+        pad = np.pad(a, ((0, hb * b - H), (0, wb * b - W)), mode="edge")
+    else:
+        pad = np.full((hb * b, wb * b), fill, dtype=np.result_type(a.dtype, np.asarray(fill).dtype))
+        pad[:H, :W] = a
+    return pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
+
+
+def _nearest(blocks: np.ndarray, H: int, W: int, block: int = _SEED_BLOCK_PX) -> np.ndarray:
+    """Block values (hb, wb) of b × b px back to pixels, each pixel its block's value."""
+    return blocks[np.arange(H) // block][:, np.arange(W) // block]
+
+
+def _grown(mask: np.ndarray, px: int = 2) -> np.ndarray:
+    """``mask`` grown by ``px`` in every direction (a (2·px + 1)² maximum filter, on the part that holds it)."""
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    out = np.zeros_like(mask)
+    if rows.size:
+        r0, r1 = max(rows[0] - px, 0), min(rows[-1] + px + 1, mask.shape[0])
+        c0, c1 = max(cols[0] - px, 0), min(cols[-1] + px + 1, mask.shape[1])
+        out[r0:r1, c0:c1] = maximum_filter(mask[r0:r1, c0:c1], size=2 * px + 1, mode="constant")
+    return out
+
+
+def _upsample(blocks: np.ndarray, H: int, W: int) -> np.ndarray:
+    """Block values (hb, wb) back to pixels, bilinear between block centres."""
+    b = _SEED_BLOCK_PX
+
+    def axis(n, nb):
+        u = np.clip((np.arange(n) + 0.5) / b - 0.5, 0.0, nb - 1.0)
+        i0 = np.minimum(np.floor(u).astype(np.intp), nb - 1)
+        i1 = np.minimum(i0 + 1, nb - 1)
+        return i0, i1, u - i0
+
+    y0, y1, fy = axis(H, blocks.shape[0])
+    x0, x1, fx = axis(W, blocks.shape[1])
+    rows = blocks[y0] * (1 - fy)[:, None] + blocks[y1] * fy[:, None]
+    return rows[:, x0] * (1 - fx)[None, :] + rows[:, x1] * fx[None, :]
 
 
 def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int) -> np.ndarray:
-    """Median of ``log_light`` over valid pixels in a ``window_px`` square around each pixel (blocks of 4 px)."""
-    H, W = log_light.shape
-    b = _SEED_BLOCK_PX
-    hb, wb = -(-H // b), -(-W // b)
-    pad = np.full((hb * b, wb * b), np.nan)
-    pad[:H, :W] = np.where(valid, log_light, np.nan)
-    blocks = pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
+    """Median of ``log_light`` over valid pixels in a ``window_px`` square around each pixel, per 8×8 block."""
+    blocks = _blocks(np.where(valid, log_light, np.nan), np.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks: filled below
         med = np.nanmedian(blocks, axis=2)
     fill = np.nanmedian(med) if np.isfinite(med).any() else 0.0
     med = np.where(np.isfinite(med), med, fill)
-    size = max(1, window_px // b) | 1  # odd, in blocks
-    smooth = median_filter(med, size=size, mode="nearest")
-    return np.repeat(np.repeat(smooth, b, axis=0), b, axis=1)[:H, :W]
+    size = max(1, window_px // _SEED_BLOCK_PX) | 1  # odd, in blocks
+    return median_filter(med, size=size, mode="nearest")
 
 
-def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: float, window_px: int,
-                    unsure_log: float | None = None, weights: bool = False):
+def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, also=None):
+    """Normalised Gaussian smoothing (σ = ``window_px``/8) of ``values`` over the ``clear`` pixels.
+
+    Works on 8×8 blocks (sums and counts), so it costs a fraction of a full-resolution filter;
+    returns the smoothed values (bilinear between blocks) and the weight (Gaussian fraction of
+    clear pixels, 0 … 1) per pixel, and with ``also`` (a bool image) the clear-weighted fraction
+    of its pixels around each pixel (per block).
+    """
+    H, W = values.shape
+    n = _blocks(clear.astype(np.float64), 0.0).sum(axis=2)
+    total = _blocks(np.where(clear, values, 0.0), 0.0).sum(axis=2)
+    sigma = max(window_px / 8.0 / _SEED_BLOCK_PX, 0.5)
+    weight = gaussian_filter(n, sigma, mode="nearest")
+    smooth = gaussian_filter(total, sigma, mode="nearest")
+    level = np.where(weight > 1e-3, smooth / np.maximum(weight, 1e-3), np.nan)
+    if np.isfinite(level).any():
+        level = np.where(np.isfinite(level), level, np.nanmedian(level))
+    else:
+        level = np.zeros_like(level)
+    out = (_upsample(level, H, W), _nearest(weight / _SEED_BLOCK_PX ** 2, H, W))
+    if also is not None:
+        part = gaussian_filter(_blocks((clear & also).astype(np.float64), 0.0).sum(axis=2), sigma, mode="nearest")
+        out += (_nearest(part / np.maximum(weight, 1e-9), H, W),)
+    return out
+
+
+def _opened(mask: np.ndarray) -> np.ndarray:
+    """``mask`` without the parts narrower than 3 px once its gaps are closed (lines, specks of texture)."""
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    out = np.zeros_like(mask)
+    if rows.size == 0:
+        return out
+    r0, r1 = max(rows[0] - 3, 0), min(rows[-1] + 4, mask.shape[0])  # only the part that holds the mask
+    c0, c1 = max(cols[0] - 3, 0), min(cols[-1] + 4, mask.shape[1])
+    part = mask[r0:r1, c0:c1]
+    square = np.ones((3, 3), bool)
+    out[r0:r1, c0:c1] = part & binary_opening(binary_closing(part, square), square)
+    return out
+
+
+def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log, window_px: int,
+                    unsure_log: float | None = None, weights: bool = False, min_pixels: int = 1,
+                    texture_sigmas: float = 0.0):
     """Objects in view at the start: pixels that stand out from the background around them, and that background.
 
     A change detector that learns its background from the first light it sees learns the objects
@@ -398,8 +684,8 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
     than ``threshold_log`` from the median of ln(light) over ``window_px`` px (wider than twice
     any object) is on an object (*seeded*). The background under and near it is then
     interpolated from the pixels around that are not seeded (normalised Gaussian smoothing,
-    σ = ``window_px``/8: the local background, not the window's median), which is what the
-    pixel shows once the object has moved off.
+    σ = ``window_px``/8, on 8×8-px blocks: the local background, not the window's median),
+    which is what the pixel shows once the object has moved off.
 
     Parameters
     ----------
@@ -407,9 +693,18 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
         ln of the light (or of the spike interval, its inverse: the test is symmetric).
     valid : ndarray (H, W) bool
         Pixels with a measurement (spike pixels that have no interval yet are left out).
-    threshold_log, window_px : float, int
+    threshold_log : float or ndarray (H, W)
+        How far from the median around (|ln ratio|) marks a pixel: one value, or one per pixel
+        (beyond its own noise).
+    window_px : int
     unsure_log : float, optional
         Pixels not seeded but more than this from the local background are returned as *unsure*.
+    min_pixels : int
+        Smallest object: marked groups of fewer pixels (within 5 px of each other) are left alone.
+    texture_sigmas : float
+        With > 0, a pixel must also stand out by this many times the median absolute deviation
+        of ln light around it (a background whose texture an image shows strongly — the coarse
+        steps of a dim 8-bit frame — is not taken for objects).
 
     Returns
     -------
@@ -421,14 +716,22 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
         was interpolated from (0 … 1).
     """
     window_px = check_int("window_px", window_px, 1)
-    coarse = _robust_background(log_light, valid, window_px)
-    seeded = valid & (np.abs(log_light - coarse) > threshold_log)
+    H, W = log_light.shape
+    coarse = _upsample(_robust_background(log_light, valid, window_px), H, W)
+    deviation = np.abs(log_light - coarse)
+    if texture_sigmas:  # beyond the background's own texture: its median absolute deviation around
+        spread = _upsample(_robust_background(deviation, valid, window_px), H, W)
+        threshold_log = np.maximum(threshold_log, texture_sigmas * spread)
+    # objects are ≥ 3 px across and hold at least min_pixels (specks of texture are not objects)
+    seeded = _opened(valid & (deviation > threshold_log))
+    if min_pixels > 1 and seeded.any():
+        ys, xs = np.nonzero(seeded)
+        _, counts, label = _components_of_mask(seeded, 2, 1)
+        seeded[ys[counts[label] < min_pixels], xs[counts[label] < min_pixels]] = False
     # the local background from the pixels that are not on an object (their anti-aliased edges excluded)
-    clear = (valid & ~binary_dilation(seeded, iterations=2)).astype(np.float64)
-    sigma = max(window_px / 8.0, 1.0)
-    weight = gaussian_filter(clear, sigma, mode="nearest")
-    total = gaussian_filter(np.where(clear > 0, log_light, 0.0), sigma, mode="nearest")
-    background = np.where(weight > 1e-3, total / np.maximum(weight, 1e-3), coarse)
+    clear = valid & ~_grown(seeded)
+    background, weight = _interpolate_clear(log_light, clear, window_px)
+    background = np.where(weight > 1e-3, background, coarse)
     unsure = np.zeros_like(seeded)
     if unsure_log is not None:
         unsure = valid & ~seeded & (np.abs(log_light - background) > unsure_log)
@@ -436,69 +739,6 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log: flo
 
 
 # --------------------------------------------------------------------------- grouping
-
-@njit(cache=True)
-def _find(parent, i):  # pragma: no cover - compiled
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
-@njit(cache=True)
-def _components(mask, reach, min_pixels):  # pragma: no cover - compiled
-    """Union–find over the foreground pixels; pixels within Chebyshev distance ``reach`` join."""
-    H, W = mask.shape
-    n = 0
-    for y in range(H):
-        for x in range(W):
-            if mask[y, x]:
-                n += 1
-    ys = np.empty(n, np.int64)
-    xs = np.empty(n, np.int64)
-    index = np.full((H, W), -1, np.int64)
-    parent = np.arange(n)
-    k = 0
-    for y in range(H):
-        for x in range(W):
-            if not mask[y, x]:
-                continue
-            ys[k], xs[k] = y, x
-            index[y, x] = k
-            for yy in range(max(0, y - reach), y + 1):  # earlier pixels in scan order only
-                hi = min(W - 1, x + reach) if yy < y else x - 1
-                for xx in range(max(0, x - reach), hi + 1):
-                    j = index[yy, xx]
-                    if j >= 0:
-                        a, b = _find(parent, k), _find(parent, j)
-                        if a != b:
-                            parent[max(a, b)] = min(a, b)
-            k += 1
-    box = np.empty((n, 4), np.int64)  # x0, y0, x1, y1 per root
-    count = np.zeros(n, np.int64)
-    for k in range(n):
-        r = _find(parent, k)
-        if count[r] == 0:
-            box[r, 0], box[r, 1], box[r, 2], box[r, 3] = xs[k], ys[k], xs[k], ys[k]
-        else:
-            box[r, 0], box[r, 1] = min(box[r, 0], xs[k]), min(box[r, 1], ys[k])
-            box[r, 2], box[r, 3] = max(box[r, 2], xs[k]), max(box[r, 3], ys[k])
-        count[r] += 1
-    m = 0
-    for k in range(n):
-        if count[k] >= min_pixels:
-            m += 1
-    boxes = np.empty((m, 4), np.float64)
-    counts = np.empty(m, np.int64)
-    m = 0
-    for k in range(n):  # roots in scan order of their first pixel: a deterministic order
-        if count[k] >= min_pixels:
-            boxes[m, 0], boxes[m, 1] = box[k, 0], box[k, 1]
-            boxes[m, 2], boxes[m, 3] = box[k, 2] - box[k, 0] + 1, box[k, 3] - box[k, 1] + 1
-            counts[m] = count[k]
-            m += 1
-    return boxes, counts
-
 
 def detect_boxes(mask: np.ndarray, merge_px: int = 2, min_pixels: int = 4):
     """Detections of one foreground mask: boxes (N, 4) of (x, y, w, h) px, 0-based, and pixel counts.
@@ -513,10 +753,28 @@ def detect_boxes(mask: np.ndarray, merge_px: int = 2, min_pixels: int = 4):
     boxes : ndarray, shape (N, 4), float64
     counts : ndarray, shape (N,), int64
     """
-    mask = np.ascontiguousarray(mask, dtype=np.bool_)
+    mask = np.asarray(mask, dtype=np.bool_)
     if mask.ndim != 2:
         raise ViformError(f"mask must be 2-D (H, W); got shape {mask.shape}")
-    return _components(mask, 2 * check_int("merge_px", merge_px, 0) + 1, check_int("min_pixels", min_pixels, 1))
+    boxes, counts, _ = _components_of_mask(mask, merge_px, min_pixels)
+    return boxes, counts
+
+
+def _components_of_mask(mask, merge_px, min_pixels):
+    ys, xs = np.nonzero(mask)  # scan order
+    index = np.full(mask.shape, -1, np.int64)
+    return _front.components_of_pixels(ys.astype(np.int64), xs.astype(np.int64), mask.shape[0], mask.shape[1],
+                                       2 * check_int("merge_px", merge_px, 0) + 1,
+                                       check_int("min_pixels", min_pixels, 1), index)
+
+
+def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Area of the intersection of every box of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
+    ix = np.clip(np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2])
+                 - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
+    iy = np.clip(np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3])
+                 - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
+    return ix * iy
 
 
 def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -534,78 +792,108 @@ def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- association
 
+_TRAIL = 24  # measured centres kept per track (for its velocity) ...
+_TRAIL_SPACING_TICKS = 10  # ... at least this far apart (24 of them span 240 ticks or more)
+
+
 @dataclass
 class _Track:
     track_id: int
-    state: np.ndarray  # (cx, cy, vx, vy): px and px per second
-    cov: np.ndarray
-    size: np.ndarray  # (w, h), px
+    cx: float  # centre (px) at last_t
+    cy: float
+    vx: float  # px/s
+    vy: float
+    w: float  # size, px
+    h: float
     last_t: float
     last_seen_t: float
     hits: int = 1
     confirmed: bool = False
-    trail: list = field(default_factory=list)
+    merged: bool = False
+    trail_t: np.ndarray = field(default_factory=lambda: np.zeros(_TRAIL))
+    trail_x: np.ndarray = field(default_factory=lambda: np.zeros(_TRAIL))
+    trail_y: np.ndarray = field(default_factory=lambda: np.zeros(_TRAIL))
+    n_trail: int = 0
+
+    def box_at(self, t_s: float) -> np.ndarray:
+        dt = t_s - self.last_t
+        cx, cy = self.cx + self.vx * dt, self.cy + self.vy * dt
+        return np.array([cx - self.w / 2, cy - self.h / 2, self.w, self.h])
+
+    def add(self, t_s: float, cx: float, cy: float, spacing_s: float = 0.0) -> None:
+        """Keep a measured centre; one closer than ``spacing_s`` to the one before replaces it (the trail
+        spans the same time whatever the output step)."""
+        if self.n_trail >= 2 and t_s - self.trail_t[(self.n_trail - 2) % _TRAIL] < spacing_s:
+            self.n_trail -= 1
+        k = self.n_trail % _TRAIL
+        self.trail_t[k], self.trail_x[k], self.trail_y[k] = t_s, cx, cy
+        self.n_trail += 1
 
 
 class Tracker:
-    """Constant-velocity Kalman tracks, Hungarian assignment, birth and death with hysteresis.
+    """Tracks of detections: predicted boxes, Hungarian assignment, birth and death with hysteresis.
+
+    Each track predicts its box at the next step from its last measured centre and a velocity
+    fitted to its recent measured centres (Theil–Sen: the median of the velocities between pairs
+    of them, so a few jumps of the box — an object entering, foreground growing — do not throw
+    it). Detections are assigned to predictions by the Hungarian method
+    (``scipy.optimize.linear_sum_assignment``) on 1 − IoU, with a centre-distance fallback for
+    small fast objects. Before that, a detection holding the predictions of several tracks is
+    split and pieces inside one prediction are joined (:meth:`_regroup`).
 
     Parameters
     ----------
     parameters : TrackerParameters
     tick_s : float
         Duration of a tick, s (turns ``max_coast_ticks`` into seconds).
-    position_noise_px : float
-        Measurement noise of a detection's centre, px (std).
-    acceleration_px_per_s2 : float
-        Process noise: unmodelled acceleration, px/s² (std).
     """
 
-    def __init__(self, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000,
-                 position_noise_px: float = 1.0, acceleration_px_per_s2: float = 2e6):
+    def __init__(self, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000):
         self.parameters = parameters or TrackerParameters()
         self.tick_s = check_positive("tick_s", tick_s)
-        self.r = position_noise_px ** 2
-        self.q = acceleration_px_per_s2 ** 2
         self.tracks: list[_Track] = []
         self.next_id = 1
 
-    def _predict(self, track: _Track, t_s: float) -> np.ndarray:
-        dt = t_s - track.last_t
-        f = np.eye(4)
-        f[0, 2] = f[1, 3] = dt
-        g = np.array([[dt * dt / 2, 0], [0, dt * dt / 2], [dt, 0], [0, dt]])
-        track.state = f @ track.state
-        track.cov = f @ track.cov @ f.T + self.q * (g @ g.T)
-        track.last_t = t_s
-        return track.state
+    def update(self, boxes: np.ndarray, t_s: float, pixels=None, counts=None) -> list[tuple[int, np.ndarray]]:
+        """One step: detections seen at ``t_s``; returns [(track id, box)] reported now.
 
-    def _box(self, track: _Track) -> np.ndarray:
-        (cx, cy), (w, h) = track.state[:2], track.size
-        return np.array([cx - w / 2, cy - h / 2, w, h])
-
-    def update(self, boxes: np.ndarray, t_s: float) -> list[tuple[int, np.ndarray]]:
-        """One step: detections ``boxes`` (N, 4) seen at ``t_s``; returns [(track id, box)] reported now."""
+        Parameters
+        ----------
+        boxes : ndarray (N, 4)
+            Detections (x, y, w, h), px: with ``counts``, every connected component of the step's
+            foreground, those under ``min_pixels`` only as pieces a track may join.
+        t_s : float
+            The step's instant, s.
+        pixels : tuple (ys, xs, component), optional
+            The foreground pixels and the component each belongs to. With them, a component
+            holding the predictions of several tracks is split between them (:meth:`_regroup`).
+        counts : ndarray (N,), optional
+            Foreground pixels of each component (default: every box is a detection, counted by its
+            area). A new track on at least ``confirm_pixels`` of them is confirmed at once.
+        """
         p = self.parameters
         boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
-        for track in self.tracks:
-            self._predict(track, t_s)
-        predicted = np.array([self._box(tr) for tr in self.tracks]).reshape(-1, 4)
-        matches = []
-        unmatched = set(range(len(boxes)))
-        if len(self.tracks) and len(boxes):
-            iou = iou_matrix(predicted, boxes)
-            pc = predicted[:, :2] + predicted[:, 2:] / 2
-            bc = boxes[:, :2] + boxes[:, 2:] / 2
+        counts = boxes[:, 2] * boxes[:, 3] if counts is None else np.asarray(counts, np.float64).ravel()
+        predicted = np.array([tr.box_at(t_s) for tr in self.tracks]).reshape(-1, 4)
+        boxes, counts, forced, merged = self._regroup(boxes, counts, pixels, predicted, t_s)
+        matches = list(forced.items())
+        unmatched = set(range(len(boxes))) - set(forced.values())
+        free_tracks = [i for i in range(len(self.tracks)) if i not in forced and i not in merged]
+        free_boxes = sorted(unmatched)
+        if free_tracks and free_boxes:
+            pr, bx = predicted[free_tracks], boxes[free_boxes]
+            iou = iou_matrix(pr, bx)
+            pc = pr[:, :2] + pr[:, 2:] / 2
+            bc = bx[:, :2] + bx[:, 2:] / 2
             dist = np.hypot(pc[:, None, 0] - bc[None, :, 0], pc[:, None, 1] - bc[None, :, 1])
-            reach = (np.hypot(*predicted[:, 2:].T)[:, None] + np.hypot(*boxes[:, 2:].T)[None, :]) / 2 + p.gate_px
+            reach = (np.hypot(pr[:, 2], pr[:, 3])[:, None] + np.hypot(bx[:, 2], bx[:, 3])[None, :]) / 2 + p.gate_px
             cost = np.where(iou > 0, 1.0 - iou, 1.0 + dist / reach)
             cost = np.where(dist <= reach, cost, 1e6)
             rows, cols = linear_sum_assignment(cost)
-            for i, j in zip(rows, cols, strict=True):
-                if cost[i, j] < 1e6:
-                    matches.append((i, j))
-                    unmatched.discard(j)
+            for a, b in zip(rows, cols, strict=True):
+                if cost[a, b] < 1e6:
+                    matches.append((free_tracks[a], free_boxes[b]))
+                    unmatched.discard(free_boxes[b])
         reported = []
         matched_tracks = set()
         for i, j in matches:
@@ -614,60 +902,144 @@ class Tracker:
             matched_tracks.add(i)
             if track.confirmed or track.hits >= p.min_hits:
                 track.confirmed = True
-                if self._moving(track, t_s):
-                    reported.append((track.track_id, boxes[j].copy()))
+                reported.append((track.track_id, boxes[j].copy()))
+        for i, track in enumerate(self.tracks):
+            if i in merged and not track.merged and track.n_trail >= 3:
+                track.vx, track.vy = _trail_velocity(track)
+            track.merged = i in merged
+        for i in sorted(merged):  # inside another object's foreground: reported where predicted
+            track = self.tracks[i]
+            track.last_seen_t = t_s
+            if p.report_merged:
+                reported.append((track.track_id, predicted[i].copy()))
         if p.merged_keep_alive and matches:
             # a confirmed track without a detection whose prediction lies inside another track's detection
             # is merged with (or hidden by) that object: it coasts on as long as that lasts
             matched_boxes = boxes[[j for _, j in matches]]
-            for i, track in enumerate(self.tracks):
-                if i in matched_tracks or not track.confirmed:
-                    continue
-                pb = predicted[i]
-                ix = np.clip(np.minimum(pb[0] + pb[2], matched_boxes[:, 0] + matched_boxes[:, 2])
-                             - np.maximum(pb[0], matched_boxes[:, 0]), 0, None)
-                iy = np.clip(np.minimum(pb[1] + pb[3], matched_boxes[:, 1] + matched_boxes[:, 3])
-                             - np.maximum(pb[1], matched_boxes[:, 1]), 0, None)
-                inside = ix * iy / max(pb[2] * pb[3], 1e-9)
-                if inside.max() >= 0.5:
-                    track.last_seen_t = t_s  # not reported: its box is a prediction, not a measurement
+            idle = [i for i, tr in enumerate(self.tracks) if i not in matched_tracks and tr.confirmed]
+            if idle:
+                pb = predicted[idle]
+                inside = _intersection(pb, matched_boxes) / np.maximum(pb[:, 2] * pb[:, 3], 1e-9)[:, None]
+                for i in np.asarray(idle)[inside.max(axis=1) >= 0.5]:
+                    self.tracks[i].last_seen_t = t_s  # not reported: its box is a prediction, not a measurement
         coast_s = p.max_coast_ticks * self.tick_s
         self.tracks = [tr for i, tr in enumerate(self.tracks)
                        if i in matched_tracks or (tr.confirmed and t_s - tr.last_seen_t <= coast_s)]
         for j in sorted(unmatched):
+            if counts[j] < p.min_pixels:
+                continue
             b = boxes[j]
-            state = np.array([b[0] + b[2] / 2, b[1] + b[3] / 2, 0.0, 0.0])
-            cov = np.diag([self.r, self.r, 1e8, 1e8])  # unknown velocity: up to 10,000 px/s
-            track = _Track(self.next_id, state, cov, b[2:].copy(), t_s, t_s, trail=[(t_s, state[:2].copy())])
+            track = _Track(self.next_id, b[0] + b[2] / 2, b[1] + b[3] / 2, 0.0, 0.0, b[2], b[3], t_s, t_s)
+            track.add(t_s, track.cx, track.cy)
             self.next_id += 1
             self.tracks.append(track)
-            if p.min_hits <= 1:
+            if p.min_hits <= 1 or counts[j] >= p.confirm_pixels:  # a large detection is no noise
                 track.confirmed = True
                 reported.append((track.track_id, b.copy()))
         return reported
 
-    def _moving(self, track: _Track, t_s: float) -> bool:
-        """Whether the track's measured centre moved at least ``min_speed`` over the last ``still_ticks``."""
-        window_s = self.parameters.still_ticks * self.tick_s
-        while len(track.trail) > 2 and track.trail[1][0] <= t_s - window_s:
-            track.trail.pop(0)  # keep one point at or before the window's start
-        (t0, c0), (t1, c1) = track.trail[0], track.trail[-1]
-        if t1 - t0 < window_s:
-            return True  # too young to judge
-        return math.hypot(*(c1 - c0)) >= self.parameters.min_speed_px_per_s * (t1 - t0)
+    def _regroup(self, boxes, counts, pixels, predicted, t_s):
+        """Split components that hold several tracks' predictions; join pieces inside one track's prediction.
+
+        Only confirmed tracks seen within ``max_coast_ticks`` take part. A component covering at
+        least half of the predicted boxes of two or more of them (an object passing in front of
+        another merges their foreground) is measured for the largest of them (the occluder, or
+        what the others cross) without the pixels that lie only inside the others' predictions;
+        the others go on at their predictions (a box measured from shared pixels would drag a
+        partly hidden object along with its occluder). Pieces of foreground that lie mostly
+        (≥ 60 % of their box) inside one track's predicted box and inside no other's are joined
+        into one detection for it, within that box (a textured or partly hidden object whose
+        foreground breaks up). Components under ``min_pixels`` that join nothing are dropped.
+
+        Returns the detections' boxes and pixel counts, {track index: detection index} for the
+        detections made for a track, and the set of tracks that go on at their predictions.
+        """
+        p = self.parameters
+        big = counts >= p.min_pixels
+        coast_s = p.max_coast_ticks * self.tick_s
+        live = np.array([i for i, tr in enumerate(self.tracks) if tr.confirmed and t_s - tr.last_seen_t <= coast_s],
+                        np.int64)
+        if live.size == 0 or len(boxes) == 0:
+            return boxes[big], counts[big], {}, set()
+        n_comp = len(boxes)
+        grow = float(p.merge_px)
+        pred = predicted[live].copy()
+        pred[:, :2] -= grow
+        pred[:, 2:] += 2 * grow
+        cover = _intersection(boxes, pred) / np.maximum(pred[:, 2] * pred[:, 3], 1e-9)[None, :]
+        inside = _intersection(boxes, predicted[live]) / np.maximum(boxes[:, 2] * boxes[:, 3], 1e-9)[:, None]
+        out_boxes, out_counts, forced, merged = [], [], {}, set()
+        used = np.zeros(n_comp, bool)
+        taken = set()
+        multi = np.nonzero((cover >= 0.5).sum(axis=1) >= 2)[0] if pixels is not None else np.zeros(0, np.int64)
+        if multi.size:
+            ys, xs, comp = pixels
+        for j in multi:
+            holders = [h for h in np.nonzero(cover[j] >= 0.5)[0] if live[h] not in taken]
+            if len(holders) < 2:
+                continue
+            used[j] = True
+            sel = comp == j
+            px, py = xs[sel] + 0.5, ys[sel] + 0.5
+            hb = pred[holders]
+            member = ((px[:, None] >= hb[None, :, 0]) & (px[:, None] < hb[None, :, 0] + hb[None, :, 2])
+                      & (py[:, None] >= hb[None, :, 1]) & (py[:, None] < hb[None, :, 1] + hb[None, :, 3]))
+            primary = int(np.argmax(hb[:, 2] * hb[:, 3]))
+            own = member[:, primary] | ~member.any(axis=1)
+            for k, h in enumerate(holders):
+                taken.add(int(live[h]))
+                if k != primary:
+                    merged.add(int(live[h]))
+            if own.any():
+                x0, y0 = px[own].min() - 0.5, py[own].min() - 0.5
+                forced[int(live[holders[primary]])] = len(out_boxes)
+                out_boxes.append((x0, y0, px[own].max() + 0.5 - x0, py[own].max() + 0.5 - y0))
+                out_counts.append(float(own.sum()))
+        # pieces inside one track's prediction only
+        mostly = inside >= 0.6
+        single = ~used & (mostly.sum(axis=1) == 1)
+        owner = np.where(single, np.argmax(mostly, axis=1), -1)
+        for h in np.unique(owner[owner >= 0]):
+            if int(live[h]) in taken:
+                owner[owner == h] = -1
+                continue
+            parts = np.nonzero(owner == h)[0]
+            size = counts[parts].sum()
+            if len(parts) < 2 and size >= p.min_pixels:
+                owner[parts] = -1  # one piece, large enough: an ordinary detection
+                continue
+            if size < p.min_pixels:
+                continue  # (dropped with the other small pieces)
+            pb = boxes[parts]
+            g = predicted[live[h]]  # the union, within the prediction (pieces may hang over it)
+            x0, y0 = max(pb[:, 0].min(), g[0]), max(pb[:, 1].min(), g[1])
+            x1 = min((pb[:, 0] + pb[:, 2]).max(), g[0] + g[2])
+            y1 = min((pb[:, 1] + pb[:, 3]).max(), g[1] + g[3])
+            forced[int(live[h])] = len(out_boxes)
+            taken.add(int(live[h]))
+            out_boxes.append((x0, y0, x1 - x0, y1 - y0))
+            out_counts.append(float(size))
+            used[parts] = True
+        rest = ~used & (owner < 0) & big
+        boxes_out = np.concatenate([np.array(out_boxes, np.float64).reshape(-1, 4), boxes[rest]])
+        counts_out = np.concatenate([np.array(out_counts, np.float64), counts[rest]])
+        return boxes_out, counts_out, forced, merged
 
     def _correct(self, track: _Track, box: np.ndarray, t_s: float) -> None:
-        h = np.zeros((2, 4))
-        h[0, 0] = h[1, 1] = 1.0
-        z = box[:2] + box[2:] / 2
-        s = h @ track.cov @ h.T + self.r * np.eye(2)
-        k = track.cov @ h.T @ np.linalg.inv(s)
-        track.state = track.state + k @ (z - h @ track.state)
-        track.cov = (np.eye(4) - k @ h) @ track.cov
-        track.size = 0.5 * track.size + 0.5 * box[2:]
+        """A measured box: the track's centre is the box's, its velocity refitted, its size smoothed."""
+        cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
+        track.add(t_s, cx, cy, _TRAIL_SPACING_TICKS * self.tick_s)
+        track.cx, track.cy, track.last_t = cx, cy, t_s
+        if track.n_trail >= 2:
+            track.vx, track.vy = _trail_velocity(track)
+        track.w, track.h = 0.5 * (track.w + box[2]), 0.5 * (track.h + box[3])
         track.hits += 1
         track.last_seen_t = t_s
-        track.trail.append((t_s, z.copy()))
+
+
+def _trail_velocity(track: _Track) -> tuple[float, float]:
+    n = min(track.n_trail, _TRAIL)
+    return _front.theil_sen(track.trail_t[:n], track.trail_x[:n], track.trail_y[:n])
 
 
 # --------------------------------------------------------------------------- pipelines
@@ -686,12 +1058,15 @@ class TrackingResult:
         Ticks per frame (spike streams), None for frame cameras.
     detections : int
         Detections found over the run.
+    spike_counts : ndarray (H, W) or None
+        Spikes per pixel over the ticks tracked (spike streams; the overlay's background).
     """
 
     rows: np.ndarray
     times_s: np.ndarray
     step_ticks: int | None
     detections: int
+    spike_counts: np.ndarray | None = None
 
 
 def _rows(frame: int, reported) -> list:
@@ -722,27 +1097,54 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
     if source.n_ticks < step_ticks:
         raise ViformError(f"the stream has {source.n_ticks} ticks, fewer than one output step of {step_ticks}")
     p = parameters or TrackerParameters()
-    detector = SpikeChangeDetector(source.height, source.width, step_ticks, p)
+    layout = _packed_layout(source)
+    detector = SpikeChangeDetector(source.height, source.width, step_ticks, p, *layout)
     tracker = Tracker(p, tick_s=1.0 / source.clock_hz)
     rows, times, n_det = [], [], 0
     block = max(step_ticks, (check_int("block_ticks", block_ticks, 1) // step_ticks) * step_ticks)
     n_usable = (source.n_ticks // step_ticks) * step_ticks
-    for _, spikes in source.iter_blocks(block, 0, n_usable):
-        for mask in detector.feed(spikes):
+    for words in _packed_blocks(source, block, n_usable, layout):
+        for bits in detector.feed_words(words):
             frame = len(times) + 1
             t_s = source.start_time_s + frame * step_ticks / source.clock_hz
-            boxes, _ = detect_boxes(mask, p.merge_px, p.min_pixels)
-            n_det += len(boxes)
-            reported = tracker.update(boxes, t_s)
+            boxes, counts, pixels = detector.components(bits, p.merge_px, 1)
+            n_det += int(np.count_nonzero(counts >= p.min_pixels))
+            reported = tracker.update(boxes, t_s, pixels, counts)
             rows += _rows(frame, reported)
             times.append(t_s)
             if on_step is not None:
-                on_step(frame, t_s, mask, reported)
-    return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det)
+                on_step(frame, t_s, detector.mask(bits), reported)
+    return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det,
+                          detector.upright(detector.total).copy())
+
+
+def _packed_layout(source) -> tuple[int, bool]:
+    """(stored width, rows bottom-up) of the packed words :func:`_packed_blocks` hands out for ``source``."""
+    if callable(getattr(source, "read_packed", None)):
+        return int(source.stored_width), bool(source.flip)
+    return int(source.width), False
+
+
+def _packed_blocks(source, block_ticks: int, stop: int, layout):
+    """Ticks [0, stop) of ``source`` as packed words (T, n_words) uint64, ``block_ticks`` at a time.
+
+    A ``.dat`` file hands its stored bytes as they are (no unpacking); other sources are packed here.
+    """
+    from viform.stream.container import block_ticks_for
+
+    direct = callable(getattr(source, "read_packed", None))
+    # a block of packed words is an eighth of the unpacked bytes: the reader's budget allows 8× the ticks
+    block_ticks = max(1, min(block_ticks, 8 * block_ticks_for(source.height, layout[0], block_ticks)))
+    for first in range(0, stop, block_ticks):
+        last = min(first + block_ticks, stop)
+        if direct:
+            yield _words(source.read_packed(first, last))
+        else:
+            yield pack_spikes(source.read_ticks(first, last))
 
 
 def track_frames(frames, times_s, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000,
-                 floor: float = 1e-3) -> TrackingResult:
+                 floor: float = 1e-3, measured=None, saturated=None) -> TrackingResult:
     """The same back end on a frame camera's images (frame k = ``frames[k − 1]`` seen at ``times_s[k − 1]``).
 
     Time constants in ticks (``background_ticks``, ``hold_ticks``, ``max_coast_ticks``) become
@@ -755,18 +1157,39 @@ def track_frames(frames, times_s, parameters: TrackerParameters | None = None, t
         Light estimates (lux, or anything proportional to light).
     times_s : array_like
         The instant each frame reports (end of its exposure: the earliest it can be read), s.
+    floor : float
+        Smallest light kept (same unit as the frames).
+    measured, saturated : iterable of ndarray (H, W) bool, optional
+        Per frame, the pixels it measured (not under the noise floor) and those saturated (their
+        light at least the frame's value); default all measured, none saturated.
+        See :class:`FrameChangeDetector`.
     """
     p = parameters or TrackerParameters()
     times = np.asarray(times_s, np.float64).ravel()
     detector = FrameChangeDetector(p.background_ticks * tick_s, p.hold_ticks * tick_s, p, floor)
     tracker = Tracker(p, tick_s=tick_s)
-    rows, n_det, n = [], 0, 0
-    for frame, (image, t_s) in enumerate(zip(frames, times, strict=False), start=1):
-        mask = detector.feed(image, float(t_s))
-        boxes, _ = detect_boxes(mask, p.merge_px, p.min_pixels)
-        n_det += len(boxes)
-        rows += _rows(frame, tracker.update(boxes, float(t_s)))
-        n = frame
-    if n != times.size:
-        raise ViformError(f"{n} frames were given for {times.size} instants")
+    rows, n_det = [], 0
+    frames = list(frames)
+    if len(frames) != times.size:
+        raise ViformError(f"{len(frames)} frames were given for {times.size} instants")
+    measured = [None] * len(frames) if measured is None else list(measured)
+    saturated = [None] * len(frames) if saturated is None else list(saturated)
+    if len(measured) != len(frames) or len(saturated) != len(frames):
+        raise ViformError(f"{len(measured)} measured and {len(saturated)} saturated masks were given for "
+                          f"{len(frames)} frames")
+    done = 0
+
+    def track(masks):
+        nonlocal done, n_det, rows
+        for mask in masks:
+            t_s = float(times[done])
+            done += 1
+            boxes, counts, labels = _components_of_mask(mask, p.merge_px, 1)
+            n_det += int(np.count_nonzero(counts >= p.min_pixels))
+            ys, xs = np.nonzero(mask)
+            rows += _rows(done, tracker.update(boxes, t_s, (ys, xs, labels), counts))
+
+    for image, t_s, ok, sat in zip(frames, times, measured, saturated, strict=True):
+        track(detector.feed(image, float(t_s), ok, sat))
+    track(detector.finish())
     return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), times, None, n_det)

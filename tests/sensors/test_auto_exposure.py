@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 
 from viform._validate import ViformError
-from viform.isp.auto_exposure import (
+from viform.isp.highspeed_pipeline import HighSpeedConfig, StepsScene, metering_demo, run_highspeed
+from viform.light.scenes import TranslatingScene
+from viform.sensors.auto_exposure import (
     AutoExposure,
     MeanMeter,
     PercentileMeter,
     WeightedMeter,
     settle_frames,
 )
-from viform.isp.highspeed_pipeline import HighSpeedConfig, StepsScene, metering_demo, run_highspeed
-from viform.light.scenes import TranslatingScene
 
 T_UP, T_DOWN = 0.02, 0.05  # s: ×10 then ×0.1
 

@@ -1,0 +1,84 @@
+"""CLI start-up: CPU seconds of ``viform --help`` and of a 4-tick ``viform simulate``, beside the floors.
+
+Each command runs ``--repeats`` times in a fresh process after one warm-up run (numba's caches and
+the Gamma tables on disk, bytecode written); the figure is the least CPU time (user + system of
+the child) over the runs, which is the least sensitive to the other work on a shared machine.
+The floors, measured the same way in the same run: the interpreter alone, ``import numpy``, and
+"numba ready" — ``import numba`` plus the first call of one cached viform kernel, which loads
+numba's compiler target (every numba program pays it once). A 4-tick simulation costs its
+start-up: what it costs above the floor is viform's own start-up.
+
+It also lists the heavy optional libraries each command imports (``-X importtime``): none of
+dask, zarr, matplotlib, OpenCV, TrackEval or scipy.special should load before the first tick.
+Run: ``python benchmarks/bench_startup.py [--repeats 5]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HEAVY = ("dask", "distributed", "zarr", "matplotlib", "cv2", "trackeval", "scipy.special", "torch", "numba.cuda")
+
+
+def cpu_seconds(command: list[str], repeats: int) -> tuple[float, float]:
+    """(least, median) CPU seconds of ``command`` over ``repeats`` runs after one warm-up run."""
+    subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    times = []
+    for _ in range(repeats):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        times.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    times.sort()
+    return times[0], times[len(times) // 2]
+
+
+def heavy_imports(command: list[str]) -> list[str]:
+    """The modules of :data:`HEAVY` that ``command`` (a ``python -m ...`` command) imports."""
+    result = subprocess.run([command[0], "-X", "importtime", *command[1:]], capture_output=True, text=True)
+    names = {line.rsplit("|", 1)[-1].strip() for line in result.stderr.splitlines() if line.startswith("import time:")}
+    return [h for h in HEAVY if h in names]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args(argv)
+    py = sys.executable
+    with tempfile.TemporaryDirectory(prefix="viform-startup-") as tmp:
+        out = str(Path(tmp) / "s.dat")
+        simulate = [py, "-m", "viform", "simulate", "translating", "--duration", "0.0001", "--out", out]
+        rows = [
+            ("python (interpreter, site)", [py, "-c", "pass"]),
+            ("import numpy", [py, "-c", "import numpy"]),
+            ("numba ready (import, first cached kernel)",
+             [py, "-c", "from viform.sensors._gamma import stream_keys; stream_keys(1, 1)"]),
+            ("viform --help", [py, "-m", "viform", "--help"]),
+            ("viform simulate, 4 ticks, exact", simulate),
+            ("viform simulate, 4 ticks, noise-free", [*simulate, "--no-noise"]),
+        ]
+        print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; least (median) CPU-s of "
+              f"{args.repeats} runs")
+        floors = {}
+        for name, command in rows:
+            least, median = cpu_seconds(command, args.repeats)
+            floors[name] = least
+            extra = ""
+            if command[1:3] == ["-m", "viform"]:
+                # --help needs no kernel: its floor is NumPy; a simulation's is numba ready
+                floor = "import numpy" if "--help" in command else "numba ready (import, first cached kernel)"
+                heavy = heavy_imports(command)
+                extra = (f"  above {floor.split(' (')[0]} {least - floors[floor]:+.3f}; "
+                         f"heavy imports: {', '.join(heavy) or 'none'}")
+            print(f"  {name:44s} {least:6.3f} ({median:.3f}){extra}", flush=True)
+    print(f"load average after: {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,332 @@
+"""Running a sweep: one point shot and scored as ``viform compare`` does it, the points on dask
+workers or in this process, the results stored as they finish."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+
+from viform._io import write_json
+from viform._parallel import (
+    DEFAULT_CONNECT_TIMEOUT_S,
+    SchedulerLost,
+    check_connect_timeout,
+    completed,
+    one_line_warnings,
+    open_client,
+    parse_memory,
+)
+from viform._validate import ViformError, check_int, one_line
+from viform.measure import comparison as cmp
+from viform.measure.sweep.answer import answer
+from viform.measure.sweep.parameters import make_point_sensor
+from viform.measure.sweep.plan import Point, SweepContext, SweepPlan, point_seed
+from viform.measure.sweep.store import (
+    POINTS_DIR,
+    _finite,
+    _restore,
+    check_context,
+    load_point,
+    store_point,
+    write_table,
+)
+
+#: Contrast-to-noise at which a target counts as seen (as compare's verdict counts it).
+SEEN_CNR = 3.0
+
+
+def run_point(context: SweepContext, point: Point, scene=None, device: str = "cpu") -> dict:
+    """Shoot and score one point (runs on a worker); returns its record and its images.
+
+    The record holds the metrics of :func:`viform.measure.comparison.score`; ``images`` holds the
+    light estimate (lux, float32; NaN where under-exposed) at each instant, for the report.
+    ``scene`` is the point's scene when the caller has made it already (points of one task share
+    it); ``device`` runs a spike sensor's simulation there ("cpu" or "cuda"; others run on the CPU).
+    """
+    from numba import get_num_threads, set_num_threads
+
+    # CPU of the whole process (numba may run a kernel on its own pool thread): one point at a time per
+    # worker process, so this is the point's CPU time (an overestimate when threads share a process)
+    started, cpu = time.perf_counter(), time.process_time()
+    threads = get_num_threads()
+    set_num_threads(1)  # one point per worker: parallelism comes from the workers
+    try:
+        scene = context.make_scene(point.scene) if scene is None else scene
+        sensor = make_point_sensor(point.sensor, dict(point.settings))
+        seed = point_seed(context.seed, point)
+        spike = cmp.compare_entry(point.sensor).family == "spike"
+        methods = [context.spike_image] if spike else None
+        try:
+            shots = cmp.shoot(point.sensor, scene, context.duration_s, list(context.instants_s), seed=seed,
+                              sensor=sensor, spike_methods=methods, device=device)
+        except (ViformError, ValueError) as exc:  # this setting cannot shoot this scene (light beyond its range …)
+            why = one_line(exc) if isinstance(exc, ViformError) else f"the model refused this light ({one_line(exc)})"
+            shots = [cmp.Shot(point.sensor, point.label(), "", skipped=why)]
+        shot = shots[0]
+        shot.metrics = cmp.score(shot, scene, list(context.instants_s))
+    finally:
+        set_num_threads(threads)
+    metrics = {k: (float(v) if isinstance(v, (int, float, np.floating, np.integer)) else v)
+               for k, v in shot.metrics.items()}
+    if isinstance(metrics.get("target_cnr"), dict):  # scenes with targets (night-road-fog): how many are seen
+        metrics["targets_seen"] = float(sum(v >= SEEN_CNR for v in metrics["target_cnr"].values()))
+    if context.tracking and not shot.skipped:
+        metrics.update(tracking_scores(scene, context.duration_s, shot))
+    warning = spike_support_warning(shot.raw, context.spike_image) if spike and not shot.skipped else None
+    images = None
+    if not shot.skipped:
+        images = np.stack([np.where(e.underexposed, np.nan, np.nan_to_num(np.asarray(e.lux, np.float64)))
+                           for e in shot.estimates]).astype(np.float32)
+    record = {"point_id": point.point_id, "sensor": point.sensor, "settings": dict(point.settings),
+              "swept": dict(point.swept), "default": point.is_default, "label": point.label(),
+              "shot_label": shot.label, "skipped": shot.skipped, "seed": seed, "metrics": metrics,
+              "context_sha256": context.fingerprint(),
+              "seconds": time.perf_counter() - started, "cpu_seconds": time.process_time() - cpu}
+    if point.scene:
+        record["scene"] = dict(point.scene)
+    if device != "cpu" and spike:
+        record["device"] = device
+    if warning:
+        record["warning"] = warning
+    return {"record": record, "images": images}
+
+
+def spike_support_warning(stream, spike_image: str) -> str | None:
+    """One line when a spike point's stream is too sparse for the images it is scored on
+    (:func:`viform.imaging.support.spike_support`), else None."""
+    from viform.imaging.support import imaging_need, spike_support
+
+    if stream is None or not hasattr(stream, "read_ticks"):
+        return None
+    method = {"best": "multi-interval"}.get(spike_image, spike_image)
+    window, need = imaging_need(method, stream.n_ticks, max(1, round(cmp.ACCUMULATION_WINDOW_S * stream.clock_hz)))
+    return spike_support(stream, window, need).warning(f"its {spike_image} images",
+                                                        "more light or a lower threshold would help")
+
+
+def run_points(context: SweepContext, points, device: str = "cpu") -> list[dict]:
+    """Shoot and score several points in one task, in order (:func:`run_point` each); points on the same
+    scene setting share one scene object (its light caches included)."""
+    scenes: dict = {}
+    out = []
+    for p in points:
+        if p.scene not in scenes:
+            scenes[p.scene] = context.make_scene(p.scene)
+        out.append(run_point(context, p, scenes[p.scene], device))
+    return out
+
+
+def tracking_scores(scene, duration_s: float, shot) -> dict:
+    """HOTA, MOTA, IDF1, ID switches, median latency and objects never found of the comparison's tracker
+    on this shot (:func:`viform.measure.vision_comparison.vision_scores`); {} without object truth.
+
+    Frame cameras' frames are turned into lux with the comparison's inverse response of the sensor at
+    its default pixel parameters (exposure and frame times are the shot's own).
+    """
+    kinds = scene.truth_kinds() if hasattr(scene, "truth_kinds") else ()
+    if "objects" not in kinds or shot.family == "gated":
+        return {}
+    from viform.measure.vision_comparison import vision_scores, vision_table
+
+    rows = [r for r in vision_table(vision_scores({"scene": scene, "duration_s": duration_s, "shots": [shot]}))
+            if "skipped" not in r]
+    if not rows:
+        return {}
+    r = rows[0]
+    lat = r["median_latency_ms"]
+    return {"tracking_hota": float(r["hota"]), "tracking_mota": float(r["mota"]), "tracking_idf1": float(r["idf1"]),
+            "tracking_id_switches": float(r["id_switches"]),
+            "tracking_latency_s": math.nan if lat is None else lat / 1e3,
+            "tracking_objects_missed": float(len(r["never_found"]))}
+
+
+#: dask settings of the local cluster a sweep starts. No statistical profiler in the workers: it samples
+#: the running task's stack every 10 ms, and with dask's ``MALLOC_TRIM_THRESHOLD_`` its frees trim the
+#: heap that the point's arrays then grow again — 12–15 % more CPU per point than in this process,
+#: measured point by point alternately (0.95–0.99× without). The workers' environment keeps dask's
+#: one-thread BLAS/OpenMP settings but not ``MALLOC_TRIM_THRESHOLD_`` (setting it also switches off
+#: glibc's adaptive mmap threshold, so every large temporary array is mapped and unmapped anew: 5×
+#: the page faults; a sweep's workers live for one sweep). No work stealing: the tasks are
+#: independent and queued at the scheduler, which hands each to the next free worker. The event
+#: loops' latency tick every 1 s (not 20 ms) and the system monitor every 5 s (not 0.5 s): an idle
+#: 2-worker cluster then costs 0.75 CPU-s per 20 s instead of 2.8 (this process and its children,
+#: measured), CPU taken from the points on a 2-core machine. The workers' memory monitor (which
+#: enforces the memory limit) keeps its own interval.
+CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.work-stealing": False,
+                  "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
+                                                          "OPENBLAS_NUM_THREADS": 1},
+                  "distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s"}
+
+
+def _open(workers, scheduler, memory_limit, connect_timeout_s=DEFAULT_CONNECT_TIMEOUT_S):
+    import dask
+    import distributed  # noqa: F401 -- its defaults join dask's config first (set() would drop them on exit)
+
+    with dask.config.set(CLUSTER_CONFIG if scheduler is None else {}):
+        return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"), connect_timeout_s)
+
+
+#: Tasks per dask worker a sweep's points are grouped into: several points per task cut the per-task
+#: overhead (scheduling, transfer, the scene made once), and several tasks per worker keep the
+#: workers busy to the end when points cost unequally.
+TASKS_PER_WORKER = 4
+#: Devices a sweep runs its spike simulations on.
+DEVICES = ("cpu", "cuda")
+
+
+def batches(points, n_workers: int, tasks_per_worker: int | None = None) -> list[list]:
+    """``points`` dealt round-robin into at most ``n_workers × tasks_per_worker`` tasks (default
+    :data:`TASKS_PER_WORKER`; each non-empty), so each task holds a mix of cheap and costly points.
+    Results do not depend on the grouping."""
+    per = TASKS_PER_WORKER if tasks_per_worker is None else tasks_per_worker
+    n = max(1, min(len(points), max(1, n_workers) * per))
+    return [b for b in (list(points[i::n]) for i in range(n)) if b]
+
+
+def check_device(device: str, sensors, name: str = "device") -> str:
+    """``device`` ("cpu" or "cuda", checked for a GPU) for a sweep of ``sensors``; "cuda" needs a spike sensor."""
+    if device not in DEVICES:
+        raise ViformError(f"{name} = {device!r} is not allowed: choose one of {', '.join(DEVICES)}")
+    if device == "cuda":
+        if not any(cmp.compare_entry(k).family == "spike" for k in sensors):
+            raise ViformError(f"{name} = 'cuda' runs the spike camera's simulation on a GPU; this sweep has no spike "
+                              f"sensor ({', '.join(sensors)})")
+        from viform.sensors.spike_cuda import resolve_device
+
+        resolve_device("cuda", name)
+    return device
+
+
+def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,
+              client=None, memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
+              device: str = "cpu", connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None) -> dict:
+    """Run every point not already stored in ``out``; return the records (plan order) and run figures.
+
+    ``workers=0`` runs the points in this process, one after the other (no dask); otherwise on a
+    dask LocalCluster of ``workers`` processes (default: the CPU count), on ``scheduler``, or on
+    an open ``client``, several points per task (:func:`batches`). Each point is stored as soon as
+    its task returns. ``crash_after_points`` (testing aid) ends this process abruptly after
+    storing that many new points, as a kill would.
+
+    Faults: points are computed on the workers and stored here, each whole (images, then the
+    record that marks it finished); a worker that dies has its task computed again by dask. A
+    lost scheduler (or one without a worker for ``connect_timeout_s``) stops the run with one
+    line saying how many points are stored; running the same sweep again computes only the others.
+    ``on_connect(scheduler, connect_timeout_s)`` is called just before a ``scheduler`` is reached.
+    """
+    out = Path(out)
+    stored = {p.point_id: load_point(out, p, context) for p in points}
+    todo = [p for p in points if stored[p.point_id] is None]
+    records = {pid: r for pid, r in stored.items() if r is not None}
+    started = time.perf_counter()
+    computed = 0
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(points), initial=len(records), unit="point", desc="sweep", leave=False)
+
+    def take(result):
+        nonlocal computed
+        store_point(out, result)
+        rec = _restore(json.loads(json.dumps(_finite(result["record"]))))
+        records[rec["point_id"]] = rec
+        computed += 1
+        if bar is not None:
+            bar.update(1)
+        if crash_after_points is not None and computed >= crash_after_points:
+            os._exit(70)
+
+    n_workers = 0
+    own_client = own_cluster = None
+    if todo and client is None and workers != 0:  # a scheduler that cannot be reached: nothing written yet
+        n = max(1, min(os.cpu_count() or 1, len(todo))) if workers is None else workers
+        if scheduler is not None and on_connect is not None:
+            on_connect(scheduler, connect_timeout_s)
+        own_client, own_cluster = _open(n, scheduler, memory_limit, connect_timeout_s)
+        client = own_client
+    (out / POINTS_DIR).mkdir(parents=True, exist_ok=True)
+    try:
+        if todo and client is None and workers == 0:
+            scenes: dict = {}
+            for p in todo:
+                if p.scene not in scenes:
+                    scenes[p.scene] = context.make_scene(p.scene)
+                take(run_point(context, p, scenes[p.scene], device))
+        elif todo:
+            n_workers = len(client.scheduler_info().get("workers", {}))
+            token = uuid.uuid4().hex[:8]
+            futures = [client.submit(one_line_warnings(run_points), context, batch, device, pure=False,
+                                     key=f"viform-sweep-{batch[0].point_id}-{len(batch)}-{token}")
+                       for batch in batches(todo, n_workers)]
+            try:
+                for _, results in completed(client, futures, connect_timeout_s):
+                    if isinstance(results, BaseException):
+                        raise results
+                    for result in results:  # a task's points, each stored whole
+                        take(result)
+            except SchedulerLost as exc:
+                raise ViformError(f"{exc}: {len(records)} of {len(points)} points are stored, each whole, in "
+                                  f"{str(out / POINTS_DIR)!r}; run the same sweep again to compute the other "
+                                  f"{len(points) - len(records)}") from None
+    finally:
+        if bar is not None:
+            bar.close()
+        if own_client is not None:
+            own_client.close()
+        if own_cluster is not None:
+            own_cluster.close()
+    ordered = [records[p.point_id] for p in points]
+    new = [r for r in ordered if r["point_id"] in {p.point_id for p in todo}]
+    return {"records": ordered, "computed": computed, "reused": len(points) - computed,
+            "seconds": time.perf_counter() - started, "workers": n_workers,
+            "cpu_seconds": sum(r.get("cpu_seconds", 0.0) for r in new)}
+
+
+def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | None = None, client=None,
+          memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
+          device: str = "cpu", connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None) -> dict:
+    """Run a planned sweep into ``out``: points, ``sweep.zarr`` and ``sweep.json``; returns the sweep document.
+
+    ``device`` ("cpu" or "cuda") runs the spike sensor's simulations there; it is recorded with each
+    spike point and in ``sweep.json``, and is not part of the context (a sweep started on a GPU may be
+    resumed on a CPU: the two give the same bits except in rare last-bit roundings, see
+    :mod:`viform.sensors.spike_cuda`). ``connect_timeout_s`` bounds the wait for ``scheduler`` (at the
+    start and after losing it; see :func:`run_sweep` for the faults), and ``on_connect`` is called
+    just before it is reached.
+    """
+    from viform._io import check_output_folder
+
+    out = Path(out)
+    check_output_folder("out", out)
+    if out.exists() and not out.is_dir():
+        raise ViformError(f"out = {str(out)!r} is a file, not a folder")
+    if scheduler is not None and workers is not None:
+        raise ViformError(f"scheduler = {scheduler!r} excludes workers = {workers!r}: a scheduler brings its own "
+                          "workers")
+    if workers is not None:
+        workers = check_int("workers", workers, 0, 1024)
+    memory_limit = parse_memory(memory_limit, "memory_limit")
+    connect_timeout_s = check_connect_timeout(connect_timeout_s)
+    device = check_device(device, plan.sensors)
+    check_context(out, plan.context)
+    run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
+                    memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points,
+                    device=device, connect_timeout_s=connect_timeout_s, on_connect=on_connect)
+    records = run["records"]
+    result = answer(records, plan.demands, plan.objective)
+    write_table(out / "sweep.zarr", records, plan.context)
+    doc = {"context": plan.context.describe(), "sensors": plan.sensors,
+           "vary": {k: v for k, v in plan.vary.items() if v}, "n_points": len(records),
+           "computed": run["computed"], "reused": run["reused"], "seconds": run["seconds"],
+           "cpu_seconds": run["cpu_seconds"], "workers": run["workers"], "device": device, "answer": result,
+           "pareto": [list(p) for p in plan.pareto], "points": [_finite(r) for r in records]}
+    write_json(out / "sweep.json", _finite(doc))
+    doc["records"] = records
+    return doc

@@ -1,0 +1,919 @@
+"""The compiled spike kernels that both devices share: state, run plan, crossings, lanes, packed bits.
+
+:mod:`viform.sensors.spike` (the CPU path) and :mod:`viform.sensors.spike_cuda` (the same
+per-pixel functions compiled as CUDA device functions) both import this module; it imports
+neither. The model these kernels implement (Gamma(Q, 1) targets in integrated-charge time,
+the stationary start, saturation, dead time, both reset modes) is described in
+:mod:`viform.sensors.spike`.
+
+Charge is kept in fixed point (2^-32 e⁻ units, int64): integer sums are exact and
+associative, so the bits do not depend on the block size, the number of threads or the
+device. The k-th interval of pixel p is drawn by a counter-based generator from
+(seed, p, k) (:mod:`viform.sensors._gamma`).
+
+Kernels: pixels sit in lanes of 64, one uint64 of spike bits per tick — the ``.dat`` bit
+order, so the kernels write the file's bytes as the pixels fire. The tick loop runs inside
+each work item (a tile of pixels, or a band of rows when the light is computed per tick),
+the lane loop compiles to SIMD add/compare/mask code (see the notes above
+:func:`_lanes_add_compare`), and only the lanes that fired take the scalar path with its
+Gamma draw. A self-reset pixel with photon noise whose charge per tick exceeds every gap a
+draw can leave (:func:`saturation_bound_fixed`) fires in every tick whatever its state: in
+constant light the kernel only counts those ticks and replays their draws when the light
+changes or the caller reads the state, so saturated light costs no more than dim light, with
+the same bits and state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from llvmlite import ir
+from numba import get_num_threads, njit, prange, types
+from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.extending import intrinsic
+
+from viform.light.compiled import row_lux
+from viform.sensors._gamma import (
+    TABLE_BITS,
+    TABLE_SIZE,
+    event_stream,
+    gamma_draw,
+    splitmix64,
+    stream_gamma,
+    stream_poisson,
+    stream_uniform,
+    uniform_from_hash,
+)
+
+
+class SpikeSimulationState:
+    """Per-pixel state carried between time blocks: charge and target (fixed point, 2^-32 e⁻), interval counter."""
+
+    def __init__(self, charge, target, counter, keys, next_tick: int = 0):
+        self.charge = charge
+        self.target = target
+        self.counter = counter
+        self.keys = keys  # per-pixel random-stream keys derived from the seed
+        self.next_tick = next_tick
+        # saturated ticks not yet applied to charge/target (see _run_block): count and charge per tick
+        self.pending_ticks = np.zeros(np.shape(charge), dtype=np.int64)
+        self.pending_rate = np.zeros(np.shape(charge), dtype=np.int64)
+
+
+@dataclass
+class _RunPlan:
+    """What :meth:`SpikeSensor.run_plan` fixes before the first tick (shared by the CPU and GPU paths)."""
+
+    p: object
+    n_ticks: int
+    height: int
+    width: int
+    pixels: int
+    row_bytes: int
+    sample: int
+    light: object
+    block_ticks: int
+    q: np.ndarray
+    shapes: object
+    index: np.ndarray
+    tables: tuple
+    a: np.ndarray
+    b: np.ndarray
+    rate_bound: float | None
+    state: object
+    caller_state: bool
+    reset_readout: bool
+    dead_ticks: float
+    mode: int
+    per_tick_light: bool
+
+
+class _Segments:
+    """Charge rates of a block as runs of constant light: (rates (n, H·W) int64, seg_end (n,)).
+
+    ``seg_end[s]`` is the absolute tick where run s ends (exclusive). Compiled "frames"
+    light (still image, step, image sequence held) gives one run per frame in effect;
+    any other scene one run per light sample, evaluated by NumPy.
+    """
+
+    def __init__(self, sensor, scene, light, sample, height, width):
+        self.sensor, self.scene, self.light, self.sample = sensor, scene, light, sample
+        self.height, self.width = height, width
+        self._cached = (None, None)  # (frame index, rates) of the last frame used
+
+    def block(self, first: int, last: int):
+        sample = self.sample
+        j0, j1 = first // sample, -(-last // sample)
+        clock = self.sensor.parameters.clock_hz
+        # light sampled at the middle of each interval of `sample` ticks, held over it
+        times = (np.arange(j0, j1) + 0.5) * (sample / clock)
+        if self.light is None or self.light.kind != "frames":
+            lux = self.scene.illuminance_lux_many(times).reshape(times.size, -1)
+            return (self.sensor._fixed_point_rates(lux, self.height, self.width),
+                    (np.arange(j0, j1, dtype=np.int64) + 1) * sample)
+        index = np.asarray(self.light.frame_index(times), dtype=np.int64)
+        change = np.flatnonzero(np.diff(index)) + 1
+        starts = np.concatenate(([0], change))
+        ends = np.concatenate((change, [index.size]))
+        seg_end = (j0 + ends).astype(np.int64) * sample
+        rates = np.empty((starts.size, self.height * self.width), dtype=np.int64)
+        for i, start in enumerate(starts):
+            k = int(index[start])
+            if self._cached[0] != k:
+                lux = self.light.frames[k].reshape(1, -1)
+                self._cached = (k, self.sensor._fixed_point_rates(lux, self.height, self.width)[0])
+            rates[i] = self._cached[1]
+        return rates, seg_end
+
+
+@njit(cache=True)
+def _dead_time_stationary_state(charge, target, counter, q, keys, rates, dead_ticks, noise, reset_readout):
+    """Replace each pixel's state by the stationary state of its spike train *with* dead time.
+
+    With a dead time every cycle of the pixel is the charge to the threshold, G (Gamma(Q, 1)
+    in charge time, or Q without photon noise, seed 000 §5.1), plus the dead charge time
+    D = λ·t_d (λ e⁻/tick of the first tick, t_d in ticks), during which the charge sits
+    below zero (the kernels subtract D at each reset). An observer at a time unrelated to
+    the spikes sees a cycle chosen with probability ∝ its length and sits a uniform fraction
+    of the way into it (renewal theory, e.g. Cox, *Renewal Theory*, 1962, §1.4):
+
+    * self-reset (cycle G + D in charge time): G is Gamma(Q + 1) with probability Q/(Q + D)
+      and Gamma(Q) otherwise (the length-biased law of G + D), the charge is U·(G + D) − D;
+    * reset at readout (cycle N = ⌈(G + D)/λ⌉ whole ticks): the cycle is chosen ∝ N and the
+      observer stands at one of its N tick boundaries, m uniform, with charge m·λ − D.
+      Drawn by rejection from the law ∝ (G + D + λ)·f(G), accepting with N·λ/(G + D + λ)
+      (≥ 1/2, since N ≥ max(1, (G + D)/λ) and N ≤ (G + D)/λ + 1).
+
+    The firing rate is then the steady rate from the first tick (the whole array does not
+    fire in step). Exact for light that is steady over the first cycle. Uses one event of
+    each pixel's random stream (``counter[p]``, advanced).
+    """
+    scale = 4294967296.0
+    for p in range(q.size):
+        e = rates[p]
+        dead = np.int64(e * dead_ticks + 0.5)  # as the kernels' reset
+        state = event_stream(keys[p], counter[p])
+        counter[p] += 1
+        qq = float(q[p])
+        d_e = dead / scale
+        e_e = e / scale
+        if not reset_readout or e <= 0:
+            if noise:
+                u, state = stream_uniform(state)
+                shape = qq + 1.0 if u * (qq + d_e) < qq else qq
+                g, state = stream_gamma(shape, state)
+            else:
+                g = qq
+            t = max(np.int64(1), np.int64(g * scale + 0.5))
+            u, state = stream_uniform(state)
+            charge[p] = np.int64(u * (t + dead)) - dead
+            target[p] = t
+            continue
+        while True:
+            if noise:
+                u, state = stream_uniform(state)
+                shape = qq + 1.0 if u * (qq + d_e + e_e) < qq else qq
+                g, state = stream_gamma(shape, state)
+            else:
+                g = qq
+            t = max(np.int64(1), np.int64(g * scale + 0.5))
+            cycle = (t + dead + e - 1) // e  # ticks from a reset to the next crossing, ⌈(G + D)/λ⌉
+            u, state = stream_uniform(state)
+            if not noise or u * (t + dead + e) < cycle * e:
+                break
+        u, state = stream_uniform(state)
+        m = min(np.int64(u * cycle), cycle - 1)
+        charge[p] = m * e - dead
+        target[p] = t
+
+
+# ---------------------------------------------------------------------- kernels
+# Charge is kept in fixed point (2^-32 e⁻ units, int64): integer sums are exact and
+# associative, so the event-driven kernel below, which jumps straight to the next
+# threshold crossing, gives the same bits as tick-by-tick summation, whatever the block size.
+FIXED_POINT_SCALE = float(1 << 32)
+#: Largest charge per tick, fixed point: sums of charge and target then stay inside int64.
+MAX_RATE_FIXED_POINT = float(1 << 61)
+# From 8·Q² e⁻ past a tick's first crossing, P(N mod Q = m) for N ~ Poisson(r) differs from
+# 1/Q by at most exp(−r·(1 − cos 2π/Q)) ≤ exp(−8r/Q²), below e^-64: the pixel leaves the
+# tick in the stationary state (see :func:`_run_block`).
+# Below that, a tick with more than this many Q of charge after its first crossing jumps to
+# its end state exactly (:func:`_saturated_state`, ~0.2 µs) instead of one Gamma per crossing.
+_JUMP_INTERVALS = 48.0
+
+
+@njit(cache=True)
+def _initial_targets(target, charge, counter, q, index, bins, keys,
+                     noise, random_initial):
+    for p in range(q.size):
+        if noise and random_initial:
+            charge[p], target[p] = _equilibrium_state(p, q, index, bins, keys, counter)
+        else:
+            target[p] = _next_target(p, q, index, bins, keys, noise, counter)
+            if random_initial:
+                # the noise-free pixel's stationary state: a uniform fraction of Q collected
+                u = uniform_from_hash(splitmix64(keys[p] ^ np.uint64(0x5EED5EED5EED5EED)))
+                charge[p] = np.int64(u * target[p])
+
+
+@njit(cache=True, inline="always")
+def _equilibrium_state(p, q, index, bins, keys, counter):
+    """(charge, target) of pixel p drawn from the stationary state of its renewal process.
+
+    In charge time the spikes of a self-reset pixel are a renewal process with Gamma(Q, 1)
+    intervals (seed 000 §5.1). Observed at a time unrelated to its spikes, the interval in
+    progress is length-biased, Gamma(Q + 1, 1) = Gamma(Q, 1) + Exp(1), and the observer sits
+    a uniform fraction of the way into it; the charge still missing is then the stationary
+    forward-recurrence law (1 − F_Q(x))/Q. Used for the random initial charge (so the stream
+    is stationary from t = 0) and after a tick of heavy saturation (see :func:`_run_block`).
+    Uses draw ``counter[p]`` of the pixel's stream and advances it.
+    """
+    g = gamma_draw(q[p], index[p], bins, keys[p], counter[p])
+    h = splitmix64(keys[p] + np.uint64(counter[p]) * np.uint64(0x9E3779B97F4A7C15)
+                   ^ np.uint64(0x5EED5EED5EED5EED))
+    counter[p] += 1
+    length = g - np.log(uniform_from_hash(h))  # Gamma(Q, 1) + Exp(1)
+    target = max(np.int64(1), np.int64(length * 4294967296.0 + 0.5))
+    charge = np.int64(uniform_from_hash(splitmix64(h)) * target)
+    return charge, target
+
+
+@njit(cache=True, inline="always")
+def _saturated_state(residual, p, q, keys, counter):
+    """(charge, target) of pixel p after ``residual`` e⁻ of charge time past a crossing, exactly.
+
+    In charge time the electrons are a unit-rate Poisson process and a spike every Q-th of
+    them (seed 000 §5.1), so the state at the end of the tick follows from N ~ Poisson(R)
+    electrons in the remaining charge time R: k = N mod Q electrons belong to the interval
+    in progress; its age (charge since the last crossing) is R when N < Q, else the distance
+    back to the (k + 1)-th last of N uniform arrivals, R·Beta(k + 1, N − k); the Q − k
+    electrons still missing take Gamma(Q − k, 1) more (memoryless). Constant cost, the same
+    law as drawing one Gamma(Q) per lost crossing. Uses event ``counter[p]`` and advances it.
+    """
+    whole_q = np.int64(q[p])
+    state = event_stream(keys[p], counter[p])
+    counter[p] += 1
+    n, state = stream_poisson(residual, state)
+    k = n % whole_q
+    if n < whole_q:
+        age = residual
+    else:
+        x, state = stream_gamma(k + 1.0, state)
+        y, state = stream_gamma(float(n - k), state)
+        age = residual * x / (x + y)
+    rest, state = stream_gamma(float(whole_q - k), state)
+    charge = np.int64(age * 4294967296.0)
+    target = max(charge + 1, np.int64((age + rest) * 4294967296.0 + 0.5))
+    return charge, target
+
+
+@njit(cache=True, inline="always")
+def _next_target(p, q, index, bins, keys, noise, counter):
+    if noise:
+        t = gamma_draw(q[p], index[p], bins, keys[p], counter[p])
+    else:
+        t = q[p]
+    counter[p] += 1
+    return max(np.int64(1), np.int64(t * 4294967296.0 + 0.5))
+
+
+@njit(cache=True, inline="always")
+def _fixed_charge(electrons):
+    """``electrons`` in fixed point, capped at 2^62 (a bound no tick's charge reaches, so the cap
+    only disables a shortcut, never overflows: 8·Q²·2^32 passes 2^63 from Q = 2^14)."""
+    x = electrons * 4294967296.0
+    return np.int64(x) if x < 4611686018427387904.0 else np.int64(4611686018427387904)
+
+
+@njit(cache=True)
+def _fire_general(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter):
+    """(charge, target) of pixel p after its charge ``c`` reached its target ``t`` in a tick
+    of charge ``e`` (fixed point); the spike itself is the caller's (:func:`_fire` inlines
+    the common case of this).
+
+    Self-reset: the charge past the crossing is kept; further crossings inside the same tick
+    are lost to the one-bit readout. Dead time: no charge is collected for ``dead_ticks``
+    ticks after each crossing — in charge time (where the photoelectrons are a unit-rate
+    Poisson process, seed 000 §5.1) the pixel skips ``e·dead_ticks`` of charge, exact while
+    the light is constant over the dead time (the crossing tick's light is used).
+    Readout reset: the charge is drained at the readout that ends the tick; the dead time
+    runs from there.
+    """
+    dead = np.int64(0)
+    if dead_ticks > 0.0:
+        dead = np.int64(e * dead_ticks + 0.5)
+    if reset_readout:
+        return -dead, _next_target(p, q, index, bins, keys, noise, counter)
+    if not noise:
+        period = t + dead
+        c -= period
+        if c >= t:
+            c -= ((c - t) // period + 1) * period
+        return c, t
+    if dead > 0:
+        # the stationary shortcuts below assume no dead time: drain one crossing at a time
+        # (at most e / (Q + dead) crossings a tick)
+        while c >= t:
+            c -= t + dead
+            t = _next_target(p, q, index, bins, keys, noise, counter)
+        return c, t
+    over = c - t
+    # charge past a crossing above which a saturated tick jumps / is stationary
+    stationary_from = _fixed_charge(8.0 * q[p] * q[p])
+    if over < min(_fixed_charge(_JUMP_INTERVALS * q[p]), stationary_from):
+        while c >= t:
+            c -= t
+            t = _next_target(p, q, index, bins, keys, noise, counter)
+        return c, t
+    if over >= stationary_from:
+        # ≥ 8·Q² e⁻ after the first crossing: the electron count mod Q is uniform to within
+        # e^-64, so the pixel leaves the tick in the stationary state, drawn at once
+        return _equilibrium_state(p, q, index, bins, keys, counter)
+    # many crossings lost in this tick: jump to its end state exactly
+    return _saturated_state(over / 4294967296.0, p, q, keys, counter)
+
+
+@njit(cache=True, inline="always")
+def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter):
+    """(charge, target) of pixel p after its charge ``c`` reached its target ``t`` (see
+    :func:`_fire_general`). The common case — self-reset with photon noise, no dead time,
+    fewer than 48·Q e⁻ past the crossing — is inlined into the kernels; every other case is a
+    call (kept out of line so the kernels compile fast)."""
+    if noise and not reset_readout and dead_ticks == 0.0:
+        if c - t < min(_fixed_charge(_JUMP_INTERVALS * q[p]), _fixed_charge(8.0 * q[p] * q[p])):
+            # further crossings inside the same tick are lost to the one-bit readout
+            while c >= t:
+                c -= t
+                t = _next_target(p, q, index, bins, keys, noise, counter)
+            return c, t
+    return _fire_general(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, counter)
+
+
+# ---------------------------------------------------------------------- lane kernels
+# Layout: pixels in lanes of 64 (one uint64 of spike bits per tick: bit i of word w is pixel
+# 64·w + i, which on a little-endian machine is the .dat bit order, so the words are the file's
+# bytes), the tick loop inside the work item so a tile's state stays in L1, and the spikes
+# written as bits the moment they are produced.
+#
+# The lane loop is written as LLVM vector operations on 8 lanes at a time (the intrinsics
+# below): load, add and store 8 int64 charges, compare them with their targets as one vector
+# and turn the 8 comparison bits into a byte (`bitcast <8 x i1> to i8`). On x86-64 with
+# AVX-512 that is vpaddq / vpcmpq into a mask register / kmovb, 8 of them per 64-pixel word,
+# and the same IR lowers to AVX2 (vpcmpgtq / vmovmskpd) or NEON elsewhere; a plain loop over
+# the 64 lanes vectorized as well but built the word from the comparison bits with one
+# masked OR per bit. The fired lanes of a word are then visited with ``tzcnt`` (count
+# trailing zeros), so a tick without spikes costs no branch per pixel, and the per-spike
+# Gamma draw stays off the common path.
+_LANES = 64
+_TILE_WORDS = 4  # words (× 64 pixels) per work item of the constant-light kernel: state, rates in L1
+_NO_TARGET = np.int64(0x7FFFFFFFFFFFFFFF)  # target of padding lanes: they never fire
+#: Lane modes of the constant-light kernel: any option through :func:`_fire`; the two
+#: noise-free models without dead time, resolved in the vector loop itself.
+MODE_GENERAL, MODE_NOISE_FREE_SELF, MODE_NOISE_FREE_READOUT = 0, 1, 2
+#: Expected spikes per tick (charge per tick / Q) up to which the constant-light kernel visits a
+#: word's crossings one by one instead of its ticks: there a tick by tick pass costs more than
+#: the crossings it finds (the cost of a crossing is about 20 lane-ticks).
+SPARSE_FIRING = 0.05
+_VECTOR = ir.VectorType(ir.IntType(64), 8)
+_I64 = ir.IntType(64)
+
+
+def _vector_pointer(context, builder, array_type, array, index):
+    """Pointer to the 8 int64 elements of a contiguous 1-D ``array`` from ``index``, as one vector."""
+    data = context.make_array(array_type)(context, builder, array).data
+    return builder.bitcast(builder.gep(data, [index]), _VECTOR.as_pointer())
+
+
+def _mask_bits(builder, mask):
+    """The 8 lanes of an <8 x i1> comparison as the low byte of an int64 (lane i in bit i)."""
+    return builder.zext(builder.bitcast(mask, ir.IntType(8)), _I64)
+
+
+@intrinsic
+def _add_compare8(typingctx, c, e, t, base):
+    """c[base:base + 8] += e[base:base + 8]; the byte of lanes where c >= t (lane i in bit i)."""
+
+    def codegen(context, builder, signature, args):
+        pc, pe, pt = (_vector_pointer(context, builder, signature.args[i], args[i], args[3]) for i in range(3))
+        charge = builder.add(builder.load(pc, align=8), builder.load(pe, align=8))
+        builder.store(charge, pc, align=8)
+        return _mask_bits(builder, builder.icmp_signed(">=", charge, builder.load(pt, align=8)))
+
+    return types.uint64(c, e, t, base), codegen
+
+
+@intrinsic
+def _noise_free_self8(typingctx, c, e, t, base):
+    """Noise-free self-reset on 8 lanes: c += e, and c -= t where c reached t. Returns the byte of
+    lanes that fired, and in bits 8–15 the lanes still at or above their target (lost crossings)."""
+
+    def codegen(context, builder, signature, args):
+        pc, pe, pt = (_vector_pointer(context, builder, signature.args[i], args[i], args[3]) for i in range(3))
+        target = builder.load(pt, align=8)
+        charge = builder.add(builder.load(pc, align=8), builder.load(pe, align=8))
+        fired = builder.icmp_signed(">=", charge, target)
+        charge = builder.select(fired, builder.sub(charge, target), charge)
+        builder.store(charge, pc, align=8)
+        over = builder.icmp_signed(">=", charge, target)
+        return builder.or_(_mask_bits(builder, fired), builder.shl(_mask_bits(builder, over), ir.Constant(_I64, 8)))
+
+    return types.uint64(c, e, t, base), codegen
+
+
+@intrinsic
+def _noise_free_readout8(typingctx, c, e, t, base):
+    """Noise-free readout reset on 8 lanes: c += e, drained to 0 where c reached t; the fired byte."""
+
+    def codegen(context, builder, signature, args):
+        pc, pe, pt = (_vector_pointer(context, builder, signature.args[i], args[i], args[3]) for i in range(3))
+        charge = builder.add(builder.load(pc, align=8), builder.load(pe, align=8))
+        fired = builder.icmp_signed(">=", charge, builder.load(pt, align=8))
+        builder.store(builder.select(fired, ir.Constant(_VECTOR, [0] * 8), charge), pc, align=8)
+        return _mask_bits(builder, fired)
+
+    return types.uint64(c, e, t, base), codegen
+
+
+@njit(cache=True, inline="always")
+def _lanes_add_compare(c, e, t, base):
+    """Add each lane's charge for the tick; the word of lanes that reached their target."""
+    word = np.uint64(0)
+    for j in range(_LANES // 8):
+        word |= _add_compare8(c, e, t, base + 8 * j) << np.uint64(8 * j)
+    return word
+
+
+@njit(cache=True, inline="always")
+def _lanes_noise_free_self(c, e, t, base):
+    """Noise-free self-reset: add, compare, subtract the target where reached; also whether a
+    lane is still at or above its target (light above one spike per tick: lost crossings)."""
+    word = np.uint64(0)
+    over = np.uint64(0)
+    for j in range(_LANES // 8):
+        bits = _noise_free_self8(c, e, t, base + 8 * j)
+        word |= (bits & np.uint64(0xFF)) << np.uint64(8 * j)
+        over |= bits
+    return word, over > np.uint64(0xFF)
+
+
+@njit(cache=True, inline="always")
+def _lanes_noise_free_readout(c, e, t, base):
+    """Noise-free readout reset: add, compare, drain the lanes that fired."""
+    word = np.uint64(0)
+    for j in range(_LANES // 8):
+        word |= _noise_free_readout8(c, e, t, base + 8 * j) << np.uint64(8 * j)
+    return word
+
+
+# ---------------------------------------------------------------------- a spike's common case
+def fixed_point_tables(bins) -> tuple[np.ndarray, np.ndarray]:
+    """The Gamma tables (:func:`viform.sensors._gamma.build_tables`) rescaled for the kernels'
+    common case, one row per (table, bin) of the flat index ``table·TABLE_SIZE + bin``:
+    ``scaled[:, 0]`` = edge·2^32 and ``scaled[:, 1]`` = width·2^6 (float64), ``accept`` = the
+    26-bit squeeze threshold ⌈squeeze·2^26 − 1/2⌉ (int64; 0 for the open last bin).
+
+    With them :func:`_target_fast` computes what :func:`_next_target` computes, bit for bit:
+    scaling by powers of two commutes with rounding, so edge·2^32 + (k₁ + 1/2)·(width·2^6)
+    rounds to exactly 2^32 times edge + ((k₁ + 1/2)·2^-26)·width, and the uniform
+    (k₂ + 1/2)·2^-26 is below the squeeze exactly when the integer k₂ is below ``accept``.
+    """
+    bins = np.asarray(bins, dtype=np.float64)
+    scaled = np.empty((bins.shape[0] * bins.shape[1], 2))
+    scaled[:, 0] = (bins[..., 0] * 4294967296.0).ravel()
+    scaled[:, 1] = (bins[..., 1] * 64.0).ravel()
+    accept = np.ceil(bins[..., 3] * 67108864.0 - 0.5)
+    accept[:, -1] = 0.0  # the open last bin: the general sampler
+    return np.ascontiguousarray(scaled), np.ascontiguousarray(np.maximum(accept, 0.0).astype(np.int64).ravel())
+
+
+@njit(cache=True)
+def _target_general(shape, table, bins, key, counter):
+    """The fixed-point target of draw ``counter`` of a pixel's stream by the general sampler
+    (:func:`viform.sensors._gamma.gamma_draw`), out of line: the rare cases of :func:`_target_fast`."""
+    x = gamma_draw(shape, table, bins, key, counter)
+    return max(np.int64(1), np.int64(x * 4294967296.0 + 0.5))
+
+
+@njit(cache=True, inline="always")
+def _target_fast(row0, scaled, accept, key, counter):
+    """The fixed-point Gamma(Q) target of draw ``counter`` of a pixel's stream, the same value as
+    :func:`_next_target` (see :func:`fixed_point_tables`), when the bin's squeeze accepts the
+    first try (about 99 % of draws); 0 (no target is 0) when :func:`_target_general` must draw it.
+    ``row0`` = the pixel's table · TABLE_SIZE. (No calls in here: an inlined function that takes
+    arrays and calls another costs two reference-count updates per use.)"""
+    h = splitmix64(key + np.uint64(counter) * np.uint64(0x9E3779B97F4A7C15))
+    row = row0 + np.int64(h >> np.uint64(64 - TABLE_BITS))
+    if np.int64(h & np.uint64(0x3FFFFFF)) < accept[row]:
+        x = scaled[row, 0] + (np.int64((h >> np.uint64(26)) & np.uint64(0x3FFFFFF)) + 0.5) * scaled[row, 1]
+        return max(np.int64(1), np.int64(x + 0.5))
+    return np.int64(0)
+
+
+@njit(cache=True)
+def _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate):
+    """Apply pixel p's pending saturated ticks (see :func:`_run_block`) to its state, exactly
+    as the lane loop would have: the same draws in the same order."""
+    c = charge[p]
+    t = target[p]
+    e = pending_rate[p]
+    # typed bools, not literals: a literal gives _fire_general a signature (and a compilation) of its own
+    noise = np.bool_(True)
+    reset_readout = np.bool_(False)
+    for _ in range(pending_ticks[p]):
+        c += e
+        if c >= t:
+            c, t = _fire(c, t, e, 0.0, p, q, index, bins, keys, noise, reset_readout, counter)
+    charge[p] = c
+    target[p] = t
+    pending_ticks[p] = 0
+
+
+@njit(cache=True, parallel=True)
+def _settle_all(charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate):
+    for p in prange(charge.size):
+        if pending_ticks[p] > 0:  # (a prange index may be unsigned: int64 keeps _settle to one signature)
+            _settle(np.int64(p), charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
+
+
+@njit(cache=True, parallel=True)
+def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, scaled, accept, keys,
+               noise, reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate, sparse_firing):
+    """Integrate-and-fire over one block of ticks in runs of constant light, 64 pixels per word.
+
+    ``rates[s, p]`` is the fixed-point charge per tick of pixel p in run s, which ends
+    (exclusive) at absolute tick ``seg_end[s]``; the runs cover the block. ``words[k, w]``
+    receives the spikes of pixels 64·w … 64·w + 63 in tick k (bit i: pixel 64·w + i).
+    Charge sums are exact integers, so adding a run's rate tick by tick gives the bits the
+    event-driven form (a jump to each crossing) gave.
+
+    Saturated pixels cost nothing per tick: with photon noise, self-reset and no dead time, a
+    pixel whose charge per tick reaches ``lazy_bound[p]`` — above the largest gap between
+    charge and target that any draw can leave (:func:`saturation_bound_fixed`) — fires in every
+    tick whatever its state, so the kernel only counts those ticks (``pending_ticks``, at rate
+    ``pending_rate``) and :func:`_settle` replays the draws when the light changes or the
+    caller asks for the state: same bits, same state, and a still saturated scene draws nothing.
+
+    ``scaled`` and ``accept`` are :func:`fixed_point_tables` of ``bins``: a spike's common case
+    (photon noise, self-reset, no dead time, fewer than 48·Q e⁻ past the crossing) draws its
+    target from them in the lane loop; every other case goes through :func:`_fire_general`.
+
+    Dim words: where every lane of a word expects at most ``sparse_firing`` spikes per tick (the
+    callers pass :data:`SPARSE_FIRING`) in a
+    run (charge per tick ≤ ``sparse_firing``·Q), the word's lanes are run crossing by crossing
+    (the tick of the next crossing from the charge still missing, then the same crossing rules)
+    instead of tick by tick: the same bits and state for any ``sparse_firing``, less work.
+    """
+    n_ticks, n_words = words.shape
+    n_pixels = charge.size
+    lazy_ok = mode == MODE_GENERAL and noise and not reset_readout and dead_ticks == 0.0
+    fast = lazy_ok  # photon noise, self-reset, no dead time: the common case inlined below
+    n_tiles = (n_words + _TILE_WORDS - 1) // _TILE_WORDS
+    for tile in prange(n_tiles):
+        w0 = tile * _TILE_WORDS
+        nw = min(w0 + _TILE_WORDS, n_words) - w0
+        p0 = w0 * _LANES
+        n = min(nw * _LANES, n_pixels - p0)
+        size = nw * _LANES
+        c = np.zeros(size, dtype=np.int64)
+        t = np.full(size, _NO_TARGET)
+        e = np.zeros(size, dtype=np.int64)
+        lazy_from = np.full(size, -1, dtype=np.int64)  # tick of the block where a lane's lazy run began
+        lazy_mask = np.zeros(nw, dtype=np.uint64)
+        # per lane, what a spike's common case reads (kept beside the lane state, in L1): the charge
+        # past a crossing below which a crossing draws one target, the pixel's draw counter (the
+        # lane's copy is the pixel's counter while the tile runs), stream key and table row
+        one_by_one = np.zeros(size, dtype=np.int64)
+        drawn = np.zeros(size, dtype=np.int64)
+        key = np.zeros(size, dtype=np.uint64)
+        row0 = np.zeros(size, dtype=np.int64)
+        # charge per tick up to which a lane fires rarely (≤ 1 spike in 20 ticks on average): words whose
+        # lanes are all below it are run crossing by crossing (same bits, less work than tick by tick)
+        sparse_rate = np.zeros(size, dtype=np.int64)
+        for j in range(n):
+            p = p0 + j
+            c[j] = charge[p]
+            t[j] = target[p]
+            one_by_one[j] = min(_fixed_charge(_JUMP_INTERVALS * q[p]), _fixed_charge(8.0 * q[p] * q[p]))
+            drawn[j] = counter[p]
+            key[j] = keys[p]
+            row0[j] = np.int64(index[p]) * TABLE_SIZE
+            sparse_rate[j] = _fixed_charge(sparse_firing * q[p])
+        s = 0
+        while seg_end[s] <= first_tick:
+            s += 1
+        k = 0
+        while k < n_ticks:
+            end = min(seg_end[s] - first_tick, n_ticks)
+            if end <= k:  # an empty run
+                s += 1
+                continue
+            if not lazy_ok:
+                for j in range(n):
+                    e[j] = rates[s, p0 + j]
+            else:
+                for j in range(n):
+                    p = p0 + j
+                    r = rates[s, p]
+                    lazy = r >= lazy_bound[p]
+                    bit = np.uint64(1) << np.uint64(j & 63)
+                    if pending_ticks[p] > 0 and (not lazy or pending_rate[p] != r):
+                        # the saturated stretch ends (or its light changes): its draws first
+                        counter[p] = drawn[j]
+                        _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
+                        drawn[j] = counter[p]
+                        c[j] = charge[p]
+                        t[j] = target[p]
+                    if lazy:
+                        if pending_ticks[p] == 0:  # a new stretch starts from the lane's state
+                            charge[p] = c[j]
+                            target[p] = t[j]
+                            pending_rate[p] = r
+                        lazy_from[j] = k
+                        c[j] = 0  # fires every tick and stays put
+                        t[j] = 0
+                        e[j] = 0
+                        lazy_mask[j >> 6] |= bit
+                    else:
+                        if lazy_mask[j >> 6] & bit:  # left laziness above: its state is back
+                            lazy_mask[j >> 6] &= ~bit
+                        e[j] = r
+            for w in range(nw):  # a word's 64 lanes through the run's ticks, then the next word
+                base = w * _LANES
+                sparse = lazy_mask[w] == 0
+                for i in range(base, base + _LANES):
+                    sparse &= e[i] <= sparse_rate[i]
+                if sparse:
+                    # every lane fires rarely in this run: visit each lane's crossings instead of each tick
+                    for kk in range(k, end):
+                        words[kk, w0 + w] = 0
+                    for i in range(base, base + min(_LANES, n - base)):
+                        ci = c[i]
+                        ti = t[i]
+                        ei = e[i]
+                        kk = k  # the lane has run up to the start of tick kk (ci < ti)
+                        while ei > 0:
+                            # the crossing's tick: the smallest m ≥ 1 with ci + m·ei ≥ ti
+                            need = ti - ci
+                            m = max(np.int64(1), np.int64(need / ei))
+                            while m * ei < need:
+                                m += 1
+                            while m > 1 and (m - 1) * ei >= need:
+                                m -= 1
+                            if m > end - kk:
+                                ci += (end - kk) * ei
+                                break
+                            kk += m
+                            ci += m * ei
+                            words[kk - 1, w0 + w] |= np.uint64(1) << np.uint64(i - base)
+                            if mode == MODE_NOISE_FREE_SELF:
+                                ci -= ti
+                                if ci >= ti:
+                                    ci %= ti
+                            elif mode == MODE_NOISE_FREE_READOUT:
+                                ci = 0
+                            elif fast and ci - ti < one_by_one[i]:
+                                while ci >= ti:
+                                    ci -= ti
+                                    ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
+                                    if ti == 0:
+                                        ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
+                                    drawn[i] += 1
+                            else:
+                                counter[p0 + i] = drawn[i]
+                                ci, ti = _fire_general(ci, ti, ei, dead_ticks, p0 + i, q, index, bins, keys, noise,
+                                                       reset_readout, counter)
+                                drawn[i] = counter[p0 + i]
+                        c[i] = ci
+                        t[i] = ti
+                    continue
+                for kk in range(k, end):
+                    if mode == MODE_NOISE_FREE_SELF:
+                        word, over = _lanes_noise_free_self(c, e, t, base)
+                        if over:  # crossings lost inside the tick: the charge modulo the target
+                            for i in range(base, base + _LANES):
+                                if c[i] >= t[i]:
+                                    c[i] %= t[i]
+                    elif mode == MODE_NOISE_FREE_READOUT:
+                        word = _lanes_noise_free_readout(c, e, t, base)
+                    else:
+                        word = _lanes_add_compare(c, e, t, base)
+                        todo = word & ~lazy_mask[w]
+                        while todo != 0:
+                            i = base + np.int64(trailing_zeros(todo))
+                            todo &= todo - np.uint64(1)
+                            ci = c[i]
+                            ti = t[i]
+                            if fast and ci - ti < one_by_one[i]:
+                                # _fire's common case: one Gamma target per crossing (draw `drawn[i]` of
+                                # the pixel's stream), the later crossings of the tick lost
+                                while ci >= ti:
+                                    ci -= ti
+                                    ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
+                                    if ti == 0:
+                                        ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
+                                    drawn[i] += 1
+                                c[i] = ci
+                                t[i] = ti
+                            else:
+                                counter[p0 + i] = drawn[i]
+                                c[i], t[i] = _fire_general(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins, keys,
+                                                           noise, reset_readout, counter)
+                                drawn[i] = counter[p0 + i]
+                    words[kk, w0 + w] = word
+            if lazy_ok:
+                for j in range(n):
+                    if lazy_from[j] >= 0:
+                        pending_ticks[p0 + j] += end - lazy_from[j]
+                        lazy_from[j] = -1
+            k = end
+            s += 1
+        for j in range(n):
+            counter[p0 + j] = drawn[j]
+            if not lazy_mask[j >> 6] & (np.uint64(1) << np.uint64(j & 63)):
+                charge[p0 + j] = c[j]
+                target[p0 + j] = t[j]
+
+
+_LIGHT_WINDOW = 16  # ticks per window of the per-tick kernel: the window's light tables stay in cache
+_ROUNDING_MAGIC = 6755399441055744.0  # 1.5·2^52
+_ROUNDING_MAGIC_BITS = np.int64(0x4338000000000000)  # its bit pattern
+#: Charge rates (fixed point) below which the per-tick kernel rounds by the magic number.
+_FAST_ROUND_LIMIT = float(1 << 51)
+
+
+@njit(cache=True, inline="always")
+def _store_row_bits(out, k, bit0, n_bits, row_words, aligned):
+    """Write the ``n_bits`` spike bits of one image row (``row_words``) at bit ``bit0`` of tick k's
+    packed frame. ``aligned``: the row starts on a byte and is whole bytes (plain stores);
+    otherwise its bytes are OR-ed into a frame zeroed beforehand (rows share edge bytes)."""
+    byte0 = bit0 >> 3
+    if aligned:
+        for j in range(n_bits >> 3):
+            out[k, byte0 + j] = np.uint8((row_words[j >> 3] >> np.uint64((j & 7) * 8)) & np.uint64(0xFF))
+        return
+    last = (bit0 + n_bits - 1) >> 3
+    n_words = row_words.size
+    for j in range(byte0, last + 1):
+        rel = j * 8 - bit0  # row bit held by bit 0 of byte j (negative: the byte starts in the row before)
+        if rel < 0:
+            v = row_words[0] << np.uint64(-rel)
+        else:
+            wi = rel >> 6
+            o = rel & 63
+            v = row_words[wi] >> np.uint64(o)
+            if o > 56 and wi + 1 < n_words:
+                v |= row_words[wi + 1] << np.uint64(64 - o)
+        out[k, j] |= np.uint8(v & np.uint64(0xFF))
+
+
+@njit(cache=True, parallel=True)
+def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round, charge, target,
+                     counter, q, index, bins, scaled, accept, keys, noise, reset_readout, dead_ticks, band_rows):
+    """Integrate-and-fire with the light computed per pixel and tick in compiled code.
+
+    The light of pixel p in tick k is :func:`viform.light.compiled.pixel_lux` from the
+    tick's scalars (row k of ``scalars``, ``xtab``, ``ytab``); its charge that tick is
+    int64(a[p]·lux + b[p] + 0.5) in fixed point (gain and dark current per pixel), added
+    exactly; the pixel fires when the sum reaches its Gamma(Q) target (the crossing rules of
+    :func:`_fire`, its common case from ``scaled`` and ``accept`` as in :func:`_run_block`). Per
+    image row and tick: one vectorized pass for the light (:func:`~viform.light.compiled.row_lux`),
+    one for the charge, one that adds, compares and packs 64 lanes per word, then only the lanes
+    that fired. ``out`` (uint8,
+    ticks × packed frame bytes) receives the bits in the .dat order. Work items are bands of
+    ``band_rows`` rows × windows of ticks, so the light tables stay in cache.
+    """
+    n_ticks = out.shape[0]
+    n_pixels = charge.size
+    width = xs.size
+    height = n_pixels // width
+    n_row_words = (width + _LANES - 1) // _LANES
+    padded = n_row_words * _LANES
+    aligned = width % 8 == 0
+    n_bands = (height + band_rows - 1) // band_rows
+    fast = noise and not reset_readout and dead_ticks == 0.0  # _fire's common case, inlined below
+    for band in prange(n_bands):
+        y0 = band * band_rows
+        y1 = min(y0 + band_rows, height)
+        lux = np.empty(width)
+        rounded = np.zeros(padded)  # lanes past the row stay 0: no charge
+        rate = rounded.view(np.int64)
+        cw = np.zeros(padded, dtype=np.int64)
+        tw = np.full(padded, _NO_TARGET)
+        row_words = np.empty(n_row_words, dtype=np.uint64)
+        byte_lo = (y0 * width) >> 3
+        byte_hi = (y1 * width + 7) >> 3
+        for w0 in range(0, n_ticks, _LIGHT_WINDOW):
+            w1 = min(w0 + _LIGHT_WINDOW, n_ticks)
+            if not aligned:
+                for k in range(w0, w1):
+                    out[k, byte_lo:byte_hi] = 0
+            for y in range(y0, y1):
+                base = y * width
+                # the row's state in local buffers for the window: plain loops over them vectorize
+                cw[:width] = charge[base:base + width]
+                tw[:width] = target[base:base + width]
+                for k in range(w0, w1):
+                    row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, lux)
+                    # charge this tick, rint(a·lux + b) in fixed point
+                    if fast_round:
+                        # below 2^51, adding 1.5·2^52 rounds to an integer (half to even, as
+                        # rint) held in the low mantissa bits: vectorizes where a float → int64
+                        # conversion does not (AVX2)
+                        for x in range(width):
+                            rounded[x] = a[base + x] * lux[x] + b[base + x] + _ROUNDING_MAGIC
+                        for x in range(width):
+                            rate[x] -= _ROUNDING_MAGIC_BITS
+                    else:
+                        for x in range(width):
+                            rate[x] = np.int64(np.rint(a[base + x] * lux[x] + b[base + x]))
+                    for w in range(n_row_words):
+                        row_words[w] = _lanes_add_compare(cw, rate, tw, w * _LANES)
+                    _store_row_bits(out, k, base, width, row_words, aligned)
+                    for w in range(n_row_words):
+                        todo = row_words[w]
+                        while todo != 0:
+                            x = w * _LANES + np.int64(trailing_zeros(todo))
+                            todo &= todo - np.uint64(1)
+                            p = base + x
+                            ci = cw[x]
+                            ti = tw[x]
+                            if fast and ci - ti < min(_fixed_charge(_JUMP_INTERVALS * q[p]),
+                                                      _fixed_charge(8.0 * q[p] * q[p])):
+                                # _fire's common case: one Gamma target per crossing, later ones lost
+                                while ci >= ti:
+                                    ci -= ti
+                                    ti = _target_fast(np.int64(index[p]) * TABLE_SIZE, scaled, accept, keys[p],
+                                                      counter[p])
+                                    if ti == 0:
+                                        ti = _target_general(q[p], index[p], bins, keys[p], counter[p])
+                                    counter[p] += 1
+                            else:
+                                ci, ti = _fire_general(ci, ti, rate[x], dead_ticks, p, q, index, bins, keys, noise,
+                                                       reset_readout, counter)
+                            cw[x] = ci
+                            tw[x] = ti
+                charge[base:base + width] = cw[:width]
+                target[base:base + width] = tw[:width]
+
+
+@njit(cache=True, parallel=True)
+def _unpack_bits(packed, out):
+    """Spike bits (ticks × packed bytes, .dat bit order) → bool (ticks × pixels)."""
+    n_pixels = out.shape[1]
+    whole = n_pixels >> 3
+    for k in prange(out.shape[0]):
+        for j in range(whole):
+            byte = packed[k, j]
+            for i in range(8):
+                out[k, 8 * j + i] = (byte >> i) & 1
+        for p in range(whole * 8, n_pixels):
+            out[k, p] = (packed[k, p >> 3] >> (p & 7)) & 1
+
+
+def saturation_bound_fixed(shapes, bins) -> np.ndarray:
+    """Per Gamma table, a charge per tick (fixed point, 2^-32 e⁻) above which a self-reset
+    pixel with photon noise and no dead time fires in every tick, whatever its state.
+
+    After any draw the gap between a pixel's target and its charge is at most the largest
+    value a draw can return (the samplers' uniforms have finite resolution): a table Gamma(Q)
+    draw is below the last quantile plus 18.72 (= ln 2^27, the smallest 26-bit uniform) over
+    its envelope's rate; the stationary state adds an Exp(1) below 37.5 (53-bit uniforms);
+    the saturated jump leaves a Marsaglia–Tsang Gamma(≤ Q) draw d·(1 + c·x)³ with the
+    Box–Muller |x| ≤ 8.66. One electron of margin covers the fixed-point roundings.
+    """
+    shapes = np.asarray(shapes, dtype=np.float64)
+    bounds = np.empty(shapes.size, dtype=np.int64)
+    for i, shape in enumerate(shapes):
+        last = float(bins[i, -1, 0]) if bins.shape[0] > i and bins.shape[1] > 1 else shape
+        rate = 1.0 - (shape - 1.0) / last if last > 0 else 1.0
+        table_max = last + 18.72 / rate
+        # d·(1 + 8.66/√(9d))³ = (√d + 2.887)³/√d is convex in √d: its largest value over the
+        # shapes 1 … Q of the jump's draw is at one end
+        marsaglia_max = max(((math.sqrt(d) + 8.66 / 3.0) ** 3) / math.sqrt(d) for d in (2.0 / 3.0, shape - 1.0 / 3.0))
+        electrons = max(table_max + 37.5, marsaglia_max) + 3.0
+        bounds[i] = min(int(math.ceil(electrons * FIXED_POINT_SCALE)), (1 << 63) - 1)
+    return bounds
+
+
+def _ticks_per_run(light, light_sample_ticks: int, clock_hz: float, probe: int = 4096) -> float:
+    """Ticks per run of constant light of "frames" light, from its first ``probe`` light samples
+    (each run is one int64 rate row of the block)."""
+    times = (np.arange(probe) + 0.5) * (light_sample_ticks / clock_hz)
+    index = np.asarray(light.frame_index(times))
+    return probe * light_sample_ticks / (1 + int(np.count_nonzero(np.diff(index))))
+
+
+def _band_rows(height: int, width: int) -> int:
+    """Rows per work item of the per-tick kernel: 8, or fewer so that small images still give
+    every thread a few bands (only where rows are whole bytes: bands must not share a byte)."""
+    if width % 8:
+        return 8
+    threads = max(1, get_num_threads())
+    return max(1, min(8, -(-height // (4 * threads))))
+
+
+def simulation_threads() -> int:
+    """Threads numba uses for the simulation kernel."""
+    return get_num_threads()

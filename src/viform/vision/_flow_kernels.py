@@ -1,0 +1,498 @@
+"""Compiled kernels of :mod:`viform.vision.flow` (private; the module's notes explain the method).
+
+* :func:`advance_rates` / :func:`force_rates`: multi-interval rates at many instants in one
+  sequential pass over the spikes (a ring of each pixel's last 2K spike ticks);
+* :func:`segment_log_light`: regions of similar light (Kruskal-ordered merging);
+* :func:`shift_gain`, :func:`best_shift`, :func:`unexplained_share`: the layered cost of one
+  region moving over a still background, and its search;
+* :func:`gauss_newton_motion`: sub-pixel translation or affine motion of a region (Lucas–Kanade).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+# ---------------------------------------------------------------------- images
+
+
+@njit(cache=True)
+def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolerance):
+    """Rate (spikes per tick), intervals used, span (ticks) and censoring of one pixel at one instant.
+
+    ``before[:nb]`` are the spike ticks at or before the instant (nearest first), ``after[:na]``
+    those after it; ``lo_cut``/``hi_cut`` stand for a spike missing on that side (the stream's or
+    the search's end). The span grows from the interval holding the instant one interval a side
+    at a time, a side stopping at the first interval inconsistent with the span's mean (the
+    Wilson–Hilferty test of :mod:`viform.imaging.multi_interval`) when ``adaptive``. With equal
+    growth on both sides the rate is Σ 1/span over the windows of m intervals that hold the
+    instant (unbiased for any stationary tick sequence, as there); else intervals / span.
+    """
+    lo = before[0] if nb > 0 else lo_cut
+    hi = after[0] if na > 0 else hi_cut
+    cut = nb == 0 or na == 0
+    n = 1
+    i_b = 1
+    i_a = 1
+    grow_b = not cut
+    grow_a = not cut
+    while grow_b or grow_a:
+        for side in range(2):
+            if side == 0 and grow_b:
+                if i_b >= nb:
+                    grow_b = False
+                    continue
+                new = before[i_b - 1] - before[i_b]
+            elif side == 1 and grow_a:
+                if i_a >= na:
+                    grow_a = False
+                    continue
+                new = after[i_a] - after[i_a - 1]
+            else:
+                continue
+            if adaptive:
+                mu = (hi - lo) / n
+                var = (1.0 / noise_q + 1.0 / (6.0 * mu * mu)) / 9.0
+                centre = 1.0 - 1.0 / (9.0 * noise_q)
+                reach = tolerance * math.sqrt(var * (1.0 + 1.0 / n))
+                low = max(centre - reach, 0.0)
+                high = centre + reach
+                ratio = new / mu
+                if ratio < low * low * low or ratio > high * high * high:
+                    if side == 0:
+                        grow_b = False
+                    else:
+                        grow_a = False
+                    continue
+            if side == 0:
+                lo = before[i_b]
+                i_b += 1
+            else:
+                hi = after[i_a]
+                i_a += 1
+            n += 1
+    if i_b == i_a and not cut:
+        total = 0.0
+        for w in range(i_b):
+            total += 1.0 / (after[i_b - 1 - w] - before[w])
+        rate = total
+    else:
+        rate = n / max(hi - lo, 1)
+    return rate, n, hi - lo, cut
+
+
+@njit(cache=True)
+def _complete(ring, count, j, k_side, instant, n_after, lo_cut, hi_cut, adaptive, noise_q, tolerance,
+              before, after):
+    """Rate of pixel j at ``instant`` from its ring (P, size: a power of two ≥ 2K): the n_after
+    most recent spikes are after the instant."""
+    mask = ring.shape[1] - 1
+    for a in range(n_after):  # chronological: nearest to the instant first
+        after[a] = ring[j, (count - n_after + a) & mask]
+    nb = 0
+    for b in range(k_side):
+        idx = count - n_after - 1 - b
+        if idx < 0 or idx <= count - ring.shape[1] - 1:
+            break
+        before[b] = ring[j, idx & mask]
+        nb += 1
+    return window_rate(before, nb, after, n_after, lo_cut, hi_cut, adaptive, noise_q, tolerance)
+
+
+#: De Bruijn multiplier and table: the index of the lowest set bit of a 64-bit word without a loop.
+_DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
+_DEBRUIJN_INDEX = np.zeros(64, np.int64)
+for _k in range(64):
+    _DEBRUIJN_INDEX[((1 << _k) * 0x03F79D71B4CB0A89 % (1 << 64)) >> 58] = _k
+del _k
+
+
+@njit(cache=True, parallel=True)
+def advance_rates(bits, first, ring, count, next_inst, instants, k_side, adaptive, noise_q, tolerance,
+                  lo_cut, out_rate, out_used, out_span, out_cut):
+    """Feed ticks [first, first + n) of ``bits`` (n, P) to every pixel's ring of spike ticks
+    (``ring`` (P, size), size a power of two ≥ 2K; ``count`` the spikes seen per pixel).
+
+    Whenever a pixel has K spikes after its next pending instant, that instant's rate is
+    computed and written to slot ``m % n_slots`` of the outputs (n_slots, P). Ticks are taken
+    64 at a time: each pixel's spikes among them are packed into one word (a vectorized pass
+    over the rows), then walked lowest bit first, the pixel's ring staying in cache.
+    """
+    n, p = bits.shape
+    m_total = instants.size
+    n_slots = out_rate.shape[0]
+    mask = ring.shape[1] - 1
+    chunk = 1024
+    one = np.uint64(1)
+    shift = np.uint64(58)
+    for ch in prange((p + chunk - 1) // chunk):
+        before = np.empty(k_side, np.int64)
+        after = np.empty(k_side, np.int64)
+        words = np.zeros(chunk, np.uint64)
+        j0 = ch * chunk
+        width = min(j0 + chunk, p) - j0
+        for t0 in range(0, n, 64):
+            for jj in range(width):
+                words[jj] = 0
+            for i in range(t0, min(n, t0 + 64)):
+                row = bits[i]
+                bit = np.uint64(i - t0)
+                for jj in range(width):
+                    words[jj] |= np.uint64(row[j0 + jj]) << bit
+            for jj in range(width):
+                word = words[jj]
+                if word == 0:
+                    continue
+                j = j0 + jj
+                c = count[j]
+                m = next_inst[j]
+                while word != 0:
+                    low = word & (~word + one)
+                    word ^= low
+                    ring[j, c & mask] = first + t0 + _DEBRUIJN_INDEX[(low * _DEBRUIJN) >> shift]
+                    c += 1
+                    while c >= k_side and m < m_total and ring[j, (c - k_side) & mask] > instants[m]:
+                        r, used, span, cut = _complete(ring, c, j, k_side, instants[m], k_side, lo_cut, 0,
+                                                       adaptive, noise_q, tolerance, before, after)
+                        s = m % n_slots
+                        out_rate[s, j] = r
+                        out_used[s, j] = used
+                        out_span[s, j] = span
+                        out_cut[s, j] = cut
+                        m += 1
+                count[j] = c
+                next_inst[j] = m
+
+
+@njit(cache=True, parallel=True)
+def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_q, tolerance, lo_cut, hi_cut,
+                out_rate, out_used, out_span, out_cut):
+    """Complete every pending instant before index ``upto`` with the spikes seen so far (fewer
+    than K after it: the search stopped at ``hi_cut``)."""
+    p = count.size
+    n_slots = out_rate.shape[0]
+    size = ring.shape[1]
+    mask = size - 1
+    for j in prange(p):
+        if next_inst[j] >= upto:
+            continue
+        before = np.empty(k_side, np.int64)
+        after = np.empty(k_side, np.int64)
+        c = count[j]
+        while next_inst[j] < upto:
+            m = next_inst[j]
+            k = instants[m]
+            n_after = 0
+            while n_after < min(k_side, c) and n_after < size and ring[j, (c - 1 - n_after) & mask] > k:
+                n_after += 1
+            r, used, span, cut = _complete(ring, c, j, k_side, k, n_after, lo_cut, hi_cut, adaptive, noise_q,
+                                           tolerance, before, after)
+            s = m % n_slots
+            out_rate[s, j] = r
+            out_used[s, j] = used
+            out_span[s, j] = span
+            out_cut[s, j] = cut
+            next_inst[j] = m + 1
+
+
+# ---------------------------------------------------------------------- regions
+
+
+@njit(cache=True)
+def _find(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True)
+def segment_log_light(log_light, sigma, tolerance, slack, n_bins):
+    """Regions of similar light: 4-neighbours are merged smallest difference first (bucketed), two
+    regions joining when each end of the edge lies within ``tolerance``·σ + ``slack`` of the other
+    region's mean (so a ramp does not chain unlike regions together). Returns (labels, count)."""
+    h, w = log_light.shape
+    n = h * w
+    flat = log_light.ravel()
+    sig = sigma.ravel()
+    m = 2 * n - h - w
+    ei = np.empty(m, np.int64)
+    ej = np.empty(m, np.int64)
+    wt = np.empty(m)
+    top = 0.0
+    for i in range(n):
+        top = max(top, tolerance * sig[i] + slack)
+    top = 2.0 * top + 1e-12
+    k = 0
+    for r in range(h):
+        for c in range(w):
+            i = r * w + c
+            if c + 1 < w:
+                ei[k] = i
+                ej[k] = i + 1
+                wt[k] = abs(flat[i] - flat[i + 1])
+                k += 1
+            if r + 1 < h:
+                ei[k] = i
+                ej[k] = i + w
+                wt[k] = abs(flat[i] - flat[i + w])
+                k += 1
+    counts = np.zeros(n_bins + 1, np.int64)
+    bucket = np.empty(m, np.int64)
+    for e in range(m):
+        b = min(int(wt[e] / top * n_bins), n_bins)
+        bucket[e] = b
+        counts[b] += 1
+    start = np.zeros(n_bins + 2, np.int64)
+    for q in range(n_bins + 1):
+        start[q + 1] = start[q] + counts[q]
+    order = np.empty(m, np.int64)
+    fill = start[:-1].copy()
+    for e in range(m):
+        order[fill[bucket[e]]] = e
+        fill[bucket[e]] += 1
+    parent = np.arange(n)
+    total = flat.copy()
+    size = np.ones(n)
+    for t in range(start[n_bins]):  # the top bucket never merges
+        e = order[t]
+        i = ei[e]
+        j = ej[e]
+        a = _find(parent, i)
+        b = _find(parent, j)
+        if a == b:
+            continue
+        mean_a = total[a] / size[a]
+        mean_b = total[b] / size[b]
+        if abs(flat[i] - mean_b) <= tolerance * sig[i] + slack and abs(flat[j] - mean_a) <= tolerance * sig[j] + slack:
+            if size[a] < size[b]:
+                a, b = b, a
+            parent[b] = a
+            total[a] += total[b]
+            size[a] += size[b]
+    labels = np.empty(n, np.int32)
+    remap = np.full(n, -1, np.int32)
+    cnt = 0
+    for i in range(n):
+        root = _find(parent, i)
+        if remap[root] < 0:
+            remap[root] = cnt
+            cnt += 1
+        labels[i] = remap[root]
+    return labels.reshape(h, w), cnt
+
+
+# ---------------------------------------------------------------------- the layered cost
+
+
+@njit(cache=True)
+def bilinear(img, y, x):
+    h, w = img.shape
+    y = min(max(y, 0.0), h - 1.0)
+    x = min(max(x, 0.0), w - 1.0)
+    y0 = min(int(y), max(h - 2, 0))
+    x0 = min(int(x), max(w - 2, 0))
+    y1 = min(y0 + 1, h - 1)
+    x1 = min(x0 + 1, w - 1)
+    fy = y - y0
+    fx = x - x0
+    return ((1 - fy) * ((1 - fx) * img[y0, x0] + fx * img[y0, x1])
+            + fy * ((1 - fx) * img[y1, x0] + fx * img[y1, x1]))
+
+
+@njit(cache=True)
+def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx, cap, unknown, exception):
+    """Cost of "``region`` moved by (dy, dx), all else still" minus the cost of "nothing moved".
+
+    Only the region's pixels and where they land differ between the two: a pixel x of the
+    region lands on x + d (residual log1(x + d) − log0(x), normalized by the noise, capped at
+    ``cap``) instead of the still residual there; a region pixel nothing lands on is uncovered
+    background of unknown light (cost ``unknown``). Any landing may instead be left still at
+    ``exception`` more than the still cost (another object in the way).
+    """
+    h, w = log0.shape
+    total = 0.0
+    for k in range(rows.size):
+        r = rows[k]
+        c = cols[k]
+        y = r + dy
+        x = c + dx
+        if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
+            continue  # it left the field: no evidence either way
+        v = bilinear(log1, y, x) - log0[r, c]
+        e = min(v * v / (var0[r, c] + var1[int(round(y)), int(round(x))]), cap)
+        s = bilinear(still, y, x)
+        total += min(e, s + exception) - s
+        sr = int(round(r - dy))
+        sc = int(round(c - dx))
+        if not (0 <= sr < h and 0 <= sc < w and labels[sr, sc] == region):
+            total += min(unknown, still[r, c] + exception) - still[r, c]
+    return total
+
+
+@njit(cache=True)
+def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse_rows, coarse_cols, radius, cap,
+               unknown, exception):
+    """The shift with the lowest :func:`shift_gain`: an integer grid of step 2 within ``radius``
+    on the ``coarse_*`` pixels (a sample weighted to the region's rim, where a uniform region's
+    motion shows), then steps 1 and 0.5 around the best on all of the region's pixels
+    (Gauss–Newton refines further). Returns (dy, dx, gain)."""
+    sub_r = coarse_rows
+    sub_c = coarse_cols
+    best = 0.0
+    by = 0.0
+    bx = 0.0
+    for i in range(-radius, radius + 1, 2):
+        for j in range(-radius, radius + 1, 2):
+            g = shift_gain(log0, log1, var0, var1, still, labels, region, sub_r, sub_c, float(i), float(j), cap,
+                           unknown, exception)
+            if g < best:
+                best = g
+                by = float(i)
+                bx = float(j)
+    best = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, by, bx, cap, unknown, exception)
+    if by != 0.0 or bx != 0.0:
+        zero = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, 0.0, 0.0, cap, unknown,
+                          exception)
+        if zero <= best:
+            best = zero
+            by = 0.0
+            bx = 0.0
+    for level in range(2):
+        step = (1.0, 0.5)[level]
+        cy = by
+        cx = bx
+        for i in range(-1 - (level == 0), 2 + (level == 0)):
+            for j in range(-1 - (level == 0), 2 + (level == 0)):
+                if i == 0 and j == 0:
+                    continue
+                g = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, cy + i * step,
+                               cx + j * step, cap, unknown, exception)
+                if g < best:
+                    best = g
+                    by = cy + i * step
+                    bx = cx + j * step
+    return by, bx, best
+
+
+@njit(cache=True)
+def unexplained_share(log0, log1, var0, var1, still, rows, cols, dy, dx, cap, exception):
+    """Share of the region's in-field landings that the shift leaves unexplained (kept still)."""
+    h, w = log0.shape
+    bad = 0
+    n = 0
+    for k in range(rows.size):
+        r = rows[k]
+        c = cols[k]
+        y = r + dy
+        x = c + dx
+        if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
+            continue
+        v = bilinear(log1, y, x) - log0[r, c]
+        e = min(v * v / (var0[r, c] + var1[int(round(y)), int(round(x))]), cap)
+        n += 1
+        if e > bilinear(still, y, x) + exception:
+            bad += 1
+    return bad / max(n, 1)
+
+
+@njit(cache=True)
+def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, rows, cols, params, affine,
+                        iterations, cap, ridge):
+    """Gauss–Newton (Lucas–Kanade) on Σ_j Σ_x w_j·(s1_j(x + f_j·d(x)) − s0(x))² over the listed pixels.
+
+    ``smooth1``, ``grad_*1`` and ``weight`` are stacks (J, H, W) of later images, their
+    gradients and weights; frame j lies at the fraction f_j = ``fractions[j]`` of the interval,
+    so a constant velocity moves a pixel by f_j·d by then (one frame at 1.0: the plain pair).
+    ``params`` (tx, ty, a, b, c, e): d(x) = (tx + a·X + b·Y, ty + c·X + e·Y), X and Y the pixel's
+    offset from the pixels' centroid in units of their largest offset; a translation when not
+    ``affine``; the affine terms cost ``ridge``·term² (a term of 1 moves the region's far edge
+    by 1 px), so directions the data leave open stay a translation. Pixels whose weighted
+    residual² exceeds ``cap`` sit out each step (and count ``cap`` in the cost). Returns
+    (params, capped cost before the last step, pixel-frames used, centroid y, centroid x, scale).
+    """
+    n_frames, h, w = smooth1.shape
+    n = rows.size
+    cy = 0.0
+    cx = 0.0
+    for k in range(n):
+        cy += rows[k]
+        cx += cols[k]
+    cy /= max(n, 1)
+    cx /= max(n, 1)
+    scale = 1.0
+    for k in range(n):
+        scale = max(scale, abs(rows[k] - cy), abs(cols[k] - cx))
+    m = 6 if affine else 2
+    cost = 0.0
+    used = 0
+    jac = np.zeros(m)
+    for _ in range(iterations):
+        hess = np.zeros((m, m))
+        grad = np.zeros(m)
+        cost = 0.0
+        used = 0
+        for f in range(n_frames):
+            frac = fractions[f]
+            for k in range(n):
+                r = rows[k]
+                c = cols[k]
+                xx = (c - cx) / scale
+                yy = (r - cy) / scale
+                y = r + frac * (params[1] + params[4] * xx + params[5] * yy)
+                x = c + frac * (params[0] + params[2] * xx + params[3] * yy)
+                if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
+                    continue
+                res = bilinear(smooth1[f], y, x) - smooth0[r, c]
+                ww = weight[f, r, c]
+                if res * res * ww > cap:
+                    cost += cap
+                    continue
+                gx = frac * bilinear(grad_x1[f], y, x)
+                gy = frac * bilinear(grad_y1[f], y, x)
+                jac[0] = gx
+                jac[1] = gy
+                if affine:
+                    jac[2] = gx * xx
+                    jac[3] = gx * yy
+                    jac[4] = gy * xx
+                    jac[5] = gy * yy
+                for i in range(m):
+                    grad[i] += ww * jac[i] * res
+                    for j in range(m):
+                        hess[i, j] += ww * jac[i] * jac[j]
+                cost += res * res * ww
+                used += 1
+        for i in range(2, m):
+            hess[i, i] += ridge
+            grad[i] += ridge * params[i]
+            cost += ridge * params[i] * params[i]
+        for i in range(m):
+            hess[i, i] += 1e-9 + 1e-3 * hess[i, i]
+        step = np.linalg.solve(hess, -grad)
+        for i in range(m):
+            params[i] += step[i]
+        if abs(step[0]) + abs(step[1]) < 1e-3:
+            break
+    return params, cost, used, cy, cx, scale
+
+
+@njit(cache=True)
+def warp_costs(smooth0, smooth1, weight, rows, cols, flow_u, flow_v, cap):
+    """min(w·(s1(x + f(x)) − s0(x))², cap) at each listed pixel, f a per-pixel flow (px); a pixel
+    sent out of the field costs ``cap``."""
+    h, w = smooth0.shape
+    out = np.empty(rows.size)
+    for k in range(rows.size):
+        r = rows[k]
+        c = cols[k]
+        y = r + flow_v[r, c]
+        x = c + flow_u[r, c]
+        if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1 or not (math.isfinite(y) and math.isfinite(x)):
+            out[k] = cap
+            continue
+        res = bilinear(smooth1, y, x) - smooth0[r, c]
+        out[k] = min(res * res * weight[r, c], cap)
+    return out

@@ -1,0 +1,384 @@
+"""Compiled kernels of the spike tracker: the change front end on packed bits, and grouping.
+
+The front end reads spikes as packed bits (64 pixels a word, least significant bit first, the
+``.dat`` layout): per tick it visits only the words that hold a spike, and per spike it touches
+three numbers of that pixel (its last spike, the start of its open window, the intervals
+counted in it). Once per output step every pixel's window is turned into an interval estimate
+and compared with its background (:func:`_evaluate`); the foreground comes out as packed bits
+again. Pixels are independent, so the words are split into chunks run in parallel, and the
+result does not depend on the chunking.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.extending import intrinsic
+
+#: A window of fewer intervals than this, spanning fewer ticks than :data:`MIN_SPAN_TICKS`, is
+#: joined with the previous step's: short intervals are dominated by the one-tick quantization.
+MIN_INTERVALS = 4
+MIN_SPAN_TICKS = 8
+
+#: Columns of the per-spike state ``spk`` (n_pixels, 4) int64.
+LAST, BEFORE, FIRST, COUNT = 0, 1, 2, 3
+
+
+@intrinsic
+def _cttz(typingctx, x):  # pragma: no cover - compiled
+    """Count of trailing zero bits of a uint64 (LLVM's cttz; x ≠ 0)."""
+    sig = types.uint64(types.uint64)
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        fnty = ir.FunctionType(i64, [i64, ir.IntType(1)])
+        fn = builder.module.declare_intrinsic("llvm.cttz", [i64], fnty)
+        return builder.call(fn, [args[0], ir.Constant(ir.IntType(1), 1)])
+
+    return sig, codegen
+
+
+@njit(cache=True, inline="always")
+def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev, due,
+              k_lo, k_hi, k_seed, k_left, background_ticks, hold_ticks):  # pragma: no cover - compiled
+    """One pixel at the end of tick ``tick``: update its window and background; its foreground state (−1, 0, +1).
+
+    Also sets ``due[s]``: the tick from which its silence alone could change that state (a pixel
+    neither fired nor flagged is evaluated again only then).
+    """
+    lt = spk[s, LAST]
+    q = prev[s]
+    due[s] = np.inf
+    if lt < 0:  # never fired: darker than the background seeded around it, if silent for long enough
+        f = 0
+        if q > 0.0:
+            if tick > q * k_seed:
+                f = -1
+                if flag_since[s] < 0:
+                    flag_since[s] = tick
+            else:
+                due[s] = q * k_seed
+        fg[s] = f
+        return f
+    n = spk[s, COUNT]
+    drop = False
+    if n > 0:  # new intervals since the last evaluation
+        a = anchor[s]
+        span = lt - a
+        if n >= 2:
+            # the step's first interval against the others: far apart, it belongs to the light before a change
+            # (an object arrived or left during it), and the later ones are the light now
+            head = spk[s, FIRST] - a
+            inner = lt - spk[s, FIRST]
+            if head * (n - 1) > (inner + 1.0) * k_left + (n - 1) or (head + 1.0) * (n - 1) * k_left < inner - 1.0:
+                span = inner
+                n -= 1
+        p_span = span1[s]
+        p_n = n1[s]
+        # one interval far longer than the last step's: the light fell during it (an object left), so it
+        # mixes two levels and says nothing of the light now
+        drop = n == 1 and p_n > 0 and span * p_n > p_span * k_left
+        tail = lt - spk[s, BEFORE]
+        if n >= 2 and (tail - 1.0) * (n - 1) > (span - tail + 1.0) * k_left:
+            # the step's last interval far longer than its others (one tick of slack each): the light fell
+            # at the end of the step
+            span = tail
+            n = 1
+            drop = True
+        mixed[s] = drop
+        # few short intervals: joined with the last step's, where the two agree (one tick of slack each)
+        agree = p_n > 0 and (span - 1.0) * p_n <= (p_span + 1.0) * n * k_left \
+            and (span + 1.0) * p_n * k_left >= (p_span - 1.0) * n
+        if n < MIN_INTERVALS and span < MIN_SPAN_TICKS and agree:
+            S = span + p_span
+            N = n + p_n
+        else:
+            S = span
+            N = n
+        span1[s] = span
+        n1[s] = n
+        anchor[s] = lt
+        spk[s, COUNT] = 0
+        win_span[s] = S
+        win_n[s] = N
+    else:
+        span = 0
+        S = win_span[s]
+        N = win_n[s]
+        drop = mixed[s]
+    silence = tick - lt  # the interval in progress is longer than this
+    b = bg[s]
+    if N == 0:  # one spike so far: the interval in progress only (silent objects since the start)
+        f = 0
+        if q > 0.0:
+            if silence > q * k_seed:
+                f = -1
+                if flag_since[s] < 0:
+                    flag_since[s] = tick
+            else:
+                due[s] = lt + q * k_seed
+        fg[s] = f
+        return f
+    tau = S / N
+    win_bright = (S + 1.0) / N < b * k_lo  # beyond the one-tick slack of the window's span
+    win_dark = (S - 1.0) / N > b * k_hi
+    # brighter while the interval in progress is still short: neither past the background's bound nor
+    # past what the window's light allows (the object has gone)
+    bright = win_bright and not drop and silence < b * k_lo and silence <= (S + 1.0) / N * k_left + 1.0
+    if censored[s]:
+        # the background is a lower bound (the first interval reaches back before the stream, or it was
+        # seeded from bounds): only "brighter" is known against it; a new interval that is not brighter
+        # measures it
+        f = 1 if bright else 0
+        if n > 0 and drop:  # a mixed interval is shorter than the background's: a better lower bound
+            bg[s] = max(b, tau)
+        elif n > 0 and not win_bright:
+            if q > 0.0 and ((S - 1.0) / N > q * k_seed or (S + 1.0) / N < q / k_seed):
+                # far from the background seeded around it: on an object since the start
+                bg[s] = q
+                prev[s] = 0.0
+                f = 1 if tau < q else -1
+            else:
+                bg[s] = max(b, tau)  # a window straddling an object's departure must not lower the bound
+            censored[s] = False
+        if f != 0:
+            if flag_since[s] < 0:
+                flag_since[s] = tick
+        else:
+            flag_since[s] = -1
+        fg[s] = f
+        return f
+    f = 0
+    if bright:
+        f = 1
+    elif win_dark or silence - 1.0 > b * k_hi:
+        f = -1
+    if f != 0 and q > 0.0 and n > 0 and q * k_lo <= tau <= q * k_hi:
+        # back to the background it had before something stayed on it: not an object's trail
+        bg[s] = q
+        prev[s] = 0.0
+        f = 0
+        b = q
+        win_bright = win_dark = False
+    if f != 0:
+        fs = flag_since[s]
+        if fs < 0:
+            flag_since[s] = tick
+        elif tick - fs > hold_ticks:  # stayed different: it is the background now
+            if q <= 0.0:
+                prev[s] = b
+            if n > 0 and span > 0:
+                t_step = span / n
+                bg[s] = b + span / (background_ticks + span) * (t_step - b)
+            elif f < 0:
+                bg[s] = max(b, float(silence))
+    else:
+        flag_since[s] = -1
+    if f == 0 and n > 0 and span > 0 and not win_bright and not win_dark:
+        t_step = span / n  # the background follows the pixel only while they agree
+        bg[s] = b + span / (background_ticks + span) * (t_step - b)
+    if f == 0:
+        due[s] = lt + bg[s] * k_hi + 1.0  # darker from then on, if silent
+    fg[s] = f
+    return f
+
+
+@njit(parallel=True, cache=True)
+def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, n_pixels,
+                      spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
+                      fg, flag_since, prev, due, out, k_lo, k_hi, k_seed, k_left, background_ticks,
+                      hold_ticks):  # pragma: no cover - compiled
+    """Feed ticks ``first_tick`` … of ``words`` (T, n_words) uint64; write each completed step's foreground bits.
+
+    Per spike only the pixel's row of ``spk`` (last spike, the one before, the step's first,
+    intervals counted) and its spike total change. At the end of a step, only the pixels of words
+    that fired, hold foreground, or reached a pixel's ``due`` tick are evaluated (:func:`_evaluate`).
+    ``out`` has one row per step ending in the block (plus one when ``evaluate_at_end`` and the block
+    does not end on a step: the state is then evaluated at the block's last tick, and that row is
+    scratch).
+    """
+    T = words.shape[0]
+    for ch in prange(chunk_lo.size):
+        lo, hi = chunk_lo[ch], chunk_hi[ch]
+        step = 0
+        for t in range(T):
+            tick = first_tick + t
+            for i in range(lo, hi):
+                w = words[t, i]
+                if not w:
+                    continue
+                fired[i] |= w
+                while w:
+                    s = i * 64 + _cttz(w)
+                    w &= w - np.uint64(1)
+                    lt = spk[s, LAST]
+                    if lt < 0:  # the first spike opens the first interval; the one it ends reaches
+                        anchor[s] = tick  # back before the stream: the background is at least tick + 1
+                        if bg[s] <= 0.0:
+                            bg[s] = tick + 1.0
+                            censored[s] = True
+                    else:
+                        if spk[s, COUNT] == 0:
+                            spk[s, FIRST] = tick  # the end of the step's first interval
+                        spk[s, COUNT] += 1
+                    spk[s, BEFORE] = lt
+                    spk[s, LAST] = tick
+                    total[s] += 1
+            if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T - 1):
+                for i in range(lo, hi):
+                    cand = fired[i] | fg_bits[i]
+                    whole = tick >= word_due[i]
+                    if whole:  # some pixel's silence may change it: the whole word (and its soonest due anew)
+                        top = min(64, n_pixels - i * 64)
+                        cand = ~np.uint64(0) if top == 64 else (np.uint64(1) << np.uint64(top)) - np.uint64(1)
+                    if cand:
+                        bits = fg_bits[i] & ~cand
+                        soonest = np.inf if whole else word_due[i]  # (a bound: a spike may only delay a due)
+                        while cand:
+                            j = _cttz(cand)
+                            cand &= cand - np.uint64(1)
+                            s = i * 64 + j
+                            if _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
+                                         fg, flag_since, prev, due, k_lo, k_hi, k_seed, k_left,
+                                         background_ticks, hold_ticks) != 0:
+                                bits |= np.uint64(1) << j
+                            if due[s] < soonest:
+                                soonest = due[s]
+                        fg_bits[i] = bits
+                        word_due[i] = soonest
+                        fired[i] = np.uint64(0)
+                    out[step, i] = fg_bits[i]
+                step += 1
+
+
+@njit(cache=True)
+def foreground_pixels(bits, height, width, stored_width, flip):  # pragma: no cover - compiled
+    """Rows and columns (upright, in scan order) of the set bits of one step's packed foreground."""
+    n = 0
+    for i in range(bits.size):
+        w = bits[i]
+        while w:
+            w &= w - np.uint64(1)
+            n += 1
+    ys = np.empty(n, np.int64)
+    xs = np.empty(n, np.int64)
+    k = 0
+    for y in range(height):  # upright rows in order: stored row y, or H − 1 − y when stored bottom-up
+        r = height - 1 - y if flip else y
+        lo = r * stored_width
+        hi = lo + width
+        i = lo // 64
+        while i * 64 < hi:
+            w = bits[i]
+            if w:
+                base = i * 64
+                if base < lo:
+                    w &= ~np.uint64(0) << np.uint64(lo - base)
+                if base + 64 > hi:
+                    w &= (np.uint64(1) << np.uint64(hi - base)) - np.uint64(1)
+                while w:
+                    ys[k] = y
+                    xs[k] = base + _cttz(w) - lo
+                    w &= w - np.uint64(1)
+                    k += 1
+            i += 1
+    return ys[:k], xs[:k]
+
+
+@njit(cache=True)
+def _find(parent, i):  # pragma: no cover - compiled
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True)
+def components_of_pixels(ys, xs, height, width, reach, min_pixels, index):  # pragma: no cover - compiled
+    """Union–find over foreground pixels given in scan order; pixels within Chebyshev ``reach`` join.
+
+    ``index`` is an (H, W) int64 scratch image holding −1 everywhere; it is left so.
+    Returns boxes (N, 4) x, y, w, h; pixel counts (N,); and each pixel's component (−1: too small).
+    """
+    n = ys.size
+    parent = np.arange(n)
+    for k in range(n):
+        y, x = ys[k], xs[k]
+        index[y, x] = k
+        left = index[y, x - 1] if x > 0 else -1
+        if left >= 0:
+            # the pixel to the left has met every earlier pixel within reach of it: only the column
+            # x + reach above is new (and the left pixel itself)
+            a, b = _find(parent, k), _find(parent, left)
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+            xx = x + reach
+            if xx < width:
+                for yy in range(max(0, y - reach), y):
+                    j = index[yy, xx]
+                    if j >= 0:
+                        a, b = _find(parent, k), _find(parent, j)
+                        if a != b:
+                            parent[max(a, b)] = min(a, b)
+            continue
+        for yy in range(max(0, y - reach), y + 1):  # earlier pixels in scan order only
+            hi = min(width - 1, x + reach) if yy < y else x - 1
+            for xx in range(max(0, x - reach), hi + 1):
+                j = index[yy, xx]
+                if j >= 0:
+                    a, b = _find(parent, k), _find(parent, j)
+                    if a != b:
+                        parent[max(a, b)] = min(a, b)
+    for k in range(n):
+        index[ys[k], xs[k]] = -1
+    box = np.empty((n, 4), np.int64)  # x0, y0, x1, y1 per root
+    count = np.zeros(n, np.int64)
+    root = np.empty(n, np.int64)
+    for k in range(n):
+        r = _find(parent, k)
+        root[k] = r
+        if count[r] == 0:
+            box[r, 0], box[r, 1], box[r, 2], box[r, 3] = xs[k], ys[k], xs[k], ys[k]
+        else:
+            box[r, 0], box[r, 1] = min(box[r, 0], xs[k]), min(box[r, 1], ys[k])
+            box[r, 2], box[r, 3] = max(box[r, 2], xs[k]), max(box[r, 3], ys[k])
+        count[r] += 1
+    label = np.full(n, -1, np.int64)
+    m = 0
+    for k in range(n):
+        if count[k] >= min_pixels:
+            label[k] = m
+            m += 1
+    boxes = np.empty((m, 4), np.float64)
+    counts = np.empty(m, np.int64)
+    for k in range(n):  # roots in scan order of their first pixel: a deterministic order
+        if count[k] >= min_pixels:
+            c = label[k]
+            boxes[c, 0], boxes[c, 1] = box[k, 0], box[k, 1]
+            boxes[c, 2], boxes[c, 3] = box[k, 2] - box[k, 0] + 1, box[k, 3] - box[k, 1] + 1
+            counts[c] = count[k]
+    pixel_label = np.empty(n, np.int64)
+    for k in range(n):
+        pixel_label[k] = label[root[k]]
+    return boxes, counts, pixel_label
+
+
+@njit(cache=True)
+def theil_sen(ts, xs, ys):  # pragma: no cover - compiled
+    """Velocity (vx, vy) of points (ts, xs, ys): the median over pairs of (Δx/Δt, Δy/Δt) (Theil–Sen)."""
+    n = ts.size
+    m = n * (n - 1) // 2
+    vx = np.empty(m)
+    vy = np.empty(m)
+    k = 0
+    for a in range(n):
+        for b in range(a + 1, n):
+            dt = ts[b] - ts[a]
+            if dt != 0.0:
+                vx[k] = (xs[b] - xs[a]) / dt
+                vy[k] = (ys[b] - ys[a]) / dt
+                k += 1
+    if k == 0:
+        return 0.0, 0.0
+    return np.median(vx[:k]), np.median(vy[:k])
