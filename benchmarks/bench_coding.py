@@ -35,6 +35,7 @@ import sys
 import tempfile
 import time
 import tracemalloc
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -344,15 +345,21 @@ CORPUS_CLOCKS_HZ = (20e3, 40e3)
 
 def corpus_streams():
     """(half, name, make) for every stream of the corpus; ``make()`` gives a SpikeStream."""
+    from viform._validate import UnverifiedDataWarning
     from viform.light.catalog import BUILTIN_SCENES, builtin_scene
     from viform.sensors.spike_presets import _builtin
     from viform.stream.io import open_spikes
+
+    def shared(f, hw):
+        with warnings.catch_warnings():  # the shared files carry no viform checksums: read unverified, as expected
+            warnings.simplefilter("ignore", UnverifiedDataWarning)
+            return open_spikes(DATA / f, *hw).to_memory()
 
     out = []
     for fname, hw in (("reds_sim_400x250.dat", (250, 400)), ("reds_sim2_400x250.dat", (250, 400)),
                       ("real_uhsr_250x250.npz", (None, None))):
         if (DATA / fname).exists():
-            out.append(("tuning", fname, lambda f=fname, hw=hw: open_spikes(DATA / f, *hw).to_memory()))
+            out.append(("tuning", fname, lambda f=fname, hw=hw: shared(f, hw)))
         else:
             print(f"skip {fname}: not found under {DATA}", file=sys.stderr)
     h, w = CORPUS_SCENE_SIZE

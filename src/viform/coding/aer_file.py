@@ -267,8 +267,8 @@ def encode_source(source: SpikeSource, path, mode: str = "strict", *, k: float |
     """Code a viform into a ``.vfc`` file (streaming, bounded memory). Returns a summary.
 
     ``fast`` (strict): write version 5 with its interval model on every band (version 4's sizes) instead
-    of version 6's tick model — about 1.5× quicker to encode and decode, files up to ~10 % larger
-    (``benchmarks/bench_coding.py --corpus``).
+    of version 6's tick model — about 2× quicker to encode and 1.7× to decode, files 7 % larger on a
+    typical stream, up to 50 % where every pixel fires every tick (``benchmarks/bench_coding.py --corpus``).
 
     ``version`` 1 writes the older column layout (kept so that old readers can be served).
     """
