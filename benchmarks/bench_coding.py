@@ -329,7 +329,7 @@ def print_precision(rows: list[dict]) -> None:
               f"{r['statistical'] / b['statistical']:7.3g}× {r['intensity'] / b['intensity']:8.3g}×   {r['strict']}")
 
 
-# ---------------------------------------------------------------------------- corpus (issue 24)
+# ---------------------------------------------------------------------------- corpus
 
 #: The corpus is split ONCE, by name, into a tuning half and a held-out half: the shared files and the
 #: scenes below are the tuning half (versions 4, 5 and 6 were tuned on them: version 4 on reds_sim, version 5

@@ -35,7 +35,7 @@ def test_encode_decode_json_and_json_file(tmp_path, stream_file, capsys):
     assert np.array_equal(back.read_ticks(0, back.n_ticks), spikes)
     # the human line: thousands separators, no JSON
     assert main(["decode", str(vfc), str(out)]) == 0
-    assert capsys.readouterr().out.startswith(f"{out}: 40 ticks × 6×8 pixels")
+    assert capsys.readouterr().out.startswith(f"{out}: 40 ticks × 8×6 pixels")
 
 
 @pytest.mark.parametrize("value", ["0", "-5"])

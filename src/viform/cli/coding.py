@@ -15,7 +15,7 @@ import click
 
 # one rule for every command's --json-file (missing folders are created, as for --out)
 from viform._io import check_json_file
-from viform._validate import ViformError
+from viform._validate import ViformError, size_text
 from viform.cli._common import spike_file_options
 from viform.cli.app import cli
 
@@ -109,8 +109,9 @@ def encode_cmd(src, dst, mode, k, threshold, slack, height, width, no_flip, cloc
 
         n_pixels = source.height * source.width
         if segment_ticks * n_pixels > MAX_SEGMENT_PIXEL_TICKS:
-            raise ViformError(f"--segment-ticks = {segment_ticks} is not allowed for {source.height}×{source.width} "
-                              f"pixels: a segment is held in memory while it is coded; give at most "
+            raise ViformError(f"--segment-ticks = {segment_ticks} is not allowed for "
+                              f"{size_text(source.height, source.width, 'pixels')}: a segment is held in memory "
+                              f"while it is coded; give at most "
                               f"{MAX_SEGMENT_PIXEL_TICKS // n_pixels} ticks")
     _announce_compile()
     t0 = time.perf_counter()
@@ -140,7 +141,7 @@ def decode_cmd(src, dst, as_json, json_file):
                "height": int(coded.height), "width": int(coded.width), "clock_hz": float(coded.clock_hz),
                "seconds": time.perf_counter() - t0}
     _emit(summary, as_json, json_file,
-          f"{dst}: {coded.n_ticks:,} ticks × {coded.height}×{coded.width} pixels ({coded.mode} coding)")
+          f"{dst}: {coded.n_ticks:,} ticks × {size_text(coded.height, coded.width, 'pixels')} ({coded.mode} coding)")
 
 
 #: Plain-language labels of the worked examples, in the order of ``seed_examples()``.

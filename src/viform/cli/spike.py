@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from viform._validate import ViformError
+from viform._validate import ViformError, size_text
 from viform.cli._common import CatalogHelp
 from viform.cli._scenes import scene_set_option, scene_settings, with_scene_list
 from viform.cli.app import cli
@@ -266,7 +266,7 @@ def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_ra
     rows = [("file", str(out_path)), ("ticks", f"{stream.n_ticks}"),
             ("duration", f"{stream.n_ticks / stream.clock_hz:.6g} s"
                          + (f" ({duration_from}: no --duration given)" if duration_from != "given" else "")),
-            ("size", f"{stream.height} × {stream.width} pixels"), ("clock", f"{stream.clock_hz:,.0f} Hz"),
+            ("size", size_text(stream.height, stream.width, "pixels")), ("clock", f"{stream.clock_hz:,.0f} Hz"),
             ("threshold Q", f"{stream.threshold_electrons:.4g} e-"),
             ("preset", "none" if preset is None else preset.name),
             ("speed", f"{pixel_ticks / elapsed:.3g} pixel-ticks/s"), ("device", stream.metadata["device"])]

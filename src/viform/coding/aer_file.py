@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open
-from viform._validate import ViformError, check_int
+from viform._validate import ViformError, check_int, size_text
 from viform.coding import interval_model, vfc_v1, vfc_v2, vfc_v3, vfc_v4, vfc_v5, vfc_v6
 from viform.coding.first_spike import (
     MAX_K,
@@ -115,7 +115,7 @@ class CodedWriter:
         self.height = check_int("height", height, 1, 1 << 16)
         self.width = check_int("width", width, 1, 1 << 16)
         if self.height * self.width > MAX_PIXELS:
-            raise ViformError(f"{height}×{width} pixels: a coded file holds at most {MAX_PIXELS} pixels")
+            raise ViformError(f"{size_text(height, width, 'pixels')}: a coded file holds at most {MAX_PIXELS} pixels")
         self.params = params
         self.strict = params.mode == "strict"
         self.encoder = FirstSpikeEncoder(self.height * self.width, params)
@@ -137,8 +137,9 @@ class CodedWriter:
         if self.banded:
             pixel_ticks = params.segment_ticks * self.height * self.width
             if pixel_ticks > MAX_SEGMENT_PIXEL_TICKS:
-                raise ViformError(f"segment_ticks = {params.segment_ticks} is not allowed for {self.height}×"
-                                  f"{self.width} pixels: a segment would hold {pixel_ticks:,} pixel-ticks in memory "
+                raise ViformError(f"segment_ticks = {params.segment_ticks} is not allowed for "
+                                  f"{size_text(self.height, self.width, 'pixels')}: a segment would hold "
+                                  f"{pixel_ticks:,} pixel-ticks in memory "
                                   f"(at most {MAX_SEGMENT_PIXEL_TICKS:,}); give at most "
                                   f"{MAX_SEGMENT_PIXEL_TICKS // (self.height * self.width)} ticks")
             coding_threads()  # refuse a bad VIFORM_THREADS before the file is opened
@@ -178,7 +179,8 @@ class CodedWriter:
             return
         block = np.asarray(block)
         if block.ndim not in (2, 3) or block.size != block.shape[0] * self.height * self.width:
-            raise ViformError(f"block of shape {block.shape} does not hold {self.height}×{self.width} pixels per tick")
+            raise ViformError(f"block of shape {block.shape} does not hold "
+                              f"{size_text(self.height, self.width, 'pixels')} per tick")
         block = block.reshape(block.shape[0], self.height, self.width)
         seg_ticks = self.params.segment_ticks
         if self._dense is None:
@@ -406,7 +408,7 @@ class CodedFile(SpikeSource):
         whole("height", 1, 1 << 16)
         whole("width", 1, 1 << 16)
         if h["height"] * h["width"] > MAX_PIXELS:
-            self._fail(f"header is invalid: fields height × width = {h['height']}×{h['width']} are not allowed: "
+            self._fail(f"header is invalid: fields width × height = {h['width']}×{h['height']} are not allowed: "
                        f"a coded file holds at most {MAX_PIXELS:,} pixels", offset)
         whole("segment_ticks", 1, MAX_SEGMENT_TICKS)
         if h["mode"] not in ("strict", "statistical", "intensity"):
@@ -425,7 +427,7 @@ class CodedFile(SpikeSource):
             # a segment is held whole while it is decoded: the bound its writer keeps
             if h["segment_ticks"] * h["height"] * h["width"] > MAX_SEGMENT_PIXEL_TICKS:
                 self._fail(f"header is invalid: field 'segment_ticks' = {h['segment_ticks']} is not allowed for "
-                           f"{h['height']}×{h['width']} pixels: a segment may hold at most "
+                           f"{size_text(h['height'], h['width'], 'pixels')}: a segment may hold at most "
                            f"{MAX_SEGMENT_PIXEL_TICKS:,} pixel-ticks", offset)
 
     def _read_index(self, f) -> list[tuple[int, int, int]]:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open, save_figure
+from viform._validate import size_text
 from viform.measure import comparison as cmp
 from viform.measure import sweep as sw
 from viform.report.compare_report import (
@@ -341,7 +342,8 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
     parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>viform sweep: {e(ctx['scene'])}"
              f"</title><style>{_CSS}</style></head><body>",
              f"<h1>Design sweep on '{e(ctx['scene'])}': which setting meets the scene's demands?</h1>",
-             f"<p class='note'>{ctx['height']}×{ctx['width']} pixels, {ctx['duration_s'] * 1e3:g} ms clip, images "
+             f"<p class='note'>{size_text(ctx['height'], ctx['width'], 'pixels')}, "
+             f"{ctx['duration_s'] * 1e3:g} ms clip, images "
              f"scored at {', '.join(f'{t * 1e3:.2f} ms' for t in ctx['instants_s'])} against the scene's truth "
              f"with the metrics of <code>viform compare</code>. {doc['n_points']} points "
              f"({doc['computed']} computed now, {doc['reused']} reused from earlier runs) on "
