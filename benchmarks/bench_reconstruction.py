@@ -4,7 +4,7 @@ Datasets: the shared REDS spike clips (``reds_sim_400x250``, ``reds_sim2_400x250
 truth is the 8-bit frame at index 150; images are compared in the common 8-bit convention,
 firing rate × 255 / 0.6) and simulated scenes with analytic truth (400×250, 40 kHz,
 Q = 10⁴ e⁻ as real chips, peak ≈ 0.55 spikes/tick): a texture translating at 400 … 20,000
-px/s, rotating at 5 and 20 rev/s, and a static 3-decade HDR scene (125×200, 20,001 ticks,
+px/s, rotating at 5 and 20 rev/s, and a static 3-decade HDR scene (200×125, 20,001 ticks,
 scored on log₁₀ lux).
 Truth for the simulated scenes is the scene's illuminance at the middle of the instant's
 tick; PSNR uses the truth's peak (lux, or decades for HDR) as the data range.
@@ -68,7 +68,7 @@ def simulated():
         stream = sensor.capture(scene, SIM_TICKS / CLOCK_HZ, seed=1)
         yield name, stream, SIM_TICK, scene.illuminance_lux((SIM_TICK + 0.5) / CLOCK_HZ), sensor
     # HDR: 3 decades down to 5.5e-4 spikes/tick (an interval of 1,800 ticks) need a long
-    # stream: 20,001 ticks at 125×200, written to a .dat and read back (bounded memory)
+    # stream: 20,001 ticks at 200×125, written to a .dat and read back (bounded memory)
     scene = HDRScene(125, 200, min_lux=top / 1e3, decades=3)
     with tempfile.TemporaryDirectory() as folder:
         path = save_spikes(Path(folder) / "hdr.dat", sensor.stream(scene, HDR_TICKS / CLOCK_HZ, seed=1))

@@ -1,7 +1,7 @@
 """Sweeps that scale: a 32-point sweep in this process and on 1 and 2 dask workers — wall, CPU, ratios.
 
 The sweep (default): the spike camera's 16 threshold levels × 2 clocks (20 / 40 kHz) on the demo's
-dilemma scene, 64×128 pixels, 40 ms — 32 points (``--standard``: the designer's standard sweep of
+dilemma scene, 128×64 pixels, 40 ms — 32 points (``--standard``: the designer's standard sweep of
 every sensor instead). It is run into fresh folders in this process without dask (the plain
 reference) and with 1 and 2 local dask workers (the LocalCluster's start-up included in the wall
 time, as a user sees it). Printed per run: wall s; CPU-seconds of this process and of its child

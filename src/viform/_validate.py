@@ -38,6 +38,12 @@ class UnverifiedDataWarning(ViformWarning):
     """Data read without checksums viform can verify (another tool's file, or its checksums removed)."""
 
 
+def size_text(height: int, width: int, unit: str = "px") -> str:
+    """An image size as viform prints it everywhere: width × height, as cameras are quoted
+    (``size_text(250, 400)`` is ``'400×250 px'``); ``unit=""`` leaves the unit off."""
+    return f"{width}×{height}" + (f" {unit}" if unit else "")
+
+
 def warning_line(message, category) -> str:
     """A warning as one line: ``viform: warning: TEXT`` (its first line), and for a library's warning
     ``(Category from library)`` — no source line, no file path."""

@@ -49,7 +49,7 @@ def test_a_cut_dat_names_only_the_flags_of_the_command(cut_dat, tmp_path, comman
     args = [command, cut_dat, *[a.format(out=tmp_path) for a in COMMANDS[command]], "--height", "8", "--width", "16"]
     rc, _, err = run(args)
     lines = [line for line in err.splitlines() if line.strip()]
-    assert rc == 2 and len(lines) == 1 and "not a whole number of 8×16 frames" in lines[0], err
+    assert rc == 2 and len(lines) == 1 and "not a whole number of 16×8 frames" in lines[0], err
     assert "check --height 8 and --width 16" in lines[0]
     has_partial = command in ("info", "verify")
     assert ("--allow-partial" in lines[0]) == has_partial, lines[0]

@@ -54,8 +54,8 @@ def _spike_sensor() -> str:
 COMMANDS = {
     "dataset": ["dataset", "--scenes", "translating", "--clips", "4", "--duration", "0.005", "--height", "32",
                 "--width", "48", "--no-progress"],
-    "sweep": ["sweep", "translating", "--sensor", _spike_sensor(), "--vary", "threshold_level=1,2,3", "--duration", "0.005",
-              "--height", "32", "--width", "48", "--no-progress"],
+    "sweep": ["sweep", "translating", "--sensor", _spike_sensor(), "--vary", "threshold_level=1,2,3", "--duration",
+              "0.005", "--height", "32", "--width", "48", "--no-progress"],
 }
 TARGETS = ("worker", "scheduler")
 #: Moments of the kill, by event (``delay``: a random fraction of an undisturbed run, long runs only).

@@ -15,7 +15,7 @@ import pytest
 from viform._validate import ViformError
 from viform.measure import sweep as sw
 
-#: A tiny sweep: dilemma at 32×48, a 12 ms clip (480 spike-camera ticks at 40 kHz).
+#: A tiny sweep: dilemma at 48×32, a 12 ms clip (480 spike-camera ticks at 40 kHz).
 TINY = dict(height=32, width=48, duration_s=0.012, instants_s=[0.004, 0.008], seed=3)
 
 

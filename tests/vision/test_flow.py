@@ -170,7 +170,7 @@ def test_layered_refinement_moves_a_uniform_region_and_stills_the_wall(shift):
 
 
 def test_estimator_beats_its_dense_flow_on_independent_motion():
-    # multi-object at Q = 100 (125×200): objects over a still textured wall; the layered estimate must
+    # multi-object at Q = 100 (200×125): objects over a still textured wall; the layered estimate must
     # cut the dense flow's error on moving pixels at least in half and keep the wall still
     sensor = SpikeSensor(threshold_electrons=100, clock_hz=40e3)
     scene = builtin_scene("multi-object", height=125, width=200)

@@ -65,7 +65,7 @@ OPTION_BOUNDS = {
 #: Simulation work a command runs without ``--force``, estimated seconds (about a minute). The
 #: estimate uses the simulator's speed on one core of an idle machine (README "Speed": 1.6–3.8e8
 #: pixel-ticks/s on textured scenes; ~14 µs of scene and bookkeeping per tick measured
-#: at 32×48): :data:`SIM_PIXEL_TICKS_PER_S` and :data:`SIM_S_PER_TICK`, on the slow side.
+#: at 48×32): :data:`SIM_PIXEL_TICKS_PER_S` and :data:`SIM_S_PER_TICK`, on the slow side.
 FORCE_WORK_S = 60.0
 SIM_PIXEL_TICKS_PER_S = 1e8
 SIM_S_PER_TICK = 1e-5
@@ -300,7 +300,7 @@ def check_request(command: click.Command, kwargs: dict) -> None:
         if height < 1 or width < 1:
             raise ViformError(f"{flags['height']} = {height} and {flags['width']} = {width}: both must be ≥ 1")
         pixels = height * width
-        what = f"{flags['height']} {height} × {flags['width']} {width}"
+        what = f"{flags['width']} {width} × {flags['height']} {height}"
     elif isinstance(size, int) and size > 0:
         pixels = size * size
         what = f"{flags['size']} {size} (× {size})"

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import click
 
+from viform._validate import size_text
 from viform.cli._common import spike_file_options
 from viform.cli.app import cli
 
@@ -39,7 +40,7 @@ def _lines(file, r: dict, out) -> list[str]:
     th, gs, d, dark = r["threshold"], r["gain_spread"], r["defects"], r["dark_current"]
     st = r["static"]
     lines = [f"spike-stream calibration of {file}",
-             f"  {r['height']}×{r['width']} pixels, {r['n_ticks']} ticks at {r['clock_hz'] / 1e3:.4g} kHz "
+             f"  {size_text(r['height'], r['width'], 'pixels')}, {r['n_ticks']} ticks at {r['clock_hz'] / 1e3:.4g} kHz "
              f"({r['duration_s'] * 1e3:.4g} ms), mean firing rate {r['mean_firing_rate_per_tick']:.4g} per tick",
              ""]
     if r["n_ticks"] < r["recording_ticks"]:

@@ -15,7 +15,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from viform._validate import ViformError, check_int, check_positive
+from viform._validate import ViformError, check_int, check_positive, size_text
 from viform.cli._common import CatalogHelp, parse_settings
 from viform.cli._scenes import scene_set_option, scene_settings, with_scene_list
 from viform.cli.app import cli
@@ -34,8 +34,8 @@ def capture_sensor_names() -> list[str]:
 
 def default_resolution(sensor_name: str) -> tuple[int, int]:
     """(rows, columns) of a built-in scene shot by ``sensor_name`` when the user gives none: the
-    catalogue's ``scene_shape`` (a spike chip's own array, e.g. spikeone 250×400; 250×400 for the
-    spike model, as ``simulate``; 64×128 for frame cameras, as ``compare``)."""
+    catalogue's ``scene_shape`` (a spike chip's own array, e.g. spikeone 400×250; 400×250 for the
+    spike model, as ``simulate``; 128×64 for frame cameras, as ``compare``)."""
     from viform.sensors.catalog import entry
 
     return entry(sensor_name).scene_shape
@@ -147,7 +147,8 @@ def check_frame_budget(n_frames: float, height: int, width: int, flag: str = "--
     """Refuse, before any work, a frame capture that would not fit in memory (8 bytes a pixel while shot)."""
     need = n_frames * height * width * 8
     if need > MAX_FRAME_BYTES:
-        raise ViformError(f"{flag}: {n_frames:.4g} frames of {height}×{width} need {need / 1e9:.3g} GB in memory, "
+        raise ViformError(f"{flag}: {n_frames:.4g} frames of {size_text(height, width)} need {need / 1e9:.3g} GB "
+                          f"in memory, "
                           f"more than the {MAX_FRAME_BYTES / 1e9:g} GB limit; shorten {flag} or lower the resolution")
 
 
@@ -335,7 +336,7 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
                    f"{summary['width']} at {summary['clock_hz']:g} Hz")
     else:
         frames = f"{summary['frames']} frame{'s' if summary['frames'] != 1 else ''}"
-        click.echo(f"wrote {out_path}: {frames} × {summary['height']}×{summary['width']}, "
+        click.echo(f"wrote {out_path}: {frames} × {size_text(summary['height'], summary['width'])}, "
                    f"exposure {summary['exposure_s'][0] * 1e3:.4g} ms, {summary['units']}")
     if preview:
         window = summary.get("preview_window_s")

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from viform._io import JSON_FILE_HELP
-from viform._validate import ViformError
+from viform._validate import ViformError, size_text
 from viform.cli.app import cli
 
 #: Verdicts on a motion by its error relative to the true motion (EPE / true length).
@@ -134,7 +134,7 @@ def flow(file, at_s, dt_s, method, preset, refine, out_dir, score, height, width
         click.echo(json.dumps(summary, indent=2))
         return
     click.echo(f"flow {summary['t0_s'] * 1e3:.5g} → {summary['t1_s'] * 1e3:.5g} ms of {file} "
-               f"({source.height}×{source.width} px), {method} images, DIS {preset}, refine {refine}: "
+               f"({size_text(source.height, source.width)}), {method} images, DIS {preset}, refine {refine}: "
                f"written to {out_dir}/")
     click.echo(f"moving regions found: {summary['moving_regions']}; mean confidence {summary['mean_confidence']:.2f}")
     if scene is None:

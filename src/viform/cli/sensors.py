@@ -6,6 +6,7 @@ import json
 
 import click
 
+from viform._validate import size_text
 from viform.cli.app import cli
 
 #: Which part of the model a parameter belongs to, in words (``where`` of a catalogue parameter).
@@ -74,7 +75,7 @@ def _print_catalogue(rows) -> None:
 
 
 def _print_sensor(doc) -> None:
-    size = f"{doc['resolution'][0]}×{doc['resolution'][1]} (H×W)" if doc["resolution"] else "the scene's"
+    size = size_text(*doc["resolution"], "px (width × height)") if doc["resolution"] else "the scene's"
     click.echo(f"{doc['name']}: {doc['description']}")
     click.echo(f"family {doc['family']}; pixel array {size}")
     if doc["compare_settings"]:

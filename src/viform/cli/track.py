@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from viform._validate import ViformError
+from viform._validate import ViformError, size_text
 from viform.cli._common import open_source
 from viform.cli.app import cli
 
@@ -128,8 +128,8 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
         raise ViformError(f"--scores: {file!r} carries no object truth (its sidecar names no built-in scene with "
                           "objects); give --truth gt.txt, or drop --scores")
     if scene is not None and (scene.height, scene.width) != (source.height, source.width):
-        raise ViformError(f"the file's scene is {scene.height}×{scene.width} but the stream is "
-                          f"{source.height}×{source.width}: give --truth gt.txt")
+        raise ViformError(f"the file's scene is {size_text(scene.height, scene.width)} but the stream is "
+                          f"{size_text(source.height, source.width)}: give --truth gt.txt")
     if scene is not None:
         from viform.vision.detectability import spike_detectability_of
 
@@ -220,8 +220,9 @@ def _align_truth(truth_path, gt, every: int, n_frames: int, source):
     info = mot.read_seqinfo(info_path)
     step, clock = info["step_ticks"], info["clock_hz"]
     if (info["width"], info["height"]) != (source.width, source.height):
-        raise ViformError(f"--truth: {str(info_path)!r} is for {info['height']}×{info['width']} images but the stream "
-                          f"is {source.height}×{source.width}")
+        raise ViformError(f"--truth: {str(info_path)!r} is for {size_text(info['height'], info['width'])} images but "
+                          f"the stream "
+                          f"is {size_text(source.height, source.width)}")
     if clock is not None and abs(clock - source.clock_hz) > 1e-6 * source.clock_hz:
         raise ViformError(f"--truth: {str(info_path)!r} records a {clock:g} Hz clock but the stream's is "
                           f"{source.clock_hz:g} Hz")

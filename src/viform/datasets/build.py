@@ -139,7 +139,7 @@ def resolve_preset(spec: str | None, height: int | None = None, width: int | Non
     h = check_int("--height", h if height is None else height, 1)
     w = check_int("--width", w if width is None else width, 1)
     if (h * w) % 8:
-        raise ViformError(f"--height × --width = {h}×{w} is not a multiple of 8 pixels: the .dat layout "
+        raise ViformError(f"width × height = {w}×{h} is not a multiple of 8 pixels: the .dat layout "
                           "packs each frame into whole bytes")
     return params, h, w
 

@@ -35,7 +35,7 @@ import os
 import numpy as np
 from numba import njit, prange
 
-from viform._validate import ViformError, check_choice, check_int, check_positive, check_range
+from viform._validate import ViformError, check_choice, check_int, check_positive, check_range, size_text
 from viform.imaging.units import LightImage, light_from_rate, sensor_parameters_of
 from viform.stream.container import SpikeSource
 
@@ -247,7 +247,7 @@ def motion_compensated_image(source: SpikeSource, t_s: float, *, half_span_ticks
     check_positive("min_spikes", min_spikes)
     check_range("multi_interval_weight", multi_interval_weight, 0.0, 1.0)
     if min(source.height, source.width) < 2 * down:
-        raise ViformError(f"flow_downscale = {down} is too large for a {source.height}×{source.width} stream")
+        raise ViformError(f"flow_downscale = {down} is too large for a {size_text(source.height, source.width)} stream")
     k = source.tick_of(t_s)
     a, b = max(0, k - span), min(source.n_ticks, k + span + 1)
     bits = source.read_ticks(a, b).view(np.uint8)

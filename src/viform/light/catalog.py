@@ -289,8 +289,8 @@ def fit_shape(native: tuple[int, int], height: int | None, width: int | None,
         return native
     if height is not None and width is not None:
         if abs(height * w0 - width * h0) > max(h0, w0):
-            raise ViformError(f"{names[0]} {height} {names[1]} {width} would stretch the {h0}×{w0} image "
-                              f"(height × width); give only {names[0]} or only {names[1]} to keep its aspect ratio")
+            raise ViformError(f"{names[0]} {height} {names[1]} {width} would stretch the {w0}×{h0} image "
+                              f"(width × height); give only {names[0]} or only {names[1]} to keep its aspect ratio")
         return int(height), int(width)
     if height is not None:
         return int(height), max(1, int(round(w0 * height / h0)))

@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from viform._validate import ViformError, check_int
+from viform._validate import ViformError, check_int, size_text
 from viform.stream.container import SpikeSource
 
 #: Shortest mean interval (ticks) used for Q_eff: below it the rounding dominates σ² by far.
@@ -1179,7 +1179,7 @@ def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_
         values["hot_pixel_fraction"] = 0.0  # simulate none: the bound only says how many could hide
     params = dataclasses.replace(params, **{k: v for k, v in values.items() if k in fields})
     what = ", ".join(f"{k} = {v:.4g}" for k, v in measured.items()) or "nothing"
-    description = f"calibrated from a {result['height']}×{result['width']} recording: measured {what}"
+    description = f"calibrated from a {size_text(result['height'], result['width'])} recording: measured {what}"
     if bounds:
         description += "; bounds " + ", ".join(f"{k} {'≥' if v['kind'] == 'lower bound' else '≤'} {v['value']:.4g}"
                                                for k, v in bounds.items())

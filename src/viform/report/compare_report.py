@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_open, save_figure, write_json
-from viform._validate import ViformError, check_int, check_positive
+from viform._validate import ViformError, check_int, check_positive, size_text
 from viform.measure import comparison as cmp
 
 #: Most bytes of spike clip a comparison holds in memory.
@@ -62,7 +62,8 @@ def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed
             continue
         need = scene.height * scene.width * duration_s * model.parameters.clock_hz
         if need > MAX_SPIKE_BYTES:
-            raise ViformError(f"--duration {duration_s:g} s of a {scene.height}×{scene.width} spike clip needs "
+            raise ViformError(f"--duration {duration_s:g} s of a {size_text(scene.height, scene.width)} spike clip "
+                              f"needs "
                               f"{need / 1e9:.3g} GB in memory, more than the {MAX_SPIKE_BYTES / 1e9:g} GB limit; "
                               "shorten --duration or lower --height/--width")
     if all(k == "gated" for k in keys) and getattr(scene, "active", None) is None:
@@ -515,7 +516,8 @@ def write_report(result, out_dir, command: str = "", started_s: float | None = N
         if d.get("flicker_hz"):
             demand_text += f", and an LED flickers at {d['flicker_hz']:g} Hz"
         demand_text += "."
-    parts.append(f"<p class='note'>{scene.height}×{scene.width} pixels, {result['duration_s'] * 1e3:g} ms clip, "
+    parts.append(f"<p class='note'>{size_text(scene.height, scene.width, 'pixels')}, "
+                 f"{result['duration_s'] * 1e3:g} ms clip, "
                  f"images compared at {', '.join(f'{t * 1e3:.2f} ms' for t in instants)}.{e(demand_text)} "
                  f"Every sensor sees the same light (illuminance on the sensor plane) and is used at its "
                  f"documented settings.{' Command: <code>' + e(command) + '</code>.' if command else ''}"

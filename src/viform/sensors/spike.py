@@ -519,7 +519,7 @@ class SpikeSensor(Sensor):
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
         if pixels % 8:
-            raise ViformError(f"height × width = {height}×{width} is not a multiple of 8 pixels; packed frames "
+            raise ViformError(f"width × height = {width}×{height} is not a multiple of 8 pixels; packed frames "
                               "(.dat) hold whole bytes")
         for first, packed in self._packed_blocks(scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
                                                  None, True, compiled_light, packed_only=True, device=device):

@@ -18,7 +18,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from viform._validate import ViformError, check_int, check_positive
+from viform._validate import ViformError, check_int, check_positive, size_text
 
 #: Bytes of unpacked spikes (one byte per pixel-tick) a reader hands out per block: blocks are
 #: sized by this budget, not by a tick count, so memory stays bounded at any resolution.
@@ -209,7 +209,7 @@ class SpikeStream(SpikeSource):
         return int(np.count_nonzero(self.spikes))
 
     def __repr__(self) -> str:
-        return (f"SpikeStream({self.n_ticks} ticks × {self.height}×{self.width}, "
+        return (f"SpikeStream({self.n_ticks} ticks × {size_text(self.height, self.width)}, "
                 f"clock {self.clock_hz:g} Hz, Q={self.threshold_electrons})")
 
     def __eq__(self, other) -> bool:

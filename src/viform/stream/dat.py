@@ -54,7 +54,7 @@ def _agree(path, name, given, declared):
 def _frame_bytes(height: int, stored_width: int) -> int:
     bits = height * stored_width
     if bits % 8:
-        raise ViformError(f"height × width = {height}×{stored_width} is not a multiple of 8 bits; "
+        raise ViformError(f"width × height = {stored_width}×{height} is not a multiple of 8 bits; "
                           "the .dat layout packs whole bytes per frame")
     return bits // 8
 
@@ -126,7 +126,7 @@ class DatFile(SpikeSource):
         whole, rest = divmod(size, self.frame_bytes)
         if rest and not allow_partial:
             raise ViformError(
-                f"{str(path)!r} holds {size} bytes, not a whole number of {self.height}×{self.stored_width} "
+                f"{str(path)!r} holds {size} bytes, not a whole number of {self.stored_width}×{self.height} "
                 f"frames ({self.frame_bytes} bytes each; {whole} whole frames and {rest} extra bytes)",
                 remedies={**({} if side is not None and side.get("height") is not None else
                              {"height": f"check height={self.height} and width={self.width}"}),

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numbers
 from pathlib import Path
 
-from viform._validate import ViformError
+from viform._validate import ViformError, size_text
 from viform.stream.container import SpikeSource
 from viform.stream.dat import DatFile, write_dat
 from viform.stream.npz import NpzSpikes, read_npz, write_npz
@@ -66,7 +66,7 @@ def open_spikes(path, height: int | None = None, width: int | None = None, *,
     else:
         raise ViformError(f"unknown spike file type {suffix!r} for {str(path)!r}: use one of {', '.join(FORMATS)}")
     if source.n_ticks == 0:  # an empty stream has no instant, duration or rate: every command says so here
-        raise ViformError(f"{str(path)!r} holds an empty stream (0 ticks of {source.height}×{source.width} "
+        raise ViformError(f"{str(path)!r} holds an empty stream (0 ticks of {size_text(source.height, source.width)} "
                           "pixels): there is nothing to read")
     return source
 

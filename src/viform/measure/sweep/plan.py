@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from viform._validate import ViformError, check_int, check_positive, one_line
+from viform._validate import ViformError, check_int, check_positive, one_line, size_text
 from viform.measure import comparison as cmp
 from viform.measure.sweep.parameters import check_sensor, make_point_sensor, scene_parameters, sweep_parameters
 from viform.measure.sweep.specs import DEFAULT_OBJECTIVE, SCENE, check_objective, parse_require, parse_vary
@@ -312,7 +312,8 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
         clocks = vary.get(k, {}).get("clock_hz", [sweep_parameters(k)["clock_hz"].default])
         need = height * width * duration_s * max(clocks)
         if need > MAX_SPIKE_BYTES:
-            raise ViformError(f"duration_s = {duration_s:g} s of a {height}×{width} spike clip needs {need / 1e9:.3g} "
+            raise ViformError(f"duration_s = {duration_s:g} s of a {size_text(height, width)} spike clip needs "
+                              f"{need / 1e9:.3g} "
                               f"GB in memory per worker, more than {MAX_SPIKE_BYTES / 1e9:g} GB; shorten the clip or "
                               "lower the resolution")
     points = plan_points(sensors, vary)
