@@ -332,11 +332,18 @@ def test_a_dat_sidecar_may_hold_fields_of_its_own(tmp_path):
 
 
 def _forge_vfc(path, field, value):
+    """Edit one header field and recompute the header's CRC-32, as a careful forger would (version 6
+    headers are zlib-compressed JSON: unpacked and packed again)."""
+    from viform.coding import vfc_v6
+
     raw = path.read_bytes()
     version, hlen, _ = struct.unpack_from("<HII", raw, 8)
-    header = json.loads(raw[18:18 + hlen])
+    head = raw[18:18 + hlen]
+    header = json.loads(vfc_v6.unpack_header(head) if version >= 6 else head)
     header[field] = value
     head = json.dumps(header).encode()
+    if version >= 6:
+        head = vfc_v6.pack_header(head)
     path.write_bytes(raw[:8] + struct.pack("<HII", version, len(head), zlib.crc32(head)) + head + raw[18 + hlen:])
 
 
