@@ -15,9 +15,10 @@ or order. Images are a folder's PNG/JPEG/TIFF/BMP files (sorted by name) or, by 
 that ship with scikit-image (public domain or CC0: :data:`BUNDLED_NATURAL`), so no download is needed.
 
 Ranges (:data:`RANGES`; a range is ``[low, high]``) are named with their units. Their defaults are set
-to cover the built-in scenes' ranges (speeds 100–10,000 px/s, rotations up to 40 rad/s — the rotating
-scene turns at 31 rad/s —, three decades of light below the peak, mains and LED flicker frequencies),
-not tuned on any result.
+to cover the built-in scenes' ranges (speeds 100–10,000 px/s — the dataset draws the built-in scenes at
+100–8,000 —, rotations up to 40 rad/s — the rotating scene turns at 31 rad/s —, two decades of light
+below the peak — the span of the brightness factors drawn for the built-in scenes, 0.1–10 —, mains and
+LED flicker frequencies), not tuned on any result.
 
 How each quantity is drawn (u: uniform, log-u: log-uniform):
 
@@ -69,7 +70,7 @@ RANGES = {
 #: Scalar settings → (default, unit, what it is, (smallest, largest)).
 SCALARS = {
     "peak_lux": (1000.0, "lux", "top of the range of full-scale levels", (1e-6, 1e8)),
-    "dynamic_range_decades": (3.0, "decades", "full-scale levels span peak_lux·10^−D … peak_lux", (0.0, 12.0)),
+    "dynamic_range_decades": (2.0, "decades", "full-scale levels span peak_lux·10^−D … peak_lux", (0.0, 12.0)),
     "flicker_probability": (0.25, "", "chance that a layer flickers", (0.0, 1.0)),
     "camera_motion_probability": (0.5, "", "chance that the camera pans (0: never, 1: always)", (0.0, 1.0)),
 }
