@@ -106,6 +106,7 @@ def test_cli_scene_set_on_a_builtin_scene(tmp_path, capsys):
     (["--scenes", "random-layers", "--images", "MISSING"], "--images"),
     (["--scenes", "random-layers", "--images", "EMPTY"], "--images"),
     (["--scenes", "translating", "--images", "EMPTY"], "--images"),
+    (["--scenes", "random-layers", "--images", "BROKEN"], "--images"),
     (["--scenes", "random-layers", "--scene-set", "speed_px_per_s=[500,100]"], "--scene-set"),
     (["--scenes", "random-layers", "--scene-set", "n_objects=[0,1000]"], "--scene-set"),
     (["--scenes", "random-layers", "--scene-set", "brightness=-1"], "--scene-set"),
@@ -113,8 +114,10 @@ def test_cli_scene_set_on_a_builtin_scene(tmp_path, capsys):
 ])
 def test_bad_input_exits_2_naming_the_flag_before_any_work(extra, flag, tmp_path, capsys):
     (tmp_path / "empty").mkdir()
-    extra = [str(tmp_path / "absent") if a == "MISSING" else str(tmp_path / "empty") if a == "EMPTY" else a
-             for a in extra]
+    (tmp_path / "broken").mkdir()
+    (tmp_path / "broken" / "a.png").write_bytes(b"not a png")
+    names = {"MISSING": "absent", "EMPTY": "empty", "BROKEN": "broken"}
+    extra = [str(tmp_path / names[a]) if a in names else a for a in extra]
     out = tmp_path / "ds"
     rc = main(["dataset", *extra, "--clips", "1", "--duration", "0.001", "--out", str(out), "--height", "16",
                "--width", "24", "--no-progress", "--workers", "1"])

@@ -224,8 +224,12 @@ def scene_clips(scenes, clips_per_scene: int, duration_s: float, settings: Datas
             spec = {"scene": scene, "height": settings.height, "width": settings.width,
                     "duration_s": duration_s, "clean": False}
             if scene == RANDOM_LAYERS:
-                description, drawn = random_layers_clip(name, settings.seed, settings.height, settings.width,
-                                                        duration_s, ranges, pool)
+                try:
+                    description, drawn = random_layers_clip(name, settings.seed, settings.height, settings.width,
+                                                            duration_s, ranges, pool)
+                except ViformError as exc:
+                    raise ViformError(f"--images {str(images)!r}: {exc}" if images is not None else str(exc)) \
+                        from None
                 spec.update(parameters=drawn, description=description)
             else:
                 spec["parameters"] = scene_parameters(scene, name, settings.seed, settings.max_lux, scene_settings)

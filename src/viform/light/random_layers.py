@@ -149,9 +149,13 @@ def image_size(source: str) -> tuple[int, int]:
 
             shape = getattr(skimage.data, source[len(BUNDLED_PREFIX):])().shape
         else:
+            import warnings
+
             import imageio.v3 as iio
 
-            shape = iio.improps(source).shape
+            with warnings.catch_warnings():  # imageio warns while it tries plugins on a damaged file
+                warnings.simplefilter("ignore")
+                shape = iio.improps(source).shape
     except Exception as exc:
         raise ViformError(f"image {source!r} could not be read: {one_line(exc)}") from None
     if len(shape) < 2 or shape[0] < 1 or shape[1] < 1:
