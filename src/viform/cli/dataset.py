@@ -8,6 +8,7 @@ import click
 
 from viform._validate import ViformError
 from viform.cli._common import CatalogHelp
+from viform.cli._scenes import scene_set_option
 from viform.cli.app import cli
 
 
@@ -19,7 +20,12 @@ def _sig(value: float) -> str:
 @click.argument("src", type=click.Path(file_okay=False), required=False)
 @click.option("--scenes", default=None, metavar="NAME[,NAME…]",
               help="Instead of SRC: make clips from built-in scenes with parameters drawn per clip (speeds, "
-                   "directions, brightness, texture), with exact truth: flow, depth, object tracks.")
+                   "directions, brightness, texture), with exact truth: flow, depth, object tracks; random-layers: "
+                   "natural images cut into objects moving by random affine motions (see --images).")
+@click.option("--images", "images_dir", type=click.Path(), default=None, metavar="DIR",
+              help="With --scenes random-layers: take its backgrounds and objects from the images (PNG, JPEG, "
+                   "TIFF, BMP) in DIR (default: photographs that ship with scikit-image).")
+@scene_set_option
 @click.option("--clips", "clips_per_scene", type=int, default=None, help="With --scenes: clips of each scene.")
 @click.option("--duration", "duration_s", type=float, default=None, help="With --scenes: length of each clip, s.")
 @click.option("--truth-every-ticks", type=int, default=40, show_default=True,
@@ -66,11 +72,12 @@ def _sig(value: float) -> str:
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
-def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, out_dir, preset, height, width,
-            workers, scheduler, connect_timeout_s, worker_memory, gt_every, seed, frame_rate_hz, max_lux,
-            interpolation, light_sample_ticks, block_ticks, device, no_progress, as_json, json_file, sensor_settings):
+def dataset(src, scenes, images_dir, scene_set, clips_per_scene, duration_s, truth_every_ticks, pairs, out_dir,
+            preset, height, width, workers, scheduler, connect_timeout_s, worker_memory, gt_every, seed, frame_rate_hz,
+            max_lux, interpolation, light_sample_ticks, block_ticks, device, no_progress, as_json, json_file,
+            sensor_settings):
     """Convert SRC, a folder of videos or of frame folders, into a spike dataset in --out;
-    or, with --scenes, make one from built-in scenes with exact truth.
+    or, with --scenes, make one from built-in scenes or random layered scenes with exact truth.
 
     Writes spike/<clip>.dat (the spike cameras' packed-bit layout) with a JSON description
     beside each, gt/<clip>_<frame>.png ground truth, config.yaml (spike_h, spike_w) and
@@ -96,6 +103,10 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
                 raise ViformError(f"{flag} applies to --scenes datasets only; SRC's clips keep their own length")
         if pairs:
             raise ViformError("--pairs applies to --scenes datasets only")
+        if images_dir is not None:
+            raise ViformError("--images applies to --scenes random-layers only")
+        if scene_set is not None:
+            raise ViformError("--scene-set applies to --scenes datasets only (SRC's clips are videos and images)")
     else:
         for flag, value in (("--clips", clips_per_scene), ("--duration", duration_s)):
             if value is None:
@@ -112,7 +123,10 @@ def dataset(src, scenes, clips_per_scene, duration_s, truth_every_ticks, pairs, 
                              truth_every_ticks=truth_every_ticks if scenes is not None else None, **overrides)
     _check_max_lux(settings)
     if scenes is not None:
-        src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs)
+        from viform.cli._scenes import scene_settings
+
+        src = scene_clips(scenes, clips_per_scene, duration_s, settings, pairs, images=images_dir,
+                          scene_settings=scene_settings(scene_set))
     summary = build_dataset(src, out_dir, settings, workers=workers, scheduler=scheduler,
                             memory_limit=worker_memory, block_ticks=block_ticks, progress=not no_progress,
                             device=device, connect_timeout_s=connect_timeout_s, on_connect=announce_connection)

@@ -181,10 +181,23 @@ def make_settings(preset: str | None = None, *, height: int | None = None, width
 
 
 def scene_clips(scenes, clips_per_scene: int, duration_s: float, settings: DatasetSettings,
-                pairs: bool = False) -> list:
-    """Clips drawn from built-in scenes (:mod:`viform.datasets.scene_clips`): ``clips_per_scene`` of
-    each, named ``<scene>-<k>``, and with ``pairs`` each one's clean twin ``<scene>-<k>-clean``."""
-    from viform.datasets.scene_clips import CLEAN_SUFFIX, parse_scene_list, scene_parameters
+                pairs: bool = False, images=None, scene_settings: dict | None = None) -> list:
+    """Clips drawn from built-in scenes and random layered scenes (:mod:`viform.datasets.scene_clips`):
+    ``clips_per_scene`` of each, named ``<scene>-<k>``, and with ``pairs`` each one's clean twin
+    ``<scene>-<k>-clean``.
+
+    ``images`` (a folder, or None for the bundled photographs) feeds ``random-layers``;
+    ``scene_settings`` (``--scene-set``) apply to every scene named: a built-in scene's parameters and
+    brightness/speed factors on its drawn ones, the random-layers generator's ranges.
+    """
+    from viform.datasets.scene_clips import (
+        CLEAN_SUFFIX,
+        RANDOM_LAYERS,
+        parse_scene_list,
+        random_layers_clip,
+        random_layers_ranges,
+        scene_parameters,
+    )
     from viform.datasets.sources import SourceClip
 
     names = parse_scene_list(scenes) if isinstance(scenes, str) else list(scenes)
@@ -195,13 +208,33 @@ def scene_clips(scenes, clips_per_scene: int, duration_s: float, settings: Datas
     if duration_s * settings.parameters.clock_hz < settings.truth_every_ticks:
         raise ViformError(f"--duration {duration_s:g} s is shorter than one truth step "
                           f"({settings.truth_every_ticks} ticks at {settings.parameters.clock_hz:g} Hz)")
+    if images is not None and RANDOM_LAYERS not in names:
+        raise ViformError(f"--images applies to --scenes {RANDOM_LAYERS} only (it is not among "
+                          f"{', '.join(names)})")
+    pool = ranges = None
+    if RANDOM_LAYERS in names:
+        from viform.light.random_layers import image_pool
+
+        pool = image_pool(images, "--images")
+        ranges = random_layers_ranges(scene_settings, settings.max_lux)
     out = []
     for scene in names:
         for k in range(clips_per_scene):
             name = f"{scene}-{k:04d}"
             spec = {"scene": scene, "height": settings.height, "width": settings.width,
-                    "parameters": scene_parameters(scene, name, settings.seed, settings.max_lux),
                     "duration_s": duration_s, "clean": False}
+            if scene == RANDOM_LAYERS:
+                try:
+                    description, drawn = random_layers_clip(name, settings.seed, settings.height, settings.width,
+                                                            duration_s, ranges, pool)
+                except ViformError as exc:
+                    raise ViformError(f"--images {str(images)!r}: {exc}" if images is not None else str(exc)) \
+                        from None
+                spec.update(parameters=drawn, description=description)
+            else:
+                spec["parameters"] = scene_parameters(scene, name, settings.seed, settings.max_lux, scene_settings)
+            if scene_settings:
+                spec["settings"] = scene_settings
             out.append(SourceClip(name, json.dumps(spec, sort_keys=True), "scene"))
             if pairs:
                 # the twin draws the same light and photon seed: its spec differs only in "clean"
@@ -261,9 +294,10 @@ def _finished(task: ClipTask, dat: Path) -> dict | None:
 
 def _remove_stale(out: Path, clip: str) -> None:
     """Temporary files a killed attempt left behind (atomic writes name them ``.<target>.*``)."""
-    from viform.datasets.scene_clips import DEPTH_DIR, FLOW_DIR, MOT_DIR
+    from viform.datasets.scene_clips import DEPTH_DIR, DESCRIPTION_DIR, FLOW_DIR, MOT_DIR
 
     for folder, prefix in ((out / SPIKE_DIR, f".{clip}.dat"), (out / GT_DIR, f".{clip}_"),
+                           (out / DESCRIPTION_DIR, f".{clip}.yaml"),
                            (out / FLOW_DIR, f".{clip}_"), (out / DEPTH_DIR, f".{clip}_")):
         if folder.is_dir():
             for p in folder.iterdir():
@@ -342,6 +376,11 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
     detect = SpikeDetectability(parameters.threshold_electrons, parameters.optics.electrons_per_lux_second)
     truth = write_truth(out, clip.name, scene, source.n_ticks, s.truth_every_ticks, source.clock_hz, s.max_lux,
                         detectability=detect)
+    described = None
+    if "description" in spec:  # a drawn description: written beside the truth, to remake the clip's scene
+        from viform.datasets.scene_clips import write_description
+
+        described = write_description(out, clip.name, spec["description"])
     spikes, digest = _write_dat(task, dat, source)
     from viform.datasets.scene_clips import too_dark
 
@@ -354,6 +393,8 @@ def _convert_scene(task: ClipTask, dat: Path, started: float) -> dict:
         "frame_rate_hz": source.clock_hz / s.truth_every_ticks, "rate": full_scale_rate,
         "gt_frames": truth["frames"], "settings_sha256": s.fingerprint(),
         "scene": spec["scene"], "scene_parameters": spec["parameters"], "clean": spec["clean"], **darkness,
+        **({"scene_settings": spec["settings"]} if "settings" in spec else {}),
+        **({"scene_description": spec["description"], "description_file": described} if described else {}),
         "truth": {"kinds": truth["kinds"], "step_ticks": s.truth_every_ticks, "mot": truth["mot"],
                   "frame_time": "frame k: the end of step k, t = k·step_ticks / clock_hz (s)",
                   "flow": "forward flow from frame k to frame k + 1, px, Middlebury .flo (unknown = 1e10)",
@@ -471,10 +512,17 @@ def _label_types(clips) -> list:
     scenes = [c for c in clips if c.kind == "scene"]
     if scenes:
         from viform.light.catalog import builtin_scene
+        from viform.light.layered import DescribedScene
 
         kinds = set()
-        for name in {json.loads(c.path)["scene"] for c in scenes}:
-            kinds.update(builtin_scene(name, 64, 96).truth_kinds())
+        firsts = {}
+        for c in scenes:
+            firsts.setdefault(json.loads(c.path)["scene"], json.loads(c.path))
+        for name, spec in firsts.items():
+            if "description" in spec:  # a drawn description: every one has the truth kinds of its layers
+                kinds.update(DescribedScene(spec["description"]).truth_kinds())
+            else:
+                kinds.update(builtin_scene(name, 64, 96).truth_kinds())
         types += [t for kind, t in (("motion", 2), ("depth", 3.1), ("objects", 5)) if kind in kinds]
     return types
 
@@ -651,7 +699,8 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
 
 
 #: Manifest keys of scene clips: what was drawn, and where the truth is.
-_SCENE_KEYS = ("scene", "scene_parameters", "clean", "truth", "too_dark", "spikes_per_pixel_per_truth_step")
+_SCENE_KEYS = ("scene", "scene_parameters", "scene_settings", "scene_description", "description_file", "clean",
+               "truth", "too_dark", "spikes_per_pixel_per_truth_step")
 
 
 def _write_manifest(out: Path, settings: DatasetSettings, rows: dict, failed: dict) -> None:

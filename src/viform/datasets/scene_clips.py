@@ -42,6 +42,8 @@ LUX_DIR = "gt_lux"
 DARK_SPIKES_PER_STEP = 1.0
 DEPTH_DIR = "depth"
 MOT_DIR = "mot"
+#: Folder of the scene descriptions of drawn described scenes (``<clip>.yaml``).
+DESCRIPTION_DIR = "scenes"
 #: Suffix of a clip's clean twin (same light and seed, photon noise and fixed patterns off).
 CLEAN_SUFFIX = "-clean"
 
@@ -83,13 +85,63 @@ RANDOMIZERS = {
 }
 
 
-def scene_parameters(scene: str, clip: str, dataset_seed: int, full_scale_lux: float) -> dict:
-    """The drawn parameters of one clip: a pure function of (dataset seed, clip name), JSON values."""
+#: The scene of natural images cut into moving layers (:mod:`viform.light.random_layers`).
+RANDOM_LAYERS = "random-layers"
+#: Every name ``--scenes`` takes.
+SCENE_CHOICES = (*RANDOMIZERS, RANDOM_LAYERS)
+
+
+def _parameters_rng(clip: str, dataset_seed: int):
+    return np.random.default_rng(clip_seed(dataset_seed, f"parameters/{clip}"))
+
+
+def scene_parameters(scene: str, clip: str, dataset_seed: int, full_scale_lux: float,
+                     settings: dict | None = None) -> dict:
+    """The drawn parameters of one clip of a built-in scene: a pure function of (dataset seed, clip
+    name), JSON values; ``settings`` (name → value, as ``--scene-set`` gives them) then fix named
+    parameters and scale the drawn ones by the ``brightness`` and ``speed`` factors
+    (:func:`viform.light.catalog.entry_settings`)."""
     if scene not in RANDOMIZERS:
-        raise ViformError(f"--scenes {scene!r} is not allowed: choose among {', '.join(RANDOMIZERS)}")
-    rng = np.random.default_rng(clip_seed(dataset_seed, f"parameters/{clip}"))
-    drawn = RANDOMIZERS[scene](rng, float(full_scale_lux))
+        raise ViformError(f"--scenes {scene!r} is not allowed: choose among {', '.join(SCENE_CHOICES)}")
+    drawn = RANDOMIZERS[scene](_parameters_rng(clip, dataset_seed), float(full_scale_lux))
+    drawn = json.loads(json.dumps(drawn, default=float))
+    if settings:
+        from viform.light.catalog import entry_settings
+
+        drawn = entry_settings(scene, settings, "--scene-set", base=drawn)
     return json.loads(json.dumps(drawn, default=float))
+
+
+def random_layers_ranges(settings: dict | None, full_scale_lux: float) -> dict:
+    """The generator's ranges for a dataset: its defaults with ``peak_lux`` at the sensor's full scale,
+    then ``settings`` (``--scene-set``): any range or scalar of :mod:`viform.light.random_layers` by
+    name, ``brightness`` (a factor on peak_lux) and ``speed`` (a factor on every speed and rate range)."""
+    from viform.light.random_layers import check_ranges
+
+    settings = dict(settings or {})
+    factors = {k: settings.pop(k) for k in ("brightness", "speed") if k in settings}
+    ranges = check_ranges({"peak_lux": float(full_scale_lux), **settings}, "--scene-set")
+    for key, value in factors.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            raise ViformError(f"--scene-set {key}={value!r} is not allowed: it must be a finite factor > 0")
+    if "brightness" in factors:
+        ranges["peak_lux"] *= float(factors["brightness"])
+    if "speed" in factors:
+        for key in ("speed_px_per_s", "rotation_rad_per_s", "scale_per_s", "camera_speed_px_per_s"):
+            ranges[key] = [v * float(factors["speed"]) for v in ranges[key]]
+    return check_ranges(ranges, "--scene-set")
+
+
+def random_layers_clip(clip: str, dataset_seed: int, height: int, width: int, duration_s: float,
+                       ranges: dict, images=None) -> tuple[dict, dict]:
+    """(description, drawn parameters) of one random-layers clip, drawn from the clip's own seed
+    (a pure function of the dataset seed and the clip's name)."""
+    from viform.light.random_layers import random_layers
+
+    seed = clip_seed(dataset_seed, f"parameters/{clip}")
+    description, drawn = random_layers(np.random.default_rng(seed), height, width, duration_s, images, **ranges)
+    drawn["seed"] = seed
+    return json.loads(json.dumps(description)), json.loads(json.dumps(drawn))
 
 
 def parse_scene_list(text: str) -> list[str]:
@@ -98,10 +150,10 @@ def parse_scene_list(text: str) -> list[str]:
     if not names:
         raise ViformError("--scenes is empty: give built-in scene names, e.g. --scenes translating,multi-object")
     for name in names:
-        if name not in RANDOMIZERS:
+        if name not in SCENE_CHOICES:
             known = name in BUILTIN_SCENES
             raise ViformError(f"--scenes {name!r} is not allowed: " + (
-                "it has no parameters to draw; " if known else "") + f"choose among {', '.join(RANDOMIZERS)}")
+                "it has no parameters to draw; " if known else "") + f"choose among {', '.join(SCENE_CHOICES)}")
     if len(set(names)) != len(names):
         raise ViformError(f"--scenes {text!r} names a scene twice")
     return names
@@ -175,6 +227,22 @@ def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: 
     return {"frames": frames, "mot": mot, "kinds": list(kinds)}
 
 
+def write_description(out, clip: str, description: dict) -> dict:
+    """Write a clip's scene description to ``scenes/<clip>.yaml`` (``viform simulate`` remakes the scene
+    from it); returns {file, sha256}."""
+    import yaml
+
+    path = Path(out) / DESCRIPTION_DIR / f"{clip}.yaml"
+    first = ("viform_scene", "name", "summary", "canvas", "background", "layers", "camera")
+    description = {**{k: description[k] for k in first if k in description},
+                   **{k: v for k, v in description.items() if k not in first}}
+    text = (f"# the scene of dataset clip {clip}: viform simulate {DESCRIPTION_DIR}/{clip}.yaml remakes it\n"
+            + yaml.safe_dump(description, sort_keys=False, allow_unicode=True))
+    with atomic_open(path, "wb") as f:
+        f.write(text.encode("utf-8"))
+    return {"file": f"{DESCRIPTION_DIR}/{clip}.yaml", "sha256": sha256_file(path)}
+
+
 def display_white_lux(scene, times) -> float:
     """The lux shown as white in a clip's display PNGs: the 99.5th percentile of its light at its first,
     middle and last truth instants (one scale for the whole clip, so frames compare)."""
@@ -216,6 +284,10 @@ def truth_intact(out, record: dict) -> bool:
                 path = out / folder / name
                 if not path.is_file() or sha256_file(path) != frame.get(f"{key}_sha256"):
                     return False
+    described = record.get("description_file")
+    if described and (not (out / described["file"]).is_file()
+                      or sha256_file(out / described["file"]) != described.get("sha256")):
+        return False
     mot = record.get("mot")
     if mot:
         digest = hashlib.sha256()
@@ -232,5 +304,9 @@ def truth_intact(out, record: dict) -> bool:
 def make_scene(clip_source) -> object:
     """The scene of a scene clip (:class:`~viform.datasets.sources.SourceClip` of kind ``"scene"``)."""
     spec = json.loads(clip_source.path)
+    if "description" in spec:
+        from viform.light.layered import DescribedScene
+
+        return DescribedScene(spec["description"], spec["height"], spec["width"], source=spec["scene"])
     return builtin_scene(spec["scene"], spec["height"], spec["width"],
                          **{k: tuple(v) if isinstance(v, list) else v for k, v in spec["parameters"].items()})

@@ -175,11 +175,14 @@ SCENES: dict[str, SceneEntry] = {e.name: e for e in (
 )}
 
 
-def entry_settings(name: str, settings: dict | None, where: str = "scene setting") -> dict:
+def entry_settings(name: str, settings: dict | None, where: str = "scene setting", base: dict | None = None) -> dict:
     """Keyword arguments of built-in scene ``name`` from settings: its own parameters by name, and the
-    universal ``brightness`` and ``speed`` factors mapped onto them (see :class:`SceneEntry`)."""
+    universal ``brightness`` and ``speed`` factors mapped onto them (see :class:`SceneEntry`).
+
+    ``base`` (keyword arguments, e.g. drawn ones) is the starting point: settings replace its values
+    by name, and the factors scale its values (the scene's defaults where it has none)."""
     entry = SCENES[name]
-    out: dict = {}
+    out: dict = dict(base or {})
     for key, value in (settings or {}).items():
         if key in ("brightness", "speed"):
             check_positive(f"{where} {key}", value) if key == "brightness" else None
