@@ -388,3 +388,24 @@ def test_a_track_with_its_own_detection_is_not_swallowed_by_a_sparse_component_a
     first = [tid for tid, box in reported if np.allclose(box, own[0])]
     assert first == [min(ids)]  # the first track on its own detection, with its id
     assert {tr.track_id for tr in tracker.tracks} <= ids | {max(ids) + 1}  # at most the frame is new
+
+
+def test_a_saturated_window_does_not_blind_the_frame_back_end():
+    # an HDR scene through a short exposure: a sunlit window saturates 15 % of the pixels in every frame; a
+    # saturated pixel is read (at least its value), so the frames are not taken for an auto-exposure
+    # start-up that measures too little, and the moving square is tracked
+    rng = np.random.default_rng(4)
+    frames, sat, times = [], [], []
+    for k in range(30):
+        img = 10.0 * (1.0 + 0.02 * rng.standard_normal((40, 60)))
+        img[2:14, 2:26] = 255.0
+        x0 = 10 + 1.5 * k
+        img[24:32, int(x0):int(x0) + 8] = 60.0
+        s = np.zeros(img.shape, bool)
+        s[2:14, 2:26] = True
+        frames.append(img), sat.append(s), times.append(6e-4 * (k + 1))
+    assert np.mean(sat[0]) > 0.1
+    res = track_frames(frames, times, measured=[np.ones((40, 60), bool)] * 30, saturated=sat)
+    found = res.rows[(res.rows[:, 3] > 20)]  # boxes on the square's rows
+    assert len(found) >= 20
+    assert len(np.unique(found[:, 1])) == 1

@@ -501,8 +501,9 @@ class FrameChangeDetector:
     Each pixel also learns its noise (the spread of ln light while it agrees with the background;
     at first its spread over those frames, at least the typical one): a change must exceed
     :data:`NOISE_SIGMAS` standard deviations too, so the quantization of dim 8-bit pixels is not
-    read as motion. A frame that measures fewer than ``seed_measured_fraction`` of its pixels
-    gives an empty mask.
+    read as motion. A frame that reads fewer than ``seed_measured_fraction`` of its pixels
+    (measured, or saturated: at least their value) gives an empty mask; a sunlit window that
+    saturates does not blind the camera to the rest of the frame.
 
     Parameters
     ----------
@@ -546,7 +547,7 @@ class FrameChangeDetector:
         ok = ok & ~sat
         if self.ref is None:
             self._pending.append((cur, ok, float(t_s), sat))
-            usable = [f for f in self._pending if f[1].mean() >= self.parameters.seed_measured_fraction]
+            usable = [f for f in self._pending if (f[1] | f[3]).mean() >= self.parameters.seed_measured_fraction]
             if len(usable) < self.init_frames:
                 return []
             self._start(usable)
@@ -558,7 +559,7 @@ class FrameChangeDetector:
         """The masks of frames still held back when the frames end (the background from what was seen)."""
         if self.ref is not None or not self._pending:
             return []
-        usable = [f for f in self._pending if f[1].mean() >= self.parameters.seed_measured_fraction]
+        usable = [f for f in self._pending if (f[1] | f[3]).mean() >= self.parameters.seed_measured_fraction]
         self._start(usable or self._pending)
         held, self._pending = self._pending, []
         return [self._step(*f) for f in held]
@@ -638,7 +639,7 @@ class FrameChangeDetector:
             self._group = None
 
     def _step(self, cur, ok, t_s, sat):
-        if ok.mean() < self.parameters.seed_measured_fraction:
+        if (ok | sat).mean() < self.parameters.seed_measured_fraction:
             # a frame that measures too few pixels (auto-exposure still settling): nothing is read from it
             return np.zeros(cur.shape, bool)
         new = ok & ~self.known  # first measurement of a pixel unmeasured so far: its background
