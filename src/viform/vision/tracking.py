@@ -105,7 +105,7 @@ class TrackerParameters:
         seeded group none of whose pixels changes within ``seed_confirm_ticks`` (spikes: or two of
         its intervals, when longer) its own light back for good (objects in view move; a sunlit
         window, a lamp, static texture that a dim 8-bit image shows strongly do not), unless it
-        touches foreground that is not its own (a long object in view whose front moves on).
+        touches foreground of its sign that is not its own (a long object in view whose front moves on).
     """
 
     threshold_log: float = 0.4
@@ -386,7 +386,7 @@ class SpikeChangeDetector:
             prev[unsure] = level[unsure]
         later = ~measured & ~seeded & ~back & around_measured & (weight > 0.5)
         prev[later] = level[later]
-        self._new_groups(bright, dark, np.exp(upper), np.exp(lower), level, t)
+        self._new_groups(bright, dark | later, np.exp(upper), np.exp(lower), level, t)
         self.word_due[:] = -np.inf  # every pixel evaluated at the next step, against its new background
         if measured.mean() >= p.seed_measured_fraction:
             self.seeded = True
@@ -452,10 +452,10 @@ class SpikeChangeDetector:
             mine = np.zeros(self.spk.shape[0], np.bool_)
             mine[s] = True
             mine = self.upright(mine)
-            touching = _grown(mine, max(p.merge_px, 1)) & ~mine & (self.upright(self.fg) != 0)
+            touching = _grown(mine, max(p.merge_px, 1)) & ~mine & (self.upright(self.fg) == sign)
             if touching.sum() >= p.min_pixels:
-                # still, but joined to foreground that is not (the part of a long object in view since the
-                # start that it has not left, while its front moves on): decided later
+                # still, but joined to foreground of the same sign that is not (the part of a long object in
+                # view since the start that it has not left, while its front moves on): decided later
                 self._groups.append((self._step_end(self.next_tick + p.seed_confirm_ticks), s, sign, lower0, upper0,
                                      t0))
                 continue
