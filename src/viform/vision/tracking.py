@@ -101,9 +101,11 @@ class TrackerParameters:
         so the object is foreground at once and the place it leaves is not a ghost
         (:meth:`SpikeChangeDetector._seed`, :func:`seed_background`); with ``seed_unsure``,
         pixels that differ from that background by more than ``threshold_log`` only may return
-        to it without being flagged. Frames apply it to their starting background, and give a
-        seeded group none of whose pixels changes within ``seed_confirm_ticks`` its own light back
-        (objects in view move; static texture that a dim 8-bit image shows strongly does not).
+        to it without being flagged. Frames apply it to their starting background. Both give a
+        seeded group none of whose pixels changes within ``seed_confirm_ticks`` (spikes: or two of
+        its intervals, when longer) its own light back for good (objects in view move; a sunlit
+        window, a lamp, static texture that a dim 8-bit image shows strongly do not), unless it
+        touches foreground of its sign that is not its own (a long object in view whose front moves on).
     """
 
     threshold_log: float = 0.4
@@ -225,6 +227,10 @@ class SpikeChangeDetector:
         self.seeded = False
         self._seeded_ever = None
         self._index = None
+        # seeded groups still to confirm: (deadline tick, stored pixel indices, sign, prior lower and upper
+        # interval bounds in ticks, seeding tick); pixels given back (static: never seeded again)
+        self._groups = []
+        self._given_back = np.zeros(n, np.bool_)
 
     def upright(self, flat: np.ndarray) -> np.ndarray:
         """A per-pixel state array (stored order) as an upright (H, W) view."""
@@ -265,13 +271,17 @@ class SpikeChangeDetector:
         if words.ndim != 2 or words.shape[1] != self.n_words:
             raise ViformError(f"packed spikes must have shape (T, {self.n_words}); got {words.shape}")
         outs, start = [], 0
-        while True:  # split at the seeding checks: the same ticks whatever the blocks
-            check = self._next_seed_check()
+        while True:  # split at the seeding checks and the seeded groups' deadlines: the same ticks whatever the blocks
+            seed_at = self._next_seed_check()
+            confirm_at = min((g[0] for g in self._groups), default=None)
+            check = min((c for c in (seed_at, confirm_at) if c is not None), default=None)
             end = words.shape[0] if check is None else min(words.shape[0], start + check - self.next_tick)
             at_check = check is not None and self.next_tick + (end - start) == check
             outs.append(self._feed(words[start:end], at_check))
             start = end
-            if at_check:
+            if at_check and check == confirm_at:
+                self._confirm()
+            if at_check and check == seed_at:
                 self._seed()
             if start >= words.shape[0]:
                 return np.concatenate(outs)
@@ -345,19 +355,20 @@ class SpikeChangeDetector:
         upper = np.log((s_win + 1.0) / np.maximum(n_win, 1))  # the longest the measured interval can be
         lower = np.log(np.maximum(np.where(measured, (s_win - 1.0) / np.maximum(n_win, 1), bound), 1e-3))
         # objects are at least 3 px across (an opening removes thin lines of static texture)
-        bright = _opened(measured & ~up(self.mixed) & (upper < median - thr))  # not a falling transition
-        dark = _opened(median_measured & (lower > median + thr))
+        back = up(self._given_back)  # static, given back: not an object
+        bright = _opened(measured & ~up(self.mixed) & (upper < median - thr)) & ~back  # not a falling transition
+        dark = _opened(median_measured & (lower > median + thr)) & ~back
         # a background learned from an object that has since moved on (its current light may agree)
         known = ~censored & (bg > 0)
         log_bg = np.log(np.where(known, bg, 1.0))
-        stale = known & ((log_bg < median - thr) | (median_measured & (log_bg > median + thr)))
+        stale = known & ~back & ((log_bg < median - thr) | (median_measured & (log_bg > median + thr)))
         # ... kept where wide enough to be an object, or at the edge of where one stood (anti-aliased edges)
         if self._seeded_ever is None:
             self._seeded_ever = np.zeros(stale.shape, bool)
         self._seeded_ever |= bright | dark
         stale &= _opened(stale) | _grown(self._seeded_ever)
         seeded = bright | dark | stale
-        clear = ~_grown(bright | dark) & ~stale
+        clear = ~_grown(bright | dark | back) & ~stale  # (static regions that stand out are no background either)
         around, weight, measured_around = _interpolate_clear(log_v, clear, p.seed_window_px, measured)
         around_measured = measured_around > 0.9
         level = np.exp(around)
@@ -370,14 +381,94 @@ class SpikeChangeDetector:
         silent = dark & ~measured  # no interval yet: darker once silent for longer than the level around allows
         prev[silent] = level[silent]
         if p.seed_unsure:
-            unsure = ~seeded & around_measured & ((measured & (np.abs(log_v - around) > p.threshold_log))
+            unsure = ~seeded & ~back & around_measured & ((measured & (np.abs(log_v - around) > p.threshold_log))
                                                   | (known & (np.abs(log_bg - around) > p.threshold_log)))
             prev[unsure] = level[unsure]
-        later = ~measured & ~seeded & around_measured & (weight > 0.5)
+        later = ~measured & ~seeded & ~back & around_measured & (weight > 0.5)
         prev[later] = level[later]
+        self._new_groups(bright, dark | later, np.exp(upper), np.exp(lower), level, t)
         self.word_due[:] = -np.inf  # every pixel evaluated at the next step, against its new background
         if measured.mean() >= p.seed_measured_fraction:
             self.seeded = True
+
+    def _new_groups(self, bright, dark, upper, lower, level, t):
+        """Pixels seeded at tick ``t`` as groups to confirm: grouped as detections are (``merge_px``), brighter
+        and darker apart.
+
+        A group's deadline is ``seed_confirm_ticks`` after seeding, or two of its typical intervals
+        (its own for a brighter group, the background's around for a darker one) when longer: no
+        change can be measured sooner; it falls at the end of an output step.
+        """
+        p = self.parameters
+        stored = self.upright(np.arange(self.spk.shape[0]))
+        pending = np.zeros(self.spk.shape[0], np.bool_)
+        for g in self._groups:
+            pending[g[1]] = True
+        for sign, part, typical in ((1, bright, upper), (-1, dark, level)):
+            part = part & ~self.upright(pending)
+            if not part.any():
+                continue
+            ys, xs = np.nonzero(part)
+            _, _, label = _components_of_mask(part, p.merge_px, 1)  # as detections group them
+            for k in range(int(label.max()) + 1):
+                sel = label == k
+                y, x = ys[sel], xs[sel]
+                wait = max(float(p.seed_confirm_ticks), 2.0 * float(np.median(typical[y, x])))
+                self._groups.append((self._step_end(t + 1 + wait), stored[y, x].copy(), sign,
+                                     lower[y, x].copy(), upper[y, x].copy(), t))
+
+    def _step_end(self, tick: float) -> int:
+        """The first end of an output step at or after ``tick`` (a check there adds no evaluation)."""
+        return int(math.ceil(tick / self.step_ticks)) * self.step_ticks
+
+    def _confirm(self):
+        """Seeded groups at their deadline: a group none of whose pixels has changed is static (a bright
+        window, a lamp, a dark corner: an object in view moves) and gets its own light back for good.
+
+        A pixel of a brighter group has changed when its interval now lies outside its interval at
+        seeding (one tick of slack, ×e^``threshold_log``) or it has been silent for longer than that
+        allows (the object left it); one of a darker group when an interval ending since the seeding is
+        shorter than its interval then allowed.
+        """
+        p = self.parameters
+        t = self.next_tick - 1  # the state was evaluated at this tick
+        k = math.exp(p.threshold_log)
+        due, keep = [g for g in self._groups if g[0] <= self.next_tick], [g for g in self._groups
+                                                                          if g[0] > self.next_tick]
+        self._groups = keep
+        for _, s, sign, lower0, upper0, t0 in due:
+            last = self.spk[s, _front.LAST]
+            S, N = self.win_span[s].astype(np.float64), self.win_n[s]
+            has = N > 0
+            lo = np.where(has, (S - 1.0) / np.maximum(N, 1), 0.0)
+            hi = np.where(has, (S + 1.0) / np.maximum(N, 1), np.inf)
+            silence = t - last
+            if sign > 0:
+                changed = (has & ((lo > upper0 * k) | (hi * k < lower0))) | (silence - 1.0 > np.maximum(upper0, hi) * k)
+            else:
+                changed = has & (last > t0) & (hi * k < lower0)
+            if changed.sum() > 0.01 * s.size:  # (a stray pixel of a large group is noise)
+                continue
+            mine = np.zeros(self.spk.shape[0], np.bool_)
+            mine[s] = True
+            mine = self.upright(mine)
+            touching = _grown(mine, max(p.merge_px, 1)) & ~mine & (self.upright(self.fg) == sign)
+            if touching.sum() >= p.min_pixels:
+                # still, but joined to foreground of the same sign that is not (the part of a long object in
+                # view since the start that it has not left, while its front moves on): decided later
+                self._groups.append((self._step_end(self.next_tick + p.seed_confirm_ticks), s, sign, lower0, upper0,
+                                     t0))
+                continue
+            if sign > 0:
+                self.bg[s] = np.where(has, S / np.maximum(N, 1), 0.5 * (lower0 + upper0))
+                self.censored[s] = False
+            else:
+                self.bg[s] = np.maximum(lower0, np.where(last >= 0, silence, t + 1.0))
+                self.censored[s] = True
+            self.prev[s] = 0.0
+            self.flag_since[s] = -1
+            self._given_back[s] = True
+            self.word_due[:] = -np.inf
 
 #: A frame pixel counts as changed only beyond this many standard deviations of its own noise.
 NOISE_SIGMAS = 4.0
@@ -410,8 +501,9 @@ class FrameChangeDetector:
     Each pixel also learns its noise (the spread of ln light while it agrees with the background;
     at first its spread over those frames, at least the typical one): a change must exceed
     :data:`NOISE_SIGMAS` standard deviations too, so the quantization of dim 8-bit pixels is not
-    read as motion. A frame that measures fewer than ``seed_measured_fraction`` of its pixels
-    gives an empty mask.
+    read as motion. A frame that reads fewer than ``seed_measured_fraction`` of its pixels
+    (measured, or saturated: at least their value) gives an empty mask; a sunlit window that
+    saturates does not blind the camera to the rest of the frame.
 
     Parameters
     ----------
@@ -455,7 +547,7 @@ class FrameChangeDetector:
         ok = ok & ~sat
         if self.ref is None:
             self._pending.append((cur, ok, float(t_s), sat))
-            usable = [f for f in self._pending if f[1].mean() >= self.parameters.seed_measured_fraction]
+            usable = [f for f in self._pending if (f[1] | f[3]).mean() >= self.parameters.seed_measured_fraction]
             if len(usable) < self.init_frames:
                 return []
             self._start(usable)
@@ -467,7 +559,7 @@ class FrameChangeDetector:
         """The masks of frames still held back when the frames end (the background from what was seen)."""
         if self.ref is not None or not self._pending:
             return []
-        usable = [f for f in self._pending if f[1].mean() >= self.parameters.seed_measured_fraction]
+        usable = [f for f in self._pending if (f[1] | f[3]).mean() >= self.parameters.seed_measured_fraction]
         self._start(usable or self._pending)
         held, self._pending = self._pending, []
         return [self._step(*f) for f in held]
@@ -547,7 +639,7 @@ class FrameChangeDetector:
             self._group = None
 
     def _step(self, cur, ok, t_s, sat):
-        if ok.mean() < self.parameters.seed_measured_fraction:
+        if (ok | sat).mean() < self.parameters.seed_measured_fraction:
             # a frame that measures too few pixels (auto-exposure still settling): nothing is read from it
             return np.zeros(cur.shape, bool)
         new = ok & ~self.known  # first measurement of a pixel unmeasured so far: its background
@@ -967,6 +1059,13 @@ class Tracker:
         pred[:, :2] -= grow
         pred[:, 2:] += 2 * grow
         cover = _intersection(boxes, pred) / np.maximum(pred[:, 2] * pred[:, 3], 1e-9)[None, :]
+        # a track is held only by the component that matches its prediction best: a large sparse component
+        # whose box spans a track that has a detection of its own does not swallow it
+        fit = iou_matrix(boxes[big], predicted[live]) if big.any() else np.zeros((0, live.size))
+        best = np.full(live.size, -1, np.int64)
+        if fit.shape[0]:
+            best = np.where(fit.max(axis=0) > 0, np.nonzero(big)[0][np.argmax(fit, axis=0)], -1)
+        cover = np.where((best[None, :] < 0) | (best[None, :] == np.arange(n_comp)[:, None]), cover, 0.0)
         inside = _intersection(boxes, predicted[live]) / np.maximum(boxes[:, 2] * boxes[:, 3], 1e-9)[:, None]
         out_boxes, out_counts, forced, merged = [], [], {}, set()
         used = np.zeros(n_comp, bool)
