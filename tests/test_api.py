@@ -100,3 +100,47 @@ def test_attach_refuses_a_table_that_differs_from_all():
         _lazy.attach("viform.sensors", ["a", "b"], {"base": ["a"]})
     with pytest.raises(ValueError, match="listed twice"):
         _lazy.attach("viform.sensors", ["a"], {"base": ["a"], "spike": ["a"]})
+
+
+def _section(doc: str, title: str) -> list[str] | None:
+    """The lines of numpydoc section ``title`` of a cleaned docstring, None when it has none."""
+    lines = doc.splitlines() + [""]
+
+    def header(i: int) -> bool:
+        return bool(lines[i]) and not lines[i].startswith(" ") and i + 1 < len(lines) \
+            and set(lines[i + 1]) == {"-"} and len(lines[i + 1]) == len(lines[i])
+
+    for i in range(len(lines)):
+        if lines[i] == title and header(i):
+            end = next((j for j in range(i + 2, len(lines)) if header(j)), len(lines))
+            return lines[i + 2:end]
+    return None
+
+
+def _documented(section: list[str]) -> set[str]:
+    """Parameter names of a Parameters section: ``a, b : type`` or ``*args`` lines at its left margin."""
+    names = set()
+    for line in section:
+        if line and not line.startswith(" "):
+            names |= {n.strip().lstrip("*") for n in line.split(" : ")[0].split(",")}
+    return names
+
+
+@pytest.mark.parametrize("name", LAZY)
+def test_exported_functions_carry_numpydoc_parameters_and_returns(name):
+    """Every public function a subpackage exports documents each parameter (its unit in its text) and
+    what it returns (or yields), in numpydoc sections."""
+    package = _package(name)
+    for public in package.__all__:
+        obj = getattr(package, public)
+        if not inspect.isfunction(obj):
+            continue
+        doc = inspect.cleandoc(obj.__doc__ or "")
+        where = f"{obj.__module__}.{public}"
+        parameters = [p for p in inspect.signature(obj).parameters]
+        if parameters:
+            section = _section(doc, "Parameters")
+            assert section is not None, f"{where}: no Parameters section"
+            missing = set(parameters) - _documented(section)
+            assert not missing, f"{where}: parameters {sorted(missing)} not in its Parameters section"
+        assert _section(doc, "Returns") or _section(doc, "Yields"), f"{where}: no Returns (or Yields) section"
