@@ -181,6 +181,16 @@ def choose_decimation(sensor_rate_hz: float, link_rate_hz: float, *, max_decimat
     ------
     ViformError
         When even ``max_decimation`` does not fit (the message names ``interface``).
+
+    Examples
+    --------
+    The seed's camera: 1 666.7 fps over CameraLink Full (555.4 fps), with and without the 2 GB ring
+    (2 330 frames) over an hour:
+
+    >>> choose_decimation(1666.7, 555.4)
+    4
+    >>> choose_decimation(1666.7, 555.4, buffer_frames=2330, sustain_s=3600.0)
+    3
     """
     sensor_rate_hz = check_positive("sensor_rate_hz", sensor_rate_hz)
     link_rate_hz = check_positive("link_rate_hz", link_rate_hz)

@@ -223,6 +223,12 @@ def builtin_scene(name: str, height: int = 250, width: int = 400, **kw) -> Scene
     Scene
         The scene, with ``name`` and ``builtin_spec`` recorded so that a capture's metadata can remake
         it (:func:`scene_from_description`).
+
+    Examples
+    --------
+    >>> scene = builtin_scene("dilemma", height=32, width=48)
+    >>> type(scene).__name__, scene.shape, scene.name
+    ('DilemmaScene', (32, 48), 'dilemma')
     """
     check_choice("scene", name, tuple(BUILTIN_SCENES))
     scene = BUILTIN_SCENES[name](height=height, width=width, **kw)

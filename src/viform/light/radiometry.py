@@ -41,6 +41,11 @@ def photon_energy_j(wavelength_m: float = PHOTOPIC_WAVELENGTH_M) -> float:
     -------
     float
         Photon energy, J.
+
+    Examples
+    --------
+    >>> f"{photon_energy_j(555e-9):.4g} J"
+    '3.579e-19 J'
     """
     check_positive("wavelength_m", wavelength_m)
     return PLANCK_J_S * SPEED_OF_LIGHT_M_PER_S / wavelength_m

@@ -444,6 +444,11 @@ def sensor_names(*families: str) -> list[str]:
     -------
     list of str
         The sensors' names.
+
+    Examples
+    --------
+    >>> sensor_names("spike")
+    ['spike', 'spikeone', 'spiketwo', 'spiketwo-40k']
     """
     return [n for n, e in SENSORS.items() if not families or e.family in families]
 
@@ -484,6 +489,12 @@ def make_sensor(name: str, **settings) -> Sensor:
     ------
     ViformError
         For an unknown name or parameter, or a value out of its range (the message names it).
+
+    Examples
+    --------
+    >>> sensor = make_sensor("cmos", height=8, width=8, exposure_s=1e-3)
+    >>> type(sensor).__name__, sensor.exposure_s, sensor.frame_rate_hz
+    ('FrameSensor', 0.001, 30.0)
     """
     return entry(name).build(**settings)
 
