@@ -8,15 +8,13 @@ A command that imports ``viform.sensors.spike`` pays for that module only, not f
 subpackage.
 """
 
-from __future__ import annotations
-
 import importlib
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
 
 def attach(package: str, public: Iterable[str], submodules: Mapping[str, Iterable[str]]
-           ) -> tuple[Callable[[str], object], Callable[[], list[str]]]:
+           ) -> "tuple[Callable[[str], object], Callable[[], list[str]]]":
     """The ``__getattr__`` and ``__dir__`` of ``package`` that import each public name on first use.
 
     Parameters
