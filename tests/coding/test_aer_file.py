@@ -164,6 +164,8 @@ def _resign(header: dict, payloads: list[bytes], n_ticks: int, spikes: int, vers
 
     version = header.get("version", 2) if version is None else version
     head = json.dumps(header).encode()
+    if version >= 6:  # version 6 stores its header zlib-compressed
+        head = zlib.compress(head, 9)
     out = bytearray(MAGIC + struct.pack("<HII", version, len(head), zlib.crc32(head)) + head)
     acc = 0
     for p in payloads:
@@ -179,9 +181,13 @@ def _resign(header: dict, payloads: list[bytes], n_ticks: int, spikes: int, vers
 def _parts(data: bytes):
     import json
     import struct
+    import zlib
 
     hlen = struct.unpack_from("<I", data, 10)[0]
-    header, pos, payloads = json.loads(data[18:18 + hlen]), 18 + hlen, []
+    head = data[18:18 + hlen]
+    if struct.unpack_from("<H", data, 8)[0] >= 6:
+        head = zlib.decompress(head)
+    header, pos, payloads = json.loads(head), 18 + hlen, []
     while data[pos:pos + 2] == b"SG":
         length = struct.unpack_from("<I", data, pos + 2)[0]
         payloads.append(data[pos + 10:pos + 10 + length])
@@ -273,23 +279,24 @@ def test_real_file_strict_ratio(tmp_path):
 
 def test_older_versions_still_read(tmp_path):
     """Files of the older layouts (version 1 columns, version 2 range-coded records, version 3
-    interval-coded segments, version 4 bands) decode exactly; 5 is written."""
+    interval-coded segments, version 4 bands, version 5 bands by the smallest of three models) decode
+    exactly; 6 is written."""
     s = _stream(3, (120, 5, 6))
     for mode in ("strict", "statistical"):
         files = []
-        for version in (1, 2, 3, 4, None):
+        for version in (1, 2, 3, 4, 5, None):
             path = tmp_path / f"v{version}-{mode}.vfc"
             if version is None:
                 encode_source(s, path, mode, segment_ticks=32)
             else:
                 encode_source(s, path, mode, segment_ticks=32, version=version)
             files.append(CodedFile(path))
-        assert [f.version for f in files] == [1, 2, 3, 4, 5]
+        assert [f.version for f in files] == [1, 2, 3, 4, 5, 6]
         for f in files[1:]:
             assert np.array_equal(files[0].read_ticks(0, 120), f.read_ticks(0, 120))
     assert np.array_equal(CodedFile(tmp_path / "v1-strict.vfc").read_ticks(0, 120), s.spikes)
     with pytest.raises(ViformError, match="version"):
-        encode_source(s, tmp_path / "v6.vfc", version=6)
+        encode_source(s, tmp_path / "v7.vfc", version=7)
 
 
 @pytest.mark.parametrize("mode", ["strict", "statistical", "intensity"])
@@ -526,7 +533,7 @@ def _banded_stream(shape=(160, 96, 5)) -> SpikeStream:
     return SpikeStream(a, 40_000.0, 1e4)
 
 
-@pytest.mark.parametrize("version", [4, 5])
+@pytest.mark.parametrize("version", [4, 5, 6])
 def test_banded_bytes_do_not_depend_on_threads_or_blocks(tmp_path, monkeypatch, version):
     """Bands are fixed by the file (band_rows), so 1 or 2 coding threads and any block size give the same bytes."""
     from viform.coding import aer_file
@@ -628,20 +635,41 @@ def test_v4_fuzz_truncations_and_flips(tmp_path):
     _assert_damage_is_refused_or_harmless(tmp_path, good, step=5, seed=98)
 
 
-@pytest.mark.parametrize("version", [4, 5])
+@pytest.mark.parametrize("version", [4, 5, 6])
 def test_banded_forged_band_tables_and_header(tmp_path, version):
     """Re-signed files (every CRC valid) with a forged band table, band data or band_rows: clear errors only."""
     import struct
 
-    from viform.coding import vfc_v4, vfc_v5
+    from viform.coding import vfc_v4, vfc_v5, vfc_v6
     from viform.coding.vfc_common import _PAYLOAD_HEAD
 
     encode_source(_banded_stream((64, 96, 2)), tmp_path / "g.vfc", segment_ticks=64, version=version)
     header, payloads = _parts((tmp_path / "g.vfc").read_bytes())
-    head = _PAYLOAD_HEAD.size
     p = payloads[0]
-    spikes = _PAYLOAD_HEAD.unpack_from(p)[4]
-    if version == 4:
+    if version == 6:  # u8 flag, varints start, ticks, spikes, then per band: bytes, 4·spikes + model
+        pos = 1
+        fields = []
+        for _ in range(3):
+            v, pos = vfc_v6._read_varint(p, pos, "")
+            fields.append(v)
+        spikes, head = fields[2], pos
+    else:
+        head = _PAYLOAD_HEAD.size
+        spikes = _PAYLOAD_HEAD.unpack_from(p)[4]
+    if version == 6:
+        forged = [p[:head + 1], p[:head] + bytes([0xFF] * 12) + p[head:], bytes([5]) + p[1:]]  # cut; long; flag
+        nbytes, pos = vfc_v6._read_varint(p, head, "")
+        field, end = vfc_v6._read_varint(p, pos, "")
+        for new in (field - field % 4 + 2, field - field % 4 + 3, 4 * 10 ** 12, field + 4, field - 4):
+            forged.append(p[:pos] + vfc_v6._varint(new) + p[end:])  # unknown models; spikes not the band's
+        records = field - field % 4 + vfc_v6.MODEL_RECORDS  # a tick band read as records (any record count)
+        for n_rec in (0, 1, field // 4, field // 4 + 1):
+            forged.append(p[:pos] + vfc_v6._varint(records) + vfc_v6._varint(n_rec) + p[end:])
+        forged.append(p[:head] + vfc_v6._varint(nbytes + 1) + p[pos:])  # a band's bytes
+        for start, ticks, n in ((64, 64, spikes), (0, 0, spikes), (0, 65, spikes), (0, 64, 10 ** 9)):
+            forged.append(p[:1] + b"".join(map(vfc_v6._varint, (start, ticks, n))) + p[head:])  # segment head
+        table_end = head + 12
+    elif version == 4:
         band = vfc_v4._BAND_HEAD
         forged = [p[:head] + struct.pack("<I", 3) + p[head + 4:]]  # band count
         b = bytearray(p)
@@ -659,10 +687,11 @@ def test_banded_forged_band_tables_and_header(tmp_path, version):
             forged.append(p[:pos] + vfc_v5._varint(new) + p[end:])
         forged.append(p[:head] + vfc_v5._varint(nbytes + 1) + p[pos:])  # a band's bytes
         table_end = head + 12  # about where the table ends (random bytes over its end are damage too)
-    flag = vfc_v4._FLAG_BANDS if version == 4 else vfc_v5._FLAG_BANDS5
-    b = bytearray(p)
-    b[head:head + 24] = _PAYLOAD_HEAD.pack(0, 64, 5, flag, spikes)  # records stated
-    forged.append(bytes(b))
+    if version < 6:
+        flag = vfc_v4._FLAG_BANDS if version == 4 else vfc_v5._FLAG_BANDS5
+        b = bytearray(p)
+        b[head:head + 24] = _PAYLOAD_HEAD.pack(0, 64, 5, flag, spikes)  # records stated
+        forged.append(bytes(b))
     rng = np.random.default_rng(3)
     for _ in range(60):  # random band data behind a valid table
         b = bytearray(p)

@@ -1,7 +1,6 @@
 """``viform encode`` / ``decode`` / ``dr`` command lines: JSON convention, bad input, notices."""
 
 import json
-import os
 import subprocess
 import sys
 
@@ -100,24 +99,73 @@ def test_help_says_spike_stream(capsys):
     assert "spike stream SRC" in text and "viform SRC" not in text
 
 
-@pytest.mark.parametrize("cached", [False, True])
-def test_cold_cache_is_announced(tmp_path, stream_file, capsys, monkeypatch, cached):
-    from viform.coding import _compile_cache
+def test_compile_notice_is_said_once_and_only_for_a_coding_compile(monkeypatch):
+    """The notice is tied to numba's compile event of a coding kernel (a cache load fires none): once per
+    process, never for another package's kernel."""
+    from numba.core import event
 
-    monkeypatch.setattr(_compile_cache, "kernels_cached", lambda direction="encode": cached)
+    from viform.coding import _compile_cache, interval_model
+    from viform.sensors import spike
+
+    monkeypatch.setattr(_compile_cache, "_ANNOUNCED", False)
+    said = []
+    _compile_cache.announce_compiles(lambda: said.append(1))
+    other = next(v for v in vars(spike).values() if hasattr(v, "py_func") and hasattr(v, "stats"))
+    with event.trigger_event("numba:compile", data={"dispatcher": other}):
+        pass
+    assert said == []
+    for _ in range(2):
+        with event.trigger_event("numba:compile", data={"dispatcher": interval_model.encode_segment}):
+            pass
+    assert said == [1]
+
+
+_RUN_TWICE = """
+import json, sys
+from viform.cli import main
+from viform.coding._compile_cache import coding_dispatchers
+src, vfc, back = sys.argv[1:4]
+assert main(["encode", src, vfc]) == 0
+assert main(["encode", src, vfc + ".lossy.vfc", "--mode", "statistical"]) == 0
+assert main(["decode", vfc, back]) == 0
+assert main(["decode", vfc + ".lossy.vfc", back]) == 0
+stats = [d.stats for d in coding_dispatchers()]
+print(json.dumps({"misses": sum(sum(s.cache_misses.values()) for s in stats),
+                  "hits": sum(sum(s.cache_hits.values()) for s in stats)}))
+"""
+
+
+def test_second_process_loads_the_kernels_from_the_cache(tmp_path, stream_file):
+    """Encode and decode (strict and lossy) in one process, then again in a second: the second compiles
+    nothing (numba's cache hit count, not a timing) and prints no compile notice."""
     src, _ = stream_file
-    assert main(["encode", str(src), str(tmp_path / "s.vfc")]) == 0
-    err = capsys.readouterr().err
-    assert (_compile_cache.COMPILING_NOTICE in err) is (not cached)
+    runs = []
+    for k in range(2):
+        args = [str(src), str(tmp_path / f"s{k}.vfc"), str(tmp_path / f"b{k}.npz")]
+        done = subprocess.run([sys.executable, "-c", _RUN_TWICE, *args], capture_output=True, text=True,
+                              check=True)
+        runs.append((json.loads(done.stdout.strip().splitlines()[-1]), done.stderr))
+    (_, _), (second, err) = runs
+    assert second["misses"] == 0 and second["hits"] > 0, second
+    assert "compiling the coding kernels" not in err
 
 
-def test_empty_numba_cache_reads_as_cold(tmp_path):
-    """With numba's cache pointed at an empty folder the kernels have no cached code (the check
-    only loads the cache index: nothing is compiled)."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
-    code = "from viform.coding._compile_cache import kernels_cached as k; print(k('encode'), k('decode'))"
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
-    assert out.split() == ["False", "False"]
+def test_kernels_are_stamped_by_every_coding_source(tmp_path):
+    """The coding kernels inline code of other modules (the range coder): their cache entries carry a
+    stamp of every source file of the package that defines kernels, so an edit of any one of them makes
+    every entry stale (and an edit of a file without kernels none)."""
+    from viform.coding import _compile_cache, interval_model
+
+    locator = interval_model.encode_segment._cache._impl.locator
+    assert locator.get_source_stamp() == ("viform.coding", _compile_cache.sources_stamp())
+    for name in ("a.py", "b.py"):
+        (tmp_path / name).write_text("from numba import njit\nx = 1\n")
+    (tmp_path / "c.py").write_text("y = 1\n")
+    before = _compile_cache.sources_stamp(tmp_path)
+    (tmp_path / "c.py").write_text("y = 2\n")  # no kernel in it: nothing compiled depends on it
+    assert _compile_cache.sources_stamp(tmp_path) == before
+    (tmp_path / "b.py").write_text("from numba import njit\nx = 2\n")
+    assert _compile_cache.sources_stamp(tmp_path) != before
 
 
 def test_segment_ticks_too_large_for_the_sensor_is_refused_by_flag(tmp_path, capsys):

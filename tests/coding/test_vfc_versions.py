@@ -1,5 +1,5 @@
 """Every ``.vfc`` version: files written by the code of each earlier version decode exactly, today's
-writer of each version gives the same bytes, version 5 is never larger than versions 3 and 4, and
+writer of each version gives the same bytes, each version's strict file is no larger than the one before, and
 forged header fields are refused by name before anything is allocated from them."""
 
 import json
@@ -26,7 +26,8 @@ from make_stream import (  # noqa: E402 -- the fixtures' own generator, importab
     fixture_spikes,
 )
 
-OLD_VERSIONS = (1, 2, 3, 4)
+#: versions whose fixtures were written by the code of that version (make_stream.py)
+FIXTURE_VERSIONS = (1, 2, 3, 4, 5, 6)
 
 
 @pytest.fixture(scope="module")
@@ -37,10 +38,11 @@ def spikes():
 @pytest.mark.parametrize("mode", MODES)
 def test_files_of_every_earlier_version_decode_exactly(spikes, mode):
     """The fixtures were written by the code of each version (v1: f5a62db^, v2: 8d83148^, v3: 608621c^,
-    v4: 866098e); strict ones decode to the stream, lossy ones to the same spikes in every version
-    (they code the same first-spike records), with the header's values."""
+    v4: 866098e, v5: 70d19ee, v6: the commit that made it the default); strict ones decode to the stream,
+    lossy ones to the same spikes in every version (they code the same first-spike records), with the
+    header's values."""
     decoded = []
-    for v in OLD_VERSIONS:
+    for v in FIXTURE_VERSIONS:
         cf = CodedFile(FIXTURES / f"v{v}_{mode}.vfc")
         assert (cf.version, cf.mode, cf.n_ticks, cf.height, cf.width) == (v, mode, *spikes.shape)
         assert (cf.clock_hz, cf.threshold_electrons, cf.start_time_s) == (CLOCK_HZ, Q_ELECTRONS, 0.25)
@@ -57,23 +59,18 @@ def test_files_of_every_earlier_version_decode_exactly(spikes, mode):
 
 @pytest.mark.parametrize("mode", MODES)
 def test_writers_of_every_version_keep_their_bytes(tmp_path, spikes, mode):
-    """Today's writer of versions 1-4 gives the fixture's bytes (the split into one module per version
-    changed no byte); version 5 round-trips and its strict file is no larger than versions 3 and 4."""
+    """Today's writer of every version gives the bytes its fixture was written with by that version's own
+    code (one shared range coder for every model, the split into one module per version: no byte moved);
+    each version's strict file is no larger than the one before (version 5: than versions 3 and 4)."""
     stream = SpikeStream(spikes, CLOCK_HZ, Q_ELECTRONS, 0.25, {"fixture": "tests/coding/fixtures"})
-    for v in (*OLD_VERSIONS, VERSION):
+    assert VERSION in FIXTURE_VERSIONS
+    for v in FIXTURE_VERSIONS:
         path = tmp_path / f"v{v}.vfc"
         encode_source(stream, path, mode, segment_ticks=SEGMENT_TICKS, version=v)
-        if v in OLD_VERSIONS:
-            assert path.read_bytes() == (FIXTURES / f"v{v}_{mode}.vfc").read_bytes(), v
-    new = CodedFile(tmp_path / f"v{VERSION}.vfc")
-    assert new.version == 5
-    got = new.read_ticks(0, new.n_ticks)
+        assert path.read_bytes() == (FIXTURES / f"v{v}_{mode}.vfc").read_bytes(), v
     if mode == "strict":
-        assert np.array_equal(got, spikes)
-        size = (tmp_path / "v5.vfc").stat().st_size
-        assert size <= min((FIXTURES / f"v{v}_strict.vfc").stat().st_size for v in (3, 4))
-    else:
-        assert np.array_equal(got, CodedFile(FIXTURES / f"v4_{mode}.vfc").read_ticks(0, new.n_ticks))
+        size = {v: (FIXTURES / f"v{v}_strict.vfc").stat().st_size for v in FIXTURE_VERSIONS}
+        assert size[5] <= min(size[3], size[4]) and size[6] <= size[5], size
 
 
 def test_version_5_chooses_per_band(tmp_path):
@@ -97,8 +94,9 @@ def test_version_5_chooses_per_band(tmp_path):
         charge[charge >= 1] -= 1
     s = SpikeStream(out, 40_000.0, 30.0)
     sizes = {}
-    for v in (3, 4, 5):
+    for v in (3, 4, 5, 6):
         sizes[v] = encode_source(s, tmp_path / f"v{v}.vfc", segment_ticks=400, version=v)["bytes"]
+    assert sizes[6] <= sizes[5] and np.array_equal(CodedFile(tmp_path / "v6.vfc").read_ticks(0, t), out), sizes
     payload = (tmp_path / "v5.vfc").read_bytes()
     cf = CodedFile(tmp_path / "v5.vfc")
     start = cf._index[0][0]
@@ -106,9 +104,10 @@ def test_version_5_chooses_per_band(tmp_path):
     assert _PAYLOAD_HEAD.size and vfc_v5.MODEL_RECORDS in models and len(set(models)) == 2
     assert sizes[5] < min(sizes[3], sizes[4]), sizes
     assert np.array_equal(cf.read_ticks(0, t), out)
-    # --fast: the interval model on every band (version 4's work), still lossless, larger here
+    # --fast: version 5 with the interval model on every band (version 4's work), still lossless, larger here
     fast = encode_source(s, tmp_path / "f.vfc", segment_ticks=400, fast=True)["bytes"]
     ff = CodedFile(tmp_path / "f.vfc")
+    assert ff.version == 5
     fp = (tmp_path / "f.vfc").read_bytes()[ff._index[0][0]:ff._index[0][0] + ff._index[0][1]]
     assert vfc_v5.band_models(fp, 2) == [vfc_v5.MODEL_INTERVALS] * 2 and fast > sizes[5]
     assert np.array_equal(ff.read_ticks(0, t), out)
@@ -121,10 +120,14 @@ def test_version_5_chooses_per_band(tmp_path):
 def _reheader(data: bytes, version: int | None = None, **fields) -> bytes:
     """The file with header fields replaced (and the header CRC recomputed): a forgery a CRC cannot catch."""
     hlen = struct.unpack_from("<I", data, 10)[0]
-    header = json.loads(data[18:18 + hlen])
+    stored = struct.unpack_from("<H", data, 8)[0]
+    head = data[18:18 + hlen]
+    header = json.loads(zlib.decompress(head) if stored >= 6 else head)  # version 6: zlib-compressed header
     header.update(fields)
+    v = stored if version is None else version
     head = json.dumps(header).encode()
-    v = struct.unpack_from("<H", data, 8)[0] if version is None else version
+    if v >= 6:
+        head = zlib.compress(head, 9)
     return MAGIC + struct.pack("<HII", v, len(head), zlib.crc32(head)) + head + data[18 + hlen:]
 
 
@@ -190,3 +193,54 @@ def test_writer_never_writes_what_the_reader_refuses(tmp_path):
     with pytest.raises(ViformError, match="k = "):
         encode_source(SpikeStream(np.zeros((10, 2, 2), bool), 1e3, 100.0), tmp_path / "k.vfc", "statistical", k=2e6)
     assert not list(tmp_path.iterdir())
+
+
+def _runs_of_widths(rng, t, h, w, widths=(5, 60), runs=(2, 5)) -> np.ndarray:
+    """Pixels that hold a random width for a short run of spikes, then jump to another (what records code well)."""
+    out = np.zeros((t, h, w), bool)
+    for i in range(h):
+        for j in range(w):
+            tick = int(rng.integers(0, 10))
+            while tick < t:
+                width = int(rng.integers(*widths))
+                for _ in range(int(rng.integers(*runs))):
+                    if tick >= t:
+                        break
+                    out[tick, i, j] = True
+                    tick += width
+    return out
+
+
+def test_version_6_codes_records_where_smaller(tmp_path, monkeypatch):
+    """A band of shot-noise pixels (Gamma intervals, Q = 30) and a band of pixels jumping between held widths:
+    version 6 codes the first with the tick model and the second as records (after its first segment), the
+    state carried across the switch; exact, no larger than version 5, the same bytes on 1 or 2 threads, and
+    damage gives a one-line error or the exact spikes."""
+    from test_aer_file import _assert_damage_is_refused_or_harmless
+
+    from viform.coding import vfc_v6
+
+    rng = np.random.default_rng(11)
+    t, h, w = 400, 96, 8
+    out = np.zeros((t, h, w), bool)
+    rate = rng.uniform(0.08, 0.3, (48, w))
+    charge = rng.uniform(0, 1, (48, w))
+    for k in range(t):
+        charge += rng.gamma(30 * rate, 1 / 30)
+        out[k, :48] = charge >= 1
+        charge[charge >= 1] -= 1
+    out[:, 48:] = _runs_of_widths(rng, t, 48, w)
+    s = SpikeStream(out, 40_000.0, 30.0)
+    sizes = {v: encode_source(s, tmp_path / f"v{v}.vfc", segment_ticks=100, version=v)["bytes"] for v in (5, 6)}
+    assert sizes[6] <= sizes[5], sizes
+    cf = CodedFile(tmp_path / "v6.vfc")
+    data = (tmp_path / "v6.vfc").read_bytes()
+    models = [vfc_v6.band_models(data[off:off + length], 2) for off, length, _ in cf._index]
+    assert [m[0] for m in models] == [vfc_v6.MODEL_TICKS] * 4, models
+    assert vfc_v6.MODEL_RECORDS in [m[1] for m in models], models
+    assert np.array_equal(cf.read_ticks(0, t), out)
+    assert np.array_equal(cf.read_ticks(150, 333), out[150:333])
+    monkeypatch.setenv("VIFORM_THREADS", "1")
+    encode_source(s, tmp_path / "one.vfc", segment_ticks=100, version=6)
+    assert (tmp_path / "one.vfc").read_bytes() == data
+    _assert_damage_is_refused_or_harmless(tmp_path, data, step=53, seed=6, flips=150)

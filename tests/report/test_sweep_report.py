@@ -125,6 +125,11 @@ def test_flat_metric_is_drawn_flat_not_stretched():
     assert _floor_span(ax2, [10.0, 20.0, 30.0]) is None
     assert _floor_span(ax2, [0.0, 0.0]) == 0.0 and ax2.get_ylim() == (-0.5, 0.5)
     plt.close("all")
+    # the panel's note names the value: a constant (data rate) is said to be one, not "within ±0"
+    from viform.report.sweep_report import _flat_text
+
+    assert _flat_text([40.96, 40.96], 0.0) == "the same at every point: 40.96"
+    assert _flat_text(values, half) == f"flat: every point within ±{half:.2g} of {(0.80196 + 0.80251) / 2:.4g}"
 
 
 def test_pareto_front_of_one_point_is_visible(swept):

@@ -9,11 +9,11 @@ from viform.light.scenes import Scene, StillScene
 from viform.measure.emva1288 import measure_response, plateau_onset
 from viform.sensors.catalog import make_sensor
 from viform.sensors.overflow import (
-    SEED003_INTEGRATIONS_S,
+    PAPER003_INTEGRATIONS_S,
     OverflowSensor,
     dynamic_range_gain_db,
     overflow_voltages_v,
-    seed003_pixel_parameters,
+    paper003_pixel_parameters,
     segment_boundaries_a,
     share_charge_v,
 )
@@ -93,7 +93,7 @@ def test_dynamic_range_gain_over_4t():
     over, _ = measured_saturation_current_a(sensor, SWEEP_CURRENTS_A)
     four_t, _ = measured_saturation_current_a(make_sensor("seed003-4t"), SWEEP_CURRENTS_A)
     e_a = sensor.segment_boundaries_a()["E"]
-    i_4t_a = (sensor.v_reset_v - sensor.v_sat_v) * sensor.c_pd_f / sum(SEED003_INTEGRATIONS_S)
+    i_4t_a = (sensor.v_reset_v - sensor.v_sat_v) * sensor.c_pd_f / sum(PAPER003_INTEGRATIONS_S)
     assert i_4t_a == pytest.approx(8e-12, rel=1e-3)  # the C_PD calibration (seed: ~8 pA)
     assert e_a == pytest.approx(1.613 * sensor.c_pd_f / 0.03e-3, rel=1e-3)  # 4.78 nA
     assert -0.1 < db(four_t / i_4t_a) < tol_db
@@ -114,7 +114,7 @@ def test_62db_is_out_of_reach_of_eqs_1_to_6():
     both start from V20 = V30, so E/D = t2/t3 = 16.7 exactly, and its D = 270 pA gives
     E = 4.5 nA → 55.0 dB; "10 nA" (10 nA / 270 pA = 37) is inconsistent with eqs. 5–6.
     """
-    t_frame_s, t3_s = sum(SEED003_INTEGRATIONS_S), SEED003_INTEGRATIONS_S[2]
+    t_frame_s, t3_s = sum(PAPER003_INTEGRATIONS_S), PAPER003_INTEGRATIONS_S[2]
     sup_db = db(t_frame_s / t3_s * 2.2 / 3.3)
     assert sup_db == pytest.approx(57.39, abs=0.01)
     gains = [
@@ -179,7 +179,7 @@ def test_noisy_capture_matches_equations_on_average():
     DN here); tolerance 4·se plus half an LSB, because the dark frame's read noise (60 e⁻ =
     0.14 DN at K = 2.3e-3 DN/e⁻) is far below one LSB, so its mean is rounded, not dithered.
     """
-    s = OverflowSensor(seed003_pixel_parameters(prnu_fraction=0.0, dsnu_electrons=0.0), height=32, width=32)
+    s = OverflowSensor(paper003_pixel_parameters(prnu_fraction=0.0, dsnu_electrons=0.0), height=32, width=32)
     k_dn_per_e = s.parameters.system_gain_dn_per_e
     for current in (1e-12, 50e-12, 1e-9):  # segments AB, CD, DE
         lux = s.lux_from_photocurrent(current)
@@ -220,7 +220,8 @@ class _TurnOn(Scene):
 def test_row_stagger_for_time_varying_scenes():
     """Rows start frame_period/rows apart (row-by-row exposure): light that turns on mid-frame
     is integrated longer by the later rows."""
-    s = OverflowSensor(seed003_pixel_parameters(prnu_fraction=0.0, dsnu_electrons=0.0), height=32, width=4, noise=False)
+    s = OverflowSensor(paper003_pixel_parameters(prnu_fraction=0.0, dsnu_electrons=0.0), height=32, width=4,
+                       noise=False)
     scene = _TurnOn(s.lux_from_photocurrent(1e-12), 0.5 / 30, 32, 4)
     frame = s.capture_frame(scene, 0.0).astype(float)
     assert np.all(np.diff(frame[:, 0]) >= 0)
@@ -236,8 +237,8 @@ def test_row_stagger_for_time_varying_scenes():
         (dict(overflow_capacitance_f=0.0), "overflow_capacitance_f"),
         (dict(v_f_v=3.5), "v_f_v"),
         (dict(v_reset_v=1.0), "v_f_v"),
-        (dict(parameters=seed003_pixel_parameters(full_well_electrons=3e6)), "full_well_electrons"),
-        (dict(parameters=seed003_pixel_parameters(full_well_electrons=2e5)), "v_f_v"),
+        (dict(parameters=paper003_pixel_parameters(full_well_electrons=3e6)), "full_well_electrons"),
+        (dict(parameters=paper003_pixel_parameters(full_well_electrons=2e5)), "v_f_v"),
     ],
 )
 def test_bad_input_names_the_parameter(kwargs, name):
@@ -255,7 +256,7 @@ def test_reset_ktc_noise_as_the_seed_samples_it():
     (the switch's partition) = 118.4 e⁻."""
     from viform.sensors.overflow import ktc_noise_electrons, share_ktc_noise_electrons
 
-    s = OverflowSensor(seed003_pixel_parameters(), ktc_noise=True)
+    s = OverflowSensor(paper003_pixel_parameters(), ktc_noise=True)
     assert s.c_pd_f == pytest.approx(88.9e-15, rel=1e-3)
     assert s.reset_ktc_electrons == pytest.approx(120.0, abs=0.5)
     assert s.readout_reset_noise_electrons() == pytest.approx(np.sqrt(2) * 119.76, abs=0.1)
@@ -268,7 +269,7 @@ def test_ktc_noise_adds_its_variance_in_the_dark():
     """Monte Carlo, 64 × 64 dark pixels, 16-bit ADC (1 DN = 27 e⁻, quantization negligible):
     turning the kTC noise on adds 2 × 119.8² e⁻² of variance (no sharing in the dark).
     Tolerance 4·√(2/N) of the total variance (N = 4 096)."""
-    p = seed003_pixel_parameters(adc_bits=16, dsnu_electrons=0.0)
+    p = paper003_pixel_parameters(adc_bits=16, dsnu_electrons=0.0)
     dark = StillScene(np.zeros((64, 64)))
     var = {}
     for ktc in (False, True):
@@ -286,13 +287,13 @@ def test_lofic_baseline_fig5_drb():
     LOFIC's saturation is (C_PD + C_S)/C_PD = 6.6 × the 4T's (±10 %: plateau detection on a
     150-point grid), its floor E2 ≥ 5 × E1, so DR_b stays within 6 dB of DR_a, while DR_c
     exceeds DR_a by the 55.5 dB the equations give (±3 dB: floors measured on 16 × 16 px)."""
-    from viform.report.response_plots import seed003_fig5
+    from viform.report.response_plots import paper003_fig5
     from viform.sensors.overflow import lofic_pixel_parameters
 
     p = lofic_pixel_parameters()
     assert p.full_well_electrons == pytest.approx(3.0 * 588.9e-15 / 1.602176634e-19, rel=1e-3)
     assert p.read_noise_electrons == pytest.approx(590, abs=2)
-    r = seed003_fig5(size=12)
+    r = paper003_fig5(size=12)
     a, b, c = r.values()
     assert b["i_sat_a"] / a["i_sat_a"] == pytest.approx(588.9 / 88.9, rel=0.1)
     assert b["i_min_a"] / a["i_min_a"] > 5
@@ -303,7 +304,7 @@ def test_lofic_baseline_fig5_drb():
 def test_pga_gain_scales_the_system_gain():
     """Seed 003 §2: CDS → PGA → ADC. A PGA gain g multiplies K by g (one DN is 1/g of the
     electrons) and the ADC then clips at 1/g of the photodiode swing."""
-    p1, p4 = seed003_pixel_parameters(), seed003_pixel_parameters(analog_gain=4.0)
+    p1, p4 = paper003_pixel_parameters(), paper003_pixel_parameters(analog_gain=4.0)
     assert p4.system_gain_dn_per_e == pytest.approx(4 * p1.system_gain_dn_per_e)
     s = OverflowSensor(p4, height=4, width=4, noise=False)
     bright = StillScene(np.full((4, 4), 1e4))

@@ -9,14 +9,14 @@ from scipy.stats import norm
 
 from viform.light.radiometry import ELEMENTARY_CHARGE_C
 from viform.light.scenes import StillScene
-from viform.sensors.overflow import OverflowSensor, seed003_pixel_parameters
+from viform.sensors.overflow import OverflowSensor, paper003_pixel_parameters
 
 W = 400  # columns: the std of W estimates is within 1/√(2W) = 3.5 % of the truth
 
 
 def _quiet(**kw):
     """The seed pixel with no fixed pattern or read noise, a 16-bit ADC (K ≈ 0.037 DN/e⁻)."""
-    return seed003_pixel_parameters(prnu_fraction=0.0, dsnu_electrons=0.0, read_noise_electrons=0.0, adc_bits=16,
+    return paper003_pixel_parameters(prnu_fraction=0.0, dsnu_electrons=0.0, read_noise_electrons=0.0, adc_bits=16,
                                     **kw)
 
 

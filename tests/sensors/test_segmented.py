@@ -9,8 +9,8 @@ from viform.measure.emva1288 import measure_response, plateau_onset
 from viform.sensors.catalog import make_sensor
 from viform.sensors.frame import FramePixelParameters, FrameSensor
 from viform.sensors.presets import (
-    SEED001_FIG8_UNIT_LUX,
-    SEED001_FIG9_UNIT_LUX,
+    PAPER001_FIG8_UNIT_LUX,
+    PAPER001_FIG9_UNIT_LUX,
 )
 from viform.sensors.segmented import (
     SegmentedExposureSensor,
@@ -50,8 +50,8 @@ def test_two_segments_extend_saturation_30_to_105_fig8():
     Tolerance: the measured plateau onset is late by ≤ one grid step (1.9 %, 0.17 dB) plus
     the PRNU spread (0.08 dB); both ends shift alike, so the ratio is within ±LATE_DB.
     """
-    normal = saturating_intensity("seed001-normal", SEED001_FIG8_UNIT_LUX)
-    hdr = saturating_intensity("seed001-2seg", SEED001_FIG8_UNIT_LUX)
+    normal = saturating_intensity("seed001-normal", PAPER001_FIG8_UNIT_LUX)
+    hdr = saturating_intensity("seed001-2seg", PAPER001_FIG8_UNIT_LUX)
     assert_saturates_at(normal, 30.0)
     assert_saturates_at(hdr, 105.0)
     assert abs(db(hdr / normal) - 10.88) < LATE_DB
@@ -63,8 +63,8 @@ def test_three_segments_extend_range_35_to_440_fig9():
     The solved parameters give 12.6 × 35 = 441 noise-free (0.02 dB from 440); same tolerance
     reasoning as fig. 8.
     """
-    normal = saturating_intensity("seed001-normal", SEED001_FIG9_UNIT_LUX)
-    hdr = saturating_intensity("seed001-3seg", SEED001_FIG9_UNIT_LUX)
+    normal = saturating_intensity("seed001-normal", PAPER001_FIG9_UNIT_LUX)
+    hdr = saturating_intensity("seed001-3seg", PAPER001_FIG9_UNIT_LUX)
     assert_saturates_at(normal, 35.0)
     assert_saturates_at(hdr, 440.0)
     assert abs(db(hdr / normal) - 21.99) < LATE_DB
@@ -84,13 +84,13 @@ def test_three_segment_knees_at_348_and_669_dn_fig9():
 def test_two_segment_knee_at_intensity_15_and_374_dn_fig8():
     sensor = make_sensor("seed001-2seg", noise=False)
     knee = sensor.knee_lux()[0]
-    assert knee / SEED001_FIG8_UNIT_LUX == pytest.approx(15.0, rel=1e-3)
+    assert knee / PAPER001_FIG8_UNIT_LUX == pytest.approx(15.0, rel=1e-3)
     dn = sensor.expected_charge_electrons(knee) * sensor.parameters.system_gain_dn_per_e
     assert dn == pytest.approx(374.0, rel=0.01)
 
 
 @pytest.mark.parametrize(
-    "name, unit", [("seed001-2seg", SEED001_FIG8_UNIT_LUX), ("seed001-3seg", SEED001_FIG9_UNIT_LUX)]
+    "name, unit", [("seed001-2seg", PAPER001_FIG8_UNIT_LUX), ("seed001-3seg", PAPER001_FIG9_UNIT_LUX)]
 )
 def test_small_signal_identical_to_normal_mode(name, unit):
     """Below the first knee (intensity < 15) the HDR output equals the normal mode's (seed 001 §4).
@@ -112,7 +112,7 @@ def test_small_signal_identical_to_normal_mode(name, unit):
 
 def test_small_signal_identity_with_noise():
     """With shot noise the means agree to within their standard error (Poisson statistics)."""
-    lux = 10.0 * SEED001_FIG8_UNIT_LUX
+    lux = 10.0 * PAPER001_FIG8_UNIT_LUX
     scene = StillScene(np.full((64, 64), lux))
     a = make_sensor("seed001-normal").capture_frame(scene, 0.0, 130e-6, seed=1).astype(float)
     b = make_sensor("seed001-2seg").capture_frame(scene, 0.0, 130e-6, seed=2).astype(float)
@@ -308,7 +308,7 @@ def test_snr_dips_at_the_knees_against_the_no_snr_loss_claim():
     small = np.geomspace(1e3, 0.9 * r1, 20)
     np.testing.assert_allclose(expected_snr(small, t, b), expected_snr(small, [t.sum()], [1e9]))
 
-    p = presets.seed001_pixel_parameters(prnu_fraction=0.0)
+    p = presets.paper001_pixel_parameters(prnu_fraction=0.0)
     s = SegmentedExposureSensor(p, t, b[:2], frame_rate_hz=60.0)
     lux = p.optics.lux_from_electrons_per_s(1.3 * r1 - p.dark_current_e_per_s)
     pix = s.pixel_array(64, 64)

@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 
 from viform.light.scenes import StillScene
 from viform.sensors.frame import FrameSensor
-from viform.sensors.presets import seed001_pixel_parameters
+from viform.sensors.presets import paper001_pixel_parameters
 from viform.sensors.segmented import SegmentedExposureSensor
 
 SIZE = 64
@@ -16,7 +16,7 @@ SIZE = 64
 
 def _quiet(**kw):
     """Seed 001's pixel with no fixed pattern, read noise or dark current, 16-bit ADC (4.8 DN/e⁻)."""
-    return seed001_pixel_parameters(prnu_fraction=0.0, dsnu_electrons=0.0, read_noise_electrons=0.0,
+    return paper001_pixel_parameters(prnu_fraction=0.0, dsnu_electrons=0.0, read_noise_electrons=0.0,
                                     dark_current_e_per_s=0.0, adc_bits=16, **kw)
 
 

@@ -9,6 +9,16 @@ import click
 from viform._validate import ViformError
 
 
+def apply_options(options):
+    """A decorator that adds a list of click options to a command, in the order listed."""
+    def decorator(f):
+        for option in reversed(options):
+            f = option(f)
+        return f
+
+    return decorator
+
+
 def parse_times(text: str) -> list[float]:
     try:
         times = [float(part) for part in text.split(",") if part.strip()]

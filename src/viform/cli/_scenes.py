@@ -34,6 +34,22 @@ def with_scene_list(f):
     return f
 
 
+def built_in_scene_options(f):
+    """The options compare and sweep share to make a built-in scene: its size in pixels and the
+    named settings of the dilemma and night-road-fog scenes."""
+    options = [
+        click.option("--height", type=int, default=64, show_default=True, help="Resolution of built-in scenes."),
+        click.option("--width", type=int, default=128, show_default=True),
+        click.option("--brightness", type=float, default=None,
+                     help="Factor on the light of the dilemma and night-road-fog scenes."),
+        click.option("--speed", type=float, default=None, help="Factor on the dilemma scene's speeds."),
+        click.option("--visibility-m", type=float, default=None, help="Fog visibility of night-road-fog, m."),
+    ]
+    for option in reversed(options):
+        f = option(f)
+    return f
+
+
 def scene_set_option(f):
     """The ``--scene-set`` option (value: the raw text; parse it with :func:`scene_settings`)."""
     return click.option("--scene-set", "scene_set", default=None, metavar="NAME=VALUE,...", help=SCENE_SET_HELP)(f)

@@ -12,7 +12,7 @@ import click
 
 from viform._validate import ViformError, check_positive
 from viform.cli._common import CatalogHelp
-from viform.cli._scenes import scene_options, scene_set_option, with_scene_list
+from viform.cli._scenes import built_in_scene_options, scene_options, scene_set_option, with_scene_list
 from viform.cli.app import cli
 
 
@@ -178,12 +178,7 @@ def _echo_vision(doc: dict) -> None:
 @click.option("--at", "at", default=None, help="Instants to compare, s, comma-separated (default: 30/50/70 %).")
 @click.option("--out", "out_dir", type=click.Path(), default="viform-compare", show_default=True,
               help="Output folder (report.html, metrics.json, figures/).")
-@click.option("--height", type=int, default=64, show_default=True, help="Resolution of built-in scenes.")
-@click.option("--width", type=int, default=128, show_default=True)
-@click.option("--brightness", type=float, default=None,
-              help="Factor on the light of the dilemma and night-road-fog scenes.")
-@click.option("--speed", type=float, default=None, help="Factor on the dilemma scene's speeds.")
-@click.option("--visibility-m", type=float, default=None, help="Fog visibility of night-road-fog, m.")
+@built_in_scene_options
 @click.option("--seed", type=int, default=0, show_default=True, help="Noise seed.")
 @click.option("--set", "settings", multiple=True, metavar="[SENSOR:]NAME=VALUE",
               help="Change one parameter of a sensor by name, e.g. --set cmos:exposure_s=0.002, or of every "

@@ -8,8 +8,8 @@ import warnings
 import click
 
 from viform._validate import UnverifiedDataWarning
+from viform.cli._common import apply_options, spike_file_options
 from viform.cli._common import open_source as _open
-from viform.cli._common import spike_file_options
 from viform.cli.app import cli
 
 #: Units shown after the values of ``info`` (by the summary's key).
@@ -34,15 +34,6 @@ def _emit_json(result: dict, as_json: bool, json_file) -> bool:
     if as_json:
         click.echo(json.dumps(result, indent=2, default=str))
     return as_json
-
-
-def _apply(options):
-    def decorator(f):
-        for option in reversed(options):
-            f = option(f)
-        return f
-
-    return decorator
 
 
 def _coded_module():
@@ -156,7 +147,7 @@ def _table(summary: dict) -> None:
 
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
-@_apply(_json_options)
+@apply_options(_json_options)
 @spike_file_options(partial=True)
 def info(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, allow_partial):
     """Resolution, duration, ticks, spike count, firing and data rates of a spike stream (or a coded file).
@@ -213,7 +204,7 @@ def _verification(source) -> dict:
 
 @cli.command()
 @click.argument("file", type=click.Path(exists=True))
-@_apply(_json_options)
+@apply_options(_json_options)
 @spike_file_options(partial=True)
 def verify(file, as_json, json_file, height, width, no_flip, clock_hz, key, axes, allow_partial):
     """Check that FILE (.dat with its sidecar, .npz, .zarr or .vfc) is whole and consistent.

@@ -28,7 +28,7 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
 
     if name in ("seed001-2seg", "seed001-3seg"):
         two = name == "seed001-2seg"
-        unit = presets.SEED001_FIG8_UNIT_LUX if two else presets.SEED001_FIG9_UNIT_LUX
+        unit = presets.PAPER001_FIG8_UNIT_LUX if two else presets.PAPER001_FIG9_UNIT_LUX
         units = np.geomspace(1.0, 1000.0, 360)
         sat = {}
         for key in ("seed001-normal", name):
@@ -93,9 +93,9 @@ def _seed_figures(name: str, size: int, seed: int) -> dict:
             r = measure_response(s, lux, height=size, width=size, seed=seed)
             sat[key] = plateau_onset(currents, r["signal_dn"])
         b = over.segment_boundaries_a()
-        from viform.report.response_plots import seed003_fig5
+        from viform.report.response_plots import paper003_fig5
 
-        fig5 = seed003_fig5(size=min(size, 16), seed=seed)
+        fig5 = paper003_fig5(size=min(size, 16), seed=seed)
         return {
             "fig5": fig5,
             "source": "seed 003 §5–6, fig. 6",
@@ -361,7 +361,7 @@ def characterize(sensor, out_dir, as_json, json_path, size, seed, settings):
         seed_fig = _seed_figures(sensor, min(size, 32), seed)
         fig5 = seed_fig.pop("fig5", None)
         if fig5 is not None:
-            figures["fig5_dr_abc.png"] = plots.seed003_fig5_figure(fig5)
+            figures["fig5_dr_abc.png"] = plots.paper003_fig5_figure(fig5)
         if seed_fig:
             result["seed_comparison"] = seed_fig
             unit_lux = seed_fig.get("intensity_unit_lux")

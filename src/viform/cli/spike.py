@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from viform._validate import ViformError, size_text
-from viform.cli._common import CatalogHelp
+from viform.cli._common import CatalogHelp, apply_options
 from viform.cli._scenes import scene_set_option, scene_settings, with_scene_list
 from viform.cli.app import cli
 
@@ -130,15 +130,6 @@ def check_request_duration(duration_s: float, sensor, light) -> None:
                           "variable VIFORM_MAX_PIXEL_TICKS")
 
 
-def _apply(options):
-    def decorator(f):
-        for option in reversed(options):
-            f = option(f)
-        return f
-
-    return decorator
-
-
 @cli.command(cls=CatalogHelp)
 @click.argument("scene")
 @click.option("--duration", "duration_s", type=float, default=None,
@@ -175,7 +166,7 @@ def _apply(options):
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary instead of the table.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 @scene_set_option
-@_apply(sensor_options)
+@apply_options(sensor_options)
 @with_scene_list
 def simulate(scene, duration_s, out_path, seed, height, width, max_lux, frame_rate_hz, interpolation,
              light_sample_ticks, truth_dir, truth_every_ticks, force, device, as_json, json_file, scene_set,

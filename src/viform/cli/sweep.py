@@ -13,7 +13,7 @@ import click
 from viform._io import JSON_FILE_HELP
 from viform._validate import ViformError
 from viform.cli._common import CatalogHelp
-from viform.cli._scenes import scene_options, scene_set_option, with_scene_list
+from viform.cli._scenes import built_in_scene_options, scene_options, scene_set_option, with_scene_list
 from viform.cli.app import cli
 
 #: Largest --speed factor of the dilemma scene a sweep accepts.
@@ -53,12 +53,7 @@ SWEEP_FLAGS = {
                    "accumulation.")
 @click.option("--duration", "duration_s", type=float, default=0.04, show_default=True, help="Clip length, s.")
 @click.option("--at", "at", default=None, help="Instants to score, s, comma-separated (default: 30/50/70 %).")
-@click.option("--height", type=int, default=64, show_default=True, help="Resolution of built-in scenes.")
-@click.option("--width", type=int, default=128, show_default=True)
-@click.option("--brightness", type=float, default=None,
-              help="Factor on the light of the dilemma and night-road-fog scenes.")
-@click.option("--speed", type=float, default=None, help="Factor on the dilemma scene's speeds.")
-@click.option("--visibility-m", type=float, default=None, help="Fog visibility of night-road-fog, m.")
+@built_in_scene_options
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Sweep seed; each point's noise seed is derived from it and the point.")
 @click.option("--out", "out_dir", type=click.Path(), default="viform-sweep", show_default=True,

@@ -8,10 +8,16 @@
   :func:`open_coded` reads it back as a spike source (:class:`CodedFile`), :func:`is_coded_file`,
   :func:`describe_coded_file` and :func:`verify_coded_file` inspect and check it.
 
-The names are imported on first use (:mod:`viform._lazy`): ``import viform.coding`` costs nothing.
+The names are imported on first use (:mod:`viform._lazy`). Importing the package itself installs
+numba's cache locators for the coding kernels (:mod:`viform.coding._compile_cache`), before any kernel
+of the package is defined, and so imports numba.
 """
 
 from viform import _lazy
+from viform.coding._compile_cache import install_locators as _install_locators
+
+# before any kernel of the package is defined: their numba cache is stamped by every source file here
+_install_locators()
 
 __all__ = [
     "CodingParameters", "FirstSpikeEncoder", "FirstSpikeDecoder", "encode_array", "decode_segments", "first_spikes",

@@ -29,8 +29,18 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-_TOP = np.int64(1) << 24
-_MASK32 = (np.int64(1) << 32) - 1
+from viform.coding._range_coder import (
+    decode_bit,
+    decode_plain,
+    decode_uniform,
+    decoder_start,
+    encode_bit,
+    encode_plain,
+    encode_uniform,
+    encoder_flush,
+    encoder_start,
+)
+
 _PBITS = 11
 _PONE = 1 << _PBITS
 # two estimates per context, a fast (shift 4) and a slow (shift 7) one, averaged (15-bit each)
@@ -73,27 +83,7 @@ ERRORS = {1: "value out of range", 2: "too many records", 3: "a first spike afte
           4: "stream is cut short", 5: "record count differs from the header", 6: "repeats without a width"}
 
 
-# ---------------------------------------------------------------------------- range coder
-
-@njit(cache=True, inline="always")
-def _shift_low(st, out):
-    low = st[0]
-    if low < 0xFF000000 or low > _MASK32:
-        carry = low >> 32
-        temp = st[2]
-        while True:
-            pos = st[4]
-            if pos < out.size:
-                out[pos] = (temp + carry) & 0xFF
-            st[4] = pos + 1
-            temp = 0xFF
-            st[3] -= 1
-            if st[3] == 0:
-                break
-        st[2] = (low >> 24) & 0xFF
-    st[3] += 1
-    st[0] = (low & 0x00FFFFFF) << 8
-
+# ---------------------------------------------------------------------------- bits with adaptive probabilities
 
 #: version 5: a young context learns at the running frequency 1/(n + 1.5) of its first n bits, then the
 #: two estimates settle at their fixed shifts (fast after 2^_FAST bits, slow after 2^_SLOW); older versions
@@ -129,175 +119,69 @@ def _adapt(probs, i, bit):
 
 
 @njit(cache=True, inline="always")
-def _ebit(st, out, probs, i, bit):
-    p = (probs[3 * i] + probs[3 * i + 1]) >> 5
-    bound = (st[1] >> _PBITS) * p
-    if bit == 0:
-        st[1] = bound
-    else:
-        st[0] += bound
-        st[1] -= bound
+def _p(probs, i):
+    """P(bit = 0) of context i in 1/2^_PBITS: the mean of its fast and slow estimates."""
+    return (probs[3 * i] + probs[3 * i + 1]) >> 5
+
+
+@njit(cache=True, inline="always")
+def _ebit(rc, out, probs, i, bit):
+    rc = encode_bit(rc, out, _p(probs, i), _PBITS, bit)
     _adapt(probs, i, bit)
-    while st[1] < _TOP:
-        st[1] <<= 8
-        _shift_low(st, out)
+    return rc
 
 
 @njit(cache=True, inline="always")
-def _ebit_plain(st, out, bit):
-    st[1] >>= 1
-    if bit:
-        st[0] += st[1]
-    while st[1] < _TOP:
-        st[1] <<= 8
-        _shift_low(st, out)
-
-
-@njit(cache=True, inline="always")
-def _eunif_small(st, out, v, n):
-    r = st[1] // n
-    st[0] += v * r
-    st[1] = r
-    while st[1] < _TOP:
-        st[1] <<= 8
-        _shift_low(st, out)
+def _dbit(rc, data, probs, i):
+    bit, rc = decode_bit(rc, data, _p(probs, i), _PBITS)
+    _adapt(probs, i, bit)
+    return bit, rc
 
 
 @njit(cache=True)
-def _eunif(st, out, v, n):
-    """Code v uniform in [0, n)."""
-    if n <= 4096:
-        if n > 1:
-            _eunif_small(st, out, v, n)
-        return
-    hi_n = ((n - 1) >> 12) + 1
-    hi = v >> 12
-    _eunif(st, out, hi, hi_n)
-    lo_n = ((n - 1) & 4095) + 1 if hi == hi_n - 1 else 4096
-    _eunif_small(st, out, v & 4095, lo_n)
-
-
-@njit(cache=True)
-def _euint(st, out, probs, base, v):
+def _euint(rc, out, probs, base, v):
     """Adaptive Elias-gamma code of v ≥ 0 (v < 2**40)."""
     x = v + 1
     n = 0
     while (x >> (n + 1)) > 0:
         n += 1
     for i in range(n):
-        _ebit(st, out, probs, base + min(i, 23), 1)
-    _ebit(st, out, probs, base + min(n, 23), 0)
+        rc = _ebit(rc, out, probs, base + min(i, 23), 1)
+    rc = _ebit(rc, out, probs, base + min(n, 23), 0)
     node = 1
     nb = min(n, 23)
     for k in range(n - 1, -1, -1):
         bit = (x >> k) & 1
         if n - 1 - k < 2:
-            _ebit(st, out, probs, base + 24 + nb * 3 + node - 1, bit)
+            rc = _ebit(rc, out, probs, base + 24 + nb * 3 + node - 1, bit)
             node = node * 2 + bit if node == 1 else node
         else:
-            _ebit_plain(st, out, bit)
+            rc = encode_plain(rc, out, bit)
+    return rc
 
 
 @njit(cache=True)
-def _eflush(st, out):
-    for _ in range(5):
-        _shift_low(st, out)
-
-
-@njit(cache=True, inline="always")
-def _dnorm(ds, data):
-    while ds[0] < _TOP:
-        ds[0] <<= 8
-        pos = ds[2]
-        b = np.int64(data[pos]) if pos < data.size else np.int64(0)
-        ds[2] = pos + 1
-        ds[1] = ((ds[1] << 8) | b) & _MASK32
-
-
-@njit(cache=True, inline="always")
-def _dbit(ds, data, probs, i):
-    p = (probs[3 * i] + probs[3 * i + 1]) >> 5
-    bound = (ds[0] >> _PBITS) * p
-    if ds[1] < bound:
-        ds[0] = bound
-        bit = 0
-    else:
-        ds[1] -= bound
-        ds[0] -= bound
-        bit = 1
-    _adapt(probs, i, bit)
-    _dnorm(ds, data)
-    return bit
-
-
-@njit(cache=True, inline="always")
-def _dbit_plain(ds, data):
-    ds[0] >>= 1
-    bit = 0
-    if ds[1] >= ds[0]:
-        ds[1] -= ds[0]
-        bit = 1
-    _dnorm(ds, data)
-    return bit
-
-
-@njit(cache=True, inline="always")
-def _dunif_small(ds, data, n):
-    r = ds[0] // n
-    v = ds[1] // r
-    if v >= n:
-        v = n - 1
-        ds[3] = 1  # impossible in a valid stream
-    ds[1] -= v * r
-    ds[0] = r
-    _dnorm(ds, data)
-    return v
-
-
-@njit(cache=True)
-def _dunif(ds, data, n):
-    if n <= 4096:
-        if n > 1:
-            return _dunif_small(ds, data, n)
-        return np.int64(0)
-    hi_n = ((n - 1) >> 12) + 1
-    hi = _dunif(ds, data, hi_n)
-    lo_n = ((n - 1) & 4095) + 1 if hi == hi_n - 1 else 4096
-    return (hi << 12) | _dunif_small(ds, data, lo_n)
-
-
-@njit(cache=True)
-def _duint(ds, data, probs, base):
+def _duint(rc, data, probs, base):
+    """Inverse of :func:`_euint`: ``(v, state)``; over-long codes set the state's error flag."""
     n = 0
-    while _dbit(ds, data, probs, base + min(n, 23)) == 1:
+    while True:
+        bit, rc = _dbit(rc, data, probs, base + min(n, 23))
+        if bit == 0:
+            break
         n += 1
         if n > _MAXBITS:
-            ds[3] = 1
-            return np.int64(0)
+            return np.int64(0), (rc[0], rc[1], rc[2], np.int64(1))
     x = np.int64(1)
     node = 1
     nb = min(n, 23)
     for k in range(n - 1, -1, -1):
         if n - 1 - k < 2:
-            bit = _dbit(ds, data, probs, base + 24 + nb * 3 + node - 1)
+            bit, rc = _dbit(rc, data, probs, base + 24 + nb * 3 + node - 1)
             node = node * 2 + bit if node == 1 else node
         else:
-            bit = _dbit_plain(ds, data)
+            bit, rc = decode_plain(rc, data)
         x = (x << 1) | bit
-    return x - 1
-
-
-@njit(cache=True)
-def _dstart(ds, data):
-    ds[0] = _MASK32
-    ds[1] = 0
-    ds[2] = 0
-    ds[3] = 0
-    for _ in range(5):
-        pos = ds[2]
-        b = np.int64(data[pos]) if pos < data.size else np.int64(0)
-        ds[2] = pos + 1
-        ds[1] = ((ds[1] << 8) | b) & _MASK32
+    return x - 1, rc
 
 
 # ---------------------------------------------------------------------------- contexts
@@ -430,9 +314,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
     """
     npix = counts.size
     probs = new_probabilities(young)
-    st = np.zeros(6, np.int64)
-    st[1] = _MASK32
-    st[3] = 1
+    rc = encoder_start()
     rec_start = np.zeros(npix + 1, np.int64)
     for p in range(npix):
         rec_start[p + 1] = rec_start[p] + counts[p]
@@ -452,7 +334,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
         if ref == 0:
             col = p % width
             lf = 1 if (col > 0 and counts[p - 1] > 0) else 0
-            _ebit(st, out, probs, _P_MORE + lf, 1 if r < r_end else 0)
+            rc = _ebit(rc, out, probs, _P_MORE + lf, 1 if r < r_end else 0)
             if r == r_end:
                 continue
             off = seg_start - 1 - a  # a pixel that never fired: a = -1; code its first tick within the segment
@@ -461,23 +343,23 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
             nb4 = _nb_first(p, width, rec_start, counts, rec_s, rec_o, ref0, ptr, seg_start)
             fb = _RB if nb4 < 0 else _rbucket((nb4 + 2) // 4)
             two = r + 1 < r_end
-            _ebit(st, out, probs, _P_MORE2 + min(fb, _RB - 1), 1 if two else 0)
+            rc = _ebit(rc, out, probs, _P_MORE2 + min(fb, _RB - 1), 1 if two else 0)
             if two:
                 m2 = rec_m[r + 1]
                 o2 = rec_o[r + 1]
-                _euint(st, out, probs, _P_M2, m2)
+                rc = _euint(rc, out, probs, _P_M2, m2)
                 pred = (nb4 + 2) // 4 if nb4 > 0 else 0
                 e = o2 - pred
-                _ebit(st, out, probs, _P_FWS + fb, 1 if e < 0 else 0)
-                _euint(st, out, probs, _P_FW + fb * _EG, abs(e) - (1 if e < 0 else 0))
+                rc = _ebit(rc, out, probs, _P_FWS + fb, 1 if e < 0 else 0)
+                rc = _euint(rc, out, probs, _P_FW + fb * _EG, abs(e) - (1 if e < 0 else 0))
                 # the phase given the first full width: uniform below it (strict: never equal when m2 = 0)
                 lim = o2 - 1 if (strict and m2 == 0) else o2
                 below = phase <= lim
-                _ebit(st, out, probs, _P_PHASE + (1 if m2 > 0 else 0), 1 if below else 0)
+                rc = _ebit(rc, out, probs, _P_PHASE + (1 if m2 > 0 else 0), 1 if below else 0)
                 if below:
-                    _eunif(st, out, phase - 1, lim)
+                    rc = encode_uniform(rc, out, phase - 1, lim)
                 else:
-                    _euint(st, out, probs, _P_PH + _rbucket(o2) * _EG, phase - lim - 1)
+                    rc = _euint(rc, out, probs, _P_PH + _rbucket(o2) * _EG, phase - lim - 1)
                 a = a + off + phase
                 ref = off + phase
                 r += 1
@@ -485,8 +367,8 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
                 g = rec_g[r]
                 if not strict and m2 > 0:
                     e = g - m2 * ref
-                    _ebit(st, out, probs, _P_GSIGN, 1 if e < 0 else 0)
-                    _euint(st, out, probs, _P_GRES, abs(e) - (1 if e < 0 else 0))
+                    rc = _ebit(rc, out, probs, _P_GSIGN, 1 if e < 0 else 0)
+                    rc = _euint(rc, out, probs, _P_GRES, abs(e) - (1 if e < 0 else 0))
                 rec_s[r] = a + g
                 a = a + g + o2
                 ref = o2
@@ -494,7 +376,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
                 r += 1
                 first = 0
             else:
-                _euint(st, out, probs, _P_PH + fb * _EG, phase - 1)
+                rc = _euint(rc, out, probs, _P_PH + fb * _EG, phase - 1)
                 a = a + off + phase
                 ref = off + phase
                 r += 1
@@ -502,7 +384,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
             remaining = seg_end - 1 - a
             more = r < r_end
             if remaining >= 1:
-                _ebit(st, out, probs, _P_MORE + _more_ctx(remaining, ref, mb, first), 1 if more else 0)
+                rc = _ebit(rc, out, probs, _P_MORE + _more_ctx(remaining, ref, mb, first), 1 if more else 0)
             if not more:
                 break
             first = 0
@@ -510,21 +392,21 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
             g = rec_g[r]
             o = rec_o[r]
             rb = _rbucket(ref)
-            _euint(st, out, probs, _P_M + (mb * _RB + rb) * _EG, m)
+            rc = _euint(rc, out, probs, _P_M + (mb * _RB + rb) * _EG, m)
             if not strict and m > 0:
                 e = g - m * ref
-                _ebit(st, out, probs, _P_GSIGN + 1, 1 if e < 0 else 0)
-                _euint(st, out, probs, _P_GRES + _EG, abs(e) - (1 if e < 0 else 0))
+                rc = _ebit(rc, out, probs, _P_GSIGN + 1, 1 if e < 0 else 0)
+                rc = _euint(rc, out, probs, _P_GRES + _EG, abs(e) - (1 if e < 0 else 0))
             s = a + g
             rec_s[r] = s
             nb4 = _nb_mean(p, width, s + (ref + 1) // 2, rec_start, counts, rec_s, rec_o, ref0, ptr)
             c = _dctx(_nbctx(nb4, ref), _dbucket(dp, have_d), rb)
             d = o - ref
             if not strict:
-                _ebit(st, out, probs, _P_ZERO + c, 1 if d == 0 else 0)
+                rc = _ebit(rc, out, probs, _P_ZERO + c, 1 if d == 0 else 0)
             if d != 0 or strict:
-                _ebit(st, out, probs, _P_SIGN + c, 1 if d < 0 else 0)
-                _euint(st, out, probs, _P_D + c * _EG, abs(d) - 1)
+                rc = _ebit(rc, out, probs, _P_SIGN + c, 1 if d < 0 else 0)
+                rc = _euint(rc, out, probs, _P_D + c * _EG, abs(d) - 1)
             dp = d
             have_d = True
             mb = _mbucket(m)
@@ -536,13 +418,12 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
             fill = (seg_end - 1 - a) // ref
             e = fill - m
             tc = (0 if strict else 8) + min(fill, 7)
-            _euint(st, out, probs, _P_TAIL + tc * _EG, 2 * e if e >= 0 else -2 * e - 1)
+            rc = _euint(rc, out, probs, _P_TAIL + tc * _EG, 2 * e if e >= 0 else -2 * e - 1)
             if not strict and m > 0:
                 e = tail_g[p] - m * ref
-                _ebit(st, out, probs, _P_GSIGN + 2, 1 if e < 0 else 0)
-                _euint(st, out, probs, _P_GRES + 2 * _EG, abs(e) - (1 if e < 0 else 0))
-    _eflush(st, out)
-    return st[4]
+                rc = _ebit(rc, out, probs, _P_GSIGN + 2, 1 if e < 0 else 0)
+                rc = _euint(rc, out, probs, _P_GRES + 2 * _EG, abs(e) - (1 if e < 0 else 0))
+    return encoder_flush(rc, out)
 
 
 # ---------------------------------------------------------------------------- decoder
@@ -555,8 +436,7 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
     ``rec_m, rec_g, rec_o, rec_s`` must hold at least ``n_rec`` records.
     """
     probs = new_probabilities(young)
-    ds = np.zeros(4, np.int64)
-    _dstart(ds, data)
+    rc = decoder_start(data)
     big = np.int64(1) << 31
     cap = min(n_rec, rec_m.size)
     rec_start = np.zeros(npix + 1, np.int64)
@@ -579,10 +459,11 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
         if ref == 0:
             col = p % width
             lf = 1 if (col > 0 and counts[p - 1] > 0) else 0
-            if _dbit(ds, data, probs, _P_MORE + lf) == 0:
+            fires, rc = _dbit(rc, data, probs, _P_MORE + lf)
+            if fires == 0:
                 tail_m[p] = 0
                 tail_g[p] = 0
-                if ds[2] > data.size + 8:
+                if rc[2] > data.size + 8:
                     return 4
                 continue
             if r >= cap:
@@ -592,30 +473,35 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
                 return 1
             nb4 = _nb_first(p, width, rec_start, counts, rec_s, rec_o, ref0, ptr, seg_start)
             fb = _RB if nb4 < 0 else _rbucket((nb4 + 2) // 4)
-            two = _dbit(ds, data, probs, _P_MORE2 + min(fb, _RB - 1)) == 1
+            two_bit, rc = _dbit(rc, data, probs, _P_MORE2 + min(fb, _RB - 1))
+            two = two_bit == 1
             m2 = np.int64(0)
             o2 = np.int64(0)
             if two:
                 if r + 1 >= cap:
                     return 2
-                m2 = _duint(ds, data, probs, _P_M2)
+                m2, rc = _duint(rc, data, probs, _P_M2)
                 pred = (nb4 + 2) // 4 if nb4 > 0 else 0
-                neg = _dbit(ds, data, probs, _P_FWS + fb)
-                mag = _duint(ds, data, probs, _P_FW + fb * _EG)
+                neg, rc = _dbit(rc, data, probs, _P_FWS + fb)
+                mag, rc = _duint(rc, data, probs, _P_FW + fb * _EG)
                 o2 = pred - mag - 1 if neg else pred + mag
-                if o2 < 1 or o2 > big or m2 > big or ds[3]:
+                if o2 < 1 or o2 > big or m2 > big or rc[3]:
                     return 1
                 lim = o2 - 1 if (strict and m2 == 0) else o2
-                if _dbit(ds, data, probs, _P_PHASE + (1 if m2 > 0 else 0)):
+                below, rc = _dbit(rc, data, probs, _P_PHASE + (1 if m2 > 0 else 0))
+                if below:
                     if lim < 1:
                         return 1
-                    phase = _dunif(ds, data, lim) + 1
+                    phase, rc = decode_uniform(rc, data, lim)
+                    phase += 1
                 else:
-                    phase = _duint(ds, data, probs, _P_PH + _rbucket(o2) * _EG) + lim + 1
+                    phase, rc = _duint(rc, data, probs, _P_PH + _rbucket(o2) * _EG)
+                    phase += lim + 1
                 phase += off
             else:
-                phase = _duint(ds, data, probs, _P_PH + fb * _EG) + 1 + off
-            if phase > big or ds[3]:
+                phase, rc = _duint(rc, data, probs, _P_PH + fb * _EG)
+                phase += 1 + off
+            if phase > big or rc[3]:
                 return 1
             # the pixel's first spike: its phase record
             rec_m[r] = 0
@@ -630,8 +516,8 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
             if two:
                 g = m2 * ref
                 if not strict and m2 > 0:
-                    neg = _dbit(ds, data, probs, _P_GSIGN)
-                    mag = _duint(ds, data, probs, _P_GRES)
+                    neg, rc = _dbit(rc, data, probs, _P_GSIGN)
+                    mag, rc = _duint(rc, data, probs, _P_GRES)
                     g += -mag - 1 if neg else mag
                 if g < m2 or g > big:
                     return 1
@@ -650,21 +536,22 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
             remaining = seg_end - 1 - a
             if remaining < 1:
                 break
-            if _dbit(ds, data, probs, _P_MORE + _more_ctx(remaining, ref, mb, first)) == 0:
+            more, rc = _dbit(rc, data, probs, _P_MORE + _more_ctx(remaining, ref, mb, first))
+            if more == 0:
                 break
-            if ds[2] > data.size + 8:
+            if rc[2] > data.size + 8:
                 return 4
             if r >= cap:
                 return 2
             first = 0
             rb = _rbucket(ref)
-            m = _duint(ds, data, probs, _P_M + (mb * _RB + rb) * _EG)
-            if m > big or ds[3]:
+            m, rc = _duint(rc, data, probs, _P_M + (mb * _RB + rb) * _EG)
+            if m > big or rc[3]:
                 return 1
             g = m * ref
             if not strict and m > 0:
-                neg = _dbit(ds, data, probs, _P_GSIGN + 1)
-                mag = _duint(ds, data, probs, _P_GRES + _EG)
+                neg, rc = _dbit(rc, data, probs, _P_GSIGN + 1)
+                mag, rc = _duint(rc, data, probs, _P_GRES + _EG)
                 g += -mag - 1 if neg else mag
             if g < m or g > big:
                 return 1
@@ -677,13 +564,14 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
             d = np.int64(0)
             zero = False
             if not strict:
-                zero = _dbit(ds, data, probs, _P_ZERO + c) == 1
+                zero_bit, rc = _dbit(rc, data, probs, _P_ZERO + c)
+                zero = zero_bit == 1
             if not zero:
-                neg = _dbit(ds, data, probs, _P_SIGN + c)
-                mag = _duint(ds, data, probs, _P_D + c * _EG) + 1
-                d = -mag if neg else mag
+                neg, rc = _dbit(rc, data, probs, _P_SIGN + c)
+                mag, rc = _duint(rc, data, probs, _P_D + c * _EG)
+                d = -(mag + 1) if neg else mag + 1
             o = ref + d
-            if o < 1 or o > big or ds[3]:
+            if o < 1 or o > big or rc[3]:
                 return 1
             rec_m[r] = m
             rec_g[r] = g
@@ -700,14 +588,14 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
         if ref > 0:
             fill = (seg_end - 1 - a) // ref
             tc = (0 if strict else 8) + min(fill, 7)
-            e = _duint(ds, data, probs, _P_TAIL + tc * _EG)
+            e, rc = _duint(rc, data, probs, _P_TAIL + tc * _EG)
             m = fill - ((e >> 1) if (e & 1) == 0 else -((e + 1) >> 1))
-            if m < 0 or m > big or ds[3]:
+            if m < 0 or m > big or rc[3]:
                 return 1
             g = m * ref
             if not strict and m > 0:
-                neg = _dbit(ds, data, probs, _P_GSIGN + 2)
-                mag = _duint(ds, data, probs, _P_GRES + 2 * _EG)
+                neg, rc = _dbit(rc, data, probs, _P_GSIGN + 2)
+                mag, rc = _duint(rc, data, probs, _P_GRES + 2 * _EG)
                 g += -mag - 1 if neg else mag
             if g < m or g > big:
                 return 1
@@ -716,10 +604,10 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
         else:
             tail_m[p] = 0
             tail_g[p] = 0
-        if ds[2] > data.size + 8:
+        if rc[2] > data.size + 8:
             return 4
     if r != n_rec:
         return 5
-    if ds[2] > data.size + 5:
+    if rc[2] > data.size + 5:
         return 4
     return 0

@@ -40,19 +40,18 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from viform.coding.context_model import (
-    _EG,
-    _MASK32,
-    _RB,
-    _TOP,
-    _dnorm,
-    _dstart,
-    _dunif,
-    _eflush,
-    _eunif,
-    _rbucket,
-    _shift_low,
+from viform.coding._range_coder import (
+    decode_bit,
+    decode_plain,
+    decode_uniform,
+    decoder_start,
+    encode_bit,
+    encode_plain,
+    encode_uniform,
+    encoder_flush,
+    encoder_start,
 )
+from viform.coding.context_model import _EG, _RB, _rbucket
 
 # Probabilities: per binary context a 16-bit P(bit = 0) and a count; the estimate moves by
 # 1/(count + 1.5) of the error (the running frequency while a context is young), down to
@@ -76,95 +75,63 @@ def _adapt(probs, i, bit):
 
 
 @njit(cache=True, inline="always")
-def _ebit(st, out, probs, i, bit):
-    bound = (st[1] >> _PB) * probs[2 * i]
-    if bit == 0:
-        st[1] = bound
-    else:
-        st[0] += bound
-        st[1] -= bound
+def _ebit(rc, out, probs, i, bit):
+    rc = encode_bit(rc, out, probs[2 * i], _PB, bit)
     _adapt(probs, i, bit)
-    while st[1] < _TOP:
-        st[1] <<= 8
-        _shift_low(st, out)
+    return rc
 
 
 @njit(cache=True, inline="always")
-def _ebit_plain(st, out, bit):
-    st[1] >>= 1
-    if bit:
-        st[0] += st[1]
-    while st[1] < _TOP:
-        st[1] <<= 8
-        _shift_low(st, out)
-
-
-@njit(cache=True, inline="always")
-def _dbit(ds, data, probs, i):
-    bound = (ds[0] >> _PB) * probs[2 * i]
-    if ds[1] < bound:
-        ds[0] = bound
-        bit = 0
-    else:
-        ds[1] -= bound
-        ds[0] -= bound
-        bit = 1
+def _dbit(rc, data, probs, i):
+    bit, rc = decode_bit(rc, data, probs[2 * i], _PB)
     _adapt(probs, i, bit)
-    _dnorm(ds, data)
-    return bit
-
-
-@njit(cache=True, inline="always")
-def _dbit_plain(ds, data):
-    ds[0] >>= 1
-    bit = 0
-    if ds[1] >= ds[0]:
-        ds[1] -= ds[0]
-        bit = 1
-    _dnorm(ds, data)
-    return bit
+    return bit, rc
 
 
 @njit(cache=True)
-def _euint(st, out, probs, base, v):
+def _euint(rc, out, probs, base, v):
     """Adaptive Elias-gamma code of v ≥ 0 (v < 2**40): unary length, two modelled mantissa bits."""
     x = v + 1
     n = 0
     while (x >> (n + 1)) > 0:
         n += 1
     for i in range(n):
-        _ebit(st, out, probs, base + min(i, 23), 1)
-    _ebit(st, out, probs, base + min(n, 23), 0)
+        rc = _ebit(rc, out, probs, base + min(i, 23), 1)
+    rc = _ebit(rc, out, probs, base + min(n, 23), 0)
     node = 1
     nb = min(n, 23)
     for k in range(n - 1, -1, -1):
         bit = (x >> k) & 1
         if n - 1 - k < 2:
-            _ebit(st, out, probs, base + 24 + nb * 3 + node - 1, bit)
+            rc = _ebit(rc, out, probs, base + 24 + nb * 3 + node - 1, bit)
             node = node * 2 + bit if node == 1 else node
         else:
-            _ebit_plain(st, out, bit)
+            rc = encode_plain(rc, out, bit)
+    return rc
 
 
 @njit(cache=True)
-def _duint(ds, data, probs, base):
+def _duint(rc, data, probs, base):
+    """Inverse of :func:`_euint`: ``(v, state)``; over-long codes set the state's error flag."""
     n = 0
-    while _dbit(ds, data, probs, base + min(n, 23)) == 1:
+    while True:
+        bit, rc = _dbit(rc, data, probs, base + min(n, 23))
+        if bit == 0:
+            break
         n += 1
         if n > _MAXBITS:
-            ds[3] = 1
-            return np.int64(0)
+            return np.int64(0), (rc[0], rc[1], rc[2], np.int64(1))
     x = np.int64(1)
     node = 1
     nb = min(n, 23)
     for k in range(n - 1, -1, -1):
         if n - 1 - k < 2:
-            bit = _dbit(ds, data, probs, base + 24 + nb * 3 + node - 1)
+            bit, rc = _dbit(rc, data, probs, base + 24 + nb * 3 + node - 1)
             node = node * 2 + bit if node == 1 else node
         else:
-            bit = _dbit_plain(ds, data)
+            bit, rc = decode_plain(rc, data)
         x = (x << 1) | bit
-    return x - 1
+    return x - 1, rc
 
 
 _FB = 16  # fractional bits of the fixed-point state
@@ -484,9 +451,7 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
     place. Returns the byte count (> out.size: retry bigger from copies of the state).
     """
     npix = counts.size
-    es = np.zeros(6, np.int64)
-    es[1] = _MASK32
-    es[3] = 1
+    rc = encoder_start()
     starts = np.zeros(npix + 1, np.int64)
     for q in range(npix):
         starts[q + 1] = starts[q] + counts[q]
@@ -503,7 +468,7 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
         if a < 0:
             col = q % width
             lf = 1 if (col > 0 and counts[q - 1] > 0) else 0
-            _ebit(es, out, probs, _P_NEW + lf, 1 if c > 0 else 0)
+            rc = _ebit(rc, out, probs, _P_NEW + lf, 1 if c > 0 else 0)
             if c == 0:
                 continue
             base = seg_start - 1
@@ -511,24 +476,24 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
             nb = _nb_mu(st, q, width, npix)
             fb = _RB if nb <= 0 else _rbucket(nb)
             two = c >= 2
-            _ebit(es, out, probs, _P_TWO + fb, 1 if two else 0)
+            rc = _ebit(rc, out, probs, _P_TWO + fb, 1 if two else 0)
             if two:
                 iv = ticks[r + 1] - ticks[r]
                 e = iv - nb
-                _ebit(es, out, probs, _P_FWS + fb, 1 if e < 0 else 0)
-                _euint(es, out, probs, _P_FW + fb * _EG, e if e >= 0 else -e - 1)
+                rc = _ebit(rc, out, probs, _P_FWS + fb, 1 if e < 0 else 0)
+                rc = _euint(rc, out, probs, _P_FW + fb * _EG, e if e >= 0 else -e - 1)
                 below = phase <= iv
-                _ebit(es, out, probs, _P_PHB, 1 if below else 0)
+                rc = _ebit(rc, out, probs, _P_PHB, 1 if below else 0)
                 if below:
-                    _eunif(es, out, phase - 1, iv)
+                    rc = encode_uniform(rc, out, phase - 1, iv)
                 else:
-                    _euint(es, out, probs, _P_PH + _rbucket(iv) * _EG, phase - iv - 1)
+                    rc = _euint(rc, out, probs, _P_PH + _rbucket(iv) * _EG, phase - iv - 1)
                 st[q, 3] = 0
                 _update(st, q, iv, iv, model)
                 a = ticks[r + 1]
                 k = 2
             else:
-                _euint(es, out, probs, _P_PH + fb * _EG, phase - 1)
+                rc = _euint(rc, out, probs, _P_PH + fb * _EG, phase - 1)
                 st[q, 3] = 0
                 a = ticks[r]
                 k = 1
@@ -540,16 +505,16 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
             more = k < c
             fl = st[q, 3]
             if (fl & _NMASK) == 0:
-                _ebit(es, out, probs, _P_COLD + (1 if a >= seg_start else 0), 1 if more else 0)
+                rc = _ebit(rc, out, probs, _P_COLD + (1 if a >= seg_start else 0), 1 if more else 0)
                 if not more:
                     break
                 iv = ticks[r + k] - a
-                _euint(es, out, probs, _P_COLDV, iv - lo)
+                rc = _euint(rc, out, probs, _P_COLDV, iv - lo)
                 _update(st, q, iv, iv, model)
             else:
                 p, f = _predict(st[q, 0], st[q, 1], lo)
                 sb = _sbucket(st[q, 2])
-                _ebit(es, out, probs, _stop_ctx(rem, p, sb), 1 if more else 0)
+                rc = _ebit(rc, out, probs, _stop_ctx(rem, p, sb), 1 if more else 0)
                 if not more:
                     break
                 iv = ticks[r + k] - a
@@ -560,19 +525,18 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
                 else:
                     tr = _trend(model, q, width, a, a + p, starts, counts, ticks, last0, ptr)
                 zc, h1 = _zctx(st, q, p, f, sb, tr)
-                _ebit(es, out, probs, _P_Z + zc, 1 if d == 0 else 0)
+                rc = _ebit(rc, out, probs, _P_Z + zc, 1 if d == 0 else 0)
                 if d != 0:
                     neg = 1 if d < 0 else 0
-                    _ebit(es, out, probs, _P_SG + zc, neg)
+                    rc = _ebit(rc, out, probs, _P_SG + zc, neg)
                     ad = -d if neg else d
-                    _ebit(es, out, probs, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr, 1 if ad == 1 else 0)
+                    rc = _ebit(rc, out, probs, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr, 1 if ad == 1 else 0)
                     if ad > 1:
-                        _euint(es, out, probs, _P_MAG + ((sb * 2 + neg) * _RB + _rbucket(p)) * _EG, ad - 2)
+                        rc = _euint(rc, out, probs, _P_MAG + ((sb * 2 + neg) * _RB + _rbucket(p)) * _EG, ad - 2)
                 _update(st, q, iv, p, model)
             a = a + iv
             k += 1
-    _eflush(es, out)
-    return es[4]
+    return encoder_flush(rc, out)
 
 
 # ---------------------------------------------------------------------------- decoder
@@ -584,8 +548,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
     ``ticks`` must hold the spikes: when it is full the code is 2 (the caller may grow it and
     decode again from copies of the state, or give up when the segment states fewer spikes).
     """
-    ds = np.zeros(4, np.int64)
-    _dstart(ds, data)
+    rc = decoder_start(data)
     cap = min(n_spikes, ticks.size)
     starts = np.zeros(npix + 1, np.int64)
     ptr = np.zeros(4, np.int64)
@@ -604,28 +567,33 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
         if a < 0:
             col = q % width
             lf = 1 if (col > 0 and counts[q - 1] > 0) else 0
-            if _dbit(ds, data, probs, _P_NEW + lf) == 0:
-                if ds[2] > data.size + 8:
+            fires, rc = _dbit(rc, data, probs, _P_NEW + lf)
+            if fires == 0:
+                if rc[2] > data.size + 8:
                     return 4, r
                 continue
             base = seg_start - 1
             nb = _nb_mu(st, q, width, npix)
             fb = _RB if nb <= 0 else _rbucket(nb)
-            two = _dbit(ds, data, probs, _P_TWO + fb) == 1
+            two_bit, rc = _dbit(rc, data, probs, _P_TWO + fb)
+            two = two_bit == 1
             if two:
                 if r + 2 > cap:
                     return 2, r
-                neg = _dbit(ds, data, probs, _P_FWS + fb)
-                mag = _duint(ds, data, probs, _P_FW + fb * _EG)
+                neg, rc = _dbit(rc, data, probs, _P_FWS + fb)
+                mag, rc = _duint(rc, data, probs, _P_FW + fb * _EG)
                 iv = nb - mag - 1 if neg else nb + mag
-                if iv < 1 or iv >= seg_end - seg_start or ds[3]:
+                if iv < 1 or iv >= seg_end - seg_start or rc[3]:
                     return 1, r
-                if _dbit(ds, data, probs, _P_PHB):
-                    phase = _dunif(ds, data, iv) + 1
+                below, rc = _dbit(rc, data, probs, _P_PHB)
+                if below:
+                    phase, rc = decode_uniform(rc, data, iv)
+                    phase += 1
                 else:
-                    phase = _duint(ds, data, probs, _P_PH + _rbucket(iv) * _EG) + iv + 1
+                    phase, rc = _duint(rc, data, probs, _P_PH + _rbucket(iv) * _EG)
+                    phase += iv + 1
                 t0 = base + phase
-                if ds[3] or phase > seg_end or t0 + iv >= seg_end:
+                if rc[3] or phase > seg_end or t0 + iv >= seg_end:
                     return 3, r
                 ticks[r] = t0
                 ticks[r + 1] = t0 + iv
@@ -636,8 +604,9 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
             else:
                 if r + 1 > cap:
                     return 2, r
-                phase = _duint(ds, data, probs, _P_PH + fb * _EG) + 1
-                if ds[3] or phase > seg_end - base - 1:
+                phase, rc = _duint(rc, data, probs, _P_PH + fb * _EG)
+                phase += 1
+                if rc[3] or phase > seg_end - base - 1:
                     return 3, r
                 ticks[r] = base + phase
                 st[q, 3] = 0
@@ -651,16 +620,19 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
                 break
             fl = st[q, 3]
             if (fl & _NMASK) == 0:
-                if _dbit(ds, data, probs, _P_COLD + (1 if a >= seg_start else 0)) == 0:
+                more, rc = _dbit(rc, data, probs, _P_COLD + (1 if a >= seg_start else 0))
+                if more == 0:
                     break
-                iv = _duint(ds, data, probs, _P_COLDV) + lo
-                if ds[3] or iv > rem:
+                iv, rc = _duint(rc, data, probs, _P_COLDV)
+                iv += lo
+                if rc[3] or iv > rem:
                     return 3, r + c
                 _update(st, q, iv, iv, model)
             else:
                 p, f = _predict(st[q, 0], st[q, 1], lo)
                 sb = _sbucket(st[q, 2])
-                if _dbit(ds, data, probs, _stop_ctx(rem, p, sb)) == 0:
+                more, rc = _dbit(rc, data, probs, _stop_ctx(rem, p, sb))
+                if more == 0:
                     break
                 # the pixel's own spikes so far are visible to _trend only through its neighbours
                 if model >= 4:
@@ -669,17 +641,20 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
                 else:
                     tr = _trend(model, q, width, a, a + p, starts, counts, ticks, last0, ptr)
                 zc, h1 = _zctx(st, q, p, f, sb, tr)
-                if _dbit(ds, data, probs, _P_Z + zc):
+                zero, rc = _dbit(rc, data, probs, _P_Z + zc)
+                if zero:
                     d = np.int64(0)
                 else:
-                    neg = _dbit(ds, data, probs, _P_SG + zc)
-                    if _dbit(ds, data, probs, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr):
+                    neg, rc = _dbit(rc, data, probs, _P_SG + zc)
+                    one, rc = _dbit(rc, data, probs, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr)
+                    if one:
                         ad = np.int64(1)
                     else:
-                        ad = _duint(ds, data, probs, _P_MAG + ((sb * 2 + neg) * _RB + _rbucket(p)) * _EG) + 2
+                        ad, rc = _duint(rc, data, probs, _P_MAG + ((sb * 2 + neg) * _RB + _rbucket(p)) * _EG)
+                        ad += 2
                     d = -ad if neg else ad
                 iv = p + d
-                if ds[3] or iv < lo or iv > rem:
+                if rc[3] or iv < lo or iv > rem:
                     return 3, r + c
                 _update(st, q, iv, p, model)
             if r + c >= cap:
@@ -687,15 +662,15 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
             a = a + iv
             ticks[r + c] = a
             c += 1
-            if ds[2] > data.size + 8:
+            if rc[2] > data.size + 8:
                 return 4, r + c
         counts[q] = c
         r += c
-        if ds[2] > data.size + 8:
+        if rc[2] > data.size + 8:
             return 4, r
     if r != n_spikes:
         return 5, r
-    if ds[2] > data.size + 5:
+    if rc[2] > data.size + 5:
         return 4, r
     return 0, r
 
@@ -764,36 +739,52 @@ def records_from_ticks(tick_counts, ticks, anchor0, ref0, counts, rec_m, rec_g, 
 
 # ---------------------------------------------------------------------------- dense ↔ ticks (version 4 bands)
 
+# de Bruijn table: the index of the lowest set bit of a 64-bit word
+_DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
+_LOWBIT = np.array([0, 1, 48, 2, 57, 49, 28, 3, 61, 58, 50, 42, 38, 29, 17, 4, 62, 55, 59, 36, 53, 51, 43, 22, 45,
+                    39, 33, 30, 24, 18, 12, 5, 63, 47, 56, 27, 60, 41, 37, 16, 54, 35, 52, 21, 44, 32, 23, 11, 46,
+                    26, 40, 15, 34, 20, 31, 10, 25, 14, 19, 9, 13, 8, 7, 6], np.int64)
+
+
 @njit(cache=True, nogil=True)
 def band_ticks(dense, row0, row1, seg_start):
-    """Spike ticks of rows ``row0:row1`` of a segment's bool array ``dense`` (T, H, W).
+    """Spike ticks of rows ``row0:row1`` of a segment's bool array ``dense`` (T, H, W), C-ordered.
 
     Returns ``counts`` (one per pixel of the band, row-major) and ``ticks`` (absolute ticks,
-    grouped by pixel, in time order; ``seg_start`` is the tick of ``dense[0]``).
+    grouped by pixel, in time order; ``seg_start`` is the tick of ``dense[0]``). Pixels are taken
+    64 at a time: per tick, which of them fired is gathered into one word and only its set bits
+    are visited (their 64 write cursors stay in cache).
     """
     n_ticks = dense.shape[0]
     width = dense.shape[2]
     npix = (row1 - row0) * width
+    flat = dense.reshape(n_ticks, dense.shape[1] * width).view(np.uint8)
+    p0 = row0 * width
     counts = np.zeros(npix, np.int64)
     for k in range(n_ticks):
-        for r in range(row0, row1):
-            base = (r - row0) * width
-            for c in range(width):
-                if dense[k, r, c]:
-                    counts[base + c] += 1
-    pos = np.empty(npix, np.int64)
+        row = flat[k, p0:p0 + npix]
+        for q in range(npix):
+            counts[q] += row[q]
+    cur = np.empty(npix, np.int64)
     total = np.int64(0)
     for q in range(npix):
-        pos[q] = total
+        cur[q] = total
         total += counts[q]
     ticks = np.empty(total, np.int64)
-    for k in range(n_ticks):
-        for r in range(row0, row1):
-            base = (r - row0) * width
-            for c in range(width):
-                if dense[k, r, c]:
-                    ticks[pos[base + c]] = seg_start + k
-                    pos[base + c] += 1
+    for g0 in range(0, npix, 64):
+        n = min(npix - g0, 64)
+        b = p0 + g0
+        for k in range(n_ticks):
+            row = flat[k]
+            m = np.uint64(0)
+            for j in range(n):
+                m |= np.uint64(row[b + j]) << np.uint64(j)
+            while m:
+                low = m & (~m + np.uint64(1))
+                q = g0 + _LOWBIT[np.int64((low * _DEBRUIJN) >> np.uint64(58))]
+                ticks[cur[q]] = seg_start + k
+                cur[q] += 1
+                m ^= low
     return counts, ticks
 
 

@@ -85,6 +85,7 @@ from viform._validate import (
     check_positive,
     check_range,
 )
+from viform.light.laser import F_NUMBER_RANGE
 from viform.light.radiometry import PixelOptics
 from viform.light.scenes import Scene
 from viform.sensors.spike import SpikeSensor, SpikeSensorParameters
@@ -238,7 +239,7 @@ class ReceiverLens:
 
     def __post_init__(self):
         check_positive("focal_length_m", self.focal_length_m)
-        check_positive("f_number", self.f_number)
+        check_range("f_number", self.f_number, *F_NUMBER_RANGE)  # the same rule as every lens
         check_range("transmission", self.transmission, 0.0, 1.0, low_open=True)
 
     @property

@@ -26,6 +26,9 @@ from dataclasses import asdict, dataclass
 from viform._validate import ViformError, check_positive, check_range
 from viform.light.radiometry import SPEED_OF_LIGHT_M_PER_S, photon_energy_j
 
+#: Allowed lens f-numbers: from the limit of a lens in air (N = 1/(2·NA) ≥ 0.5) to a pinhole-like f/64.
+F_NUMBER_RANGE = (0.5, 64.0)
+
 #: Laser wavelength of the seed's emitter, m (seed 004: 905 nm).
 LASER_WAVELENGTH_M = 905e-9
 
@@ -129,7 +132,7 @@ class Receiver:
 
     def __post_init__(self):
         check_positive("focal_length_m", self.focal_length_m)
-        check_range("f_number", self.f_number, 0.5, 64.0)
+        check_range("f_number", self.f_number, *F_NUMBER_RANGE)
         check_range("transmission", self.transmission, 0.0, 1.0, low_open=True)
         check_positive("filter_center_m", self.filter_center_m)
         check_positive("filter_bandwidth_m", self.filter_bandwidth_m)

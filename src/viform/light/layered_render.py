@@ -9,6 +9,12 @@ for a row, an edge's trapezoid is integrated only over the columns its x-range c
 columns left of it (covered over the edge's whole height in the row) are filled by a running sum,
 so a polygon costs O(perimeter + area) instead of O(edges × area).
 
+Work. A work item is one light sample and a group of row spans (a few items per thread). Within an
+item, a layer with no rotation or shear (its inverse map is diagonal) and no mask reads the column
+half of its arithmetic from a per-column table filled once: an image magnified or mildly minified
+(the direct 3 × 3 texel sum) its texel indices and weights along x, a sines pattern its factor along
+x. The expressions are those of the per-pixel path, so the light is the same to the bit.
+
 Static part. Layers that neither move nor flicker (and no camera motion) form the static light;
 the layers below the first dynamic one are composited once (``base``). A sample renders, in each
 dirty span, the base and every layer from the first dynamic one upward.
@@ -19,7 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from viform.light.affine import invert_many
 from viform.light.sampled import LightSampler, lux_to_rates, ranges_to_spans
@@ -245,93 +251,193 @@ def _prepare(samp, ints, px, py, qx, qy, bbox, height, width):
             bbox[i, l, 3] = min(height, np.int64(math.ceil(ymax)) + 1)
 
 
-@njit(cache=True)
-def _render_job(job, samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s, c1s, offs, a, b,
-                lux_out, rates_out, want_rates):
-    """Job ``job`` of :func:`_render_parallel`: span job mod m at sample job // m."""
-    n_layers = samp.shape[1]
-    m = rows.size
-    i = job // m
-    s = job - i * m
-    y = rows[s]
-    cs, ce = c0s[s], c1s[s]
-    nx = ce - cs
-    lux = np.empty(nx)
-    cov = np.empty(nx)
-    full = np.empty(nx + 1)
-    pbase = y * width
-    for c in range(nx):
-        lux[c] = base[pbase + cs + c]
-    yc = y + 0.5
-    for l in range(first, n_layers):
-        if not active[l] or y < bbox[i, l, 2] or y >= bbox[i, l, 3]:
-            continue
-        xs = max(cs, bbox[i, l, 0])
-        xe = min(ce, bbox[i, l, 1])
-        if xe <= xs:
-            continue
-        sl = samp[i, l]
-        mod = sl[S_M]
-        kind, pattern, blend = ints[l, I_KIND], ints[l, I_PATTERN], ints[l, I_BLEND]
-        val, h, w, sat = ints[l, I_VAL], ints[l, I_H], ints[l, I_W], ints[l, I_SAT]
-        mval, msat, seed = ints[l, I_MVAL], ints[l, I_MSAT], ints[l, I_SEED]
-        f = fp[l]
-        i00, i01, i02 = sl[S_INV], sl[S_INV + 1], sl[S_INV + 2]
-        i10, i11, i12 = sl[S_INV + 3], sl[S_INV + 4], sl[S_INV + 5]
-        j0, j1 = sl[S_JAC], sl[S_JAC + 1]
-        if ints[l, I_FULL]:
-            for c in range(xe - xs):
-                cov[c] = 1.0
-        else:
-            _row_coverage(qx[i], qy[i], ints[l, I_POLY0], ints[l, I_POLYN], y, xs, xe, cov, full)
-        for c in range(xe - xs):
-            alpha = cov[c]
-            if alpha == 0.0 and l > 0:
-                continue
-            xc = (xs + c) + 0.5
-            u = i00 * xc + i01 * yc + i02
-            v = i10 * xc + i11 * yc + i12
-            if mval >= 0:
-                kx, ky = f[F_KX], f[F_KY]
-                hx = 0.5 * max(kx * j0, 1.0)
-                hy = 0.5 * max(ky * j1, 1.0)
-                mk = _texel_mean(store, mval, msat, h, w, (u - f[F_IX]) * kx, (v - f[F_IY]) * ky, hx, hy)
-                alpha = alpha * min(max(mk, 0.0), 1.0)
-            src = _source(kind, pattern, f, seed, store, val, sat, h, w, u, v, j0, j1) * mod
-            k = xs + c - cs
-            if l == 0:
-                lux[k] = src
-            elif blend == 1:
-                lux[k] += alpha * src
-            else:
-                lux[k] += alpha * (src - lux[k])
-    o = offs[s]
-    if want_rates:
-        for c in range(nx):
-            rates_out[i, o + c] = np.int64(np.rint(lux[c] * a[o + c] + b[o + c]))
-    else:
-        for c in range(nx):
-            lux_out[i, o + c] = lux[c]
+@njit(cache=True, inline="always")
+def _axis_weights(p0, p1, n, idx, wts):
+    """Texels 0 … n − 1 a box [p0, p1] (texel units, p1 − p0 ≤ 2) overlaps: three indices and weights
+    (:meth:`viform.light.layered.Texels.sample`'s direct sum along one axis)."""
+    i0 = min(np.int64(math.floor(p0)), n - 1)
+    for k in range(3):
+        i = i0 + k
+        wts[k] = max(min(p1, np.float64(i + 1)) - max(p0, np.float64(i)), 0.0)
+        idx[k] = min(i, n - 1)
 
+
+@njit(cache=True, inline="always")
+def _box(u, hw, n):
+    """The clamped box [p0, p1] of half-width ``hw`` about ``u`` in [0, n] (Texels.sample)."""
+    p0 = min(max(u - hw, 0.0), n - 2 * hw)
+    p0 = max(p0, 0.0)
+    p1 = min(p0 + 2 * hw, np.float64(n))
+    return p0, p1
+
+
+@njit(cache=True)
+def _render_job(i, g0, g1, samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s, c1s, offs,
+                a, b, lux_out, rates_out, want_rates):
+    """Spans g0 … g1 − 1 at sample i (see :func:`_render_parallel`)."""
+    n_layers = samp.shape[1]
+    lux = np.empty(width)
+    cov = np.empty(width)
+    full = np.empty(width + 1)
+    # per layer: axis-aligned image or sines layers read per-column tables (the column part of their
+    # arithmetic, which does not depend on the row), filled over the layer's box once for the job
+    table = np.zeros(n_layers, np.bool_)
+    xidx = np.empty((n_layers, width, 3), np.int64)
+    xw = np.empty((n_layers, width, 4))
+    yidx = np.empty(3, np.int64)
+    yw = np.empty(3)
+    for l in range(first, n_layers):
+        sl = samp[i, l]
+        if not active[l] or sl[S_INV + 1] != 0.0 or sl[S_INV + 3] != 0.0 or ints[l, I_MVAL] >= 0:
+            continue
+        kind = ints[l, I_KIND]
+        f = fp[l]
+        if kind == IMAGE:
+            hx = 0.5 * max(f[F_KX] * sl[S_JAC], 1.0)
+            hy = 0.5 * max(f[F_KY] * sl[S_JAC + 1], 1.0)
+            if hx > 1.0 or hy > 1.0:
+                continue
+            w = ints[l, I_W]
+            for c in range(bbox[i, l, 0], bbox[i, l, 1]):
+                u = sl[S_INV] * (c + 0.5) + sl[S_INV + 1] * 0.0 + sl[S_INV + 2]
+                p0, p1 = _box((u - f[F_IX]) * f[F_KX], hx, w)
+                _axis_weights(p0, p1, w, xidx[l, c], xw[l, c])
+                xw[l, c, 3] = p1 - p0
+            table[l] = True
+        elif kind == PATTERN and ints[l, I_PATTERN] == 4:
+            for c in range(bbox[i, l, 0], bbox[i, l, 1]):
+                u = sl[S_INV] * (c + 0.5) + sl[S_INV + 1] * 0.0 + sl[S_INV + 2]
+                xw[l, c, 0] = math.sin(2 * math.pi * (u - f[F_X0]) / f[F_PERIOD])
+            table[l] = True
+    for s in range(g0, g1):
+        y = rows[s]
+        cs, ce = c0s[s], c1s[s]
+        nx = ce - cs
+        pbase = y * width
+        for c in range(nx):
+            lux[c] = base[pbase + cs + c]
+        yc = y + 0.5
+        for l in range(first, n_layers):
+            if not active[l] or y < bbox[i, l, 2] or y >= bbox[i, l, 3]:
+                continue
+            xs = max(cs, bbox[i, l, 0])
+            xe = min(ce, bbox[i, l, 1])
+            if xe <= xs:
+                continue
+            sl = samp[i, l]
+            mod = sl[S_M]
+            kind, pattern, blend = ints[l, I_KIND], ints[l, I_PATTERN], ints[l, I_BLEND]
+            val, h, w, sat = ints[l, I_VAL], ints[l, I_H], ints[l, I_W], ints[l, I_SAT]
+            mval, msat, seed = ints[l, I_MVAL], ints[l, I_MSAT], ints[l, I_SEED]
+            f = fp[l]
+            i00, i01, i02 = sl[S_INV], sl[S_INV + 1], sl[S_INV + 2]
+            i10, i11, i12 = sl[S_INV + 3], sl[S_INV + 4], sl[S_INV + 5]
+            j0, j1 = sl[S_JAC], sl[S_JAC + 1]
+            if ints[l, I_FULL]:
+                for c in range(xe - xs):
+                    cov[c] = 1.0
+            else:
+                _row_coverage(qx[i], qy[i], ints[l, I_POLY0], ints[l, I_POLYN], y, xs, xe, cov, full)
+            over = xs - cs
+            if table[l] and kind == IMAGE:
+                v = i10 * 0.0 + i11 * yc + i12
+                hy = 0.5 * max(f[F_KY] * j1, 1.0)
+                q0, q1 = _box((v - f[F_IY]) * f[F_KY], hy, h)
+                _axis_weights(q0, q1, h, yidx, yw)
+                dy = q1 - q0
+                for c in range(xe - xs):
+                    alpha = cov[c]
+                    if alpha == 0.0 and l > 0:
+                        continue
+                    col = xs + c
+                    total = 0.0
+                    for kj in range(3):
+                        wy = yw[kj]
+                        if wy == 0.0:
+                            continue
+                        r0 = val + yidx[kj] * w
+                        row = 0.0
+                        for ki in range(3):
+                            wx = xw[l, col, ki]
+                            if wx != 0.0:
+                                row += wx * store[r0 + xidx[l, col, ki]]
+                        total += wy * row
+                    src = total / (xw[l, col, 3] * dy) * mod
+                    k = over + c
+                    if l == 0:
+                        lux[k] = src
+                    elif blend == 1:
+                        lux[k] += alpha * src
+                    else:
+                        lux[k] += alpha * (src - lux[k])
+                continue
+            if table[l]:  # sines, axis-aligned
+                v = i10 * 0.0 + i11 * yc + i12
+                sv = f[F_DEPTH] * math.sin(2 * math.pi * (v - f[F_Y0]) / f[F_PERIOD])
+                for c in range(xe - xs):
+                    alpha = cov[c]
+                    if alpha == 0.0 and l > 0:
+                        continue
+                    src = f[F_MEAN] * (1.0 + sv * xw[l, xs + c, 0]) * mod
+                    k = over + c
+                    if l == 0:
+                        lux[k] = src
+                    elif blend == 1:
+                        lux[k] += alpha * src
+                    else:
+                        lux[k] += alpha * (src - lux[k])
+                continue
+            for c in range(xe - xs):
+                alpha = cov[c]
+                if alpha == 0.0 and l > 0:
+                    continue
+                xc = (xs + c) + 0.5
+                u = i00 * xc + i01 * yc + i02
+                v = i10 * xc + i11 * yc + i12
+                if mval >= 0:
+                    kx, ky = f[F_KX], f[F_KY]
+                    hx = 0.5 * max(kx * j0, 1.0)
+                    hy = 0.5 * max(ky * j1, 1.0)
+                    mk = _texel_mean(store, mval, msat, h, w, (u - f[F_IX]) * kx, (v - f[F_IY]) * ky, hx, hy)
+                    alpha = alpha * min(max(mk, 0.0), 1.0)
+                src = _source(kind, pattern, f, seed, store, val, sat, h, w, u, v, j0, j1) * mod
+                k = over + c
+                if l == 0:
+                    lux[k] = src
+                elif blend == 1:
+                    lux[k] += alpha * src
+                else:
+                    lux[k] += alpha * (src - lux[k])
+        o = offs[s]
+        if want_rates:
+            for c in range(nx):
+                rates_out[i, o + c] = np.int64(np.rint(lux[c] * a[o + c] + b[o + c]))
+        else:
+            for c in range(nx):
+                lux_out[i, o + c] = lux[c]
 
 
 @njit(cache=True, parallel=True)
 def _render_parallel(samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s, c1s, offs, a, b,
-                     lux_out, rates_out, want_rates):
+                     lux_out, rates_out, want_rates, groups):
     """The light of each span (row, col0 … col1 − 1, laid out from offset) at each sample: the base,
-    then layers ``first`` … from far to near (see the module notes)."""
-    for job in prange(samp.shape[0] * rows.size):
-        _render_job(job, samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s, c1s, offs, a, b,
-                    lux_out, rates_out, want_rates)
+    then layers ``first`` … from far to near (see the module notes). Work items: a sample and a group
+    of spans (spans ``groups[g]`` … ``groups[g + 1] − 1``)."""
+    n_groups = groups.size - 1
+    for job in prange(samp.shape[0] * n_groups):
+        i = job // n_groups
+        g = job - i * n_groups
+        _render_job(i, groups[g], groups[g + 1], samp, bbox, ints, fp, qx, qy, store, base, first, active, width,
+                    rows, c0s, c1s, offs, a, b, lux_out, rates_out, want_rates)
 
 
 @njit(cache=True)
 def _render_serial(samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s, c1s, offs, a, b,
-                   lux_out, rates_out, want_rates):
+                   lux_out, rates_out, want_rates, groups):
     """:func:`_render_parallel` on one thread (small renders: waking the other threads costs more)."""
-    for job in range(samp.shape[0] * rows.size):
-        _render_job(job, samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s, c1s, offs, a, b,
-                    lux_out, rates_out, want_rates)
+    for i in range(samp.shape[0]):
+        _render_job(i, 0, rows.size, samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s,
+                    c1s, offs, a, b, lux_out, rates_out, want_rates)
 
 
 #: Pixel-samples below which a render runs on one thread (waking the others costs more).
@@ -341,7 +447,13 @@ PARALLEL_WORK = 1 << 15
 def _render(*args):
     samp, rows, c0s, c1s = args[0], args[11], args[12], args[13]
     work = samp.shape[0] * int((c1s - c0s).sum()) if rows.size else 0
-    (_render_parallel if work >= PARALLEL_WORK else _render_serial)(*args)
+    if work < PARALLEL_WORK:
+        _render_serial(*args, np.zeros(2, np.int64))
+        return
+    # a few work items per thread: per sample when there are many samples, else groups of spans
+    per_sample = max(1, -(-4 * get_num_threads() // samp.shape[0]))
+    groups = np.unique(np.linspace(0, rows.size, min(rows.size, per_sample) + 1).round().astype(np.int64))
+    _render_parallel(*args, groups)
 
 
 # ----------------------------------------------------------------------------- the sampler

@@ -347,7 +347,7 @@ def snr_knees_figure(sensor, normal, spread_sensor=None, measured: dict | None =
 
 # ----------------------------------------------------------------------------- seed 003 figure 5
 
-def seed003_fig5(size: int = 16, seed: int = 0, currents_a=None) -> dict:
+def paper003_fig5(size: int = 16, seed: int = 0, currents_a=None) -> dict:
     """Seed 003 Fig. 5 from the model: the plain 4T (a), the lateral-overflow capacitor
     pixel (b) and the conditional-overflow pixel (c), each with its DR from SNR = 1 (E1, E2)
     to its plateau (E3, E4), against the photocurrent. Returns the curves and the DRs."""
@@ -371,7 +371,7 @@ def seed003_fig5(size: int = 16, seed: int = 0, currents_a=None) -> dict:
     return out
 
 
-def seed003_fig5_figure(res: dict):
+def paper003_fig5_figure(res: dict):
     """Output (fraction of its own maximum) against photocurrent, with E_min / E_sat marked."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7.5, 4.6))

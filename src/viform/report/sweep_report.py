@@ -219,8 +219,9 @@ def figure_curves(doc, key: str):
             from matplotlib.ticker import MaxNLocator
 
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # a count (threshold level): no 2.5
-        flat = _floor_span(ax, [_value(r, metric) for r in records])
-        ax.set_title(metric_label(metric) + (f"\nflat: every point within ±{flat:.2g}" if flat is not None else ""),
+        values = [_value(r, metric) for r in records]
+        flat = _floor_span(ax, values)
+        ax.set_title(metric_label(metric) + (f"\n{_flat_text(values, flat)}" if flat is not None else ""),
                      fontsize=9)
         ax.set_xlabel(parameter_label(x_name), fontsize=8)
         ax.tick_params(labelsize=7)
@@ -260,6 +261,14 @@ def _floor_span(ax, values) -> float | None:
         return None
     ax.set_ylim(centre - floor / 2, centre + floor / 2)
     return (hi - lo) / 2
+
+
+def _flat_text(values, half_range: float) -> str:
+    """A panel's note when its values barely vary: the same value everywhere, or the half-range."""
+    v = [x for x in values if math.isfinite(x)]
+    if half_range == 0:
+        return f"the same at every point: {v[0]:.4g}"
+    return f"flat: every point within ±{half_range:.2g} of {(min(v) + max(v)) / 2:.4g}"
 
 
 def _fmt_param(v) -> str:

@@ -53,10 +53,10 @@ from viform.sensors.frame import FramePixelParameters, FrameSensor
 from viform.sensors.gated_ccd import MODES, GatedInterlineCCD, InterlineCCDParameters, interline_ccd_parameters
 from viform.sensors.highspeed import HighSpeedCamera, lux13hs_pixel_parameters
 from viform.sensors.overflow import (
-    SEED003_INTEGRATIONS_S,
+    PAPER003_INTEGRATIONS_S,
     OverflowSensor,
     lofic_pixel_parameters,
-    seed003_pixel_parameters,
+    paper003_pixel_parameters,
 )
 from viform.sensors.parameters import (
     Parameter,
@@ -190,10 +190,10 @@ def frame_entry(name, label, description, pixel: Callable[..., FramePixelParamet
 
 
 def _segmented_entry(name, label, description, fractions, barriers_fw):
-    exposure = presets.SEED001_EXPOSURE_S
+    exposure = presets.PAPER001_EXPOSURE_S
 
     def make(by, h, w):
-        pixel = _with_pixel(presets.seed001_pixel_parameters(), by)
+        pixel = _with_pixel(presets.paper001_pixel_parameters(), by)
         short = by.get("shorthand", {})
         times = [f * exposure for f in fractions]
         if "exposure_s" in short or "first_segment_fraction" in short:
@@ -212,7 +212,7 @@ def _segmented_entry(name, label, description, fractions, barriers_fw):
                                        **{"frame_rate_hz": 60.0, **by.get("camera", {})})
 
     def space():
-        p = presets.seed001_pixel_parameters()
+        p = presets.paper001_pixel_parameters()
         out = {"exposure_s": parameter_for("exposure_s", exposure, "shorthand",
                                         doc="total exposure, s (every segment scaled, ratios kept)")}
         if len(fractions) == 2:
@@ -231,11 +231,11 @@ _INTEGRATIONS = ("long_integration_s", "medium_integration_s", "short_integratio
 
 def _overflow_entry(name, label, description, **camera):
     def make(by, h, w):
-        pixel = _with_pixel(seed003_pixel_parameters(), by)
+        pixel = _with_pixel(paper003_pixel_parameters(), by)
         short = by.get("shorthand", {})
         kw = {**camera, **by.get("camera", {})}
         if short:
-            times = list(SEED003_INTEGRATIONS_S)
+            times = list(PAPER003_INTEGRATIONS_S)
             for i, n in enumerate(_INTEGRATIONS):
                 if n in short:
                     times[i] = float(short[n])
@@ -243,9 +243,9 @@ def _overflow_entry(name, label, description, **camera):
         return OverflowSensor(pixel, height=h, width=w, **kw)
 
     def space():
-        p = seed003_pixel_parameters()
+        p = paper003_pixel_parameters()
         out = {n: parameter_for(n, t, "shorthand", doc="one of the three integrations, s")
-               for n, t in zip(_INTEGRATIONS, SEED003_INTEGRATIONS_S, strict=True)}
+               for n, t in zip(_INTEGRATIONS, PAPER003_INTEGRATIONS_S, strict=True)}
         return merged(out, arguments_of(OverflowSensor, camera), fields_of(p, "pixel"), fields_of(p.optics, "optics"))
 
     return SensorEntry(name, label, description, "overflow", make, space)
@@ -361,8 +361,8 @@ def _gated_entry() -> SensorEntry:
 
 
 def _entries() -> dict[str, SensorEntry]:
-    seed001 = presets.seed001_pixel_parameters
-    seed003_t = sum(SEED003_INTEGRATIONS_S)
+    paper001 = presets.paper001_pixel_parameters
+    paper003_t = sum(PAPER003_INTEGRATIONS_S)
     entries = [
         _spike_entry("spike", "spike camera, Q = 100 e⁻ (spike)",
                      "spike camera of seed 000's worked example: Q = 100 e⁻, 40 kHz, 10 µm pixels at QE 0.7, "
@@ -375,16 +375,16 @@ def _entries() -> dict[str, SensorEntry]:
         frame_entry("cmos", "CMOS 10 ms (cmos)", "conventional global-shutter CMOS, 10 ms exposure at 30 fps",
                      FramePixelParameters, exposure_s=10e-3, frame_rate_hz=30.0),
         frame_entry("seed001-normal", "5T normal mode 130 µs (seed001-normal)",
-                     "seed 001's 5T global-shutter pixel, normal mode, 130 µs exposure at 60 fps", seed001,
-                     exposure_s=presets.SEED001_EXPOSURE_S, frame_rate_hz=60.0),
+                     "seed 001's 5T global-shutter pixel, normal mode, 130 µs exposure at 60 fps", paper001,
+                     exposure_s=presets.PAPER001_EXPOSURE_S, frame_rate_hz=60.0),
         _segmented_entry("seed001-2seg", "segmented, 2 segments (seed001-2seg)",
                          "segmented exposure, two segments (T1:T2 = 5:1, barrier 5/12 of the full well), 130 µs "
-                         "at 60 fps", presets.SEED001_2SEG_FRACTIONS, presets.SEED001_2SEG_BARRIERS_FW),
+                         "at 60 fps", presets.PAPER001_2SEG_FRACTIONS, presets.PAPER001_2SEG_BARRIERS_FW),
         _segmented_entry("seed001-3seg", "segmented, 3 segments (seed001-3seg)",
                          "segmented exposure, three segments (0.74:0.25:0.01, barriers 0.344/0.874 of the full "
-                         "well), 130 µs at 60 fps", presets.SEED001_3SEG_FRACTIONS, presets.SEED001_3SEG_BARRIERS_FW),
+                         "well), 130 µs at 60 fps", presets.PAPER001_3SEG_FRACTIONS, presets.PAPER001_3SEG_BARRIERS_FW),
         frame_entry("seed003-4t", "plain 4T 33 ms (seed003-4t)", "plain 4T APS, 33.33 ms integration at 30 fps",
-                     seed003_pixel_parameters, exposure_s=seed003_t, frame_rate_hz=30.0),
+                     paper003_pixel_parameters, exposure_s=paper003_t, frame_rate_hz=30.0),
         _overflow_entry("seed003-overflow", "conditional overflow (seed003-overflow)",
                         "conditional-overflow pixel, C_F = 500 fF, three integrations (32.8/0.5/0.03 ms) at 30 fps"),
         _overflow_entry("seed003-overflow-ktc", "conditional overflow with kTC noise (seed003-overflow-ktc)",
@@ -394,7 +394,7 @@ def _entries() -> dict[str, SensorEntry]:
                      "lateral-overflow capacitor pixel, C_S = 500 fF read with the photodiode at low gain, "
                      "33.33 ms at 30 fps", lofic_pixel_parameters,
                      design={"lateral_capacitance_f": 500e-15, "temperature_k": 300.0},
-                     exposure_s=seed003_t, frame_rate_hz=30.0),
+                     exposure_s=paper003_t, frame_rate_hz=30.0),
         _highspeed_entry(),
         _gated_entry(),
     ]

@@ -99,7 +99,7 @@ def share_ktc_noise_electrons(c_pd_f: float, c_f_f: float, temperature_k: float 
 
 
 #: Seed 003 §3 integration times: long, medium, short (s), in a 33.33 ms frame.
-SEED003_INTEGRATIONS_S = (32.8e-3, 0.5e-3, 0.03e-3)
+PAPER003_INTEGRATIONS_S = (32.8e-3, 0.5e-3, 0.03e-3)
 
 
 def share_charge_v(v_pd_v, v_cf_v: float, c_pd_f: float, c_f_f: float):
@@ -179,7 +179,7 @@ class PhotodiodeJunction:
 
 
 def junction_segment_boundaries_a(junction: PhotodiodeJunction, c_f_f: float = 500e-15, v_f_v: float = 2.2,
-                                  v_sat_v: float = 0.3, integration_times_s=SEED003_INTEGRATIONS_S) -> dict:
+                                  v_sat_v: float = 0.3, integration_times_s=PAPER003_INTEGRATIONS_S) -> dict:
     """Points B, C, D, E (A) for any junction law: B = Q(VF)/(t1 + t2), C = Q(V_sat)/t1,
     D and E = (Q(V_sat) − Q(V20))/t2 and /t3 with V20 the sharing of V_sat (eq. 1); the 4T's
     saturation I_4T = Q(V_sat)/T. Equal to :func:`segment_boundaries_a` for a linear junction."""
@@ -198,7 +198,7 @@ def overflow_voltages_v(
     v_reset_v: float = 3.3,
     v_f_v: float = 2.2,
     v_sat_v: float = 0.3,
-    integration_times_s=SEED003_INTEGRATIONS_S,
+    integration_times_s=PAPER003_INTEGRATIONS_S,
     dark_current_a: float = 0.0,
 ):
     """Noise-free photodiode voltages (V1, V2, V3) at the end of t1, t2, t3 (seed 003, eqs. 1–6).
@@ -221,7 +221,7 @@ def segment_boundaries_a(
     v_reset_v: float = 3.3,
     v_f_v: float = 2.2,
     v_sat_v: float = 0.3,
-    integration_times_s=SEED003_INTEGRATIONS_S,
+    integration_times_s=PAPER003_INTEGRATIONS_S,
 ) -> dict:
     """Photocurrents (A) at the seed's points B, C, D, E (seed 003, §6, fig. 6), from eqs. 1–6.
 
@@ -244,7 +244,7 @@ def dynamic_range_gain_db(
     v_reset_v: float = 3.3,
     v_f_v: float = 2.2,
     v_sat_v: float = 0.3,
-    integration_times_s=SEED003_INTEGRATIONS_S,
+    integration_times_s=PAPER003_INTEGRATIONS_S,
 ) -> float:
     """Noise-free DR gain over the plain 4T APS, 20·lg(E / I_4T), dB (seed 003, §6, eqs. 3–6).
 
@@ -321,7 +321,7 @@ class OverflowSensor(FrameSensor):
     def __init__(
         self,
         parameters: FramePixelParameters | None = None,
-        integration_times_s=SEED003_INTEGRATIONS_S,
+        integration_times_s=PAPER003_INTEGRATIONS_S,
         overflow_capacitance_f: float = 500e-15,
         v_f_v: float = 2.2,
         v_reset_v: float = 3.3,
@@ -341,7 +341,7 @@ class OverflowSensor(FrameSensor):
         junction_grading_m: float = 0.0,
         junction_built_in_v: float = 0.7,
     ):
-        parameters = parameters or seed003_pixel_parameters()
+        parameters = parameters or paper003_pixel_parameters()
         self.comparator_offset_v = check_non_negative("comparator_offset_v", comparator_offset_v)
         self.comparator_noise_v = check_non_negative("comparator_noise_v", comparator_noise_v)
         self.overflow_capacitance_spread = check_range("overflow_capacitance_spread", overflow_capacitance_spread,
@@ -624,7 +624,7 @@ class OverflowSensor(FrameSensor):
         return d
 
 
-def seed003_pixel_parameters(**overrides) -> FramePixelParameters:
+def paper003_pixel_parameters(**overrides) -> FramePixelParameters:
     """The seed 003 pixel: 25 µm pitch, 20 × 20 µm photodiode, 0.35 µm CMOS (seed 003, §1).
 
     The seed gives no photodiode capacitance; C_PD is set so that a plain 4T APS
@@ -657,7 +657,7 @@ def lofic_pixel_parameters(lateral_capacitance_f: float = 500e-15, temperature_k
                            **overrides) -> FramePixelParameters:
     """The lateral-overflow-integration-capacitor (LOFIC) pixel of seed 003 Fig. 5(b) (DR_b).
 
-    Same photodiode and readout chain as :func:`seed003_pixel_parameters` (C_PD = 88.9 fF,
+    Same photodiode and readout chain as :func:`paper003_pixel_parameters` (C_PD = 88.9 fF,
     3.0 V swing, 60 e⁻ read noise at C_PD = 108 µV), plus an in-pixel C_S (default 500 fF,
     the seed's C_F) that collects the overflow during the whole integration; PD + C_S are
     read together at the low conversion gain q/(C_PD + C_S):
@@ -670,7 +670,7 @@ def lofic_pixel_parameters(lateral_capacitance_f: float = 500e-15, temperature_k
     So the LOFIC's low end E2 sits ≈ 10 × above the 4T's E1 while its top end rises 6.6 ×:
     the compressed low-light sensitivity and SNR of the seed's DR_b.
     """
-    base = seed003_pixel_parameters()
+    base = paper003_pixel_parameters()
     c_pd = ELEMENTARY_CHARGE_C / base.conversion_gain_v_per_e
     c_s = check_positive("lateral_capacitance_f", lateral_capacitance_f)
     c_tot = c_pd + c_s

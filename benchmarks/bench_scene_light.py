@@ -1,0 +1,203 @@
+"""Scene light against the pixels: described and built-in scenes end to end, per CPU-second, in one process.
+
+Configuration (issues 35 §6 and 38 §2): 400×250 pixels, 40 kHz clock, Q = 100 e⁻, exact photon
+statistics, packed ``.dat`` bits (:meth:`SpikeSensor.simulate_packed`). Scenes:
+
+* ``four-images``: a described scene (below) — a static photograph behind four moving image layers
+  (scikit-image's bundled photographs: an ellipse translating, a rectangle rotating while it
+  translates, a rectangle growing, a polygon on a spline path); 1.4 lux on average, firing ≈ 0.1 a tick;
+* the built-in ``dilemma`` and ``multi-object`` scenes (their code, at the default light sampling).
+
+For each scene, in the same process:
+
+* viform end to end at the default light sampling ("auto": the described scene's hold S is printed)
+  and, for the described scene, at S = 1 and at the S the bound allows;
+* the constant-light kernel: the same sensor on a still image of the scene's mean light (same firing);
+* the noise-free reference: the scene's own NumPy light per tick (``reference_lux`` for a described
+  scene, ``illuminance_lux`` otherwise), electrons per tick in float32, and the branch-free loop
+  ``acc += e; fired = acc >= Q; acc -= fired·Q; packbits(fired)`` — the best plain loop of issue 38;
+  and the same loop on a constant frame (no light) to show the loop's own cost.
+
+Pixel-ticks per CPU-second (process time of all threads) and the ratios; the goals: the described
+scene ≥ 0.5× the constant-light kernel and ≥ 1× the noise-free reference, the built-in scenes ≥ 1×
+the reference. Each row also prints the largest relative difference between the light the simulator
+used and the scene's NumPy reference at a few instants (an independent computation: the goal is
+≤ 1e-6), and peak NumPy memory of the end-to-end run (tracemalloc). Load average before and after.
+Run: ``python benchmarks/bench_scene_light.py [--ticks 2000] [--reference-ticks 200]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+import tracemalloc
+
+import numpy as np
+
+from viform.light.catalog import builtin_scene
+from viform.light.description import load_description
+from viform.light.layered import DescribedScene
+from viform.light.scenes import StillScene
+from viform.sensors.spike import SpikeSensor, simulation_threads
+
+HEIGHT, WIDTH, CLOCK_HZ, Q = 250, 400, 40_000.0, 100.0
+
+
+def four_images_description() -> dict:
+    """The benchmark's described scene: a static photograph and four moving image layers."""
+    def image(name, size, lux=(0.45, 4.5)):
+        return {"image": {"path": f"skimage:{name}", "lux": list(lux), "size_px": list(size)}}
+
+    return {
+        "viform_scene": 1, "name": "four-images",
+        "summary": "A static photograph behind four moving photographs (benchmark of the compiled light)",
+        "canvas": {"width_px": WIDTH, "height_px": HEIGHT, "duration_s": 0.05},
+        "background": {"source": image("gravel", (WIDTH, HEIGHT), (0.75, 3.75)), "position_px": [200.0, 125.0]},
+        "layers": [
+            {"name": "astronaut", "source": image("astronaut", (90, 90)),
+             "shape": {"ellipse": {"width_px": 80, "height_px": 86}},
+             "position_px": [70.0, 70.0], "motion": {"velocity": {"px_per_s": [900.0, 300.0]}}},
+            {"name": "cat", "source": image("chelsea", (96, 64)), "position_px": [300.0, 80.0],
+             "motion": {"velocity": {"px_per_s": [-700.0, 200.0], "rad_per_s": 6.0}}},
+            {"name": "coffee", "source": image("coffee", (72, 48)), "position_px": [120.0, 180.0],
+             "motion": {"velocity": {"px_per_s": [500.0, -150.0], "scale_per_s": 4.0}}},
+            {"name": "rocket", "source": image("rocket", (80, 54)),
+             "shape": {"polygon": {"points_px": [[-40, -27], [40, -20], [30, 27], [-36, 20]]}},
+             "position_px": [320.0, 190.0],
+             "motion": {"keyframes": {"interpolation": "spline", "keys": [
+                 {"t_s": 0.0, "position_px": [320.0, 190.0]}, {"t_s": 0.02, "position_px": [280.0, 170.0]},
+                 {"t_s": 0.04, "position_px": [250.0, 195.0], "angle_rad": 0.3},
+                 {"t_s": 0.06, "position_px": [210.0, 180.0]}]}}},
+        ],
+    }
+
+
+def cpu_time(fn) -> float:
+    start = time.process_time()
+    fn()
+    return time.process_time() - start
+
+
+def best(fn, repeats: int) -> float:
+    return min(cpu_time(fn) for _ in range(repeats))
+
+
+def end_to_end(sensor, scene, n_ticks, sample="auto"):
+    for _ in sensor.simulate_packed(scene, n_ticks / CLOCK_HZ, seed=1, light_sample_ticks=sample):
+        pass
+
+
+def reference_loop(sensor, light, n_ticks: int, seed: int = 0) -> None:
+    """The noise-free reference: light per tick by ``light(t)`` (lux, (H, W)), best plain loop, packed bits."""
+    rng = np.random.default_rng(seed)
+    factor = sensor.electrons_per_tick(np.ones((HEIGHT, WIDTH)))
+    acc = rng.uniform(0.0, Q, (HEIGHT, WIDTH)).astype(np.float32)  # the stationary phase
+    e = np.empty((HEIGHT, WIDTH), np.float32)
+    q = np.float32(Q)
+    for k in range(n_ticks):
+        np.multiply(light((k + 0.5) / CLOCK_HZ), factor, out=e, casting="same_kind")
+        acc += e
+        fired = acc >= q
+        acc -= fired * q
+        np.packbits(fired, bitorder="little")
+
+
+def light_error(scene, times) -> float:
+    """Largest |simulator's light − NumPy reference| / reference over ``times``."""
+    compiled = scene.compiled_light()
+    reference = scene.reference_lux if isinstance(scene, DescribedScene) else scene.illuminance_lux
+    if compiled is None:  # the simulator uses the scene's NumPy light itself: nothing to compare
+        return float("nan")
+    if compiled.kind == "sampled":
+        got = compiled.sampler.frames(times)
+    else:
+        from viform.light.compiled import evaluate
+
+        got = evaluate(compiled, times)
+    worst = 0.0
+    for g, t in zip(got, times, strict=True):
+        ref = reference(float(t))
+        worst = max(worst, float(np.max(np.abs(g - ref) / np.maximum(np.abs(ref), 1e-300))))
+    return worst
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ticks", type=int, default=2000, help="ticks simulated end to end")
+    parser.add_argument("--reference-ticks", type=int, default=200, help="ticks of the noise-free reference")
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--scenes", default="four-images,dilemma,multi-object")
+    args = parser.parse_args(argv)
+    sensor = SpikeSensor(threshold_electrons=Q, clock_hz=CLOCK_HZ)
+    pixels = HEIGHT * WIDTH
+    print(f"{HEIGHT}x{WIDTH} px, {CLOCK_HZ:g} Hz, Q = {Q:g} e-, exact; {args.ticks} ticks end to end, "
+          f"{args.reference_ticks} for the reference; numba threads {simulation_threads()} on {os.cpu_count()} "
+          f"CPUs; load average (1, 5, 15 min) {load()}")
+    print(f"{'scene':>13} {'S':>3} {'viform':>8} {'kernel':>8} {'ref':>8} {'loop':>8} {'÷kernel':>8} {'×ref':>6} "
+          f"{'firing':>7} {'light err':>9} {'peak MB':>8}")
+    print(f"{'':>13} {'':>3} {'Mpx-tick per CPU-s':>35}")
+    rows = []
+    for name in args.scenes.split(","):
+        if name == "four-images":
+            scene = DescribedScene(load_description(four_images_description()))
+            reference_light = scene.reference_lux
+        else:
+            scene = builtin_scene(name, HEIGHT, WIDTH)
+            reference_light = scene.illuminance_lux
+        duration = args.ticks / CLOCK_HZ
+        auto = sensor.light_sample_ticks_for(scene, "auto", duration)
+        samples = [auto] if name != "four-images" else sorted({auto, 1})
+        times = (np.arange(args.ticks, step=max(1, args.ticks // 8)) + 0.5) / CLOCK_HZ
+        err = light_error(scene, times[::2])
+        lux = scene.illuminance_lux_many(times)
+        still = StillScene(lux.mean(axis=0))
+        firing = float(sensor.expected_firing_rate_per_tick(lux).mean())
+        end_to_end(sensor, still, 64)
+        kernel = args.ticks * pixels / best(lambda s=still: end_to_end(sensor, s, args.ticks), args.repeats)
+        ref = args.reference_ticks * pixels / best(
+            lambda light=reference_light: reference_loop(sensor, light, args.reference_ticks), args.repeats)
+        frame = lux[0]
+        loop = args.reference_ticks * pixels / best(
+            lambda f=frame: reference_loop(sensor, lambda t, f=f: f, args.reference_ticks), args.repeats)
+        for sample in samples:
+            end_to_end(sensor, scene, 64, sample)  # compile, and the scene's one-off set-up
+            tracemalloc.start()
+            end_to_end(sensor, scene, args.ticks, sample)
+            peak = tracemalloc.get_traced_memory()[1] / 1e6
+            tracemalloc.stop()
+            rate = args.ticks * pixels / best(lambda s=scene, k=sample: end_to_end(sensor, s, args.ticks, k),
+                                              args.repeats)
+            row = {"scene": name, "light_sample_ticks": sample, "auto": sample == auto, "per_cpu_s": rate,
+                   "kernel_per_cpu_s": kernel, "reference_per_cpu_s": ref, "loop_per_cpu_s": loop,
+                   "ratio_kernel": rate / kernel, "ratio_reference": rate / ref, "firing": firing,
+                   "light_error": err, "peak_mb": peak}
+            rows.append(row)
+            err_text = "numpy" if np.isnan(err) else f"{err:.1e}"
+            print(f"{name:>13} {sample:>3} {rate / 1e6:>8.1f} {kernel / 1e6:>8.1f} {ref / 1e6:>8.1f} "
+                  f"{loop / 1e6:>8.1f} {rate / kernel:>8.2f} {rate / ref:>6.2f} {firing:>7.3f} {err_text:>9} "
+                  f"{peak:>8.1f}" + ("  (auto)" if sample == auto else ""), flush=True)
+    print(f"load average after (1, 5, 15 min): {load()}. S: ticks per light sample; ÷kernel: over the "
+          "constant-light kernel on the scene's mean light; ×ref: over the noise-free reference with the scene's "
+          "NumPy light per tick; loop: that reference on a constant frame (the loop alone); light err: simulator's "
+          "light vs the NumPy reference, max relative ('numpy': the simulator uses the scene's NumPy light); "
+          "peak MB: NumPy allocations (tracemalloc; compiled code's scratch is not counted).")
+    for row in rows:
+        if not row["auto"]:
+            continue
+        goals = [("×ref ≥ 1", row["ratio_reference"] >= 1.0)]
+        if row["scene"] == "four-images":
+            goals.insert(0, ("÷kernel ≥ 0.5", row["ratio_kernel"] >= 0.5))
+        if not np.isnan(row["light_error"]):
+            goals.append(("light err ≤ 1e-6", row["light_error"] <= 1e-6))
+        verdicts = [f"{what} {'met' if ok else 'NOT met'}" for what, ok in goals]
+        print(f"goals, {row['scene']} at S = {row['light_sample_ticks']}: " + "; ".join(verdicts))
+    return rows
+
+
+def load() -> str:
+    return ", ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+if __name__ == "__main__":
+    main()
