@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from viform.coding.aer_file import encode_source, open_coded
-from viform.light.scenes import TranslatingScene
-from viform.sensors.spike import SpikeSensor
+from viform.coding import encode_source, open_coded
+from viform.light import TranslatingScene
+from viform.sensors import SpikeSensor
 
 out = Path(sys.argv[1] if len(sys.argv) > 1 else ".")
 stream = SpikeSensor().capture(TranslatingScene(height=64, width=96, velocity_px_per_s=(500.0, 0.0)), 0.02, seed=2)

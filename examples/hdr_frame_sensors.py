@@ -7,8 +7,8 @@ Run: ``python examples/hdr_frame_sensors.py``.
 
 import numpy as np
 
-from viform.light.scenes import HDRScene
-from viform.sensors.catalog import make_sensor
+from viform.light import HDRScene
+from viform.sensors import make_sensor
 
 scene = HDRScene(height=32, width=64, min_lux=0.01, decades=6.0)  # 0.01 … 10,000 lux, left to right
 truth_lux = scene.illuminance_lux(0.0)

@@ -3,7 +3,7 @@
 Run: ``python examples/highspeed_camera.py``.
 """
 
-from viform.isp.link import link_plan
+from viform.isp import link_plan
 from viform.sensors.highspeed_timing import lux13hs_timing
 
 timing = lux13hs_timing("reduced")  # 4 pixels per clock per row, top and bottom readout

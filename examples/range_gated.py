@@ -4,9 +4,9 @@ in-buffer accumulation of 20 laser pulses. Reflectors inside the gate stand out;
 Run: ``python examples/range_gated.py``.
 """
 
-from viform.light.active import field_test_scene
+from viform.light import field_test_scene
 from viform.measure.gated_metrics import expected_cnr
-from viform.sensors.gated_ccd import GatedInterlineCCD
+from viform.sensors import GatedInterlineCCD
 
 scene = field_test_scene(ambient_lux=1e5, visibility_m=20e3)  # sunny day, clear air
 ccd = GatedInterlineCCD(pulses=20, gate_range_m=150.0, mode="accumulate", frame_rate_hz=25.0)

@@ -12,8 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from viform.imaging import accumulation_image, interval_image
-from viform.light.scenes import TranslatingScene
-from viform.sensors.spike import SpikeSensor
+from viform.light import TranslatingScene
+from viform.sensors import SpikeSensor
 
 out = Path(sys.argv[1] if len(sys.argv) > 1 else ".")
 scene = TranslatingScene(height=120, width=200, velocity_px_per_s=(2000.0, 0.0), min_lux=0.25, max_lux=2.0)

@@ -40,7 +40,15 @@ class UnverifiedDataWarning(ViformWarning):
 
 def size_text(height: int, width: int, unit: str = "px") -> str:
     """An image size as viform prints it everywhere: width × height, as cameras are quoted
-    (``size_text(250, 400)`` is ``'400×250 px'``); ``unit=""`` leaves the unit off."""
+    (``size_text(250, 400)`` is ``'400×250 px'``); ``unit=""`` leaves the unit off.
+
+    Examples
+    --------
+    >>> size_text(250, 400)
+    '400×250 px'
+    >>> size_text(250, 400, unit="")
+    '400×250'
+    """
     return f"{width}×{height}" + (f" {unit}" if unit else "")
 
 

@@ -273,6 +273,38 @@ def encode_source(source: SpikeSource, path, mode: str = "strict", *, k: float |
     typical stream, up to 50 % where every pixel fires every tick (``benchmarks/bench_coding.py --corpus``).
 
     ``version`` 1 writes the older column layout (kept so that old readers can be served).
+
+    Parameters
+    ----------
+    source : SpikeSource
+        The stream to code.
+    path : str or Path
+        The ``.vfc`` file to write (atomically).
+    mode : {"strict", "statistical", "intensity"}
+        The repeat rule (:class:`~viform.coding.first_spike.CodingParameters`); strict is lossless.
+    k : float, optional
+        Tolerance factor of the statistical and intensity modes.
+    threshold_electrons : float, optional
+        Q, e⁻, for the tolerance (default: the source's).
+    slack_ticks : int
+        Extra tolerance, ticks.
+    segment_ticks : int, optional
+        Segment length, ticks (default: by the stream's size, :func:`~viform.coding.vfc_common.default_segment_ticks`).
+    block_ticks : int
+        Ticks read from ``source`` at a time.
+    level : int
+        zstd compression level of the versions that use zstd.
+    progress : bool
+        Show a progress bar.
+    version : int
+        File format version to write (1 to 5).
+    fast : bool
+        Version 5, strict: code every band with the interval model only.
+
+    Returns
+    -------
+    dict
+        ``path``, ``mode``, ``bytes``, ``raw_bytes``, ``ratio_vs_raw``, ``spikes``, ``segments``.
     """
     from viform.coding.first_spike import DEFAULT_K, DEFAULT_SEGMENT_TICKS
 
@@ -614,12 +646,34 @@ class CodedFile(SpikeSource):
 
 
 def open_coded(path) -> CodedFile:
-    """Open a ``.vfc`` file as a :class:`SpikeSource`."""
+    """Open a ``.vfc`` file as a :class:`SpikeSource`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.vfc`` file.
+
+    Returns
+    -------
+    CodedFile
+        The stream, decoded segment by segment as it is read.
+    """
     return CodedFile(path)
 
 
 def is_coded_file(path) -> bool:
-    """True when ``path`` starts with the ``.vfc`` magic number."""
+    """True when ``path`` starts with the ``.vfc`` magic number.
+
+    Parameters
+    ----------
+    path : str or Path
+        Any file.
+
+    Returns
+    -------
+    bool
+        Whether it is a ``.vfc`` file (by content, not by name).
+    """
     try:
         with open(path, "rb") as f:
             return f.read(len(MAGIC)) == MAGIC
@@ -628,7 +682,19 @@ def is_coded_file(path) -> bool:
 
 
 def describe_coded_file(path) -> dict:
-    """Summary of a ``.vfc`` file for ``viform info`` (header, size, ratio; every checksum checked, no decode)."""
+    """Summary of a ``.vfc`` file for ``viform info`` (header, size, ratio; every checksum checked, no decode).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.vfc`` file.
+
+    Returns
+    -------
+    dict
+        Size (height, width, ticks, clock, duration), coding settings, spike count, file and raw bytes,
+        compression ratio and bits per spike.
+    """
     cf = CodedFile(path)
     _check_segment_crcs(cf)
     h = cf.header
@@ -656,6 +722,16 @@ def verify_coded_file(path) -> dict:
 
     Returns what was checked (for ``viform verify``); damage raises :class:`ViformError` naming the
     byte offset and what is wrong.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.vfc`` file.
+
+    Returns
+    -------
+    dict
+        ``format_version``, ``mode``, ``segments``, ``n_ticks``, ``spike_count`` and ``checks``.
     """
     cf = CodedFile(path)
     spikes = cf.verify()

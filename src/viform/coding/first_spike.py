@@ -506,7 +506,22 @@ _ERRORS = {1: "negative or inconsistent repeat count/span", 2: "repeats before a
 # ---------------------------------------------------------------------------- conveniences
 
 def encode_array(spikes, params: CodingParameters | None = None, block_ticks: int = 1024) -> list[Segment]:
-    """First-spike segments of an in-memory bool array (T, H, W) or (T, P)."""
+    """First-spike segments of an in-memory bool array (T, H, W) or (T, P).
+
+    Parameters
+    ----------
+    spikes : ndarray of bool (T, H, W) or (T, P)
+        One frame of spikes per tick.
+    params : CodingParameters, optional
+        Mode and tolerances (default: strict, lossless).
+    block_ticks : int
+        Ticks fed to the encoder at a time.
+
+    Returns
+    -------
+    list of Segment
+        The coded segments, in time order.
+    """
     spikes = np.asarray(spikes)
     params = params or CodingParameters()
     enc = FirstSpikeEncoder(int(np.prod(spikes.shape[1:])), params)
@@ -517,7 +532,20 @@ def encode_array(spikes, params: CodingParameters | None = None, block_ticks: in
 
 
 def decode_segments(segments, shape) -> np.ndarray:
-    """Bool array of ``shape`` (T, H, W) or (T, P) regenerated from segments."""
+    """Bool array of ``shape`` (T, H, W) or (T, P) regenerated from segments.
+
+    Parameters
+    ----------
+    segments : sequence of Segment
+        Segments of :func:`encode_array` (or a coded file).
+    shape : tuple of int
+        (T, H, W) or (T, P) of the array to regenerate.
+
+    Returns
+    -------
+    ndarray of bool
+        The spikes; in strict mode, bit-identical to the coded array.
+    """
     n_pixels = int(np.prod(shape[1:]))
     dec = FirstSpikeDecoder(n_pixels)
     out = np.zeros((shape[0], n_pixels), bool)
@@ -534,6 +562,26 @@ def first_spikes(spikes, mode: str = "strict", *, k: float = DEFAULT_K, threshol
     ``spikes`` is a bool array (T, H, W) (or (T, W) for one row) or a SpikeSource. t is the
     tick of the first spike, τ its width in ticks (for a pixel's first spike: t + 1, the
     interval from the start of the stream).
+
+    Parameters
+    ----------
+    spikes : ndarray of bool or SpikeSource
+        The stream.
+    mode : {"strict", "statistical", "intensity"}
+        The repeat rule (:class:`CodingParameters`).
+    k : float
+        Tolerance factor of the repeat rule, |Δτ| ≤ k·τ/√Q.
+    threshold_electrons : float, optional
+        Q, e⁻, used for the tolerance; required for the statistical mode.
+    slack_ticks : int
+        Extra tolerance, ticks, added to k·τ/√Q.
+    segment_ticks : int
+        Segment length, ticks.
+
+    Returns
+    -------
+    ndarray of QUAD_DTYPE
+        Fields ``i``, ``j`` (row, column), ``t`` (tick) and ``tau`` (width, ticks).
 
     Examples
     --------

@@ -128,6 +128,23 @@ def run_highspeed(scene: Scene, config: HighSpeedConfig | None = None, progress=
     the timing, the link and the buffer. ``progress(1)`` is called after each sensor frame.
     ``camera`` (e.g. the catalogue's ``highspeed`` with settings) replaces the sensor that
     ``config``'s sensor fields describe; ``config`` still gives the frames, seed, link and ISP.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene, lux.
+    config : HighSpeedConfig, optional
+        Sensor, frames, seed, link and ISP settings (default: the seed's camera).
+    progress : callable, optional
+        Called with 1 after each sensor frame.
+    camera : HighSpeedCamera, optional
+        The sensor to use instead of the one ``config`` describes.
+
+    Returns
+    -------
+    HighSpeedResult
+        Every frame (8-bit), its exposure and meter reading, the frames sent over the link, the
+        timing and the link plan.
     """
     cfg = config or HighSpeedConfig()
     camera = camera if camera is not None else cfg.camera()
@@ -146,6 +163,24 @@ def process_frames(stack: FrameStack, camera: HighSpeedCamera, config: HighSpeed
 
     ``config`` gives the link, sampling and equalization settings (its sensor settings are
     ``camera``'s); ``scene`` is recorded in the result's ``config``.
+
+    Parameters
+    ----------
+    stack : FrameStack
+        The sensor's frames (``camera.capture``).
+    camera : HighSpeedCamera
+        The camera that took them.
+    config : HighSpeedConfig, optional
+        Link, sampling and equalization settings.
+    scene : Scene, optional
+        The scene, recorded in the result.
+    plan : dict, optional
+        A :func:`~viform.isp.link.link_plan` (default: computed from ``camera`` and ``config``).
+
+    Returns
+    -------
+    HighSpeedResult
+        The pipeline's outputs.
     """
     cfg = config or HighSpeedConfig()
     window = camera.window

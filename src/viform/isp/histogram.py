@@ -71,7 +71,27 @@ def histogram_counter(gray8, pixels_per_clock: int = 8, counter_bits: int = 20,
 
 
 def equalization_lut_float(hist) -> np.ndarray:
-    """Seed eq. (3) in floating point: t(k) = c(k) · 255 / N (float64, not rounded)."""
+    """Seed eq. (3) in floating point: t(k) = c(k) · 255 / N (float64, not rounded).
+
+    Parameters
+    ----------
+    hist : array_like of int (256,)
+        Pixel count per gray level.
+
+    Returns
+    -------
+    ndarray of float64 (256,)
+        Output gray level t(k) per input level k.
+
+    Examples
+    --------
+    Two gray levels holding half the pixels each:
+
+    >>> hist = np.zeros(256, int); hist[[10, 200]] = 50
+    >>> lut = equalization_lut_float(hist)
+    >>> [round(float(t), 9) for t in lut[[10, 199, 200]]]
+    [127.5, 127.5, 255.0]
+    """
     hist = np.asarray(hist, dtype=np.int64)
     n = int(hist.sum())
     if n < 1:
@@ -115,7 +135,20 @@ def shift_map(cdf, n_pixels: int, compensate: bool = True) -> np.ndarray:
 
 
 def equalization_lut_shift(hist, compensate: bool = True) -> np.ndarray:
-    """Seed eq. (3) by shifts, (E1): lookup table (uint8) from a 256-bin histogram."""
+    """Seed eq. (3) by shifts, (E1): lookup table (uint8) from a 256-bin histogram.
+
+    Parameters
+    ----------
+    hist : array_like of int (256,)
+        Pixel count per gray level.
+    compensate : bool
+        Add the seed's compensating shift (c >> 15 for 1280 × 720).
+
+    Returns
+    -------
+    ndarray of uint8 (256,)
+        Output gray level per input level.
+    """
     hist = np.asarray(hist, dtype=np.int64)
     n = int(hist.sum())
     if n < 1:
@@ -145,7 +178,20 @@ def shift_error(n_pixels: int = 921_600) -> dict:
 
 
 def equalize(gray8, lut) -> np.ndarray:
-    """Apply a 256-entry lookup table to an 8-bit image."""
+    """Apply a 256-entry lookup table to an 8-bit image.
+
+    Parameters
+    ----------
+    gray8 : ndarray of uint8
+        The image.
+    lut : array_like (256,)
+        Output level per input level (rounded and clipped to 0–255).
+
+    Returns
+    -------
+    ndarray of uint8
+        The image mapped through ``lut``.
+    """
     lut = np.asarray(lut)
     if lut.shape != (LEVELS,):
         raise ViformError(f"lut must have 256 entries; got shape {lut.shape}")

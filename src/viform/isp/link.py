@@ -157,10 +157,40 @@ def choose_decimation(sensor_rate_hz: float, link_rate_hz: float, *, max_decimat
     1 666.7 fps over a 555.4 fps link: strictly 1 666.7 / 3 = 555.6 fps is 0.03 % too fast,
     and the ring absorbs the difference for ≈ 83 minutes.
 
+    Parameters
+    ----------
+    sensor_rate_hz : float
+        Sensor frame rate, Hz.
+    link_rate_hz : float
+        Frames per second the link carries, Hz.
+    max_decimation : int
+        Largest N tried.
+    buffer_frames : int, optional
+        Frames the ring holds (none: the strict condition).
+    sustain_s : float, optional
+        Recording length the ring must absorb, s.
+    interface : str
+        The link's name, for the error message.
+
+    Returns
+    -------
+    int
+        N: 1 frame in N is sent.
+
     Raises
     ------
     ViformError
         When even ``max_decimation`` does not fit (the message names ``interface``).
+
+    Examples
+    --------
+    The seed's camera: 1 666.7 fps over CameraLink Full (555.4 fps), with and without the 2 GB ring
+    (2 330 frames) over an hour:
+
+    >>> choose_decimation(1666.7, 555.4)
+    4
+    >>> choose_decimation(1666.7, 555.4, buffer_frames=2330, sustain_s=3600.0)
+    3
     """
     sensor_rate_hz = check_positive("sensor_rate_hz", sensor_rate_hz)
     link_rate_hz = check_positive("link_rate_hz", link_rate_hz)
@@ -321,7 +351,34 @@ class RingBuffer:
 def link_plan(sensor_rate_hz: float, height: int, width: int, interface: str = "cameralink",
               bits_per_pixel: int = 8, decimation: int | None = None, max_decimation: int = 64,
               buffer: DDRBuffer | None = None, sustain_s: float = 3600.0) -> dict:
-    """Link rate, decimation, ring size and the overrun time for one configuration."""
+    """Link rate, decimation, ring size and the overrun time for one configuration.
+
+    Parameters
+    ----------
+    sensor_rate_hz : float
+        Sensor frame rate, Hz.
+    height, width : int
+        Frame size, pixels.
+    interface : str
+        A link of :data:`INTERFACES` (``"cameralink"``, ``"usb3"``, ``"gige"`` ...).
+    bits_per_pixel : int
+        Bits per pixel sent.
+    decimation : int, optional
+        1 frame in N sent (default: the smallest that fits, :func:`choose_decimation`).
+    max_decimation : int
+        Largest N tried.
+    buffer : DDRBuffer, optional
+        The frame ring (default: the seed's 2 GB DDR4).
+    sustain_s : float
+        Recording length the ring must absorb, s.
+
+    Returns
+    -------
+    dict
+        ``link_max_frame_rate_hz``, ``decimation`` (strict and with the buffer),
+        ``transmitted_frame_rate_hz``, ``buffer_capacity_frames``, ``buffer_record_s``, the overrun
+        time and the link's description.
+    """
     link = get_interface(interface)
     buffer = buffer or DDRBuffer()
     link_rate = link.max_frame_rate_hz(height, width, bits_per_pixel)

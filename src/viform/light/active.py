@@ -521,6 +521,28 @@ def field_test_scene(
     The background (vegetation/ground, ρ = 0.3 at 905 nm) is put far behind the gate so
     that only the reflectors can appear; clear air (20 km visibility) and sunny-day ambient
     light by default.
+
+    Parameters
+    ----------
+    height, width : int
+        Size, pixels.
+    ranges_m : sequence of float
+        Range of each retroreflector, m.
+    background_range_m : float
+        Range of the background, m.
+    background_reflectance : float
+        Lambertian reflectance of the background at 905 nm, in [0, 1].
+    ambient_lux : float
+        Ambient (solar) illuminance, lux.
+    visibility_m : float
+        Meteorological visibility of the air, m.
+    retro : dict, optional
+        Overrides of the retroreflectors' :class:`PointRetroreflector` fields.
+
+    Returns
+    -------
+    ActiveScene
+        The scene, for :class:`~viform.sensors.GatedInterlineCCD`.
     """
     check_int("height", height, 8)
     check_int("width", width, 8)
@@ -554,6 +576,26 @@ def fog_scene(
 
     Panels are square, ~1.2 m wide at their range; the rest is a Lambertian background
     (ρ = 0.3) at ``background_range_m``; the fog fills the space in front.
+
+    Parameters
+    ----------
+    height, width : int
+        Size, pixels.
+    visibility_m : float
+        Meteorological visibility in the fog, m.
+    ambient_lux : float
+        Ambient illuminance, lux (night by default).
+    sign_ranges_m : sequence of float
+        Range of each sign panel, m.
+    sign_retro_per_sr : float
+        Coefficient of retroreflection R_A of the sheeting, sr⁻¹ (= cd lx⁻¹ m⁻²).
+    background_range_m : float
+        Range of the background, m.
+
+    Returns
+    -------
+    ActiveScene
+        The scene, for :class:`~viform.sensors.GatedInterlineCCD`.
     """
     check_int("height", height, 8)
     check_int("width", width, 8)
@@ -603,6 +645,26 @@ def depth_scene(
     0.027 e⁻ per pulse at 240 m, below the 12 e⁻ read noise even after 291 pulses (the most
     that fit a 25 Hz frame); at 45–60 m it gives ≈ 0.5 e⁻ per pulse. Retroreflectors (the
     seed's targets) are visible much farther.
+
+    Parameters
+    ----------
+    height, width : int
+        Size, pixels.
+    camera_height_m : float
+        Height of the camera above the ground, m.
+    near_ground_m : float
+        Range of the ground seen by the bottom row, m.
+    ambient_lux : float
+        Ambient illuminance, lux.
+    visibility_m : float
+        Meteorological visibility of the air, m.
+    ifov_rad : float, optional
+        Angle one pixel sees, rad (default: the gated camera's lens and pitch).
+
+    Returns
+    -------
+    ActiveScene
+        The scene, with a range per pixel.
     """
     check_int("height", height, 16)
     check_int("width", width, 16)

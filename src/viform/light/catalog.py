@@ -210,7 +210,29 @@ def entry_settings(name: str, settings: dict | None, where: str = "scene setting
 
 
 def builtin_scene(name: str, height: int = 250, width: int = 400, **kw) -> Scene:
-    """A built-in synthetic scene by name (see :data:`BUILTIN_SCENES`)."""
+    """A built-in synthetic scene by name (see :data:`BUILTIN_SCENES`).
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`BUILTIN_SCENES` (``"dilemma"``, ``"moving-edge"``, ``"multi-object"`` ...).
+    height, width : int
+        Size of the scene, pixels.
+    **kw
+        The scene's own parameters (see :func:`entry_settings`), e.g. ``velocity_px_per_s``.
+
+    Returns
+    -------
+    Scene
+        The scene, with ``name`` and ``builtin_spec`` recorded so that a capture's metadata can remake
+        it (:func:`scene_from_description`).
+
+    Examples
+    --------
+    >>> scene = builtin_scene("dilemma", height=32, width=48)
+    >>> type(scene).__name__, scene.shape, scene.name
+    ('DilemmaScene', (32, 48), 'dilemma')
+    """
     check_choice("scene", name, tuple(BUILTIN_SCENES))
     scene = BUILTIN_SCENES[name](height=height, width=width, **kw)
     scene.name = name  # metadata records the name the user gave ("moving-edge", not its class's "translating")
@@ -232,7 +254,24 @@ def _plain(parameters: dict) -> dict:
 def described_scene(spec, height: int | None = None, width: int | None = None, settings: dict | None = None,
                     fit: tuple[int | None, int | None] | None = None) -> DescribedScene:
     """A :class:`~viform.light.layered.DescribedScene` from a description file, a mapping or the name of
-    a shipped description; at its canvas size, at ``height`` × ``width``, or fitted (aspect kept)."""
+    a shipped description; at its canvas size, at ``height`` × ``width``, or fitted (aspect kept).
+
+    Parameters
+    ----------
+    spec : str, path or dict
+        A description file (.yaml, .yml, .json), a mapping, or the name of a shipped description.
+    height, width : int, optional
+        Size to render at, pixels (default: the description's canvas).
+    settings : dict, optional
+        Values of the description's named parameters (``brightness``, ``speed`` ...).
+    fit : tuple of (int or None, int or None), optional
+        (height, width) to fit into keeping the aspect ratio.
+
+    Returns
+    -------
+    DescribedScene
+        The layered scene with its exact truth.
+    """
     if isinstance(spec, str) and spec in SCENES and SCENES[spec].description:
         spec = str(SCENES[spec].description_path())
     if isinstance(spec, (str, Path)) and not Path(spec).is_file():
@@ -255,6 +294,16 @@ def scene_from_description(described: dict | None) -> Scene:
 
     Raises :class:`~viform.light.truth.TruthUnavailable` for scenes that were neither (an image or
     a video) or whose parameters were not recorded.
+
+    Parameters
+    ----------
+    described : dict or None
+        The ``scene`` metadata of a capture (a sidecar's or a result's).
+
+    Returns
+    -------
+    Scene
+        The scene the capture was made of.
     """
     if isinstance(described, dict) and isinstance(described.get("described"), dict):
         record = described["described"]
@@ -318,6 +367,30 @@ def load_scene(spec: str, height: int = 250, width: int = 400, max_lux: float = 
     width or None), which resizes keeping the aspect ratio (see :func:`fit_shape`).
     ``max_lux`` and ``frame_rate_hz`` are checked for every scene (a built-in one ignores them,
     but a negative full scale or frame rate is a mistake worth saying).
+
+    Parameters
+    ----------
+    spec : str
+        A built-in scene's name, or the path of a description, an image, a video or a folder of images.
+    height, width : int
+        Size, pixels, of a built-in scene, or of a file's scene when ``resize`` is set.
+    max_lux : float
+        Illuminance, lux, of an integer image's or video's full scale.
+    frame_rate_hz : float or None
+        Frame rate of a video or a folder of images, Hz (None: a video file's own).
+    interpolation : str
+        How a video or image sequence is interpolated between frames (``"linear"`` or ``"hold"``).
+    resize : bool
+        Resize a file's scene to exactly ``height`` × ``width``.
+    fit : tuple of (int or None, int or None), optional
+        (height, width) to fit into keeping the aspect ratio (:func:`fit_shape`).
+    settings : dict, optional
+        Parameter name → value of a built-in scene or a description.
+
+    Returns
+    -------
+    Scene
+        The scene, illuminance in lux on each pixel over time.
     """
     if max_lux is not None:
         check_positive("max_lux", max_lux)

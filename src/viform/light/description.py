@@ -467,7 +467,21 @@ def _files(doc):
 
 def load_description(spec, settings: dict | None = None) -> dict:
     """A validated description from a file path (YAML/JSON) or a mapping (image paths relative to
-    the current folder)."""
+    the current folder).
+
+    Parameters
+    ----------
+    spec : str, path or dict
+        A YAML/JSON description file or the description itself.
+    settings : dict, optional
+        Values of the description's named parameters and the universal settings
+        (:data:`UNIVERSAL_SETTINGS`).
+
+    Returns
+    -------
+    dict
+        The validated description, settings applied and defaults filled in.
+    """
     if isinstance(spec, dict):
         return validate(spec, "description", settings)
     path = Path(spec)

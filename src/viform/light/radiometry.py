@@ -30,7 +30,23 @@ PHOTOPIC_WAVELENGTH_M = 555e-9
 
 
 def photon_energy_j(wavelength_m: float = PHOTOPIC_WAVELENGTH_M) -> float:
-    """Energy of one photon, E = h·c/λ, in joules."""
+    """Energy of one photon, E = h·c/λ, in joules.
+
+    Parameters
+    ----------
+    wavelength_m : float
+        Wavelength, m (default 555 nm, the photopic peak).
+
+    Returns
+    -------
+    float
+        Photon energy, J.
+
+    Examples
+    --------
+    >>> f"{photon_energy_j(555e-9):.4g} J"
+    '3.579e-19 J'
+    """
     check_positive("wavelength_m", wavelength_m)
     return PLANCK_J_S * SPEED_OF_LIGHT_M_PER_S / wavelength_m
 
@@ -67,6 +83,13 @@ def lux_to_photons_per_s(lux, pixel_area_m2: float, fill_factor: float = 1.0,
         Photosensitive fraction of the pixel area, in (0, 1].
     wavelength_m : float
         Equivalent monochromatic wavelength, m.
+    luminous_efficiency : float
+        Luminous efficiency of the light's spectrum relative to 555 nm, in (0, 1].
+
+    Returns
+    -------
+    ndarray of float64
+        Photon rate per pixel, photons/s, the shape of ``lux``.
 
     Examples
     --------

@@ -178,6 +178,19 @@ def image_to_lux(image, max_lux: float | None) -> np.ndarray:
     Integer images (uint8, uint16, …) map linearly: 0 → 0 lux, the dtype's full scale →
     ``max_lux``. Float images (TIFF, EXR, NumPy) are lux already: ``max_lux`` does not
     apply to them. Colour images are reduced to luminance with the Rec. 709 weights.
+
+    Parameters
+    ----------
+    image : array_like (H, W) or (H, W, 3)
+        Stored pixel values: integers of any width, or floats already in lux.
+    max_lux : float or None
+        Illuminance, lux, of an integer image's full scale; needed for integer images, ignored
+        for float ones.
+
+    Returns
+    -------
+    ndarray of float64 (H, W)
+        Illuminance per pixel, lux.
     """
     arr = np.asarray(image)
     if arr.ndim == 3 and arr.shape[-1] in (3, 4):

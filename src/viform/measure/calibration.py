@@ -992,6 +992,22 @@ def calibrate(source: SpikeSource, *, max_ticks: int | None = None, tile: int = 
 
     Returns a JSON-ready dict; every figure that the recording cannot support is ``None``
     with a ``reason`` (and a bound where one exists) — never a made-up value.
+
+    Parameters
+    ----------
+    source : SpikeSource
+        A recording of a flat, still, unchanging scene.
+    max_ticks : int, optional
+        Ticks used (default: all).
+    tile : int
+        Side of the tiles of the gain-spread map, pixels.
+
+    Returns
+    -------
+    dict
+        ``threshold`` (Q_eff, e⁻), ``gain_spread``, ``defects`` (hot and dead pixels),
+        ``dark_current``, ``interval_table`` and ``static`` (the check that the scene held still),
+        each figure with how it was found, or ``None`` with a ``reason``.
     """
     tile = check_int("tile", tile, 2, 64)
     iv = interval_statistics(source, max_ticks=max_ticks)
@@ -1121,6 +1137,20 @@ def preset_from_calibration(result: dict, name: str = "calibrated", *, fallback_
     simulator's sidecar: ``recorded``), else ``fallback_threshold_electrons`` (``assumed``);
     with neither, :class:`~viform._validate.ViformError` is raised: a preset that measured
     no threshold would silently repeat a chip default.
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`calibrate` returned.
+    name : str
+        The preset's name.
+    fallback_threshold_electrons : float, optional
+        Threshold Q, e⁻, to assume when neither measured nor recorded.
+
+    Returns
+    -------
+    SpikePreset
+        The preset, with its ``calibration`` record.
     """
     from viform.sensors.spike_presets import SpikePreset, _chip_parameters
 

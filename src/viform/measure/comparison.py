@@ -232,6 +232,30 @@ def shoot(key: str, scene, duration_s: float, instants_s, *, seed: int = 0, sens
     family turns the output into light (:data:`ESTIMATORS`) and says how fast it is (:data:`SHOTS`).
     ``device`` ("cpu" or "cuda") runs a spike camera's simulation there (the same algorithm and
     bits, :mod:`viform.sensors.spike_cuda`); the other families run on the CPU.
+
+    Parameters
+    ----------
+    key : str
+        A sensor of the comparison (:func:`compare_entry`; the catalogue's names).
+    scene : Scene
+        The scene, lux.
+    duration_s : float
+        Length of the capture, s.
+    instants_s : sequence of float
+        Instants at which the light is estimated, s.
+    seed : int
+        Seed of the sensor's random noise.
+    sensor : Sensor, optional
+        The sensor to shoot with instead of the comparison's own.
+    spike_methods : sequence of str, optional
+        Spike reconstructions to run (of :data:`SPIKE_METHODS`).
+    device : {"cpu", "cuda"}
+        Where a spike camera's simulation runs.
+
+    Returns
+    -------
+    list of Shot
+        One shot (light estimates, label, data rate, timing) per reconstruction.
     """
     entry = compare_entry(key)
     sensor = sensor if sensor is not None else make_compare_sensor(key)
@@ -363,7 +387,22 @@ def edge_width_px(lux, rows, dark_lux: float, bright_lux: float) -> float:
 
 
 def score(shot: Shot, scene, instants_s) -> dict:
-    """The metrics of :data:`METRICS` for one shot (see the module notes)."""
+    """The metrics of :data:`METRICS` for one shot (see the module notes).
+
+    Parameters
+    ----------
+    shot : Shot
+        A shot of :func:`shoot`.
+    scene : Scene
+        The scene it shot (its truth is the reference).
+    instants_s : sequence of float
+        The instants of the shot's estimates, s.
+
+    Returns
+    -------
+    dict
+        Metric name of :data:`METRICS` → value in that metric's unit (empty for a skipped shot).
+    """
     if shot.skipped:
         return {}
     demand = scene.demand() if hasattr(scene, "demand") else None
@@ -527,6 +566,18 @@ def verdict(shots, demand: dict | None) -> list[str]:
     flicker, PSNR) rank the sensors that give an image in lux; sensor metrics (saturated,
     under-exposed, data rate, latency) rank every sensor that ran. Sensors tied at the
     precision shown are all named; those left out of a ranking are named, with the reason.
+
+    Parameters
+    ----------
+    shots : sequence of Shot
+        Every sensor's shots, scored (``shot.metrics``, :func:`score`).
+    demand : dict, optional
+        The scene's demands (``scene.demand()``: the dynamic range it holds ...), which the sentences quote.
+
+    Returns
+    -------
+    list of str
+        The sentences, most important first.
     """
     ran = [s for s in shots if not s.skipped]
     image_rows = [s for s in ran if s.lux_units]

@@ -28,6 +28,18 @@ from viform.sensors.subthreshold import subthreshold_dynamic_range_db
 def dynamic_range_db(shortest_s: float, longest_s: float) -> float:
     """DR = 20·lg(τ̂/τ̌) dB (seed 000 §4.4).
 
+    Parameters
+    ----------
+    shortest_s : float
+        Shortest interval the pixel can give, τ̌, s.
+    longest_s : float
+        Longest interval, τ̂ (in the dark), s.
+
+    Returns
+    -------
+    float
+        Dynamic range, dB.
+
     Examples
     --------
     >>> round(dynamic_range_db(10e-9, 1.0), 6), round(dynamic_range_db(10e-9, 10.0), 6)
@@ -135,6 +147,23 @@ def measure_spike_dynamic_range(sensor=None, *, dark_duration_s: float | None = 
     The formula value is 20·lg(Q/(τ̌·I_d)) with τ̌ = 1/clock (seed 000 §4.4). The relative
     standard error of the measured τ̂ is 1/√(spikes) (Poisson count), reported as
     ``tolerance_db`` (3σ).
+
+    Parameters
+    ----------
+    sensor : SpikeSensor, optional
+        The sensor (default: :class:`~viform.sensors.SpikeSensor` with 2,000 e⁻/s dark current).
+    dark_duration_s : float, optional
+        Length of the dark capture, s (default: 50 expected dark intervals, at most 2·10⁶ ticks).
+    size : int
+        Side of the square pixel array, pixels.
+    seed : int
+        Seed of the sensor's noise.
+
+    Returns
+    -------
+    dict
+        τ̌ and τ̂ (formula and measured, s), the dark spikes, the DR by formula and measured (dB) and
+        ``tolerance_db``, the measurement's 3σ.
     """
     from viform.light.scenes import StillScene
     from viform.sensors.spike import SpikeSensor

@@ -317,7 +317,28 @@ def characterize_frame_sensor(
     spatial_frames: int = 16,
     seed: int = 0,
 ) -> dict:
-    """Full EMVA 1288 R4.0 linear characterization of a timed-exposure frame sensor."""
+    """Full EMVA 1288 R4.0 linear characterization of a timed-exposure frame sensor.
+
+    Parameters
+    ----------
+    sensor : FrameSensor
+        The sensor.
+    height, width : int
+        Size of the flat fields, pixels.
+    n_points : int
+        Exposures of the photon-transfer sweep.
+    spatial_frames : int
+        Frames averaged for the spatial nonuniformity.
+    seed : int
+        Seed of the sensor's noise.
+
+    Returns
+    -------
+    dict
+        The EMVA 1288 figures (``system_gain_dn_per_e``, ``quantum_efficiency``,
+        ``temporal_dark_noise_electrons``, ``saturation_capacity_electrons``, ``dynamic_range_db`` ...),
+        the sweep's curves and ``expected``: the same figures from the sensor's parameters.
+    """
     if not isinstance(sensor, FrameSensor):
         raise ViformError(f"EMVA 1288 linear characterization needs a frame sensor, got {type(sensor).__name__}")
     series = acquire_exposure_sweep(

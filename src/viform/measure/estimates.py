@@ -221,5 +221,26 @@ ESTIMATORS = {
 
 def light_estimates(family: str, sensor, output, instants_s, *, duration_s: float | None = None,
                     method: str | None = None) -> list:
-    """The light a sensor's ``output`` (its ``capture``) shows at ``instants_s``, by the sensor's family."""
+    """The light a sensor's ``output`` (its ``capture``) shows at ``instants_s``, by the sensor's family.
+
+    Parameters
+    ----------
+    family : str
+        The sensor's family (:data:`~viform.sensors.catalog.FAMILIES`).
+    sensor : Sensor
+        The sensor that captured ``output``.
+    output : FrameStack or SpikeStream
+        Its ``capture``.
+    instants_s : sequence of float
+        Instants, s.
+    duration_s : float, optional
+        Length of the capture, s.
+    method : str, optional
+        A spike camera's reconstruction (default: the family's best).
+
+    Returns
+    -------
+    list of Estimate
+        Per instant: light (lux), saturated and under-exposed pixels, the time the light integrates.
+    """
     return ESTIMATORS[family](sensor, output, list(instants_s), duration_s, method)

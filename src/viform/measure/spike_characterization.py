@@ -141,7 +141,27 @@ def interval_snr_curve(sensor, lux_values, *, pixels: int = 64, duration_s: floa
 def characterize_spike_sensor(
     sensor, *, height: int = 16, width: int = 16, seed: int = 0, lux_values=None, dark_duration_s=None
 ) -> dict:
-    """Interval DR (measured and expected) and the interval-SNR curve of a spike sensor."""
+    """Interval DR (measured and expected) and the interval-SNR curve of a spike sensor.
+
+    Parameters
+    ----------
+    sensor : SpikeSensor
+        The sensor.
+    height, width : int
+        Size of the flat fields, pixels.
+    seed : int
+        Seed of the sensor's noise.
+    lux_values : sequence of float, optional
+        Illuminances of the SNR curve, lux (default: 12, logarithmically over the sensor's range).
+    dark_duration_s : float, optional
+        Length of the dark capture, s (default: about 4 expected dark intervals).
+
+    Returns
+    -------
+    dict
+        Measured and expected interval dynamic range (dB), the interval-SNR curve
+        (``snr_curve``) and the expected low-light SNR (``snr_low_light_expected_db``).
+    """
     _require_spike()
     p = sensor.parameters
     dr = measure_interval_dynamic_range(sensor, height=height, width=width, seed=seed, dark_duration_s=dark_duration_s)

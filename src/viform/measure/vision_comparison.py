@@ -95,6 +95,11 @@ def vision_scores(result) -> dict | None:
     exposure), over all objects and over the detectable ones, and every object it never finds is
     given a cause (:func:`_causes`).
 
+    Parameters
+    ----------
+    result : dict
+        A comparison's result (:func:`viform.report.compare_report.run_comparison`), shots included.
+
     Returns
     -------
     dict

@@ -412,6 +412,16 @@ def register(new: SensorEntry) -> SensorEntry:
 
     A sensor of the package is an entry of :func:`_entries`; this is for a sensor defined outside it
     (a notebook, a study's own preset).
+
+    Parameters
+    ----------
+    new : SensorEntry
+        The entry (:func:`frame_entry` builds one for a preset of a frame camera).
+
+    Returns
+    -------
+    SensorEntry
+        ``new``, now in the catalogue.
     """
     if new.name in SENSORS:
         raise ViformError(f"sensor {new.name!r} is already in the catalogue: choose another name")
@@ -423,7 +433,23 @@ def register(new: SensorEntry) -> SensorEntry:
 
 
 def sensor_names(*families: str) -> list[str]:
-    """Names of the sensors of ``families`` (all when none is given), in catalogue order."""
+    """Names of the sensors of ``families`` (all when none is given), in catalogue order.
+
+    Parameters
+    ----------
+    *families : str
+        Families to list (of :data:`FAMILIES`: ``"frame"``, ``"spike"`` ...).
+
+    Returns
+    -------
+    list of str
+        The sensors' names.
+
+    Examples
+    --------
+    >>> sensor_names("spike")
+    ['spike', 'spikeone', 'spiketwo', 'spiketwo-40k']
+    """
     return [n for n, e in SENSORS.items() if not families or e.family in families]
 
 
@@ -445,6 +471,30 @@ def make_sensor(name: str, **settings) -> Sensor:
     ``SENSORS[name].parameters`` may be given: a pixel field (``read_noise_electrons``,
     ``parasitic_light_sensitivity``), an optics field (``quantum_efficiency``), a camera argument
     (``exposure_s``, ``comparator_noise_v``) or a shorthand (``threshold_level``).
+
+    Parameters
+    ----------
+    name : str
+        A name of :data:`SENSORS` (:func:`sensor_names`).
+    **settings
+        Parameter name → value, any of ``SENSORS[name].parameters`` (each with its unit in its
+        name: ``exposure_s``, ``read_noise_electrons`` ...), plus ``height`` and ``width`` (pixels).
+
+    Returns
+    -------
+    Sensor
+        The sensor, ready to ``capture(scene, duration_s, seed=...)``.
+
+    Raises
+    ------
+    ViformError
+        For an unknown name or parameter, or a value out of its range (the message names it).
+
+    Examples
+    --------
+    >>> sensor = make_sensor("cmos", height=8, width=8, exposure_s=1e-3)
+    >>> type(sensor).__name__, sensor.exposure_s, sensor.frame_rate_hz
+    ('FrameSensor', 0.001, 30.0)
     """
     return entry(name).build(**settings)
 

@@ -277,7 +277,18 @@ def preset_from_dict(d, source: str = "preset") -> SpikePreset:
 
 
 def load_spike_preset(spec: str | Path) -> SpikePreset:
-    """A built-in preset by name (:data:`SPIKE_PRESET_NAMES`) or a ``.json`` preset file, validated."""
+    """A built-in preset by name (:data:`SPIKE_PRESET_NAMES`) or a ``.json`` preset file, validated.
+
+    Parameters
+    ----------
+    spec : str or Path
+        A built-in preset's name or the path of a preset ``.json`` (:func:`save_spike_preset`).
+
+    Returns
+    -------
+    SpikePreset
+        The preset; ``preset.sensor(...)`` builds its :class:`~viform.sensors.spike.SpikeSensor`.
+    """
     text = str(spec)
     if text in SPIKE_PRESET_NAMES:
         return _builtin(text)
@@ -296,7 +307,20 @@ def load_spike_preset(spec: str | Path) -> SpikePreset:
 
 
 def save_spike_preset(path, preset: SpikePreset) -> Path:
-    """Write ``preset`` as JSON (atomically); :func:`load_spike_preset` reads it back."""
+    """Write ``preset`` as JSON (atomically); :func:`load_spike_preset` reads it back.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.json`` file to write.
+    preset : SpikePreset
+        The preset to save.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     from viform._io import write_json
 
     path = Path(path)

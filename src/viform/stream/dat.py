@@ -266,12 +266,40 @@ class DatFile(SpikeSource):
 
 
 def read_dat(path, height: int | None = None, width: int | None = None, **kwargs) -> DatFile:
-    """Open a ``.dat`` spike file; see :class:`DatFile` for the options."""
+    """Open a ``.dat`` spike file; see :class:`DatFile` for the options.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.dat`` file.
+    height, width : int, optional
+        Size, pixels (needed without a sidecar).
+    **kwargs
+        :class:`DatFile`'s options (``clock_hz``, ``flip``, ``threshold_electrons``, ``allow_partial``).
+
+    Returns
+    -------
+    DatFile
+        The memory-mapped stream.
+    """
     return DatFile(path, height, width, **kwargs)
 
 
 def pack_frames(spikes: np.ndarray, flip: bool = True) -> bytes:
-    """Pack bool frames (T, H, W) into the ``.dat`` byte layout."""
+    """Pack bool frames (T, H, W) into the ``.dat`` byte layout.
+
+    Parameters
+    ----------
+    spikes : ndarray of bool (T, H, W)
+        One frame of spikes per tick.
+    flip : bool
+        Store rows bottom-up, as the cameras do.
+
+    Returns
+    -------
+    bytes
+        The ``.dat`` bytes of those ticks.
+    """
     spikes = np.asarray(spikes, dtype=bool)
     if flip:
         spikes = spikes[:, ::-1, :]
@@ -292,6 +320,24 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     (:func:`~viform.stream.sidecar.settle_sidecar`). With ``sidecar=False`` an old sidecar is
     removed just before the data is renamed in (it would describe other bits): a kill between
     the two leaves the old data without a sidecar, never with a wrong one.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.dat`` file to write.
+    source : SpikeSource
+        The spikes.
+    flip : bool
+        Store rows bottom-up, as the cameras do.
+    block_ticks : int
+        Ticks written per block (memory bound).
+    sidecar : bool
+        Write the JSON sidecar.
+
+    Returns
+    -------
+    Path
+        The file written.
     """
     from viform._io import clean_stale
     from viform.stream.sidecar import pending_sidecar_path, settle_sidecar

@@ -33,6 +33,30 @@ def open_spikes(path, height: int | None = None, width: int | None = None, *,
     ``height`` and ``width`` are required. ``clock_hz`` and ``threshold_electrons`` override what
     the file records. ``key`` and ``axes`` choose the array of a ``.npz`` and its axis order
     (see :class:`~viform.stream.npz.NpzSpikes`).
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.dat`` (with or without sidecar), ``.npz``, ``.zarr`` or ``.vfc`` file.
+    height, width : int, optional
+        Size of a ``.dat`` without sidecar, pixels.
+    clock_hz : float, optional
+        Tick rate, Hz, overriding the file's.
+    flip : bool, optional
+        Whether a ``.dat``'s rows are stored bottom-up (default: its sidecar's, else True).
+    allow_partial : bool
+        Accept a ``.dat`` whose size is not a whole number of frames (the trailing bytes are ignored).
+    threshold_electrons : float, optional
+        Spike threshold Q, e⁻, overriding the file's.
+    key : str, optional
+        Name of the spike array of a ``.npz``.
+    axes : str, optional
+        Axis order of that array (``"thw"``, ``"hwt"`` ...).
+
+    Returns
+    -------
+    SpikeSource
+        The stream, read block by block (a ``.dat`` is memory-mapped).
     """
     from viform._io import clean_stale, store_set_aside
 
@@ -95,6 +119,18 @@ def verify_spikes(path, **kwargs) -> dict:
 
     Returns ``{"file", "format", "verified", "checks", ...summary}``; a damaged file raises
     :class:`ViformError` naming the file and what is wrong.
+
+    Parameters
+    ----------
+    path : str or Path
+        The spike file.
+    **kwargs
+        Passed to :func:`open_spikes` (``height``, ``width``, ``key`` ...).
+
+    Returns
+    -------
+    dict
+        ``file``, ``format``, ``verified``, ``checks`` and the stream's summary.
     """
     source = open_spikes(path, **kwargs)
     result = source.verify() if hasattr(source, "verify") else {"verified": False, "checks": ["no checks"]}
@@ -105,6 +141,22 @@ def save_spikes(path, source: SpikeSource, *, flip: bool = True, block_ticks: in
     """Save a spike stream; the format follows the suffix (.dat + sidecar, .npz, .zarr). Atomic.
 
     Memory stays bounded for every format (blocks of at most a few tens of MB).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write; its suffix chooses the format (:data:`FORMATS`).
+    source : SpikeSource
+        The spikes (a :class:`SpikeStream` or any opened file).
+    flip : bool
+        Store a ``.dat``'s rows bottom-up, as the cameras do.
+    block_ticks : int
+        Ticks written per block (memory bound).
+
+    Returns
+    -------
+    Path
+        The file written.
     """
     path = Path(path)
     suffix = path.suffix.lower()

@@ -509,7 +509,24 @@ def _short(exc) -> str:
 
 
 def read_npz(path, clock_hz: float | None = None, key: str | None = None, axes: str | None = None) -> NpzSpikes:
-    """Open a ``.npz`` spike stream (streamed; see :class:`NpzSpikes`)."""
+    """Open a ``.npz`` spike stream (streamed; see :class:`NpzSpikes`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.npz`` file.
+    clock_hz : float, optional
+        Tick rate, Hz, overriding the file's.
+    key : str, optional
+        Name of the spike array.
+    axes : str, optional
+        Its axis order (``"thw"``, ``"hwt"`` ...).
+
+    Returns
+    -------
+    NpzSpikes
+        The stream.
+    """
     return NpzSpikes(path, clock_hz, key, axes)
 
 
@@ -518,6 +535,20 @@ def write_npz(path, source: SpikeSource, *, block_ticks: int = 1024) -> Path:
 
     The spike member is written first; the header that follows holds the CRC-32 of each block
     of it (:mod:`viform.stream.checksums`), its size, ``format``/``version`` and its own BLAKE2b.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.npz`` file to write.
+    source : SpikeSource
+        The spikes.
+    block_ticks : int
+        Ticks written per block (memory bound).
+
+    Returns
+    -------
+    Path
+        The file written.
     """
     path = Path(path)
     shape = (int(source.n_ticks), int(source.height), int(source.width))

@@ -73,13 +73,35 @@ ROW_ORDERS = ("bottom-up", "upright")
 
 
 def sidecar_path(data_path) -> Path:
-    """The sidecar of ``data_path``: the same name with ``.json`` appended (``clip.dat.json``)."""
+    """The sidecar of ``data_path``: the same name with ``.json`` appended (``clip.dat.json``).
+
+    Parameters
+    ----------
+    data_path : str or Path
+        The data file.
+
+    Returns
+    -------
+    Path
+        Its sidecar's path.
+
+    Examples
+    --------
+    >>> sidecar_path("clip.dat").name
+    'clip.dat.json'
+    """
     data_path = Path(data_path)
     return data_path.with_name(data_path.name + ".json")
 
 
 def provenance() -> dict:
-    """Who wrote the data: viform version, command line and UTC date (ISO 8601)."""
+    """Who wrote the data: viform version, command line and UTC date (ISO 8601).
+
+    Returns
+    -------
+    dict
+        ``viform_version``, ``command_line`` and ``utc_date``.
+    """
     from viform import __version__
 
     argv = [Path(sys.argv[0]).name if sys.argv and sys.argv[0] else "python", *sys.argv[1:]]
@@ -130,6 +152,18 @@ def write_sidecar(data_path, metadata: dict) -> Path:
     with ``format``/``version`` markers; provenance fields are added when absent. When
     ``metadata`` holds no checksum of the data, the data file is read once and its size,
     BLAKE2b and block CRC-32s (:func:`data_checksums`) are recorded.
+
+    Parameters
+    ----------
+    data_path : str or Path
+        The data file (not the sidecar).
+    metadata : dict
+        The fields to store (:func:`stream_header`'s and any others).
+
+    Returns
+    -------
+    Path
+        The sidecar written.
     """
     from viform._io import write_json
 
@@ -281,6 +315,16 @@ def read_sidecar(data_path) -> dict | None:
     A writer killed between renaming the data and its sidecar is healed first
     (:func:`settle_sidecar`). Raises :class:`ViformError` (naming the sidecar and the field)
     when the sidecar exists but is not valid JSON, not an object, or holds an out-of-range field.
+
+    Parameters
+    ----------
+    data_path : str or Path
+        The data file (not the sidecar).
+
+    Returns
+    -------
+    dict or None
+        The sidecar's fields.
     """
     path = sidecar_path(data_path)
     chosen = settle_sidecar(data_path)

@@ -234,6 +234,20 @@ def write_zarr(path, source: SpikeSource, *, block_ticks: int = 1024) -> Path:
 
     Chunks hold ``block_ticks`` ticks (capped at :data:`CHUNK_BUDGET_BYTES` of packed bits);
     each chunk's CRC-32 goes into the header's manifest.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.zarr`` folder to write.
+    source : SpikeSource
+        The spikes.
+    block_ticks : int
+        Ticks per chunk.
+
+    Returns
+    -------
+    Path
+        The store written.
     """
     zarr = import_uninterrupted("zarr")
 

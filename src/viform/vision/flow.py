@@ -93,6 +93,20 @@ def write_flo(path, flow_px: np.ndarray, valid: np.ndarray | None = None) -> Pat
     """Write forward flow (2, H, W) in px as a Middlebury ``.flo`` file (atomically).
 
     Pixels where ``valid`` is False (or the flow is not finite) are stored as unknown (1e10).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.flo`` file to write.
+    flow_px : ndarray (2, H, W)
+        Forward flow, px (x, y).
+    valid : ndarray of bool (H, W), optional
+        Where the flow is known (default: where it is finite).
+
+    Returns
+    -------
+    Path
+        The file written.
     """
     flow = np.asarray(flow_px, dtype=np.float64)
     if flow.ndim != 3 or flow.shape[0] != 2:
@@ -109,7 +123,20 @@ def write_flo(path, flow_px: np.ndarray, valid: np.ndarray | None = None) -> Pat
 
 
 def read_flo(path) -> tuple[np.ndarray, np.ndarray]:
-    """Read a Middlebury ``.flo`` file: (flow (2, H, W) float32 px with NaN where unknown, valid (H, W))."""
+    """Read a Middlebury ``.flo`` file: (flow (2, H, W) float32 px with NaN where unknown, valid (H, W)).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.flo`` file.
+
+    Returns
+    -------
+    flow_px : ndarray of float32 (2, H, W)
+        Forward flow, px; NaN where unknown.
+    valid : ndarray of bool (H, W)
+        Where the flow is known.
+    """
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -165,7 +192,22 @@ class FlowScores:
 
 
 def flow_scores(estimate_px: np.ndarray, truth: FlowTruth, mask: np.ndarray | None = None) -> FlowScores:
-    """EPE and Fl of an estimated flow (2, H, W) against :class:`~viform.light.truth.FlowTruth`."""
+    """EPE and Fl of an estimated flow (2, H, W) against :class:`~viform.light.truth.FlowTruth`.
+
+    Parameters
+    ----------
+    estimate_px : ndarray (2, H, W)
+        Estimated forward flow, px.
+    truth : FlowTruth
+        The exact flow between the same instants.
+    mask : ndarray (H, W) of bool, optional
+        Pixels to score.
+
+    Returns
+    -------
+    FlowScores
+        Average endpoint error (px), KITTI Fl outlier fraction and the pixels scored.
+    """
     estimate = np.asarray(estimate_px, dtype=np.float64)
     if estimate.shape != truth.flow_px.shape:
         raise ViformError(f"estimated flow {estimate.shape} and truth {truth.flow_px.shape} differ in shape")
@@ -259,6 +301,11 @@ def motion_scores(estimate_px: np.ndarray, truth: FlowTruth, labels: np.ndarray 
         Pixels to score (all others left out of every figure).
     moving_above_px : float
         True flow (px) above which a pixel counts as moving (0.5).
+
+    Returns
+    -------
+    MotionScores
+        Scores over all pixels, the moving ones, each object and the still background.
     """
     estimate = np.asarray(estimate_px, dtype=np.float64)
     if estimate.shape != truth.flow_px.shape:
@@ -899,6 +946,26 @@ def flow_sequence(source, step_ticks: int, *, method: str = "multi-interval", sp
     The images of all instants come from one pass over the spikes (:func:`spike_rate_images`)
     and each is used by the two fields it bounds, so N instants cost N images and N − 1
     fields; each field equals :func:`estimate_flow` between its instants without chaining.
+
+    Parameters
+    ----------
+    source : SpikeSource
+        The spike stream.
+    step_ticks : int
+        Ticks between consecutive instants.
+    method, spikes_per_side, window_ticks, preset, refine, options, horizon_ticks
+        As for :func:`estimate_flow`.
+    start_tick : int
+        First instant, tick.
+    stop_tick : int, optional
+        Last instant, tick (default: the stream's end).
+
+    Yields
+    ------
+    tick0, tick1 : int
+        The two instants of the field, ticks.
+    flow : ndarray of float (2, H, W)
+        Forward flow from ``tick0`` to ``tick1``, px (x, y).
     """
     check_choice("method", method, IMAGE_METHODS)
     check_choice("refine", refine, REFINEMENTS)

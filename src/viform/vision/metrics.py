@@ -248,6 +248,17 @@ def score_tracking(gt_rows, result_rows, times_s, clock_hz: float | None = None,
     the truth carries detectability, over the detectable objects too (rows under 1 need not
     be found either).
 
+    Parameters
+    ----------
+    gt_rows, result_rows : ndarray
+        Ground truth and tracker output rows, as for :func:`trackeval_scores`.
+    times_s : array_like
+        Instant of each frame (frame k = ``times_s[k − 1]``), s.
+    clock_hz : float, optional
+        Spike clock, Hz: latencies are also given in ticks.
+    start_time_s : float
+        Start of the stream, s (an object visible in frame 1 appears then).
+
     Returns
     -------
     dict

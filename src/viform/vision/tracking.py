@@ -1256,12 +1256,21 @@ def track_frames(frames, times_s, parameters: TrackerParameters | None = None, t
         Light estimates (lux, or anything proportional to light).
     times_s : array_like
         The instant each frame reports (end of its exposure: the earliest it can be read), s.
+    parameters : TrackerParameters, optional
+        The tracker's settings (default: the same as :func:`track_spikes`'s).
+    tick_s : float
+        Length of the spike camera's tick, s: the settings' times in ticks become seconds with it.
     floor : float
         Smallest light kept (same unit as the frames).
     measured, saturated : iterable of ndarray (H, W) bool, optional
         Per frame, the pixels it measured (not under the noise floor) and those saturated (their
         light at least the frame's value); default all measured, none saturated.
         See :class:`FrameChangeDetector`.
+
+    Returns
+    -------
+    TrackingResult
+        MOTChallenge result rows (frame, id, box) and the instant of each frame.
     """
     p = parameters or TrackerParameters()
     times = np.asarray(times_s, np.float64).ravel()

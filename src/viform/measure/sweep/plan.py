@@ -272,6 +272,40 @@ def make_plan(scene: str, sensors=None, vary_texts=None, *, height: int = 64, wi
     With no ``sensors`` and no ``vary_texts``: the standard sweep (:func:`standard_vary`).
     ``vary_texts`` are ``[SENSOR:]PARAM=SPEC`` texts (:func:`~viform.measure.sweep.specs.parse_vary`);
     ``vary`` gives {sensor: {param: values}} directly instead.
+
+    Parameters
+    ----------
+    scene : str
+        A scene of the catalogue or a scene file (:func:`~viform.light.catalog.load_scene`).
+    sensors : sequence of str, optional
+        Catalogue sensors to sweep (:data:`SWEEP_SENSORS`).
+    vary_texts : sequence of str, optional
+        ``[SENSOR:]PARAM=SPEC`` texts (``exposure_s=log:1e-4:1e-2:5``).
+    height, width : int
+        Scene size, pixels.
+    duration_s : float
+        Length of each capture, s.
+    seed : int
+        Seed of the points' noise (each point's own seed derives from it).
+    instants_s : sequence of float, optional
+        Instants scored, s (default: 30, 50 and 70 % of the capture, as ``compare``).
+    require : str, optional
+        Demands, ``METRIC<=VALUE`` joined by commas (``edge_width_px<=2``).
+    objective : str
+        The metric that ranks the settings that meet the demands.
+    spike_image : str
+        The spike reconstruction scored, of :data:`SPIKE_IMAGES` (``"best"``: the best one per point).
+    scene_options : dict, optional
+        The scene's own settings.
+    vary : dict, optional
+        {sensor: {parameter: values}}, instead of ``vary_texts``.
+    tracking : bool
+        Also score tracking (the scene must have objects to track in the clip).
+
+    Returns
+    -------
+    SweepPlan
+        The points, the demands and the context a sweep runs and resumes by.
     """
     height, width, seed, instants = validate_inputs(scene, height, width, duration_s, seed, instants_s, spike_image)
     demands = parse_require(require)

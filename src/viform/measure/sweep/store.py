@@ -114,7 +114,18 @@ def write_table(path: Path, records, context) -> None:
 
 
 def read_table(path) -> dict:
-    """``sweep.zarr`` back as {column: array} (metric/* and parameter/* keep their prefixes)."""
+    """``sweep.zarr`` back as {column: array} (metric/* and parameter/* keep their prefixes).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``sweep.zarr`` store.
+
+    Returns
+    -------
+    dict
+        Column name → array, one row per point (``sensor``, ``point``, ``parameter/*``, ``metric/*``).
+    """
     import zarr
 
     root = zarr.open_group(str(path), mode="r")
