@@ -6,14 +6,14 @@
    and at the SpikeOne preset, over all objects and over the ones the sensor shows (truth rows
    under detectability 1 need not be found). Beside each: MOTA recomputed here from per-frame
    Hungarian matches (an independent check of TrackEval's), and a plain baseline — the same
-   back end without the start-up seeding and without splitting or joining foreground — so that
+   back end without the start-up priming and without splitting or joining foreground — so that
    what those add is measured, not assumed.
 2. **Throughput** of the tracker on ``.dat`` files (what ``viform track`` reads) at 400×250,
    ticks per second and per CPU-second, next to the plain reference in the same process: reading
    the same file and counting its spikes (NumPy). Load average and threads are printed; on a
    shared machine compare the ratios.
 3. **Frame sensors** through the same back end: a 1 ms CMOS at 1,000 fps and the 1,667 fps
-   camera with auto-exposure (a seeded background must not be blinded by its start-up frame),
+   camera with auto-exposure (a primed background must not be blinded by its start-up frame),
    each beside the same frames with every pixel taken as measured.
 
     PYTHONPATH=src python benchmarks/bench_tracking.py [--seeds 1,2,3,4,5] [--sizes 250x400,125x200]
@@ -87,7 +87,7 @@ def _mota_by_hand(gt, rows, n_frames):
 
 
 def scores(args, folder):
-    plain = TrackerParameters(seed_ticks=0, report_merged=False, merged_keep_alive=False)
+    plain = TrackerParameters(prime_ticks=0, report_merged=False, merged_keep_alive=False)
     print("\n== Scores on held-out seeds (parameters chosen on seed 0) ==")
     for size in args.sizes.split(","):
         height, width = map(int, size.split("x"))

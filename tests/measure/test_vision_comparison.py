@@ -28,7 +28,7 @@ def test_spike_and_frame_rows_table_verdict_figure():
     assert vision["cmos-short"]["frames"] == 1  # 30 fps: one frame in 40 ms, read at the end of its 1 ms
     np.testing.assert_allclose(vision["cmos-short"]["times_s"], [1e-3])
     # one frame shows no motion: at most what stands out from the background around it (the start-up
-    # seeding) is found; the rest is missed, and the report says why
+    # priming) is found; the rest is missed, and the report says why
     cmos_scores = vision["cmos-short"]["scores"]
     assert len(cmos_scores["never_found"]) >= 4 and len(cmos_scores["objects"]) == 6
     doc = vision_json(vision)

@@ -196,35 +196,35 @@ def test_detections_are_the_components_of_the_dilated_mask():
 def test_object_in_view_at_the_start_is_tracked_and_leaves_no_ghost(lux):
     # the square stands at x = 4 px when tracking starts: a detector that learns its background
     # from the first light learns the square as background (invisible, then a ghost where it stood);
-    # seeding from the robust background around it sees it from the start, and nothing where it stood.
-    # At 0.5 lux its pixels have no interval yet when the background is seeded (≈ 40 ticks apart at
-    # Q = 100 e⁻): their first interval is compared with the background seeded around them.
+    # priming from the robust background around it sees it from the start, and nothing where it stood.
+    # At 0.5 lux its pixels have no interval yet when the background is primed (≈ 40 ticks apart at
+    # Q = 100 e⁻): their first interval is compared with the background primed around them.
     scene = Square(lux=lux, speed=1000.0, enter_s=-0.012)
     spk = SpikeSensor(threshold_electrons=100).capture(scene, 0.02, seed=4)
 
-    def scores(seed_ticks, block_ticks=1024):
-        p = TrackerParameters(min_pixels=4, merge_px=1, min_hits=2, seed_ticks=seed_ticks)
+    def scores(prime_ticks, block_ticks=1024):
+        p = TrackerParameters(min_pixels=4, merge_px=1, min_hits=2, prime_ticks=prime_ticks)
         res = track_spikes(spk, 10, p, block_ticks=block_ticks)
         gt = mot.gt_rows(scene, res.times_s)
         return res, score_tracking(gt, res.rows, res.times_s, spk.clock_hz)
 
-    (res, seeded), (_, unseeded) = scores(20), scores(0)
-    np.testing.assert_array_equal(res.rows, scores(20, block_ticks=7)[0].rows)  # seeded at the same tick
-    print({k: (seeded[k], unseeded[k]) for k in ("mota", "idf1", "false_positives", "false_negatives")})
-    assert seeded["never_found"] == [] and seeded["id_switches"] == 0
-    # seeded at 20 ticks (or at the first interval), confirmed 2 steps later
-    assert seeded["objects"][1]["latency_match_ticks"] <= (60 if lux > 5 else 120)
-    assert seeded["mota"] > 0.8 and seeded["false_positives"] <= 3
-    assert unseeded["mota"] < seeded["mota"] - 0.3  # what seeding fixes
+    (res, primed), (_, unseeded) = scores(20), scores(0)
+    np.testing.assert_array_equal(res.rows, scores(20, block_ticks=7)[0].rows)  # primed at the same tick
+    print({k: (primed[k], unseeded[k]) for k in ("mota", "idf1", "false_positives", "false_negatives")})
+    assert primed["never_found"] == [] and primed["id_switches"] == 0
+    # primed at 20 ticks (or at the first interval), confirmed 2 steps later
+    assert primed["objects"][1]["latency_match_ticks"] <= (60 if lux > 5 else 120)
+    assert primed["mota"] > 0.8 and primed["false_positives"] <= 3
+    assert unseeded["mota"] < primed["mota"] - 0.3  # what priming fixes
 
 
 def test_seed_background_marks_only_what_stands_out():
-    from viform.vision.tracking import seed_background
+    from viform.vision.tracking import prime_background
 
     light = np.full((40, 60), 5.0) * np.linspace(0.8, 1.2, 60)  # smooth background, ±20 %
     light[10:18, 20:30] = 60.0
     ramp = np.log(np.full((40, 60), 5.0) * np.linspace(0.8, 1.2, 60))
-    marked, unsure, background = seed_background(np.log(light), np.ones(light.shape, bool), 0.7, 32, 0.4)
+    marked, unsure, background = prime_background(np.log(light), np.ones(light.shape, bool), 0.7, 32, 0.4)
     expected = np.zeros(light.shape, bool)
     expected[10:18, 20:30] = True
     np.testing.assert_array_equal(marked, expected)
@@ -296,7 +296,7 @@ def test_saturated_and_unmeasured_pixels():
     # an unmeasured one is never flagged and never moves the background
     from viform.vision.tracking import FrameChangeDetector
 
-    det = FrameChangeDetector(0.01, 0.05, TrackerParameters(seed_ticks=0), init_frames=1)
+    det = FrameChangeDetector(0.01, 0.05, TrackerParameters(prime_ticks=0), init_frames=1)
     flat = np.full((8, 8), 5.0)
     (first,) = det.feed(flat, 0.001)
     assert not first.any()
@@ -314,9 +314,9 @@ def test_saturated_and_unmeasured_pixels():
 
 def test_a_saturated_object_in_view_and_the_dark_strip_beside_it_leave_no_ghost():
     # A bright object in view at the start saturates most of its pixels: each is at least as bright
-    # as its value, so the object is seeded (not learned as background from the few pixels it does
+    # as its value, so the object is primed (not learned as background from the few pixels it does
     # not saturate, which would leave a ghost where it stood once it moves off). A dark strip of
-    # static background touching it is seeded too (it stands out, darker) but as a group of its own
+    # static background touching it is primed too (it stands out, darker) but as a group of its own
     # that never moves: it gets its own light back instead of following the object's group.
     from viform.vision.tracking import FrameChangeDetector
 
@@ -346,8 +346,8 @@ def test_a_saturated_object_in_view_and_the_dark_strip_beside_it_leave_no_ghost(
 
 def test_a_still_bright_region_in_view_is_given_back():
     # a sunlit window 250× brighter than the dim textured wall around it, and a small lamp, in view from
-    # the start: the start-up seeding takes them for objects in view, but nothing of them ever changes, so
-    # after the seeded groups' deadline (seed_confirm_ticks, 200 ticks) they are background and no track
+    # the start: the start-up priming takes them for objects in view, but nothing of them ever changes, so
+    # after the primed groups' deadline (prime_confirm_ticks, 200 ticks) they are background and no track
     # is reported on them; a real object in view moves and changes its pixels (the test above)
     from viform.light.scenes import StillScene
 
@@ -357,8 +357,8 @@ def test_a_still_bright_region_in_view_is_given_back():
     lux[(x - 40) ** 2 + (y - 6) ** 2 <= 4] = 5000.0  # lamp
     spikes = SpikeSensor(threshold_electrons=400).capture(StillScene(lux), 0.03, seed=3)
     res = track_spikes(spikes, 10)
-    assert len(res.rows)  # (seeded: reported until the deadline) ...
-    late = res.rows[res.rows[:, 0] * 10 > 2 * TrackerParameters().seed_confirm_ticks + 10]
+    assert len(res.rows)  # (primed: reported until the deadline) ...
+    late = res.rows[res.rows[:, 0] * 10 > 2 * TrackerParameters().prime_confirm_ticks + 10]
     assert len(late) == 0  # ... and never after it
 
 

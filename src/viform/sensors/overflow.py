@@ -68,6 +68,8 @@ poorer low-light sensitivity and SNR the seed describes.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from viform._validate import ViformError, check_int, check_non_negative, check_positive, check_range
@@ -100,6 +102,36 @@ def share_ktc_noise_electrons(c_pd_f: float, c_f_f: float, temperature_k: float 
 
 #: Seed 003 §3 integration times: long, medium, short (s), in a 33.33 ms frame.
 PAPER003_INTEGRATIONS_S = (32.8e-3, 0.5e-3, 0.03e-3)
+
+
+@dataclass(frozen=True)
+class OverflowCircuit:
+    """The conditional-overflow pixel's circuit values (seed 003, §3 and Table 1), in one place.
+
+    Attributes
+    ----------
+    c_f_f : float
+        Column-shared overflow capacitance C_F, farads.
+    v_reset_v : float
+        Photodiode reset voltage V_res, volts.
+    v_f_v : float
+        Overflow (sharing) decision level V_F, volts.
+    v_sat_v : float
+        Photodiode saturation voltage V_sat, volts.
+    integration_times_s : tuple of float
+        The three integrations t1, t2, t3, seconds.
+    """
+
+    c_f_f: float = 500e-15
+    v_reset_v: float = 3.3
+    v_f_v: float = 2.2
+    v_sat_v: float = 0.3
+    integration_times_s: tuple = PAPER003_INTEGRATIONS_S
+
+
+#: The paper's circuit: the default of every function and sensor of this module.
+PAPER003_CIRCUIT = OverflowCircuit()
+_C = PAPER003_CIRCUIT
 
 
 def share_charge_v(v_pd_v, v_cf_v: float, c_pd_f: float, c_f_f: float):
@@ -178,8 +210,8 @@ class PhotodiodeJunction:
         return 0.5 * (lo + hi)
 
 
-def junction_segment_boundaries_a(junction: PhotodiodeJunction, c_f_f: float = 500e-15, v_f_v: float = 2.2,
-                                  v_sat_v: float = 0.3, integration_times_s=PAPER003_INTEGRATIONS_S) -> dict:
+def junction_segment_boundaries_a(junction: PhotodiodeJunction, c_f_f: float = _C.c_f_f, v_f_v: float = _C.v_f_v,
+                                  v_sat_v: float = _C.v_sat_v, integration_times_s=_C.integration_times_s) -> dict:
     """Points B, C, D, E (A) for any junction law: B = Q(VF)/(t1 + t2), C = Q(V_sat)/t1,
     D and E = (Q(V_sat) − Q(V20))/t2 and /t3 with V20 the sharing of V_sat (eq. 1); the 4T's
     saturation I_4T = Q(V_sat)/T. Equal to :func:`segment_boundaries_a` for a linear junction."""
@@ -194,11 +226,11 @@ def junction_segment_boundaries_a(junction: PhotodiodeJunction, c_f_f: float = 5
 def overflow_voltages_v(
     photocurrent_a,
     c_pd_f: float,
-    c_f_f: float = 500e-15,
-    v_reset_v: float = 3.3,
-    v_f_v: float = 2.2,
-    v_sat_v: float = 0.3,
-    integration_times_s=PAPER003_INTEGRATIONS_S,
+    c_f_f: float = _C.c_f_f,
+    v_reset_v: float = _C.v_reset_v,
+    v_f_v: float = _C.v_f_v,
+    v_sat_v: float = _C.v_sat_v,
+    integration_times_s=_C.integration_times_s,
     dark_current_a: float = 0.0,
 ):
     """Noise-free photodiode voltages (V1, V2, V3) at the end of t1, t2, t3 (seed 003, eqs. 1–6).
@@ -217,11 +249,11 @@ def overflow_voltages_v(
 
 def segment_boundaries_a(
     c_pd_f: float,
-    c_f_f: float = 500e-15,
-    v_reset_v: float = 3.3,
-    v_f_v: float = 2.2,
-    v_sat_v: float = 0.3,
-    integration_times_s=PAPER003_INTEGRATIONS_S,
+    c_f_f: float = _C.c_f_f,
+    v_reset_v: float = _C.v_reset_v,
+    v_f_v: float = _C.v_f_v,
+    v_sat_v: float = _C.v_sat_v,
+    integration_times_s=_C.integration_times_s,
 ) -> dict:
     """Photocurrents (A) at the seed's points B, C, D, E (seed 003, §6, fig. 6), from eqs. 1–6.
 
@@ -240,11 +272,11 @@ def segment_boundaries_a(
 
 def dynamic_range_gain_db(
     c_pd_f: float,
-    c_f_f: float = 500e-15,
-    v_reset_v: float = 3.3,
-    v_f_v: float = 2.2,
-    v_sat_v: float = 0.3,
-    integration_times_s=PAPER003_INTEGRATIONS_S,
+    c_f_f: float = _C.c_f_f,
+    v_reset_v: float = _C.v_reset_v,
+    v_f_v: float = _C.v_f_v,
+    v_sat_v: float = _C.v_sat_v,
+    integration_times_s=_C.integration_times_s,
 ) -> float:
     """Noise-free DR gain over the plain 4T APS, 20·lg(E / I_4T), dB (seed 003, §6, eqs. 3–6).
 
@@ -321,10 +353,10 @@ class OverflowSensor(FrameSensor):
     def __init__(
         self,
         parameters: FramePixelParameters | None = None,
-        integration_times_s=PAPER003_INTEGRATIONS_S,
-        overflow_capacitance_f: float = 500e-15,
-        v_f_v: float = 2.2,
-        v_reset_v: float = 3.3,
+        integration_times_s=_C.integration_times_s,
+        overflow_capacitance_f: float = _C.c_f_f,
+        v_f_v: float = _C.v_f_v,
+        v_reset_v: float = _C.v_reset_v,
         share_use_time_s: float = 5e-6,
         frame_rate_hz: float = 30.0,
         height: int | None = None,

@@ -41,7 +41,7 @@ def _cttz(typingctx, x):  # pragma: no cover - compiled
 
 @njit(cache=True, inline="always")
 def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored, fg, flag_since, prev, due,
-              k_lo, k_hi, k_seed, k_left, background_ticks, hold_ticks):  # pragma: no cover - compiled
+              k_lo, k_hi, k_prime, k_left, background_ticks, hold_ticks):  # pragma: no cover - compiled
     """One pixel at the end of tick ``tick``: update its window and background; its foreground state (−1, 0, +1).
 
     Also sets ``due[s]``: the tick from which its silence alone could change that state (a pixel
@@ -50,15 +50,15 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
     lt = spk[s, LAST]
     q = prev[s]
     due[s] = np.inf
-    if lt < 0:  # never fired: darker than the background seeded around it, if silent for long enough
+    if lt < 0:  # never fired: darker than the background primed around it, if silent for long enough
         f = 0
         if q > 0.0:
-            if tick > q * k_seed:
+            if tick > q * k_prime:
                 f = -1
                 if flag_since[s] < 0:
                     flag_since[s] = tick
             else:
-                due[s] = q * k_seed
+                due[s] = q * k_prime
         fg[s] = f
         return f
     n = spk[s, COUNT]
@@ -112,12 +112,12 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
     if N == 0:  # one spike so far: the interval in progress only (silent objects since the start)
         f = 0
         if q > 0.0:
-            if silence > q * k_seed:
+            if silence > q * k_prime:
                 f = -1
                 if flag_since[s] < 0:
                     flag_since[s] = tick
             else:
-                due[s] = lt + q * k_seed
+                due[s] = lt + q * k_prime
         fg[s] = f
         return f
     tau = S / N
@@ -128,14 +128,14 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
     bright = win_bright and not drop and silence < b * k_lo and silence <= (S + 1.0) / N * k_left + 1.0
     if censored[s]:
         # the background is a lower bound (the first interval reaches back before the stream, or it was
-        # seeded from bounds): only "brighter" is known against it; a new interval that is not brighter
+        # primed from bounds): only "brighter" is known against it; a new interval that is not brighter
         # measures it
         f = 1 if bright else 0
         if n > 0 and drop:  # a mixed interval is shorter than the background's: a better lower bound
             bg[s] = max(b, tau)
         elif n > 0 and not win_bright:
-            if q > 0.0 and ((S - 1.0) / N > q * k_seed or (S + 1.0) / N < q / k_seed):
-                # far from the background seeded around it: on an object since the start
+            if q > 0.0 and ((S - 1.0) / N > q * k_prime or (S + 1.0) / N < q / k_prime):
+                # far from the background primed around it: on an object since the start
                 bg[s] = q
                 prev[s] = 0.0
                 f = 1 if tau < q else -1
@@ -187,7 +187,7 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
 @njit(parallel=True, cache=True)
 def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, n_pixels,
                       spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
-                      fg, flag_since, prev, due, out, k_lo, k_hi, k_seed, k_left, background_ticks,
+                      fg, flag_since, prev, due, out, k_lo, k_hi, k_prime, k_left, background_ticks,
                       hold_ticks):  # pragma: no cover - compiled
     """Feed ticks ``first_tick`` … of ``words`` (T, n_words) uint64; write each completed step's foreground bits.
 
@@ -240,7 +240,7 @@ def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, 
                             cand &= cand - np.uint64(1)
                             s = i * 64 + j
                             if _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
-                                         fg, flag_since, prev, due, k_lo, k_hi, k_seed, k_left,
+                                         fg, flag_since, prev, due, k_lo, k_hi, k_prime, k_left,
                                          background_ticks, hold_ticks) != 0:
                                 bits |= np.uint64(1) << j
                             if due[s] < soonest:

@@ -17,9 +17,9 @@ spike stream itself. This module is that pipeline, one stage per function:
      with no interval yet starts from the censored bound "at least as long as the stream so
      far", so a bright object is seen from its first interval even at a high threshold Q.
      Objects already in view at the start would be learned as background (and leave a
-     "ghost" where they stood): after ``seed_ticks`` the background of pixels that stand out
+     "ghost" where they stood): after ``prime_ticks`` the background of pixels that stand out
      from the background around them is interpolated from their surroundings
-     (:func:`seed_background`).
+     (:func:`prime_background`).
    * frames (:class:`FrameChangeDetector`): the same rule on log light per frame.
 
 2. **Grouping** (:func:`detect_boxes`): foreground pixels of one output step whose squares of
@@ -89,20 +89,20 @@ class TrackerParameters:
         it, or hidden by it) does not age while that lasts, so the ball behind the truck keeps its
         id; ``report_merged``: where the foreground holding both is split (:meth:`Tracker._regroup`),
         it is reported at its prediction.
-    seed_ticks, seed_measured_fraction : int, float
-        Seeding checks at ``seed_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to ``hold_ticks``,
+    prime_ticks, prime_measured_fraction : int, float
+        Priming checks at ``prime_ticks``·2^k ticks (k = 0, 1, …; 0: never), up to ``hold_ticks``,
         until at least this fraction of the pixels has measured an interval (later at a high
         threshold Q).
-    seed_window_px, seed_threshold_log, seed_unsure : int, float, bool
+    prime_window_px, prime_threshold_log, prime_unsure : int, float, bool
         Objects already in view when tracking starts: at each check, a pixel whose light
-        differs (|ln ratio| > ``seed_threshold_log``) from the median over ``seed_window_px``
+        differs (|ln ratio| > ``prime_threshold_log``) from the median over ``prime_window_px``
         px around it (wider than any object, on the assumption that the background is smoother
         than the objects on it) takes the background interpolated from the pixels around it,
         so the object is foreground at once and the place it leaves is not a ghost
-        (:meth:`SpikeChangeDetector._seed`, :func:`seed_background`); with ``seed_unsure``,
+        (:meth:`SpikeChangeDetector._prime`, :func:`prime_background`); with ``prime_unsure``,
         pixels that differ from that background by more than ``threshold_log`` only may return
         to it without being flagged. Frames apply it to their starting background. Both give a
-        seeded group none of whose pixels changes within ``seed_confirm_ticks`` (spikes: or two of
+        primed group none of whose pixels changes within ``prime_confirm_ticks`` (spikes: or two of
         its intervals, when longer) its own light back for good (objects in view move; a sunlit
         window, a lamp, static texture that a dim 8-bit image shows strongly do not), unless it
         touches foreground of its sign that is not its own (a long object in view whose front moves on).
@@ -120,12 +120,12 @@ class TrackerParameters:
     gate_px: float = 8.0
     merged_keep_alive: bool = True
     report_merged: bool = True
-    seed_ticks: int = 8
-    seed_window_px: int = 96
-    seed_threshold_log: float = 0.7
-    seed_unsure: bool = True
-    seed_measured_fraction: float = 0.9
-    seed_confirm_ticks: int = 200
+    prime_ticks: int = 8
+    prime_window_px: int = 96
+    prime_threshold_log: float = 0.7
+    prime_unsure: bool = True
+    prime_measured_fraction: float = 0.9
+    prime_confirm_ticks: int = 200
 
     def __post_init__(self):
         check_positive("threshold_log", self.threshold_log)
@@ -138,11 +138,11 @@ class TrackerParameters:
         check_int("confirm_pixels", self.confirm_pixels, 1)
         check_int("max_coast_ticks", self.max_coast_ticks, 0)
         check_positive("gate_px", self.gate_px)
-        check_int("seed_ticks", self.seed_ticks, 0)
-        check_int("seed_window_px", self.seed_window_px, 1)
-        check_positive("seed_threshold_log", self.seed_threshold_log)
-        if not 0.0 <= self.seed_measured_fraction <= 1.0:
-            raise ViformError(f"seed_measured_fraction = {self.seed_measured_fraction!r} must be within 0 … 1")
+        check_int("prime_ticks", self.prime_ticks, 0)
+        check_int("prime_window_px", self.prime_window_px, 1)
+        check_positive("prime_threshold_log", self.prime_threshold_log)
+        if not 0.0 <= self.prime_measured_fraction <= 1.0:
+            raise ViformError(f"prime_measured_fraction = {self.prime_measured_fraction!r} must be within 0 … 1")
 
 
 # --------------------------------------------------------------------------- spike front end
@@ -218,17 +218,17 @@ class SpikeChangeDetector:
         self.censored = np.zeros(n, np.bool_)  # bg is a lower bound
         self.fg = np.zeros(n, np.int8)
         self.flag_since = np.full(n, -1, np.int64)
-        self.prev = np.zeros(n, np.float64)  # the background before the last absorption, or seeded (0: none)
+        self.prev = np.zeros(n, np.float64)  # the background before the last absorption, or primed (0: none)
         self.due = np.full(n, np.inf)  # the tick from which silence alone could change the pixel's state
         chunks = max(1, min(get_num_threads(), self.n_words))
         edges = np.linspace(0, self.n_words, chunks + 1).round().astype(np.int64)
         self._chunks = (edges[:-1].copy(), edges[1:].copy())
         self.next_tick = 0
-        self.seeded = False
-        self._seeded_ever = None
+        self.primed = False
+        self._primed_ever = None
         self._index = None
-        # seeded groups still to confirm: (deadline tick, stored pixel indices, sign, prior lower and upper
-        # interval bounds in ticks, seeding tick); pixels given back (static: never seeded again)
+        # primed groups still to confirm: (deadline tick, stored pixel indices, sign, prior lower and upper
+        # interval bounds in ticks, priming tick); pixels given back (static: never primed again)
         self._groups = []
         self._given_back = np.zeros(n, np.bool_)
 
@@ -271,18 +271,18 @@ class SpikeChangeDetector:
         if words.ndim != 2 or words.shape[1] != self.n_words:
             raise ViformError(f"packed spikes must have shape (T, {self.n_words}); got {words.shape}")
         outs, start = [], 0
-        while True:  # split at the seeding checks and the seeded groups' deadlines: the same ticks whatever the blocks
-            seed_at = self._next_seed_check()
+        while True:  # split at the priming checks and the primed groups' deadlines: the same ticks whatever the blocks
+            prime_at = self._next_prime_check()
             confirm_at = min((g[0] for g in self._groups), default=None)
-            check = min((c for c in (seed_at, confirm_at) if c is not None), default=None)
+            check = min((c for c in (prime_at, confirm_at) if c is not None), default=None)
             end = words.shape[0] if check is None else min(words.shape[0], start + check - self.next_tick)
             at_check = check is not None and self.next_tick + (end - start) == check
             outs.append(self._feed(words[start:end], at_check))
             start = end
             if at_check and check == confirm_at:
                 self._confirm()
-            if at_check and check == seed_at:
-                self._seed()
+            if at_check and check == prime_at:
+                self._prime()
             if start >= words.shape[0]:
                 return np.concatenate(outs)
 
@@ -299,34 +299,34 @@ class SpikeChangeDetector:
                                      self.anchor, self.span1, self.n1, self.win_span, self.win_n, self.mixed, self.bg,
                                      self.censored, self.fg, self.flag_since, self.prev, self.due, out,
                                      math.exp(-p.threshold_log), math.exp(p.threshold_log),
-                                     math.exp(p.seed_threshold_log), math.exp(p.left_log),
+                                     math.exp(p.prime_threshold_log), math.exp(p.left_log),
                                      float(p.background_ticks), int(p.hold_ticks))
         self.next_tick += t
         return out[:n_out]
 
-    def _next_seed_check(self):
-        """The next tick (``seed_ticks``·2^k) at which to try seeding the background, or None."""
-        every = self.parameters.seed_ticks
-        if every <= 0 or self.seeded:
+    def _next_prime_check(self):
+        """The next tick (``prime_ticks``·2^k) at which to try priming the background, or None."""
+        every = self.parameters.prime_ticks
+        if every <= 0 or self.primed:
             return None
         check = every
-        while check <= self.next_tick:  # checks at seed_ticks·2^k: a handful, whatever the threshold Q
+        while check <= self.next_tick:  # checks at prime_ticks·2^k: a handful, whatever the threshold Q
             check *= 2
         return check if check <= self.parameters.hold_ticks else None  # past that, give up
 
-    def _seed(self):
+    def _prime(self):
         """Objects in view since the start: set the background of pixels that stand out from their surroundings.
 
-        Run at the seeding checks (the state is evaluated at the check's tick). Each pixel's
+        Run at the priming checks (the state is evaluated at the check's tick). Each pixel's
         current interval is measured (a window of intervals) or only bounded from below (no
         complete interval yet: at least the time since the stream started, or since its only
-        spike). A pixel whose interval is more than ×e^``seed_threshold_log`` shorter than the
-        robust median over ``seed_window_px`` around it is on a brighter object (valid even
+        spike). A pixel whose interval is more than ×e^``prime_threshold_log`` shorter than the
+        robust median over ``prime_window_px`` around it is on a brighter object (valid even
         where that median is only a lower bound): its background becomes the level interpolated
         from the clear pixels around it, kept as a lower bound, so only "brighter" is tested
         against it until its first interval after the object has gone replaces it. A pixel longer
         by that factor than a *measured* median is on a darker object: it takes the measured
-        level around it. Repeated at every check until ``seed_measured_fraction`` of the pixels
+        level around it. Repeated at every check until ``prime_measured_fraction`` of the pixels
         are measured.
         """
         p = self.parameters
@@ -344,14 +344,14 @@ class SpikeChangeDetector:
         H, W = log_v.shape
         # the robust median around, and whether it is measured: bounds above the median do not move it
         # (on 16-px blocks: the window is 96 px)
-        b = 2 * _SEED_BLOCK_PX
-        size = max(1, p.seed_window_px // b) | 1
+        b = 2 * _PRIME_BLOCK_PX
+        size = max(1, p.prime_window_px // b) | 1
         med_b = median_filter(np.median(_blocks(log_v, block=b), axis=2), size=size, mode="nearest")
         median = _nearest(med_b, H, W, b)
         low_frac = median_filter(_blocks(~measured & (log_v < median), block=b).mean(axis=2), size=size,
                                  mode="nearest")
         median_measured = _nearest(low_frac, H, W, b) < 0.1
-        thr = p.seed_threshold_log
+        thr = p.prime_threshold_log
         upper = np.log((s_win + 1.0) / np.maximum(n_win, 1))  # the longest the measured interval can be
         lower = np.log(np.maximum(np.where(measured, (s_win - 1.0) / np.maximum(n_win, 1), bound), 1e-3))
         # objects are at least 3 px across (an opening removes thin lines of static texture)
@@ -363,39 +363,39 @@ class SpikeChangeDetector:
         log_bg = np.log(np.where(known, bg, 1.0))
         stale = known & ~back & ((log_bg < median - thr) | (median_measured & (log_bg > median + thr)))
         # ... kept where wide enough to be an object, or at the edge of where one stood (anti-aliased edges)
-        if self._seeded_ever is None:
-            self._seeded_ever = np.zeros(stale.shape, bool)
-        self._seeded_ever |= bright | dark
-        stale &= _opened(stale) | _grown(self._seeded_ever)
-        seeded = bright | dark | stale
+        if self._primed_ever is None:
+            self._primed_ever = np.zeros(stale.shape, bool)
+        self._primed_ever |= bright | dark
+        stale &= _opened(stale) | _grown(self._primed_ever)
+        primed = bright | dark | stale
         clear = ~_grown(bright | dark | back) & ~stale  # (static regions that stand out are no background either)
-        around, weight, measured_around = _interpolate_clear(log_v, clear, p.seed_window_px, measured)
+        around, weight, measured_around = _interpolate_clear(log_v, clear, p.prime_window_px, measured)
         around_measured = measured_around > 0.9
         level = np.exp(around)
-        bg[seeded] = level[seeded]
+        bg[primed] = level[primed]
         # a lower bound unless measured around (only "brighter" is tested against it until the pixel's first
         # interval replaces it), and always under a brighter object: replaced by its first interval after
-        censored[seeded] = (~around_measured | bright)[seeded]
-        prev[seeded] = 0.0
-        flag_since[seeded] = -1
+        censored[primed] = (~around_measured | bright)[primed]
+        prev[primed] = 0.0
+        flag_since[primed] = -1
         silent = dark & ~measured  # no interval yet: darker once silent for longer than the level around allows
         prev[silent] = level[silent]
-        if p.seed_unsure:
-            unsure = ~seeded & ~back & around_measured & ((measured & (np.abs(log_v - around) > p.threshold_log))
+        if p.prime_unsure:
+            unsure = ~primed & ~back & around_measured & ((measured & (np.abs(log_v - around) > p.threshold_log))
                                                   | (known & (np.abs(log_bg - around) > p.threshold_log)))
             prev[unsure] = level[unsure]
-        later = ~measured & ~seeded & ~back & around_measured & (weight > 0.5)
+        later = ~measured & ~primed & ~back & around_measured & (weight > 0.5)
         prev[later] = level[later]
         self._new_groups(bright, dark | later, np.exp(upper), np.exp(lower), level, t)
         self.word_due[:] = -np.inf  # every pixel evaluated at the next step, against its new background
-        if measured.mean() >= p.seed_measured_fraction:
-            self.seeded = True
+        if measured.mean() >= p.prime_measured_fraction:
+            self.primed = True
 
     def _new_groups(self, bright, dark, upper, lower, level, t):
-        """Pixels seeded at tick ``t`` as groups to confirm: grouped as detections are (``merge_px``), brighter
+        """Pixels primed at tick ``t`` as groups to confirm: grouped as detections are (``merge_px``), brighter
         and darker apart.
 
-        A group's deadline is ``seed_confirm_ticks`` after seeding, or two of its typical intervals
+        A group's deadline is ``prime_confirm_ticks`` after priming, or two of its typical intervals
         (its own for a brighter group, the background's around for a darker one) when longer: no
         change can be measured sooner; it falls at the end of an output step.
         """
@@ -413,7 +413,7 @@ class SpikeChangeDetector:
             for k in range(int(label.max()) + 1):
                 sel = label == k
                 y, x = ys[sel], xs[sel]
-                wait = max(float(p.seed_confirm_ticks), 2.0 * float(np.median(typical[y, x])))
+                wait = max(float(p.prime_confirm_ticks), 2.0 * float(np.median(typical[y, x])))
                 self._groups.append((self._step_end(t + 1 + wait), stored[y, x].copy(), sign,
                                      lower[y, x].copy(), upper[y, x].copy(), t))
 
@@ -422,12 +422,12 @@ class SpikeChangeDetector:
         return int(math.ceil(tick / self.step_ticks)) * self.step_ticks
 
     def _confirm(self):
-        """Seeded groups at their deadline: a group none of whose pixels has changed is static (a bright
+        """Primed groups at their deadline: a group none of whose pixels has changed is static (a bright
         window, a lamp, a dark corner: an object in view moves) and gets its own light back for good.
 
         A pixel of a brighter group has changed when its interval now lies outside its interval at
-        seeding (one tick of slack, ×e^``threshold_log``) or it has been silent for longer than that
-        allows (the object left it); one of a darker group when an interval ending since the seeding is
+        priming (one tick of slack, ×e^``threshold_log``) or it has been silent for longer than that
+        allows (the object left it); one of a darker group when an interval ending since the priming is
         shorter than its interval then allowed.
         """
         p = self.parameters
@@ -456,7 +456,7 @@ class SpikeChangeDetector:
             if touching.sum() >= p.min_pixels:
                 # still, but joined to foreground of the same sign that is not (the part of a long object in
                 # view since the start that it has not left, while its front moves on): decided later
-                self._groups.append((self._step_end(self.next_tick + p.seed_confirm_ticks), s, sign, lower0, upper0,
+                self._groups.append((self._step_end(self.next_tick + p.prime_confirm_ticks), s, sign, lower0, upper0,
                                      t0))
                 continue
             if sign > 0:
@@ -489,19 +489,19 @@ class FrameChangeDetector:
     auto-exposure is still settling delivers frames where many pixels are such. Unmeasured pixels
     are never flagged and never move the background. The background is not learned from one
     frame: it starts from the per-pixel median of the first ``init_frames`` frames that measure at
-    least ``seed_measured_fraction`` of the pixels, so no single frame — an auto-exposure start-up, a frame that
+    least ``prime_measured_fraction`` of the pixels, so no single frame — an auto-exposure start-up, a frame that
     blinked — sets it; the masks of those first frames are given once it is known. Objects in view
-    there are seeded as for spikes (:func:`seed_background`), a saturated pixel counting as at least
-    as bright as its value (a bright object saturates most of its pixels). Seeded pixels are grouped
+    there are primed as for spikes (:func:`prime_background`), a saturated pixel counting as at least
+    as bright as its value (a bright object saturates most of its pixels). Primed pixels are grouped
     (touching, brighter and darker than the background apart); a group none of whose pixels changes
-    within ``seed_confirm_ticks`` gets its own light back (static texture), and a seeded pixel whose
+    within ``prime_confirm_ticks`` gets its own light back (static texture), and a primed pixel whose
     light has left its starting level and holds still over two frames, nearer the background around
     than that level, has been uncovered: that light is its background. A pixel unmeasured there
     takes the light around it (an object in view) or its first measured light.
     Each pixel also learns its noise (the spread of ln light while it agrees with the background;
     at first its spread over those frames, at least the typical one): a change must exceed
     :data:`NOISE_SIGMAS` standard deviations too, so the quantization of dim 8-bit pixels is not
-    read as motion. A frame that reads fewer than ``seed_measured_fraction`` of its pixels
+    read as motion. A frame that reads fewer than ``prime_measured_fraction`` of its pixels
     (measured, or saturated: at least their value) gives an empty mask; a sunlit window that
     saturates does not blind the camera to the rest of the frame.
 
@@ -528,8 +528,8 @@ class FrameChangeDetector:
         self.flag_since = None
         self.last_t = None
         self._pending = []  # frames seen before the background is known: (log light, measured, t, saturated)
-        self._group = None  # seeded groups still to confirm (labels), their light before seeding, which moved
-        self.confirm_s = self.parameters.seed_confirm_ticks * self.hold_s / self.parameters.hold_ticks
+        self._group = None  # primed groups still to confirm (labels), their light before priming, which moved
+        self.confirm_s = self.parameters.prime_confirm_ticks * self.hold_s / self.parameters.hold_ticks
 
     def feed(self, frame: np.ndarray, t_s: float, measured: np.ndarray | None = None,
              saturated: np.ndarray | None = None) -> list[np.ndarray]:
@@ -547,7 +547,7 @@ class FrameChangeDetector:
         ok = ok & ~sat
         if self.ref is None:
             self._pending.append((cur, ok, float(t_s), sat))
-            usable = [f for f in self._pending if (f[1] | f[3]).mean() >= self.parameters.seed_measured_fraction]
+            usable = [f for f in self._pending if (f[1] | f[3]).mean() >= self.parameters.prime_measured_fraction]
             if len(usable) < self.init_frames:
                 return []
             self._start(usable)
@@ -559,7 +559,7 @@ class FrameChangeDetector:
         """The masks of frames still held back when the frames end (the background from what was seen)."""
         if self.ref is not None or not self._pending:
             return []
-        usable = [f for f in self._pending if (f[1] | f[3]).mean() >= self.parameters.seed_measured_fraction]
+        usable = [f for f in self._pending if (f[1] | f[3]).mean() >= self.parameters.prime_measured_fraction]
         self._start(usable or self._pending)
         held, self._pending = self._pending, []
         return [self._step(*f) for f in held]
@@ -583,23 +583,23 @@ class FrameChangeDetector:
         self.flag_since = np.full(ref.shape, np.nan)
         self.last_t = frames[0][2]
         p = self.parameters
-        if p.seed_ticks > 0 and self.known.any():  # objects in view: the background around them, as for spikes
+        if p.prime_ticks > 0 and self.known.any():  # objects in view: the background around them, as for spikes
             # a saturated pixel is at least as bright as its value: one that stands out above the background
             # around is on an object for sure (a bright object in view saturates most of its pixels, and seen
             # only through its unsaturated edges it would be learned as background and leave a ghost)
             shown = np.isfinite(seen)
             seen = np.where(self.known, self.ref, np.where(shown, seen, 0.0))
-            seeded, _, around, weight = seed_background(seen, self.known | shown, max(p.seed_threshold_log, noise),
-                                                        p.seed_window_px, p.threshold_log, weights=True,
+            primed, _, around, weight = prime_background(seen, self.known | shown, max(p.prime_threshold_log, noise),
+                                                        p.prime_window_px, p.threshold_log, weights=True,
                                                         min_pixels=p.min_pixels, texture_sigmas=TEXTURE_SIGMAS)
-            # an object in view moves: a group of seeded pixels none of which changes within confirm_s is
+            # an object in view moves: a group of primed pixels none of which changes within confirm_s is
             # background after all (static texture the image shows strongly), and gets its own light back
-            if seeded.any():
+            if primed.any():
                 # groups of touching pixels, brighter and darker than the background apart (a dark strip of
                 # background beside a bright object in view is not that object, and it does not move)
-                self._group = np.full(seeded.shape, -1, np.int64)
+                self._group = np.full(primed.shape, -1, np.int64)
                 n = 0
-                for part in (seeded & (seen > around), seeded & (seen <= around)):
+                for part in (primed & (seen > around), primed & (seen <= around)):
                     if part.any():
                         ys, xs = np.nonzero(part)
                         _, _, label = _components_of_mask(part, 0, 1)  # touching pixels only
@@ -610,15 +610,15 @@ class FrameChangeDetector:
                 self._around = around
                 self._last = None  # the previous frame (log light, measured)
                 self._confirm_at = self.last_t + self.confirm_s
-            self.ref[seeded] = around[seeded]
+            self.ref[primed] = around[primed]
             # pixels never measured (saturated, or under the floor, on an object in view): the background around
-            fill = ~self.known & (seeded | (weight > 0.5))
+            fill = ~self.known & (primed | (weight > 0.5))
             self.ref[fill] = around[fill]
             self.known |= fill
 
     def _confirm(self, cur, ok, t_s, limit):
-        """Seeded pixels: note the groups that changed; past ``confirm_s``, give the still ones their own light
-        back; a seeded pixel whose light has left its starting level and holds still (two frames alike) nearer
+        """Primed pixels: note the groups that changed; past ``confirm_s``, give the still ones their own light
+        back; a primed pixel whose light has left its starting level and holds still (two frames alike) nearer
         the background around it than that level has been uncovered: that light is its background."""
         g = self._group
         moved = ok & (g >= 0) & (np.abs(cur - self._prior) > limit)
@@ -639,7 +639,7 @@ class FrameChangeDetector:
             self._group = None
 
     def _step(self, cur, ok, t_s, sat):
-        if (ok | sat).mean() < self.parameters.seed_measured_fraction:
+        if (ok | sat).mean() < self.parameters.prime_measured_fraction:
             # a frame that measures too few pixels (auto-exposure still settling): nothing is read from it
             return np.zeros(cur.shape, bool)
         new = ok & ~self.known  # first measurement of a pixel unmeasured so far: its background
@@ -665,10 +665,10 @@ class FrameChangeDetector:
 
 # --------------------------------------------------------------------------- start-up background
 
-_SEED_BLOCK_PX = 8  # the start-up background is computed on blocks of 8×8 px (the background is smooth)
+_PRIME_BLOCK_PX = 8  # the start-up background is computed on blocks of 8×8 px (the background is smooth)
 
 
-def _blocks(a: np.ndarray, fill=None, block: int = _SEED_BLOCK_PX) -> np.ndarray:
+def _blocks(a: np.ndarray, fill=None, block: int = _PRIME_BLOCK_PX) -> np.ndarray:
     """(H, W) → (H/b, W/b, b²) blocks of b × b px (edges padded with ``fill``, or the edge values)."""
     H, W = a.shape
     b = block
@@ -681,7 +681,7 @@ def _blocks(a: np.ndarray, fill=None, block: int = _SEED_BLOCK_PX) -> np.ndarray
     return pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
 
 
-def _nearest(blocks: np.ndarray, H: int, W: int, block: int = _SEED_BLOCK_PX) -> np.ndarray:
+def _nearest(blocks: np.ndarray, H: int, W: int, block: int = _PRIME_BLOCK_PX) -> np.ndarray:
     """Block values (hb, wb) of b × b px back to pixels, each pixel its block's value."""
     return blocks[np.arange(H) // block][:, np.arange(W) // block]
 
@@ -699,7 +699,7 @@ def _grown(mask: np.ndarray, px: int = 2) -> np.ndarray:
 
 def _upsample(blocks: np.ndarray, H: int, W: int) -> np.ndarray:
     """Block values (hb, wb) back to pixels, bilinear between block centres."""
-    b = _SEED_BLOCK_PX
+    b = _PRIME_BLOCK_PX
 
     def axis(n, nb):
         u = np.clip((np.arange(n) + 0.5) / b - 0.5, 0.0, nb - 1.0)
@@ -721,7 +721,7 @@ def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int)
         med = np.nanmedian(blocks, axis=2)
     fill = np.nanmedian(med) if np.isfinite(med).any() else 0.0
     med = np.where(np.isfinite(med), med, fill)
-    size = max(1, window_px // _SEED_BLOCK_PX) | 1  # odd, in blocks
+    size = max(1, window_px // _PRIME_BLOCK_PX) | 1  # odd, in blocks
     return median_filter(med, size=size, mode="nearest")
 
 
@@ -736,7 +736,7 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
     H, W = values.shape
     n = _blocks(clear.astype(np.float64), 0.0).sum(axis=2)
     total = _blocks(np.where(clear, values, 0.0), 0.0).sum(axis=2)
-    sigma = max(window_px / 8.0 / _SEED_BLOCK_PX, 0.5)
+    sigma = max(window_px / 8.0 / _PRIME_BLOCK_PX, 0.5)
     weight = gaussian_filter(n, sigma, mode="nearest")
     smooth = gaussian_filter(total, sigma, mode="nearest")
     level = np.where(weight > 1e-3, smooth / np.maximum(weight, 1e-3), np.nan)
@@ -744,7 +744,7 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
         level = np.where(np.isfinite(level), level, np.nanmedian(level))
     else:
         level = np.zeros_like(level)
-    out = (_upsample(level, H, W), _nearest(weight / _SEED_BLOCK_PX ** 2, H, W))
+    out = (_upsample(level, H, W), _nearest(weight / _PRIME_BLOCK_PX ** 2, H, W))
     if also is not None:
         part = gaussian_filter(_blocks((clear & also).astype(np.float64), 0.0).sum(axis=2), sigma, mode="nearest")
         out += (_nearest(part / np.maximum(weight, 1e-9), H, W),)
@@ -765,7 +765,7 @@ def _opened(mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log, window_px: int,
+def prime_background(log_light: np.ndarray, valid: np.ndarray, threshold_log, window_px: int,
                     unsure_log: float | None = None, weights: bool = False, min_pixels: int = 1,
                     texture_sigmas: float = 0.0):
     """Objects in view at the start: pixels that stand out from the background around them, and that background.
@@ -774,8 +774,8 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log, win
     already in view as background: they stay invisible until they move off and leave a "ghost"
     where they stood. Assuming the background is smoother than the objects on it, a pixel more
     than ``threshold_log`` from the median of ln(light) over ``window_px`` px (wider than twice
-    any object) is on an object (*seeded*). The background under and near it is then
-    interpolated from the pixels around that are not seeded (normalised Gaussian smoothing,
+    any object) is on an object (*primed*). The background under and near it is then
+    interpolated from the pixels around that are not primed (normalised Gaussian smoothing,
     σ = ``window_px``/8, on 8×8-px blocks: the local background, not the window's median),
     which is what the pixel shows once the object has moved off.
 
@@ -790,7 +790,7 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log, win
         (beyond its own noise).
     window_px : int
     unsure_log : float, optional
-        Pixels not seeded but more than this from the local background are returned as *unsure*.
+        Pixels not primed but more than this from the local background are returned as *unsure*.
     min_pixels : int
         Smallest object: marked groups of fewer pixels (within 5 px of each other) are left alone.
     texture_sigmas : float
@@ -800,7 +800,7 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log, win
 
     Returns
     -------
-    seeded, unsure : ndarray (H, W) bool
+    primed, unsure : ndarray (H, W) bool
     background : ndarray (H, W) float
         The estimated ln(light) of the background (same unit as ``log_light``).
     weight : ndarray (H, W) float
@@ -815,19 +815,19 @@ def seed_background(log_light: np.ndarray, valid: np.ndarray, threshold_log, win
         spread = _upsample(_robust_background(deviation, valid, window_px), H, W)
         threshold_log = np.maximum(threshold_log, texture_sigmas * spread)
     # objects are ≥ 3 px across and hold at least min_pixels (specks of texture are not objects)
-    seeded = _opened(valid & (deviation > threshold_log))
-    if min_pixels > 1 and seeded.any():
-        ys, xs = np.nonzero(seeded)
-        _, counts, label = _components_of_mask(seeded, 2, 1)
-        seeded[ys[counts[label] < min_pixels], xs[counts[label] < min_pixels]] = False
+    primed = _opened(valid & (deviation > threshold_log))
+    if min_pixels > 1 and primed.any():
+        ys, xs = np.nonzero(primed)
+        _, counts, label = _components_of_mask(primed, 2, 1)
+        primed[ys[counts[label] < min_pixels], xs[counts[label] < min_pixels]] = False
     # the local background from the pixels that are not on an object (their anti-aliased edges excluded)
-    clear = valid & ~_grown(seeded)
+    clear = valid & ~_grown(primed)
     background, weight = _interpolate_clear(log_light, clear, window_px)
     background = np.where(weight > 1e-3, background, coarse)
-    unsure = np.zeros_like(seeded)
+    unsure = np.zeros_like(primed)
     if unsure_log is not None:
-        unsure = valid & ~seeded & (np.abs(log_light - background) > unsure_log)
-    return (seeded, unsure, background, weight) if weights else (seeded, unsure, background)
+        unsure = valid & ~primed & (np.abs(log_light - background) > unsure_log)
+    return (primed, unsure, background, weight) if weights else (primed, unsure, background)
 
 
 # --------------------------------------------------------------------------- grouping
