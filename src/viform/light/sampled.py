@@ -22,6 +22,7 @@ light gives the same bits.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 
 import numpy as np
 from numba import njit, prange
@@ -43,7 +44,7 @@ def auto_light_sample_ticks(speed_px_per_s: float, clock_hz: float, error_px: fl
     return int(max(1, min(largest, math.floor(2.0 * error_px / v))))
 
 
-class LightSampler:
+class LightSampler(ABC):
     """Light that renders only where it can change (see the module notes). Subclasses implement
     :meth:`static_lux`, :meth:`dirty_rects` and :meth:`render`."""
 
@@ -52,22 +53,22 @@ class LightSampler:
     #: An upper bound of the light, lux (for the fixed-point range check).
     lux_max: float
 
+    @abstractmethod
     def static_lux(self) -> np.ndarray:
         """The light (lux, (H, W) float64) of every pixel outside the dirty rectangles, at every instant."""
-        raise NotImplementedError
 
+    @abstractmethod
     def dirty_rects(self, times_s: np.ndarray) -> np.ndarray:
         """Rectangles (k, 4) int64 of (row0, row1, col0, col1), ends exclusive, whose union holds every pixel
         whose light at one of ``times_s`` may differ from :meth:`static_lux`."""
-        raise NotImplementedError
 
+    @abstractmethod
     def render(self, times_s: np.ndarray, starts: np.ndarray, stops: np.ndarray, a: np.ndarray, b: np.ndarray,
                out: np.ndarray) -> None:
         """Fill ``out`` (N, P) with the light at ``times_s`` (N,) of the pixels of the flat ranges
         [starts[k], stops[k]) (row-major pixel indices) laid end to end (P pixels in all): as charge per
         tick rint(a·lux + b) when ``out`` is int64 (``a``, ``b``: the P pixels' factors), as lux when
         ``out`` is float64."""
-        raise NotImplementedError
 
     def frames(self, times_s) -> np.ndarray:
         """The light at ``times_s`` (N, H, W), lux: the whole field rendered as the simulator sees it."""

@@ -392,9 +392,9 @@ class _PatternScene(Scene):
         value = PATTERNS[self.pattern](u, v, self.period_px)
         return self.min_lux + (self.max_lux - self.min_lux) * value
 
+    @abstractmethod
     def _motion(self) -> tuple:
         """The pattern's motion for the compiled kernel; each moving subclass (translating, rotating) defines it."""
-        raise NotImplementedError(f"{type(self).__name__} does not describe its motion to the compiled kernel")
 
     def _pattern_light(self, modulation=("none",)):
         """The compiled form of this pattern scene (None when a subclass changed the light)."""
