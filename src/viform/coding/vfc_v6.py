@@ -35,6 +35,7 @@ import numpy as np
 from viform._validate import ViformError
 from viform.coding import interval_model, tick_model, vfc_v5
 from viform.coding.vfc_common import TickSegment, _bands, _check_band_totals, _interval_data_limit, _map
+from viform.coding.vfc_v5 import _read_varint, _varint
 
 _FLAG_BANDS6 = 6
 MODEL_TICKS = 0
@@ -45,7 +46,6 @@ MODEL_NAMES = ("tick model", "run-length records")
 #: records won 8, all at ≥ 1.65 bit/spike but one (0.54 bit/spike, 136 bytes smaller); trying from 1.5
 #: codes records for 6.1 M of the half's 26 M spikes, from 0.8 (version 5's rule) for 15.7 M.
 RECORDS_TRIAL_BITS_PER_SPIKE = 1.5
-_MAX_VARINT_BYTES = 10
 #: largest decompressed header (the container's limit on a header)
 MAX_HEADER_BYTES = 1 << 20
 
@@ -65,28 +65,6 @@ def unpack_header(stored: bytes) -> bytes:
     if d.unconsumed_tail or not d.eof or d.unused_data:
         raise ViformError("header is invalid (its zlib stream is cut short, too long, or followed by bytes)")
     return head
-
-
-def _varint(v: int) -> bytes:
-    out = bytearray()
-    while v >= 128:
-        out.append((v & 127) | 128)
-        v >>= 7
-    out.append(v)
-    return bytes(out)
-
-
-def _read_varint(payload: bytes, pos: int, what: str) -> tuple[int, int]:
-    """A LEB128 value at ``pos`` and the position after it; cut short or over-long is damage."""
-    v = 0
-    for k in range(_MAX_VARINT_BYTES):
-        if pos + k >= len(payload):
-            raise ViformError(f"segment payload is cut short in {what}")
-        byte = payload[pos + k]
-        v |= (byte & 127) << (7 * k)
-        if byte < 128:
-            return v, pos + k + 1
-    raise ViformError(f"{what} is too long")
 
 
 class BandState:
