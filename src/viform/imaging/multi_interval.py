@@ -135,6 +135,23 @@ def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
     return prev, nxt
 
 
+@njit(cache=True, inline="always")
+def interval_consistent(interval, mean, n, noise_q, tolerance):
+    """Whether one more interval (ticks) agrees with the mean ``mean`` of the ``n`` beside it.
+
+    Wilson–Hilferty: (τ/μ)^(1/3) of a Gamma(Q) interval is near normal, mean 1 − 1/(9Q), variance
+    1/(9Q); tick rounding (⅙ tick²) and the uncertainty of μ (from n intervals) add their share of
+    variance. |z| ≤ ``tolerance`` ⇔ τ/μ between the cubes of centre ∓ reach (no cube root).
+    """
+    var = (1.0 / noise_q + 1.0 / (6.0 * mean * mean)) / 9.0
+    centre = 1.0 - 1.0 / (9.0 * noise_q)
+    reach = tolerance * np.sqrt(var * (1.0 + 1.0 / n))
+    low = max(centre - reach, 0.0)
+    high = centre + reach
+    ratio = interval / mean
+    return low * low * low <= ratio <= high * high * high
+
+
 @njit(cache=True, parallel=True)
 def _span_rate(prev, nxt, n_total, adaptive, noise_q, tolerance, rate, used, censored):
     """Rate (spikes per tick) per pixel: Σ 1/span over the windows that hold the instant (module
@@ -166,18 +183,7 @@ def _span_rate(prev, nxt, n_total, adaptive, noise_q, tolerance, rate, used, cen
                 else:
                     continue
                 if adaptive:
-                    # Wilson–Hilferty: (τ/μ)^(1/3) of a Gamma(Q) interval is near normal,
-                    # mean 1 − 1/(9Q), var 1/(9Q); tick rounding (⅙ tick²) and the
-                    # uncertainty of μ (from n intervals) add their share of variance
-                    mu = (hi - lo) / n
-                    var = (1.0 / noise_q + 1.0 / (6.0 * mu * mu)) / 9.0
-                    centre = 1.0 - 1.0 / (9.0 * noise_q)
-                    reach = tolerance * np.sqrt(var * (1.0 + 1.0 / n))
-                    # |z| ≤ tolerance ⇔ τ/μ between the cubes of centre ∓ reach (no cube root)
-                    low = max(centre - reach, 0.0)
-                    high = centre + reach
-                    ratio = new / mu
-                    if ratio < low * low * low or ratio > high * high * high:
+                    if not interval_consistent(new, (hi - lo) / n, n, noise_q, tolerance):
                         if side == 0:
                             grow_b = False
                         else:

@@ -15,6 +15,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from viform.imaging.multi_interval import interval_consistent
+
 # ---------------------------------------------------------------------- images
 
 
@@ -53,14 +55,7 @@ def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolera
             else:
                 continue
             if adaptive:
-                mu = (hi - lo) / n
-                var = (1.0 / noise_q + 1.0 / (6.0 * mu * mu)) / 9.0
-                centre = 1.0 - 1.0 / (9.0 * noise_q)
-                reach = tolerance * math.sqrt(var * (1.0 + 1.0 / n))
-                low = max(centre - reach, 0.0)
-                high = centre + reach
-                ratio = new / mu
-                if ratio < low * low * low or ratio > high * high * high:
+                if not interval_consistent(new, (hi - lo) / n, n, noise_q, tolerance):
                     if side == 0:
                         grow_b = False
                     else:
