@@ -75,13 +75,16 @@ def _print_catalogue(rows) -> None:
 
 
 def _print_sensor(doc) -> None:
+    from viform.sensors.parameters import value_text
+
     size = size_text(*doc["resolution"], "px (width × height)") if doc["resolution"] else "the scene's"
     click.echo(f"{doc['name']}: {doc['description']}")
     click.echo(f"family {doc['family']}; pixel array {size}")
     if doc["compare_settings"]:
         click.echo("compare and sweep shoot it with "
                    + ", ".join(f"{k} = {v}" for k, v in doc["compare_settings"].items()))
-    rows = [(p["name"], _value(p["default"]), p["unit"], p["allowed"], p["part"], p["doc"]) for p in doc["parameters"]]
+    rows = [(p["name"], value_text(p["default"]), p["unit"], p["allowed"], p["part"], p["doc"])
+            for p in doc["parameters"]]
     head = ("parameter", "default", "unit", "allowed", "part", "")
     widths = [max(len(str(r[i])) for r in [head, *rows]) for i in range(5)]
     click.echo("  ".join(f"{h:<{w}}" for h, w in zip(head, widths, strict=False)).rstrip())
@@ -91,11 +94,3 @@ def _print_sensor(doc) -> None:
                f"--set {doc['name']}:NAME=VALUE (compare) or --vary {doc['name']}:NAME=VALUES (sweep).")
 
 
-def _value(v) -> str:
-    if v is None:
-        return "none"
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return f"{v:.6g}"
-    return str(v)

@@ -204,14 +204,7 @@ class Parameter:
         return self.check(value)
 
     def default_text(self) -> str:
-        v = self.default
-        if v is None:
-            return "none"
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, float):
-            return f"{v:.6g}"
-        return str(v)
+        return value_text(self.default)
 
 
 def _unit(name: str) -> str:
@@ -280,3 +273,14 @@ def merged(*groups: dict) -> dict[str, Parameter]:
                 raise AssertionError(f"parameter {name!r} is both {out[name].where} and {p.where}: prefix one")
             out[name] = p
     return out
+
+
+def value_text(v) -> str:
+    """A parameter's value as users type it after ``--set NAME=``: none, true/false, 6 digits."""
+    if v is None:
+        return "none"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
