@@ -298,6 +298,30 @@ def bilinear(img, y, x):
 
 
 @njit(cache=True)
+def _shift_gain_whole(log0, log1, var0, var1, still, labels, region, rows, cols, iy, ix, cap, unknown, exception):
+    """:func:`shift_gain` for a whole-pixel shift: every landing is a pixel, so no interpolation (the same
+    sums: bilinear weights of 0 and 1 reproduce the pixel exactly)."""
+    h, w = log0.shape
+    total = 0.0
+    for k in range(rows.size):
+        r = rows[k]
+        c = cols[k]
+        y = r + iy
+        x = c + ix
+        if y < 0 or x < 0 or y > h - 1 or x > w - 1:
+            continue
+        v = log1[y, x] - log0[r, c]
+        e = min(v * v / (var0[r, c] + var1[y, x]), cap)
+        s = still[y, x]
+        total += min(e, s + exception) - s
+        sr = r - iy
+        sc = c - ix
+        if not (0 <= sr < h and 0 <= sc < w and labels[sr, sc] == region):
+            total += min(unknown, still[r, c] + exception) - still[r, c]
+    return total
+
+
+@njit(cache=True)
 def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx, cap, unknown, exception):
     """Cost of "``region`` moved by (dy, dx), all else still" minus the cost of "nothing moved".
 
@@ -307,6 +331,9 @@ def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx
     background of unknown light (cost ``unknown``). Any landing may instead be left still at
     ``exception`` more than the still cost (another object in the way).
     """
+    if dy == math.floor(dy) and dx == math.floor(dx):
+        return _shift_gain_whole(log0, log1, var0, var1, still, labels, region, rows, cols, int(dy), int(dx), cap,
+                                 unknown, exception)
     h, w = log0.shape
     total = 0.0
     for k in range(rows.size):
@@ -328,48 +355,108 @@ def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx
 
 
 @njit(cache=True)
+def grid_gains(log0, log1, var0, var1, still, labels, region, rows, cols, shifts_y, shifts_x, cap, unknown,
+               exception):
+    """:func:`shift_gain` at every whole-pixel shift (``shifts_y[i]``, ``shifts_x[j]``): (ny, nx).
+
+    The pixels are the outer loop (each pixel's landings for neighbouring shifts are neighbours
+    in memory) and every shift's sum runs over the pixels in their order, so each entry is the
+    sum :func:`shift_gain` returns for that shift, to the last bit.
+    """
+    h, w = log0.shape
+    ny = shifts_y.size
+    nx = shifts_x.size
+    out = np.zeros((ny, nx))
+    for k in range(rows.size):
+        r = rows[k]
+        c = cols[k]
+        a0 = log0[r, c]
+        b0 = var0[r, c]
+        s0 = still[r, c]
+        uncovered = min(unknown, s0 + exception) - s0
+        for i in range(ny):
+            y = r + shifts_y[i]
+            if y < 0 or y > h - 1:
+                continue
+            sr = r - shifts_y[i]
+            row_in = 0 <= sr < h
+            for j in range(nx):
+                x = c + shifts_x[j]
+                if x < 0 or x > w - 1:
+                    continue
+                v = log1[y, x] - a0
+                e = min(v * v / (b0 + var1[y, x]), cap)
+                s = still[y, x]
+                g = out[i, j] + (min(e, s + exception) - s)
+                sc = c - shifts_x[j]
+                if not (row_in and 0 <= sc < w and labels[sr, sc] == region):
+                    g += uncovered
+                out[i, j] = g
+    return out
+
+
+@njit(cache=True)
 def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse_rows, coarse_cols, radius, cap,
                unknown, exception):
     """The shift with the lowest :func:`shift_gain`: an integer grid of step 2 within ``radius``
     on the ``coarse_*`` pixels (a sample weighted to the region's rim, where a uniform region's
     motion shows), then steps 1 and 0.5 around the best on all of the region's pixels
-    (Gauss–Newton refines further). Returns (dy, dx, gain)."""
-    sub_r = coarse_rows
-    sub_c = coarse_cols
+    (Gauss–Newton refines further). Returns (dy, dx, gain). Whole-pixel shifts are summed
+    pixel by pixel for many shifts at once (:func:`grid_gains`)."""
+    grid = np.arange(-radius, radius + 1, 2)
+    coarse = grid_gains(log0, log1, var0, var1, still, labels, region, coarse_rows, coarse_cols, grid, grid, cap,
+                        unknown, exception)
     best = 0.0
-    by = 0.0
-    bx = 0.0
-    for i in range(-radius, radius + 1, 2):
-        for j in range(-radius, radius + 1, 2):
-            g = shift_gain(log0, log1, var0, var1, still, labels, region, sub_r, sub_c, float(i), float(j), cap,
-                           unknown, exception)
-            if g < best:
-                best = g
-                by = float(i)
-                bx = float(j)
-    best = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, by, bx, cap, unknown, exception)
-    if by != 0.0 or bx != 0.0:
-        zero = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, 0.0, 0.0, cap, unknown,
-                          exception)
+    by = 0
+    bx = 0
+    for i in range(grid.size):
+        for j in range(grid.size):
+            if coarse[i, j] < best:
+                best = coarse[i, j]
+                by = grid[i]
+                bx = grid[j]
+    near = np.arange(-2, 3)
+    block = grid_gains(log0, log1, var0, var1, still, labels, region, rows, cols, by + near, bx + near, cap,
+                       unknown, exception)
+    best = block[2, 2]
+    if by != 0 or bx != 0:
+        if abs(by) <= 2 and abs(bx) <= 2:
+            zero = block[2 - by, 2 - bx]
+        else:
+            zero = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, 0.0, 0.0, cap, unknown,
+                              exception)
         if zero <= best:
             best = zero
-            by = 0.0
-            bx = 0.0
-    for level in range(2):
-        step = (1.0, 0.5)[level]
-        cy = by
-        cx = bx
-        for i in range(-1 - (level == 0), 2 + (level == 0)):
-            for j in range(-1 - (level == 0), 2 + (level == 0)):
-                if i == 0 and j == 0:
-                    continue
-                g = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, cy + i * step,
-                               cx + j * step, cap, unknown, exception)
-                if g < best:
-                    best = g
-                    by = cy + i * step
-                    bx = cx + j * step
-    return by, bx, best
+            by = 0
+            bx = 0
+            block = grid_gains(log0, log1, var0, var1, still, labels, region, rows, cols, near, near, cap, unknown,
+                               exception)
+    # step 1 (the 5×5 around the best), then step 0.5 (its 8 neighbours)
+    cy = by
+    cx = bx
+    fy = float(by)
+    fx = float(bx)
+    for i in range(-2, 3):
+        for j in range(-2, 3):
+            if i == 0 and j == 0:
+                continue
+            if block[i + 2, j + 2] < best:
+                best = block[i + 2, j + 2]
+                fy = float(cy + i)
+                fx = float(cx + j)
+    cyf = fy
+    cxf = fx
+    for i in range(-1, 2):
+        for j in range(-1, 2):
+            if i == 0 and j == 0:
+                continue
+            g = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, cyf + i * 0.5,
+                           cxf + j * 0.5, cap, unknown, exception)
+            if g < best:
+                best = g
+                fy = cyf + i * 0.5
+                fx = cxf + j * 0.5
+    return fy, fx, best
 
 
 @njit(cache=True)
@@ -490,4 +577,78 @@ def warp_costs(smooth0, smooth1, weight, rows, cols, flow_u, flow_v, cap):
             continue
         res = bilinear(smooth1, y, x) - smooth0[r, c]
         out[k] = min(res * res * weight[r, c], cap)
+    return out
+
+
+@njit(cache=True)
+def warp_costs_at(smooth0, smooth1, weight, rows, cols, flow_u, flow_v, cap):
+    """:func:`warp_costs` with the flow given per listed pixel (``flow_u[k]``, ``flow_v[k]``, px)."""
+    h, w = smooth0.shape
+    out = np.empty(rows.size)
+    for k in range(rows.size):
+        r = rows[k]
+        c = cols[k]
+        y = r + flow_v[k]
+        x = c + flow_u[k]
+        if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1 or not (math.isfinite(y) and math.isfinite(x)):
+            out[k] = cap
+            continue
+        res = bilinear(smooth1, y, x) - smooth0[r, c]
+        out[k] = min(res * res * weight[r, c], cap)
+    return out
+
+
+@njit(cache=True)
+def inner_depth(inside):
+    """City-block (L1) distance of each pixel of the mask ``inside`` to the nearest pixel outside it,
+    the frame around the array counting as outside (0 outside the mask). A pixel survives n
+    erosions by the 4-neighbour cross (padded with False) exactly where its depth exceeds n."""
+    h, w = inside.shape
+    big = h + w + 2
+    depth = np.empty((h, w), np.int64)
+    for r in range(h):
+        for c in range(w):
+            if not inside[r, c]:
+                depth[r, c] = 0
+                continue
+            up = depth[r - 1, c] if r > 0 else 0
+            left = depth[r, c - 1] if c > 0 else 0
+            depth[r, c] = min(min(up, left) + 1, big)
+    for r in range(h - 1, -1, -1):
+        for c in range(w - 1, -1, -1):
+            if depth[r, c] == 0:
+                continue
+            down = depth[r + 1, c] if r < h - 1 else 0
+            right = depth[r, c + 1] if c < w - 1 else 0
+            depth[r, c] = min(depth[r, c], min(down, right) + 1)
+    return depth
+
+
+@njit(cache=True)
+def rim_mean_exceeds(rim_r, rim_c, values, h, w, half, threshold):
+    """For each listed pixel: whether the mean of ``values`` over the listed pixels within its
+    (2·half + 1)² square exceeds ``threshold`` (the 5×5 mean of a quantity known on the rim only)."""
+    n = rim_r.size
+    out = np.zeros(n, np.bool_)
+    if n == 0:
+        return out
+    r0 = rim_r.min()
+    c0 = rim_c.min()
+    bh = rim_r.max() - r0 + 1
+    bw = rim_c.max() - c0 + 1
+    total = np.zeros((bh, bw))
+    count = np.zeros((bh, bw))
+    for k in range(n):
+        total[rim_r[k] - r0, rim_c[k] - c0] += values[k]
+        count[rim_r[k] - r0, rim_c[k] - c0] += 1.0
+    for k in range(n):
+        r = rim_r[k] - r0
+        c = rim_c[k] - c0
+        s = 0.0
+        m = 0.0
+        for i in range(max(0, r - half), min(bh, r + half + 1)):
+            for j in range(max(0, c - half), min(bw, c + half + 1)):
+                s += total[i, j]
+                m += count[i, j]
+        out[k] = s / max(m, 1e-9) > threshold
     return out

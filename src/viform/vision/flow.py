@@ -701,9 +701,11 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
     from viform.vision._flow_kernels import (
         best_shift,
         gauss_newton_motion,
+        inner_depth,
+        rim_mean_exceeds,
         segment_log_light,
         unexplained_share,
-        warp_costs,
+        warp_costs_at,
     )
 
     o = options or LayeredOptions()
@@ -747,21 +749,22 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
         rows = (rows + box[0].start).astype(np.int64)
         cols = (cols + box[1].start).astype(np.int64)
         # the coarse search's sample: up to 384 pixels of the rim (2 px) and 128 of the interior
-        core = ndi.binary_erosion(np.pad(inside, 1), iterations=2)[1:-1, 1:-1][inside]
+        depth = inner_depth(inside)
+        core = depth[inside] > 2
         rim_i, core_i = np.flatnonzero(~core), np.flatnonzero(core)
         sample = np.concatenate([rim_i[::max(1, rim_i.size // 384)], core_i[::max(1, core_i.size // 128)]])
         coarse = (rows[sample].copy(), cols[sample].copy())
         dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, int(region), rows, cols, *coarse,
                                   int(o.max_shift_px), o.cap, o.unknown, o.exception)
         if -gain > o.min_gain and not dy == dx == 0.0:
-            candidates.append((-gain, int(region), box, inside, rows, cols, coarse, (dy, dx, gain)))
+            candidates.append((-gain, int(region), box, depth, rows, cols, coarse, (dy, dx, gain)))
     # 2. strongest first; what a kept motion explains (where its pixels land, what they uncover) is
     # no longer a change for the others, so a region beside a moving one is not read as moving too
     regions = []
     rejected = {"explained by others": 0, "unexplained landings": 0, "dense flow as good": 0}
     touched = np.zeros((h, w), bool)  # where kept motions changed the still costs
     reach = int(o.max_shift_px) + 2
-    for _, region, box, inside, rows, cols, coarse, first in sorted(candidates, key=lambda c: -c[0]):
+    for _, region, box, depth, rows, cols, coarse, first in sorted(candidates, key=lambda c: -c[0]):
         near = (slice(max(0, box[0].start - reach), box[0].stop + reach),
                 slice(max(0, box[1].start - reach), box[1].stop + reach))
         if touched[near].any():  # else the search would find what it found before
@@ -776,8 +779,7 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
             rejected["unexplained landings"] += 1
             continue
         # sub-pixel: Gauss–Newton on the rim (the interior of a uniform region tells nothing)
-        core = ndi.binary_erosion(np.pad(inside, 1), iterations=o.rim_px)[1:-1, 1:-1]
-        rim_r, rim_c = np.nonzero(inside & ~core)
+        rim_r, rim_c = np.nonzero((depth > 0) & (depth <= o.rim_px))
         rim_r = (rim_r + box[0].start).astype(np.int64)
         rim_c = (rim_c + box[1].start).astype(np.int64)
         start = np.array([dx, dy, 0, 0, 0, 0], float)
@@ -802,36 +804,31 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
         # min_gain (a dense flow that already follows a textured region is kept), except at rim
         # pixels the dense flow explains clearly better (another object's motion); judged on the
         # images themselves (smoothing would mix in the other side of the region's edge)
-        trial = np.zeros((2, h, w), np.float32)
-        trial[0, rows, cols] = u
-        trial[1, rows, cols] = v
-        fit_cost = warp_costs(log0, log1, inverse_var, rim_r, rim_c, trial[0], trial[1], o.cap)
-        dense_cost = warp_costs(log0, log1, inverse_var, rim_r, rim_c, flow[0], flow[1], o.cap)
+        at_rim = depth[depth > 0] <= o.rim_px  # the region's pixels (row-major, as rows/cols) on its rim
+        u32 = u.astype(np.float32)
+        v32 = v.astype(np.float32)
+        fit_cost = warp_costs_at(log0, log1, inverse_var, rows[at_rim], cols[at_rim], u32[at_rim], v32[at_rim],
+                                 o.cap)
+        dense_cost = warp_costs_at(log0, log1, inverse_var, rows[at_rim], cols[at_rim], flow[0, rows[at_rim],
+                                   cols[at_rim]], flow[1, rows[at_rim], cols[at_rim]], o.cap)
         if np.sum(dense_cost - np.minimum(fit_cost, dense_cost + o.exception)) <= o.min_gain:
             rejected["dense flow as good"] += 1
             continue
         # rim pixels the dense flow explains clearly better, over 5×5 of the rim (another object's motion,
         # not one noisy pixel), keep it
-        better = np.zeros((h, w))
-        on_rim = np.zeros((h, w))
-        better[rim_r, rim_c] = fit_cost - dense_cost
-        on_rim[rim_r, rim_c] = 1.0
-        mean_better = ndi.uniform_filter(better, 5, mode="constant") / np.maximum(
-            ndi.uniform_filter(on_rim, 5, mode="constant"), 1e-9)
-        keep = np.zeros((h, w), bool)
-        keep[rim_r, rim_c] = mean_better[rim_r, rim_c] > o.exception
-        take = ~keep[rows, cols]
-        flow[0, rows[take], cols[take]] = u[take]
-        flow[1, rows[take], cols[take]] = v[take]
+        keep_rim = rim_mean_exceeds(rows[at_rim], cols[at_rim], fit_cost - dense_cost, h, w, 2, o.exception)
+        take = np.ones(rows.size, bool)
+        take[np.flatnonzero(at_rim)[keep_rim]] = False
+        flow[0, rows[take], cols[take]] = u32[take]
+        flow[1, rows[take], cols[take]] = v32[take]
         moving[rows[take], cols[take]] = True
         land_r = np.rint(rows + v).astype(np.int64)
         land_c = np.rint(cols + u).astype(np.int64)
         inside_field = (land_r >= 0) & (land_r < h) & (land_c >= 0) & (land_c < w)
-        explained = np.zeros((h, w), bool)
-        explained[land_r[inside_field], land_c[inside_field]] = True
-        explained[rows, cols] = True  # its own place: landed on, or uncovered
-        still[explained] = np.minimum(still[explained], 1.0)
-        touched |= explained
+        # what it explains: where it lands, and its own place (landed on, or uncovered)
+        for er, ec in ((land_r[inside_field], land_c[inside_field]), (rows, cols)):
+            still[er, ec] = np.minimum(still[er, ec], 1.0)
+            touched[er, ec] = True
         regions.append({"pixels": int(rows.size), "centre_px": [float(cols.mean()), float(rows.mean())],
                         "shift_px": [float(params[0]), float(params[1])],
                         "affine": bool(params[2:].any()), "gain": float(-gain)})
