@@ -343,12 +343,21 @@ def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx
         x = c + dx
         if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
             continue  # it left the field: no evidence either way
-        v = bilinear(log1, y, x) - log0[r, c]
-        e = min(v * v / (var0[r, c] + var1[int(round(y)), int(round(x))]), cap)
-        s = bilinear(still, y, x)
+        # bilinear (:func:`bilinear`, the same arithmetic) of log1 and still at one landing
+        y0 = min(int(y), max(h - 2, 0))
+        x0 = min(int(x), max(w - 2, 0))
+        y1 = min(y0 + 1, h - 1)
+        x1 = min(x0 + 1, w - 1)
+        fy = y - y0
+        fx = x - x0
+        v = ((1 - fy) * ((1 - fx) * log1[y0, x0] + fx * log1[y0, x1])
+             + fy * ((1 - fx) * log1[y1, x0] + fx * log1[y1, x1])) - log0[r, c]
+        e = min(v * v / (var0[r, c] + var1[int(np.rint(y)), int(np.rint(x))]), cap)
+        s = ((1 - fy) * ((1 - fx) * still[y0, x0] + fx * still[y0, x1])
+             + fy * ((1 - fx) * still[y1, x0] + fx * still[y1, x1]))
         total += min(e, s + exception) - s
-        sr = int(round(r - dy))
-        sc = int(round(c - dx))
+        sr = int(np.rint(r - dy))
+        sc = int(np.rint(c - dx))
         if not (0 <= sr < h and 0 <= sc < w and labels[sr, sc] == region):
             total += min(unknown, still[r, c] + exception) - still[r, c]
     return total
@@ -397,11 +406,13 @@ def grid_gains(log0, log1, var0, var1, still, labels, region, rows, cols, shifts
 
 @njit(cache=True)
 def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse_rows, coarse_cols, radius, cap,
-               unknown, exception):
+               unknown, exception, half_steps=True):
     """The shift with the lowest :func:`shift_gain`: an integer grid of step 2 within ``radius``
     on the ``coarse_*`` pixels (a sample weighted to the region's rim, where a uniform region's
     motion shows), then steps 1 and 0.5 around the best on all of the region's pixels
-    (Gauss–Newton refines further). Returns (dy, dx, gain). Whole-pixel shifts are summed
+    (Gauss–Newton refines further; ``half_steps`` False: step 1 only). ``rows``/``cols`` may be a
+    sample of the region's pixels (``labels``/``region`` still say which pixels are its own).
+    Returns (dy, dx, gain). Whole-pixel shifts are summed
     pixel by pixel for many shifts at once (:func:`grid_gains`)."""
     grid = np.arange(-radius, radius + 1, 2)
     coarse = grid_gains(log0, log1, var0, var1, still, labels, region, coarse_rows, coarse_cols, grid, grid, cap,
@@ -444,6 +455,8 @@ def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse
                 best = block[i + 2, j + 2]
                 fy = float(cy + i)
                 fx = float(cx + j)
+    if not half_steps:
+        return fy, fx, best
     cyf = fy
     cxf = fx
     for i in range(-1, 2):
@@ -473,7 +486,7 @@ def unexplained_share(log0, log1, var0, var1, still, rows, cols, dy, dx, cap, ex
         if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
             continue
         v = bilinear(log1, y, x) - log0[r, c]
-        e = min(v * v / (var0[r, c] + var1[int(round(y)), int(round(x))]), cap)
+        e = min(v * v / (var0[r, c] + var1[int(np.rint(y)), int(np.rint(x))]), cap)
         n += 1
         if e > bilinear(still, y, x) + exception:
             bad += 1
