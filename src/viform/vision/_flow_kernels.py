@@ -406,13 +406,11 @@ def grid_gains(log0, log1, var0, var1, still, labels, region, rows, cols, shifts
 
 @njit(cache=True)
 def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse_rows, coarse_cols, radius, cap,
-               unknown, exception, half_steps=True):
+               unknown, exception):
     """The shift with the lowest :func:`shift_gain`: an integer grid of step 2 within ``radius``
     on the ``coarse_*`` pixels (a sample weighted to the region's rim, where a uniform region's
     motion shows), then steps 1 and 0.5 around the best on all of the region's pixels
-    (Gauss–Newton refines further; ``half_steps`` False: step 1 only). ``rows``/``cols`` may be a
-    sample of the region's pixels (``labels``/``region`` still say which pixels are its own).
-    Returns (dy, dx, gain). Whole-pixel shifts are summed
+    (Gauss–Newton refines further). Returns (dy, dx, gain). Whole-pixel shifts are summed
     pixel by pixel for many shifts at once (:func:`grid_gains`)."""
     grid = np.arange(-radius, radius + 1, 2)
     coarse = grid_gains(log0, log1, var0, var1, still, labels, region, coarse_rows, coarse_cols, grid, grid, cap,
@@ -455,8 +453,6 @@ def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse
                 best = block[i + 2, j + 2]
                 fy = float(cy + i)
                 fx = float(cx + j)
-    if not half_steps:
-        return fy, fx, best
     cyf = fy
     cxf = fx
     for i in range(-1, 2):

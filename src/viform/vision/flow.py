@@ -77,9 +77,8 @@ FLO_UNKNOWN = 1e10
 IMAGE_METHODS = ("multi-interval", "interval", "accumulation")
 #: DIS presets of OpenCV (speed against accuracy).
 DIS_PRESETS = ("ultrafast", "fast", "medium")
-#: Refinements after the dense flow: the layered one (module notes, step 3–4), its faster
-#: settings (:data:`FAST_LAYERED`) or none.
-REFINEMENTS = ("layered", "layered-fast", "none")
+#: Refinements after the dense flow: the layered one (module notes, step 3–4) or none.
+REFINEMENTS = ("layered", "none")
 #: Q assumed for the noise of streams that do not record it (as multi-interval imaging does).
 DEFAULT_NOISE_THRESHOLD_ELECTRONS = 1.0e4
 #: Relative floor of each pixel's log-light noise (gain spread between pixels, ≈ 2 %).
@@ -652,13 +651,6 @@ class LayeredOptions:
         A pixel outside moving regions is still where its mean χ² over 5×5 is below
         ``still_chi2`` and the dense flow moves it less than ``still_below_px`` (a moving
         texture's flat parts change little in the interval, yet move with the rest).
-    fine_max_px : int
-        The search's whole- and half-pixel steps use at most this many of a region's pixels (an
-        even stride through them; the gain is scaled to the whole region); 0: all of them.
-    half_steps : bool
-        Whether the search tries half-pixel steps before Gauss–Newton (which refines further).
-    affine : bool
-        Whether a region may move as an affine motion (a rotating blade), not only a translation.
     """
 
     max_shift_px: int = 14
@@ -675,23 +667,6 @@ class LayeredOptions:
     rim_px: int = 4
     still_chi2: float = 2.0
     still_below_px: float = 0.3
-    fine_max_px: int = 0
-    half_steps: bool = True
-    affine: bool = True
-
-
-#: The faster refinement (``refine="layered-fast"``): the search's fine steps on at most 1,024 of a
-#: region's pixels, whole-pixel steps only, translations only (the speed and the scores of both are
-#: printed by ``benchmarks/bench_flow.py``).
-FAST_LAYERED = LayeredOptions(fine_max_px=1024, half_steps=False, affine=False)
-
-
-def _fine_sample(rows, cols, max_px):
-    """An even stride through a region's pixels, at most ``max_px`` of them (0: all)."""
-    if max_px <= 0 or rows.size <= max_px:
-        return rows, cols
-    pick = np.linspace(0, rows.size - 1, max_px).astype(np.int64)
-    return rows[pick].copy(), cols[pick].copy()
 
 
 def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var1: np.ndarray,
@@ -779,25 +754,22 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
         rim_i, core_i = np.flatnonzero(~core), np.flatnonzero(core)
         sample = np.concatenate([rim_i[::max(1, rim_i.size // 384)], core_i[::max(1, core_i.size // 128)]])
         coarse = (rows[sample].copy(), cols[sample].copy())
-        fine = _fine_sample(rows, cols, o.fine_max_px)
-        dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, int(region), *fine, *coarse,
-                                  int(o.max_shift_px), o.cap, o.unknown, o.exception, o.half_steps)
-        gain *= rows.size / fine[0].size
+        dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, int(region), rows, cols, *coarse,
+                                  int(o.max_shift_px), o.cap, o.unknown, o.exception)
         if -gain > o.min_gain and not dy == dx == 0.0:
-            candidates.append((-gain, int(region), box, depth, rows, cols, fine, coarse, (dy, dx, gain)))
+            candidates.append((-gain, int(region), box, depth, rows, cols, coarse, (dy, dx, gain)))
     # 2. strongest first; what a kept motion explains (where its pixels land, what they uncover) is
     # no longer a change for the others, so a region beside a moving one is not read as moving too
     regions = []
     rejected = {"explained by others": 0, "unexplained landings": 0, "dense flow as good": 0}
     touched = np.zeros((h, w), bool)  # where kept motions changed the still costs
     reach = int(o.max_shift_px) + 2
-    for _, region, box, depth, rows, cols, fine, coarse, first in sorted(candidates, key=lambda c: -c[0]):
+    for _, region, box, depth, rows, cols, coarse, first in sorted(candidates, key=lambda c: -c[0]):
         near = (slice(max(0, box[0].start - reach), box[0].stop + reach),
                 slice(max(0, box[1].start - reach), box[1].stop + reach))
         if touched[near].any():  # else the search would find what it found before
-            dy, dx, gain = best_shift(log0, log1, var0, var1, still, labels, region, *fine, *coarse,
-                                      int(o.max_shift_px), o.cap, o.unknown, o.exception, o.half_steps)
-            first = (dy, dx, gain * rows.size / fine[0].size)
+            first = best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, *coarse,
+                               int(o.max_shift_px), o.cap, o.unknown, o.exception)
         dy, dx, gain = first
         if -gain <= o.min_gain or dy == dx == 0.0:
             rejected["explained by others"] += 1
@@ -813,16 +785,15 @@ def layered_refinement(log0: np.ndarray, log1: np.ndarray, var0: np.ndarray, var
         start = np.array([dx, dy, 0, 0, 0, 0], float)
         params, cost, used, cy, cx, scale = gauss_newton_motion(
             s0, stack1, grad_x1, grad_y1, weight, fractions, rim_r, rim_c, start, False, 20, o.cap, 0.0)
-        if o.affine:
-            affine, cost_a, _, _, _, _ = gauss_newton_motion(
-                s0, stack1, grad_x1, grad_y1, weight, fractions, rim_r, rim_c, params.copy(), True, 20, o.cap,
-                o.min_gain)
-            # an affine motion (a rotating blade) must lower the cost by min_gain and spread the motion by
-            # half a pixel or more across the region (less is within a translation's own error)
-            spread = np.abs(affine[2:]).reshape(2, 2).sum(axis=1).max()
-            if cost_a < cost - o.min_gain and spread >= 0.5 and abs(affine[0] - params[0]) + abs(
-                    affine[1] - params[1]) < 1.0:
-                params = affine
+        affine, cost_a, _, _, _, _ = gauss_newton_motion(
+            s0, stack1, grad_x1, grad_y1, weight, fractions, rim_r, rim_c, params.copy(), True, 20, o.cap,
+            o.min_gain)
+        # an affine motion (a rotating blade) must lower the cost by min_gain and spread the motion by
+        # half a pixel or more across the region (less is within a translation's own error)
+        spread = np.abs(affine[2:]).reshape(2, 2).sum(axis=1).max()
+        if cost_a < cost - o.min_gain and spread >= 0.5 and abs(affine[0] - params[0]) + abs(
+                affine[1] - params[1]) < 1.0:
+            params = affine
         if not (abs(params[0] - dx) <= 1.0 and abs(params[1] - dy) <= 1.0 and np.all(np.isfinite(params))):
             params = np.array([dx, dy, 0, 0, 0, 0], float)  # the step wandered: keep the search's shift
         xx = (cols - cx) / scale
@@ -891,9 +862,7 @@ def _flow_from_images(images, ticks, q, preset, refine, options, chain_above_px,
         chained = len(images) - 1
     flow = dense.astype(np.float32)
     info = {"log_rate_range": [lo, hi], "chained_steps": chained}
-    if refine in ("layered", "layered-fast"):
-        if options is None and refine == "layered-fast":
-            options = FAST_LAYERED
+    if refine == "layered":
         # the intermediate images are not fitted (frames=()): on the tuning scenes a constant velocity
         # through them read saturated edges, which move in whole pixels, worse than the two instants
         flow, regions, extra = layered_refinement(first.log_light(), last.log_light(), first.log_variance(q),
@@ -924,9 +893,8 @@ def estimate_flow(source, t_s: float, dt_s: float, *, method: str = "multi-inter
         Accumulation window, ticks.
     preset : {"ultrafast", "fast", "medium"}
         OpenCV DIS preset of the dense flow.
-    refine : {"layered", "layered-fast", "none"}
-        The layered refinement and still background (module notes, steps 3–4), the same with
-        :data:`FAST_LAYERED` (unless ``options`` are given), or DIS alone.
+    refine : {"layered", "none"}
+        The layered refinement and still background (module notes, steps 3–4), or DIS alone.
     options : LayeredOptions, optional
         The refinement's settings.
     chain_steps : int
