@@ -49,15 +49,16 @@ and the 1,667 fps high-speed camera with its auto-exposure shoot the SpikeOne-li
 dense flow (DIS ``fast`` on their log frames) between consecutive frames, scored over each
 camera's own frame interval (a 30 fps camera cannot give a 1 ms flow).
 
-Speed (issue 38 item 6): ``flow_sequence`` over a 20 ms stream, one field per 40 ticks, 400×250,
-fields per second end to end with the default images, for the default estimator and DIS only;
+Speed (issue 38 item 6): ``flow_sequence`` over a 20 ms stream (translating 2,000 px/s and
+multi-object), one field per 40 ticks, 400×250, fields per wall second and per CPU-second (all
+threads of the process) end to end with the default images, for the default estimator and DIS only;
 the images alone (one pass) against today's imaging path
 (:func:`viform.imaging.sequence.reconstruct_ticks`, multi-interval) on the same instants, the
 largest difference between the two images (they are the same estimator); DIS alone. Ratios are
 in one process; the load average is printed. Peak RSS is printed.
 
 Run: ``python benchmarks/bench_flow.py`` (``--quick``: 2 instants, fewer scenes; ``--small``:
-200×125; ``--no-speed``).
+200×125; ``--no-speed``; ``--speed-only``).
 """
 
 from __future__ import annotations
@@ -339,19 +340,26 @@ def cli_check(height, width):
 # ---------------------------------------------------------------------- speed
 
 
-def speed(params, height, width):
-    scene = scene_for("translating 2,000 px/s", params, height, width)
+def timed(run):
+    """(wall s, CPU s of this process — all its threads) of ``run()``, and its result."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    result = run()
+    return time.perf_counter() - wall, time.process_time() - cpu, result
+
+
+def speed(params, height, width, scene_name="translating 2,000 px/s"):
+    scene = scene_for(scene_name, params, height, width)
     spikes = SpikeSensor(params, height, width).capture(scene, 0.02, seed=1)
     list(flow_sequence(spikes, 40, stop_tick=160))  # compile and warm
     out = {}
     for refine in ("layered", "none"):
-        wall = time.perf_counter()
-        n = len(list(flow_sequence(spikes, 40, refine=refine)))
-        out[refine] = n / (time.perf_counter() - wall)
+        wall, cpu, n = timed(lambda refine=refine: len(list(flow_sequence(spikes, 40, refine=refine))))
+        out[refine] = n / wall
+        out[refine + "_cpu"] = n / cpu
     ticks = list(range(0, spikes.n_ticks, 40))
-    t = time.perf_counter()
-    images = [im.rate for _, im in spike_rate_images(spikes, ticks)]
-    out["images_one_pass"] = len(ticks) / (time.perf_counter() - t)
+    wall, cpu, images = timed(lambda: [im.rate for _, im in spike_rate_images(spikes, ticks)])
+    out["images_one_pass"] = len(ticks) / wall
+    out["images_one_pass_cpu"] = len(ticks) / cpu
     from viform.imaging.sequence import reconstruct_ticks
 
     t = time.perf_counter()
@@ -362,10 +370,9 @@ def speed(params, height, width):
     from viform.vision.flow import log_light_pair_8bit
 
     pairs = [log_light_pair_8bit(a, b)[:2] for a, b in zip(images[:-1], images[1:], strict=True)]
-    t = time.perf_counter()
-    for a, b in pairs:
-        flow_between_images(a, b)
-    out["dis"] = len(pairs) / (time.perf_counter() - t)
+    wall, cpu, _ = timed(lambda: [flow_between_images(a, b) for a, b in pairs])
+    out["dis"] = len(pairs) / wall
+    out["dis_cpu"] = len(pairs) / cpu
     out["fields"] = n
     return out
 
@@ -378,6 +385,7 @@ def main():
     parser.add_argument("--quick", action="store_true", help="2 instants, fewer scenes")
     parser.add_argument("--small", action="store_true", help="200×125 instead of 400×250")
     parser.add_argument("--no-speed", action="store_true", help="skip the speed runs")
+    parser.add_argument("--speed-only", action="store_true", help="only the speed runs")
     parser.add_argument("--scenes", default=None, help="comma-separated subset of the scenes")
     parser.add_argument("--no-frame-sensors", dest="frame_sensors", action="store_false",
                         help="skip the frame cameras' rows")
@@ -388,6 +396,8 @@ def main():
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; {width}×{height} px; flow over 1 ms")
     instants = [0.004, 0.008] if args.quick else [0.003, 0.005, 0.007, 0.009, 0.011]
     names = args.scenes.split(",") if args.scenes else (QUICK if args.quick else tuple(SCENES))
+    if args.speed_only:
+        names, args.frame_sensors, args.cli = (), False, False
     goals = []
     print(f"\n{'scene':<24} {'sensor':<16} {'estimator':<16} {'moving EPE':>10} {'× best':>7} {'rel.':>6} "
           f"{'still med':>9} {'textured':>9}")
@@ -468,14 +478,17 @@ def main():
                   f"{check:>11.3f} {zero:>9.3f} {still:>9.3f}  {objs}")
     if not args.no_speed:
         for label, params in PRESETS.items():
-            s = speed(params, height, width)
-            print(f"\nspeed, {label}, {width}×{height}, one field per 40 ticks over 20 ms ({s['fields']} fields): "
-                  f"default {s['layered']:.3g} fields/s, DIS only {s['none']:.3g} fields/s; images one pass "
-                  f"{s['images_one_pass']:.3g}/s vs reconstruct_ticks {s['images_reconstruct']:.3g}/s "
-                  f"(× {s['images_one_pass'] / s['images_reconstruct']:.3g}, largest difference "
-                  f"{s['image_difference']:.2g} spikes/tick); DIS alone {s['dis']:.3g} fields/s; default / DIS alone "
-                  f"= {s['layered'] / s['dis']:.2f}; goal ≥ 100 fields/s: "
-                  f"{'met' if s['layered'] >= 100 else 'NOT met'}")
+            for scene_name in ("translating 2,000 px/s", "multi-object"):
+                s = speed(params, height, width, scene_name)
+                print(f"\nspeed, {scene_name}, {label}, {width}×{height}, one field per 40 ticks over 20 ms "
+                      f"({s['fields']} fields), load average {os.getloadavg()[0]:.1f}; per wall s / per CPU-s: "
+                      f"default {s['layered']:.3g} / {s['layered_cpu']:.3g} fields, DIS only {s['none']:.3g} / "
+                      f"{s['none_cpu']:.3g} fields; images one pass {s['images_one_pass']:.3g} / "
+                      f"{s['images_one_pass_cpu']:.3g} vs reconstruct_ticks {s['images_reconstruct']:.3g}/s wall "
+                      f"(× {s['images_one_pass'] / s['images_reconstruct']:.3g}, largest difference "
+                      f"{s['image_difference']:.2g} spikes/tick); DIS alone {s['dis']:.3g} / {s['dis_cpu']:.3g} "
+                      f"fields; default / DIS alone per CPU-s = {s['layered_cpu'] / s['dis_cpu']:.3f}; "
+                      f"goal ≥ 100 fields/s: {'met' if s['layered'] >= 100 else 'NOT met'}")
     print(f"\npeak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 
