@@ -399,8 +399,9 @@ def main():
     if args.speed_only:
         names, args.frame_sensors, args.cli = (), False, False
     goals = []
-    print(f"\n{'scene':<24} {'sensor':<16} {'estimator':<16} {'moving EPE':>10} {'× best':>7} {'rel.':>6} "
-          f"{'still med':>9} {'textured':>9}")
+    if names:
+        print(f"\n{'scene':<24} {'sensor':<16} {'estimator':<16} {'moving EPE':>10} {'× best':>7} {'rel.':>6} "
+              f"{'still med':>9} {'textured':>9}")
     object_lines = []
     for name in names:
         seed, tuning = SCENES[name]
@@ -460,13 +461,14 @@ def main():
                       f"{mean([r[0].moving.epe_px for r in rows]):>10.3f} "
                       f"{mean([r[0].moving.relative_error for r in rows]):>6.2f} "
                       f"{mean([r[0].still_median_px for r in rows]):>9.3f} {mean([r[1].epe_px for r in rows]):>9.3f}")
-    print(f"\n{'scene':<22} {'sensor':<16} {'object':<16} {'EPE px':>8} {'true px':>8} {'rel.':>6} "
-          f"{'DIS only':>9} {'best TFP':>9} {'inst':>4} {'spikes/dwell':>9}")
-    for line in object_lines:
-        print(line)
-    print("\ngoals (issue 34 item 1):")
-    for text, met in goals:
-        print(f"  {'met    ' if met else 'NOT met'}  {text}")
+    if names:
+        print(f"\n{'scene':<22} {'sensor':<16} {'object':<16} {'EPE px':>8} {'true px':>8} {'rel.':>6} "
+              f"{'DIS only':>9} {'best TFP':>9} {'inst':>4} {'spikes/dwell':>9}")
+        for line in object_lines:
+            print(line)
+        print("\ngoals (issue 34 item 1):")
+        for text, met in goals:
+            print(f"  {'met    ' if met else 'NOT met'}  {text}")
     if args.cli:
         print(f"\nviform flow (the command: simulate -q 100, then flow --at 0.01 --dt 0.001), {width}×{height}; "
               "every printed and written score recomputed from flow.npy and the truth apart (agree: asserted):")
