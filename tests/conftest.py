@@ -33,6 +33,7 @@ def pytest_configure(config):
     from viform._numba_cache import share_compiles
 
     share_compiles()
+    os.environ["VIFORM_SHARE_COMPILES"] = "1"  # and so do the commands the tests start in subprocesses
 
 
 #: The real recordings (README, "Tests that read real recordings"): ``$VIFORM_SPIKE_DATA`` if set,

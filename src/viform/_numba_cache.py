@@ -7,6 +7,10 @@ process take a per-kernel file lock (beside the kernel's cache index) around num
 ``Dispatcher.compile``: the first process compiles and saves, the others wait for the lock, then load
 the saved kernel from the cache — the same machine code numba would have loaded on the next run.
 
+Set ``VIFORM_SHARE_COMPILES=1`` in the environment of processes started together (parallel jobs
+on one machine; the test suite sets it for the commands its tests start) and importing viform calls
+:func:`share_compiles`.
+
 Only viform's own kernels with an on-disk cache are locked; every other numba function compiles as
 numba does it. The lock is taken inside numba's process-wide compiler lock, so threads of one process
 never wait on each other's file locks, and a kernel's lock is taken once per process even when its
