@@ -180,6 +180,14 @@ def test_cuda_without_a_gpu_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and err.count("--device = 'cuda'") == 1, err
     assert not out.exists()
+    # the same line as every command with --device (here: simulate)
+    code = main(["simulate", "hdr", "--duration", "0.001", "--height", "8", "--width", "8", "--out",
+                 str(tmp_path / "x.dat"), "--device", "cuda"])
+    assert code == 2 and capsys.readouterr().err.strip() == err
+    # auto: the CPU where there is no GPU (a sweep runs; its document says where)
+    code = main([*ARGS, "--sensor", "spikeone", "--vary", "spikeone:threshold_level=12", "--workers", "0",
+                 "--device", "auto", "--out", str(out), "--no-progress"])
+    assert code == 0 and json.loads((out / "sweep.json").read_text())["device"] == "cpu"
 
 
 def test_scene_parameters_from_the_command_line(tmp_path, capsys):
