@@ -66,6 +66,28 @@ def run_once(plan, workers: int, out: str) -> dict:
     return {"wall": wall, "cpu": me + kids, "doc": doc, "out": out}
 
 
+def plain_processes_once(plan, n: int) -> dict:
+    """The same points on ``n`` plain Python processes (a spawn ProcessPoolExecutor running the sweep's own
+    guided batches, no dask, nothing stored): what any process split costs on this machine, to tell
+    dask's share of the overhead from the machine's."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    before = load()
+    (me0, kids0), wall = _cpu(), time.perf_counter()
+    with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(run.run_points, plan.context, b) for b in run.batches(plan.points, n)]
+        results = {r["record"]["point_id"]: r for f in futures for r in f.result()}
+    wall = time.perf_counter() - wall
+    me1, kids1 = _cpu()
+    me, kids = me1 - me0, kids1 - kids0
+    own = sum(r["record"]["cpu_seconds"] for r in results.values())
+    print(f"{n} plain processes (no dask): wall {wall:6.1f} s  CPU-s: this process {me:5.1f} + children {kids:5.1f} = "
+          f"{me + kids:5.1f}; points' own {own:5.1f} ({own / len(plan.points):.3f}/point); overhead "
+          f"{(me + kids - own) / len(plan.points):+.3f} CPU-s/point; load {before} → {load()}", flush=True)
+    return {"wall": wall, "cpu": me + kids, "results": results}
+
+
 def same_points(ref: dict, run: dict) -> None:
     """Every point's metrics and images of ``run`` equal ``ref``'s (NaN equals NaN)."""
     for a, b in zip(ref["doc"]["records"], run["doc"]["records"], strict=True):
@@ -86,6 +108,8 @@ def main() -> None:
     ap.add_argument("--standard", action="store_true", help="the standard sweep of every sensor (158 points)")
     ap.add_argument("--repeat", type=int, default=1,
                     help="run the list this many times, in reverse order every other time; ratios per repetition")
+    ap.add_argument("--plain", type=int, default=0,
+                    help="also run the points on this many plain processes (no dask) in each repetition")
     ap.add_argument("--one-per-task", action="store_true",
                     help="one point per dask task (no guided batches), to measure what batching saves")
     args = ap.parse_args()
@@ -109,6 +133,16 @@ def main() -> None:
                 results[workers] = run_once(plan, workers, os.path.join(tmp, f"r{rep}w{workers}"))
             ref_name = counts[0]
             ref = results[ref_name]
+            if args.plain:
+                plain = plain_processes_once(plan, args.plain)
+                for r in ref["doc"]["records"]:
+                    got = plain["results"][r["point_id"]]
+                    assert got["record"]["metrics"].keys() == r["metrics"].keys()
+                    assert all(v == got["record"]["metrics"][k] or (isinstance(v, float) and np.isnan(v))
+                               for k, v in r["metrics"].items()), r["label"]
+                    assert np.array_equal(load_images(ref["out"], r["point_id"]), got["images"], equal_nan=True)
+                print(f"  repetition {rep + 1}: {args.plain} plain processes / {ref_name}: wall "
+                      f"{plain['wall'] / ref['wall']:.2f}×, CPU-s {plain['cpu'] / ref['cpu']:.2f}×", flush=True)
             for w in counts[1:]:
                 same_points(ref, results[w])
                 print(f"  repetition {rep + 1}: {w} worker{'s' if w != 1 else ''} / {ref_name}: "
