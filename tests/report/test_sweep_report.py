@@ -201,3 +201,15 @@ def test_scene_parameters_from_the_command_line(tmp_path, capsys):
     assert main(["sweep", "dilemma", "--sensor", "cmos", "--list-parameters"]) == 0
     listed = capsys.readouterr().out
     assert "scene (dilemma; vary as scene:PARAM): brightness=1.0" in listed
+
+
+def test_console_says_where_the_points_ran():
+    """The first console line names the workers, and how many points this process shot while they started."""
+    from viform.report.sweep_report import console_lines
+
+    doc = {"n_points": 5, "computed": 5, "reused": 0, "seconds": 3.0, "cpu_seconds": 2.0, "workers": 2,
+           "computed_here": 2, "answer": {"per_sensor": {}, "sentences": [], "objective": "psnr_log_db"}}
+    assert console_lines(doc)[0] == ("5 points (5 computed, 0 reused) in 3.0 s on 2 dask workers (2 of the points "
+                                     "in this process while they started), 2.0 CPU-s")
+    doc.update(workers=0, computed_here=5)
+    assert console_lines(doc)[0] == "5 points (5 computed, 0 reused) in 3.0 s on no dask workers, 2.0 CPU-s"
