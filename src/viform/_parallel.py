@@ -75,8 +75,10 @@ def open_client(workers: int, scheduler: str | None, memory_limit,
     LocalCluster of ``workers`` processes with one thread each and ``memory_limit`` per worker.
 
     ``connect_timeout_s`` bounds the wait for the scheduler, at the start and after a lost
-    connection (then :func:`completed` stops the run). The client's own log lines are kept
-    quiet: its failures reach the caller as exceptions, said in one line.
+    connection (then :func:`completed` stops the run). The client's own log lines, and the local
+    cluster's, are kept quiet: failures reach the caller as exceptions, said in one line (a worker's
+    heartbeat that meets the scheduler already closed, on a loaded machine, would otherwise print a
+    traceback after a run that succeeded).
     """
     from distributed import Client, LocalCluster
 
@@ -91,7 +93,7 @@ def open_client(workers: int, scheduler: str | None, memory_limit,
                               f"{connect_timeout_s:g} s ({one_line(exc)}); nothing was written") from None
     try:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                               dashboard_address=":0", silence_logs=logging.ERROR)
+                               dashboard_address=":0", silence_logs=logging.CRITICAL)
     except Exception as exc:  # a worker process that died while starting (killed, out of memory)
         raise ViformError(f"could not start {workers} local dask worker process(es) ({one_line(exc)}); nothing "
                           "was written: run the command again") from None

@@ -189,18 +189,22 @@ def test_a_scene_sweep_answers_per_scene_setting(tmp_path):
 
 
 def test_device_is_checked_before_any_work(tmp_path):
-    """device: cpu or cuda; cuda only for a sweep with a spike sensor, and only where a GPU is found."""
-    with pytest.raises(ViformError, match=r"^device = 'gpu' is not allowed: choose one of cpu, cuda"):
+    """device: cpu, cuda or auto, with every simulation's messages; cuda only for a sweep with a spike sensor,
+    and only where a GPU is found; auto is the CPU where there is none, and for a sweep without a spike sensor."""
+    with pytest.raises(ViformError, match=r"^device = 'gpu' is not allowed: use one of cpu, cuda, auto$"):
         sw.check_device("gpu", ["spikeone"])
     with pytest.raises(ViformError, match=r"^device = 'cuda' runs the spike camera's simulation on a GPU; this "
                                           r"sweep has no spike sensor"):
         sw.check_device("cuda", ["cmos"])
     assert sw.check_device("cpu", ["cmos"]) == "cpu"
+    assert sw.check_device("auto", ["cmos"]) == "cpu"
     from viform.sensors.spike_cuda import cuda_available
 
     if not cuda_available():
         plan = sw.make_plan("dilemma", ["spikeone"], None, **TINY)
-        with pytest.raises(ViformError, match=r"^device = 'cuda'"):
+        assert sw.check_device("auto", ["spikeone"]) == "cpu"
+        with pytest.raises(ViformError, match=r"^device = 'cuda': numba-cuda finds no CUDA GPU on this machine "
+                                              r"\(use cpu or auto\)$|^device = 'cuda' needs numba-cuda"):
             sw.sweep(plan, tmp_path / "never", device="cuda", workers=0, progress=False)
         assert not (tmp_path / "never").exists()
 
@@ -268,23 +272,80 @@ def test_identical_results_with_one_and_two_workers(serial, tmp_path):
 
 def test_own_local_cluster_gives_the_same_points(serial, tmp_path):
     """workers=2 starts the sweep's own LocalCluster (its settings: no profiler, no work stealing), in
-    round-robin batches of points; the points equal the in-process ones, and this process's dask settings
+    guided batches of points; the points equal the in-process ones, and this process's dask settings
     are left as they were."""
     plan, out, ref = serial
     # a fresh process, where distributed is not imported yet (as on the command line)
     code = (f"import dask, json\nfrom viform.measure import sweep as sw\n"
             f"plan = sw.make_plan('dilemma', ['cmos'], ['cmos:exposure_s=1e-4,1e-3'], **{TINY!r})\n"
             f"doc = sw.sweep(plan, {str(tmp_path)!r}, workers=2, progress=False)\n"
-            f"print(json.dumps([doc['workers'], doc['computed'], "
+            f"print(json.dumps([doc['workers'], doc['computed'], doc['computed_here'] >= 1, "
             f"dask.config.get('distributed.scheduler.work-stealing')]))\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800,
                          env={**__import__("os").environ, "PYTHONPATH": str(Path(sw.__file__).parents[3])})
     assert run.returncode == 0, run.stderr[-3000:]
-    assert json.loads(run.stdout.strip().splitlines()[-1]) == [2, 3, True]
+    assert json.loads(run.stdout.strip().splitlines()[-1]) == [2, 3, True, True]
     doc = json.loads((tmp_path / "sweep.json").read_text())
     _same([r for r in ref["records"] if r["sensor"] == "cmos"], [sw._restore(r) for r in doc["points"]])
-    assert sw.batches(list(range(7)), 1, 3) == [[0, 3, 6], [1, 4], [2, 5]]
     assert sw.batches(list(range(2)), 2) == [[0], [1]]
+
+
+class _FakeCluster:
+    closed = 0
+
+    def close(self):
+        _FakeCluster.closed += 1
+
+
+def test_points_are_shot_here_while_the_cluster_starts():
+    """While its own cluster starts, the sweep shoots one point of each sensor here (the kernels compiled once,
+    before any worker needs them), then more until the cluster is up; the rest go to the workers."""
+    import threading
+
+    points = [sw.Point(s, (("x", i),)) for s in ("a", "b") for i in range(4)]  # a0..a3, b0..b3
+    shot, up = [], threading.Event()
+
+    def here(p):
+        shot.append(p)
+        if len(shot) == 3:  # the cluster comes up during the third point
+            up.set()
+
+    def start():
+        up.wait(60)
+        return "client", "cluster"
+
+    client, cluster, left = sw.run._start_while_shooting(start, points, here, lambda: len(shot), "out")
+    assert (client, cluster) == ("client", "cluster")
+    assert shot[:2] == [points[0], points[4]]  # a0, b0: one of each sensor first
+    assert len(shot) >= 3 and sorted(map(points.index, shot + left)) == list(range(8))
+    assert not set(map(points.index, shot)) & set(map(points.index, left))
+
+    def fail():
+        raise ViformError("could not start 2 local dask worker process(es) (killed); nothing was written: "
+                          "run the command again")
+
+    shot.clear()
+    with pytest.raises(ViformError, match=r"^could not start 2 local dask worker process\(es\) \(killed\); 2 points "
+                                          r"are stored, each whole, in '.*points': run the same sweep again"):
+        sw.run._start_while_shooting(fail, points, here, lambda: len(shot), "out")
+
+    def boom(p):
+        raise RuntimeError("a point failed")
+
+    with pytest.raises(RuntimeError, match="a point failed"):  # the cluster that came up is closed
+        sw.run._start_while_shooting(lambda: (_FakeCluster(), _FakeCluster()), points, boom, lambda: 0, "out")
+    assert _FakeCluster.closed == 2
+
+
+def test_tasks_shrink_toward_the_end():
+    """Guided batches: each task takes half the points left per worker (strided through the plan), the last
+    ones a point each; every point once."""
+    tasks = sw.batches(list(range(32)), 2)
+    assert [len(t) for t in tasks] == [8, 6, 5, 4, 3, 2, 1, 1, 1, 1]
+    assert sorted(sum(tasks, [])) == list(range(32))
+    assert tasks[0] == [0, 10, 20, 30, 1, 11, 21, 31]  # a mix of the plan's settings
+    assert [len(t) for t in sw.batches(list(range(7)), 1)] == [4, 2, 1]
+    assert sw.batches(list(range(5)), 2, share=0) == [[0], [1], [2], [3], [4]]
 
 
 def test_table_and_physics(serial):

@@ -119,6 +119,31 @@ def _shot(label, **metrics):
     return s
 
 
+@pytest.mark.parametrize("scale", [1e-9, 1e-3, 1.0, 30.0])
+def test_psnr_is_skimages_to_the_bit(scale):
+    """psnr_db gives skimage.metrics.peak_signal_noise_ratio's value exactly, from tiny to huge errors."""
+    from skimage.metrics import peak_signal_noise_ratio
+
+    rng = np.random.default_rng(7)
+    a = rng.uniform(-2, 5, (33, 47))
+    b = a + scale * rng.standard_normal(a.shape)
+    assert cmp.psnr_db(a, b, 7.0) == peak_signal_noise_ratio(a, b, data_range=7.0)
+
+
+def test_scoring_imports_no_scipy_stats():
+    """Scoring an image (PSNR, SSIM) in a fresh process leaves scipy.stats unimported (its import costs every
+    sweep worker 0.5-1 CPU-s)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, numpy as np\nfrom viform.measure import comparison as cmp\n"
+            "x = np.full((16, 16), 10.0); y = x * np.linspace(0.5, 2, 16)\n"
+            "print(cmp.log_fidelity(y, x, 0.1, 1e3)[0] > 0, 'scipy.stats' in sys.modules)")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split() == ["True", "False"]
+
+
 def test_verdict_follows_the_metrics():
     """Swap two sensors' numbers and the text swaps its winners: nothing is written in advance."""
     demand = {"dynamic_range_db": 120.0, "time_resolution_s": 1e-4}

@@ -180,6 +180,14 @@ def test_cuda_without_a_gpu_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and err.count("--device = 'cuda'") == 1, err
     assert not out.exists()
+    # the same line as every command with --device (here: simulate)
+    code = main(["simulate", "hdr", "--duration", "0.001", "--height", "8", "--width", "8", "--out",
+                 str(tmp_path / "x.dat"), "--device", "cuda"])
+    assert code == 2 and capsys.readouterr().err.strip() == err
+    # auto: the CPU where there is no GPU (a sweep runs; its document says where)
+    code = main([*ARGS, "--sensor", "spikeone", "--vary", "spikeone:threshold_level=12", "--workers", "0",
+                 "--device", "auto", "--out", str(out), "--no-progress"])
+    assert code == 0 and json.loads((out / "sweep.json").read_text())["device"] == "cpu"
 
 
 def test_scene_parameters_from_the_command_line(tmp_path, capsys):
@@ -193,3 +201,15 @@ def test_scene_parameters_from_the_command_line(tmp_path, capsys):
     assert main(["sweep", "dilemma", "--sensor", "cmos", "--list-parameters"]) == 0
     listed = capsys.readouterr().out
     assert "scene (dilemma; vary as scene:PARAM): brightness=1.0" in listed
+
+
+def test_console_says_where_the_points_ran():
+    """The first console line names the workers, and how many points this process shot while they started."""
+    from viform.report.sweep_report import console_lines
+
+    doc = {"n_points": 5, "computed": 5, "reused": 0, "seconds": 3.0, "cpu_seconds": 2.0, "workers": 2,
+           "computed_here": 2, "answer": {"per_sensor": {}, "sentences": [], "objective": "psnr_log_db"}}
+    assert console_lines(doc)[0] == ("5 points (5 computed, 0 reused) in 3.0 s on 2 dask workers (2 of the points "
+                                     "in this process while they started), 2.0 CPU-s")
+    doc.update(workers=0, computed_here=5)
+    assert console_lines(doc)[0] == "5 points (5 computed, 0 reused) in 3.0 s on no dask workers, 2.0 CPU-s"

@@ -71,9 +71,9 @@ SWEEP_FLAGS = {
 @click.option("--tracking", is_flag=True,
               help="Also track the scene's objects at every point and score it against the truth (HOTA, MOTA, IDF1, "
                    "ID switches, latency; scenes with object truth). Slower.")
-@click.option("--device", type=click.Choice(["cpu", "cuda"]), default="cpu", show_default=True,
-              help="Where the spike sensor's simulations run: cpu, or cuda (a CUDA GPU with numba-cuda: pip "
-                   "install \"viform[cuda]\"; the same bits as the CPU but for rare last-bit roundings).")
+@click.option("--device", type=click.Choice(["cpu", "cuda", "auto"]), default="cpu", show_default=True,
+              help="Where the spike sensor's simulations run: CPU cores, a CUDA GPU (pip install \"viform[cuda]\"; "
+                   "the same bits for the same seed), or a GPU when one is found.")
 @click.option("--list-parameters", is_flag=True,
               help="List each sensor's parameters and the scene's (scene:PARAM) with their defaults, and exit.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")

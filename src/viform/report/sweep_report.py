@@ -356,7 +356,9 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
              f"scored at {', '.join(f'{t * 1e3:.2f} ms' for t in ctx['instants_s'])} against the scene's truth "
              f"with the metrics of <code>viform compare</code>. {doc['n_points']} points "
              f"({doc['computed']} computed now, {doc['reused']} reused from earlier runs) on "
-             f"{doc['workers'] or 'no'} dask worker{'s' if doc['workers'] != 1 else ''}; the points took "
+             f"{doc['workers'] or 'no'} dask worker{'s' if doc['workers'] != 1 else ''}"
+             + (f" ({doc['computed_here']} of them in the command's own process while the workers started)"
+                if doc["workers"] and doc.get("computed_here") else "") + "; the points took "
              f"{doc['seconds']:.1f} s ({doc['cpu_seconds']:.1f} CPU-seconds computed now)"
              + (f", the whole command {run_time:.1f} s" if run_time else "") + "."
              + (f" Command: <code>{e(command)}</code>." if command else "") + "</p>"]
@@ -421,8 +423,11 @@ def write_sweep_report(doc, scene, out, command: str = "", started_s: float | No
 def console_lines(doc) -> list[str]:
     """The console summary: per sensor the best (or nearest) setting, then the answer."""
     ans = doc["answer"]
+    here = doc.get("computed_here", 0)
+    where = (f"{doc['workers']} dask workers" + (f" ({here} of the points in this process while they started)"
+                                                  if here else "")) if doc["workers"] else "no dask workers"
     lines = [f"{doc['n_points']} points ({doc['computed']} computed, {doc['reused']} reused) in "
-             f"{doc['seconds']:.1f} s on {doc['workers'] or 'no'} dask workers, {doc['cpu_seconds']:.1f} CPU-s"]
+             f"{doc['seconds']:.1f} s on {where}, {doc['cpu_seconds']:.1f} CPU-s"]
     width = max([len(k) for k in ans["per_sensor"]] + [6])
     for key, v in ans["per_sensor"].items():
         if v["meets"] is None:  # no demands: nothing "meets"; the best by the objective

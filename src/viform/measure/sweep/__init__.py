@@ -58,8 +58,8 @@ from viform.measure.sweep.plan import (
 )
 from viform.measure.sweep.run import (
     DEVICES,
+    GUIDED_SHARE,
     SEEN_CNR,
-    TASKS_PER_WORKER,
     batches,
     check_device,
     run_point,
@@ -93,9 +93,9 @@ from viform.measure.sweep.store import (
 )
 
 __all__ = [
-    "ContextMismatch", "DEFAULT_OBJECTIVE", "DEVICES", "Demand", "MAX_DURATION_S", "MAX_SPIKE_BYTES",
+    "ContextMismatch", "DEFAULT_OBJECTIVE", "DEVICES", "GUIDED_SHARE", "Demand", "MAX_DURATION_S", "MAX_SPIKE_BYTES",
     "METRIC_DIRECTIONS", "POINTS_DIR", "Point", "SCENE", "SCENE_PREFIX", "SEEDED_AS", "SEEN_CNR", "SPIKE_IMAGES",
-    "SWEEP_FORMAT", "SWEEP_SENSORS", "SWEEP_VERSION", "SweepContext", "SweepPlan", "TASKS_PER_WORKER", "_finite",
+    "SWEEP_FORMAT", "SWEEP_SENSORS", "SWEEP_VERSION", "SweepContext", "SweepPlan", "_finite",
     "_restore", "_miss_text", "_settings_text", "answer", "answer_sentences", "batches", "check_context",
     "check_device", "check_objective", "check_objects", "check_sensor", "load_images", "load_point", "make_plan",
     "make_point_sensor", "metric_columns", "parse_require", "parse_values", "parse_vary", "plan_points",

@@ -36,6 +36,7 @@ from viform.measure.sweep.store import (
     store_point,
     write_table,
 )
+from viform.sensors.spike_cuda import DEVICES  # noqa: F401 -- a sweep's devices are every simulation's
 
 #: Contrast-to-noise at which a target counts as seen (as compare's verdict counts it).
 SEEN_CNR = 3.0
@@ -172,35 +173,93 @@ def _open(workers, scheduler, memory_limit, connect_timeout_s=DEFAULT_CONNECT_TI
         return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"), connect_timeout_s)
 
 
-#: Tasks per dask worker a sweep's points are grouped into: several points per task cut the per-task
-#: overhead (scheduling, transfer, the scene made once), and several tasks per worker keep the
-#: workers busy to the end when points cost unequally.
-TASKS_PER_WORKER = 4
-#: Devices a sweep runs its spike simulations on.
-DEVICES = ("cpu", "cuda")
+#: Each task takes this fraction of the points not yet dealt, per worker (guided self-scheduling): the
+#: first tasks hold several points (fewer tasks to schedule and transfer), the last ones one point each,
+#: so no worker waits long for another at the end.
+GUIDED_SHARE = 0.5
 
 
-def batches(points, n_workers: int, tasks_per_worker: int | None = None) -> list[list]:
-    """``points`` dealt round-robin into at most ``n_workers × tasks_per_worker`` tasks (default
-    :data:`TASKS_PER_WORKER`; each non-empty), so each task holds a mix of cheap and costly points.
-    Results do not depend on the grouping."""
-    per = TASKS_PER_WORKER if tasks_per_worker is None else tasks_per_worker
-    n = max(1, min(len(points), max(1, n_workers) * per))
-    return [b for b in (list(points[i::n]) for i in range(n)) if b]
+def batches(points, n_workers: int, share: float | None = None) -> list[list]:
+    """``points`` dealt into tasks that shrink toward the end: each takes ``ceil(share × left /
+    n_workers)`` of the points left (at least one; default :data:`GUIDED_SHARE`), the points first
+    put in a strided order (every k-th point, k the number of tasks a full sweep of equal shares
+    would have) so that a task holds a mix of the plan's settings. Results do not depend on the grouping."""
+    share = GUIDED_SHARE if share is None else share
+    n_workers = max(1, n_workers)
+    sizes, left = [], len(points)
+    while left:
+        sizes.append(min(left, max(1, math.ceil(share * left / n_workers))))
+        left -= sizes[-1]
+    k = max(1, len(sizes))
+    order = [p for r in range(k) for p in points[r::k]]
+    out, at = [], 0
+    for n in sizes:
+        out.append(order[at:at + n])
+        at += n
+    return out
 
 
 def check_device(device: str, sensors, name: str = "device") -> str:
-    """``device`` ("cpu" or "cuda", checked for a GPU) for a sweep of ``sensors``; "cuda" needs a spike sensor."""
-    if device not in DEVICES:
-        raise ViformError(f"{name} = {device!r} is not allowed: choose one of {', '.join(DEVICES)}")
-    if device == "cuda":
-        if not any(cmp.compare_entry(k).family == "spike" for k in sensors):
-            raise ViformError(f"{name} = 'cuda' runs the spike camera's simulation on a GPU; this sweep has no spike "
-                              f"sensor ({', '.join(sensors)})")
-        from viform.sensors.spike_cuda import resolve_device
+    """The device a sweep of ``sensors`` runs its spike simulations on: ``device`` is "cpu", "cuda" or
+    "auto" (a GPU when there is one), as for every simulation
+    (:func:`viform.sensors.spike_cuda.resolve_device`, its messages); "cuda" needs a spike sensor.
+    Returns "cpu" or "cuda"."""
+    from viform.sensors.spike_cuda import resolve_device
 
-        resolve_device("cuda", name)
-    return device
+    spike = any(cmp.compare_entry(k).family == "spike" for k in sensors)
+    if device == "cuda" and not spike:
+        raise ViformError(f"{name} = 'cuda' runs the spike camera's simulation on a GPU; this sweep has no spike "
+                          f"sensor ({', '.join(sensors)})")
+    device = resolve_device(device, name)
+    return device if spike else "cpu"
+
+
+def _start_while_shooting(start, todo, here, computed, out):
+    """Start a local cluster (``start()`` → (client, cluster)) in a thread while this process shoots points
+    (``here(point)``): first one point of each sensor, so that the kernels they need are compiled and in
+    numba's disk cache before a worker loads them (the workers never compile what this process has), then
+    further points until the cluster is up. Returns (client, cluster, the points left for the workers).
+
+    The cluster's start is mostly waiting and the other processes' start-up, so this process's points are
+    work done in time that was idle; a cluster that cannot start stops the run with one line saying how
+    many points are stored."""
+    import threading
+
+    box: dict = {}
+
+    def open_cluster():
+        try:
+            box["opened"] = start()
+        except BaseException as exc:  # noqa: BLE001 -- raised in the caller's thread below
+            box["error"] = exc
+
+    thread = threading.Thread(target=open_cluster, name="viform-sweep-cluster", daemon=True)
+    thread.start()
+    first = {}
+    for p in todo:
+        first.setdefault(p.sensor, p)
+    warm = list(first.values())
+    queue = warm + [p for p in todo if p not in warm]
+    done = 0
+    try:
+        while done < len(queue) and (done < len(warm) or thread.is_alive()):
+            here(queue[done])
+            done += 1
+    except BaseException:
+        thread.join()
+        for part in box.get("opened", ()):  # the cluster that started meanwhile goes too
+            part.close()
+        raise
+    thread.join()
+    if "error" in box:
+        exc = box["error"]
+        if computed() and isinstance(exc, ViformError):
+            raise ViformError(f"{one_line(exc).split('; nothing was written')[0]}; {computed()} points are stored, "
+                              f"each whole, in {str(Path(out) / POINTS_DIR)!r}: run the same sweep again to "
+                              "compute the others") from None
+        raise exc
+    client, cluster = box["opened"]
+    return client, cluster, queue[done:]
 
 
 def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,
@@ -210,9 +269,12 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
 
     ``workers=0`` runs the points in this process, one after the other (no dask); otherwise on a
     dask LocalCluster of ``workers`` processes (default: the CPU count), on ``scheduler``, or on
-    an open ``client``, several points per task (:func:`batches`). Each point is stored as soon as
-    its task returns. ``crash_after_points`` (testing aid) ends this process abruptly after
-    storing that many new points, as a kill would.
+    an open ``client``, several points per task (:func:`batches`). A LocalCluster of the sweep's own
+    starts while this process shoots the first points (one per sensor, then more until the cluster is
+    up: :func:`_start_while_shooting`), so the workers find the kernels compiled. Each point is
+    stored as soon as it is done; ``computed_here`` counts those shot in this process.
+    ``crash_after_points`` (testing aid) ends this process abruptly after storing that many new
+    points, as a kill would.
 
     Faults: points are computed on the workers and stored here, each whole (images, then the
     record that marks it finished); a worker that dies has its task computed again by dask. A
@@ -243,28 +305,41 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
         if crash_after_points is not None and computed >= crash_after_points:
             os._exit(70)
 
-    n_workers = 0
+    n_workers = here_count = 0
     own_client = own_cluster = None
-    if todo and client is None and workers != 0:  # a scheduler that cannot be reached: nothing written yet
-        n = max(1, min(os.cpu_count() or 1, len(todo))) if workers is None else workers
-        if scheduler is not None and on_connect is not None:
+    scenes: dict = {}
+
+    def here(p):  # a point shot and stored in this process (its scene made once per setting)
+        if p.scene not in scenes:
+            scenes[p.scene] = context.make_scene(p.scene)
+        take(run_point(context, p, scenes[p.scene], device))
+
+    if todo and client is None and workers != 0 and scheduler is not None:  # unreachable: nothing written yet
+        if on_connect is not None:
             on_connect(scheduler, connect_timeout_s)
-        own_client, own_cluster = _open(n, scheduler, memory_limit, connect_timeout_s)
+        own_client, own_cluster = _open(workers or 1, scheduler, memory_limit, connect_timeout_s)
         client = own_client
     (out / POINTS_DIR).mkdir(parents=True, exist_ok=True)
     try:
         if todo and client is None and workers == 0:
-            scenes: dict = {}
             for p in todo:
-                if p.scene not in scenes:
-                    scenes[p.scene] = context.make_scene(p.scene)
-                take(run_point(context, p, scenes[p.scene], device))
-        elif todo:
+                here(p)
+            here_count = computed
+        elif todo and client is None:  # a local cluster of our own
+            n = max(1, min(os.cpu_count() or 1, len(todo))) if workers is None else workers
+            own_client, own_cluster, todo_left = _start_while_shooting(
+                lambda: _open(n, None, memory_limit, connect_timeout_s), todo, here, lambda: computed, out)
+            client = own_client
+            here_count = computed
+            n_workers = len(client.scheduler_info().get("workers", {}))
+        else:
+            todo_left = todo
+        if todo and client is not None and todo_left:
             n_workers = len(client.scheduler_info().get("workers", {}))
             token = uuid.uuid4().hex[:8]
             futures = [client.submit(one_line_warnings(run_points), context, batch, device, pure=False,
                                      key=f"viform-sweep-{batch[0].point_id}-{len(batch)}-{token}")
-                       for batch in batches(todo, n_workers)]
+                       for batch in batches(todo_left, n_workers)]
             try:
                 for _, results in completed(client, futures, connect_timeout_s):
                     if isinstance(results, BaseException):
@@ -284,7 +359,7 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
             own_cluster.close()
     ordered = [records[p.point_id] for p in points]
     new = [r for r in ordered if r["point_id"] in {p.point_id for p in todo}]
-    return {"records": ordered, "computed": computed, "reused": len(points) - computed,
+    return {"records": ordered, "computed": computed, "computed_here": here_count, "reused": len(points) - computed,
             "seconds": time.perf_counter() - started, "workers": n_workers,
             "cpu_seconds": sum(r.get("cpu_seconds", 0.0) for r in new)}
 
@@ -325,7 +400,8 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
     doc = {"context": plan.context.describe(), "sensors": plan.sensors,
            "vary": {k: v for k, v in plan.vary.items() if v}, "n_points": len(records),
            "computed": run["computed"], "reused": run["reused"], "seconds": run["seconds"],
-           "cpu_seconds": run["cpu_seconds"], "workers": run["workers"], "device": device, "answer": result,
+           "cpu_seconds": run["cpu_seconds"], "workers": run["workers"], "computed_here": run["computed_here"],
+           "device": device, "answer": result,
            "pareto": [list(p) for p in plan.pareto], "points": [_finite(r) for r in records]}
     write_json(out / "sweep.json", _finite(doc))
     doc["records"] = records
