@@ -166,6 +166,10 @@ def _words(packed: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(packed).view("<u8").astype(np.uint64, copy=False)
 
 
+#: Words of packed pixels the front end runs through a block's ticks together (their state stays in cache).
+GROUP_WORDS = 64
+
+
 class SpikeChangeDetector:
     """Foreground from a spike stream, one mask per output step of ``step_ticks`` ticks.
 
@@ -223,6 +227,7 @@ class SpikeChangeDetector:
         chunks = max(1, min(get_num_threads(), self.n_words))
         edges = np.linspace(0, self.n_words, chunks + 1).round().astype(np.int64)
         self._chunks = (edges[:-1].copy(), edges[1:].copy())
+        self.group_words = GROUP_WORDS
         self.next_tick = 0
         self.primed = False
         self._primed_ever = None
@@ -295,7 +300,8 @@ class SpikeChangeDetector:
         if t:
             p = self.parameters
             _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
-                                     self.n_pixels, self.spk, self.total, self.fired, self.fg_bits, self.word_due,
+                                     self.group_words, self.n_pixels, self.spk, self.total, self.fired, self.fg_bits,
+                                     self.word_due,
                                      self.anchor, self.span1, self.n1, self.win_span, self.win_n, self.mixed, self.bg,
                                      self.censored, self.fg, self.flag_since, self.prev, self.due, out,
                                      math.exp(-p.threshold_log), math.exp(p.threshold_log),
