@@ -338,7 +338,9 @@ class SpikeChangeDetector:
         p = self.parameters
         t = self.next_tick - 1  # the state was evaluated at this tick
         up = self.upright
-        last, n_win, s_win = up(self.spk[:, _front.LAST]), up(self.win_n), up(self.win_span)
+        # (contiguous copies of what is only read: the arithmetic below runs on whole images)
+        last, n_win, s_win = (np.ascontiguousarray(up(a)) for a in (self.spk[:, _front.LAST], self.win_n,
+                                                                   self.win_span))
         bg, censored, prev, flag_since = up(self.bg), up(self.censored), up(self.prev), up(self.flag_since)
         k_hi = math.exp(p.threshold_log)
         tau = np.where(n_win > 0, s_win / np.maximum(n_win, 1), 0.0)
@@ -423,6 +425,17 @@ class SpikeChangeDetector:
                 self._groups.append((self._step_end(t + 1 + wait), stored[y, x].copy(), sign,
                                      lower[y, x].copy(), upper[y, x].copy(), t))
 
+    def _touching(self, s: np.ndarray, px: int, sign: int) -> int:
+        """Pixels within ``px`` of the stored pixels ``s`` (not theirs) whose foreground state is ``sign``."""
+        r, c = np.divmod(s, self.stored_width)
+        y = self.height - 1 - r if self.flip else r
+        y0, y1 = max(int(y.min()) - px, 0), min(int(y.max()) + px + 1, self.height)  # the part that can touch
+        x0, x1 = max(int(c.min()) - px, 0), min(int(c.max()) + px + 1, self.width)
+        mine = np.zeros((y1 - y0, x1 - x0), np.bool_)
+        mine[y - y0, c - x0] = True
+        fg = self.upright(self.fg)[y0:y1, x0:x1]
+        return int((_grown(mine, px) & ~mine & (fg == sign)).sum())
+
     def _step_end(self, tick: float) -> int:
         """The first end of an output step at or after ``tick`` (a check there adds no evaluation)."""
         return int(math.ceil(tick / self.step_ticks)) * self.step_ticks
@@ -455,11 +468,8 @@ class SpikeChangeDetector:
                 changed = has & (last > t0) & (hi * k < lower0)
             if changed.sum() > 0.01 * s.size:  # (a stray pixel of a large group is noise)
                 continue
-            mine = np.zeros(self.spk.shape[0], np.bool_)
-            mine[s] = True
-            mine = self.upright(mine)
-            touching = _grown(mine, max(p.merge_px, 1)) & ~mine & (self.upright(self.fg) == sign)
-            if touching.sum() >= p.min_pixels:
+            touching = self._touching(s, max(p.merge_px, 1), sign)
+            if touching >= p.min_pixels:
                 # still, but joined to foreground of the same sign that is not (the part of a long object in
                 # view since the start that it has not left, while its front moves on): decided later
                 self._groups.append((self._step_end(self.next_tick + p.prime_confirm_ticks), s, sign, lower0, upper0,
@@ -687,6 +697,15 @@ def _blocks(a: np.ndarray, fill=None, block: int = _PRIME_BLOCK_PX) -> np.ndarra
     return pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
 
 
+def _block_counts(mask: np.ndarray, block: int = _PRIME_BLOCK_PX) -> np.ndarray:
+    """Set pixels of a bool (H, W) image per b × b block (hb, wb), float64 (whole numbers: exact in any order)."""
+    H, W = mask.shape
+    hb, wb = -(-H // block), -(-W // block)
+    pad = np.zeros((hb * block, wb * block), np.uint8)
+    pad[:H, :W] = mask
+    return pad.reshape(hb, block, wb, block).sum(axis=(1, 3), dtype=np.int64).astype(np.float64)
+
+
 def _nearest(blocks: np.ndarray, H: int, W: int, block: int = _PRIME_BLOCK_PX) -> np.ndarray:
     """Block values (hb, wb) of b × b px back to pixels, each pixel its block's value."""
     return blocks[np.arange(H) // block][:, np.arange(W) // block]
@@ -740,7 +759,7 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
     of its pixels around each pixel (per block).
     """
     H, W = values.shape
-    n = _blocks(clear.astype(np.float64), 0.0).sum(axis=2)
+    n = _block_counts(clear)
     total = _blocks(np.where(clear, values, 0.0), 0.0).sum(axis=2)
     sigma = max(window_px / 8.0 / _PRIME_BLOCK_PX, 0.5)
     weight = gaussian_filter(n, sigma, mode="nearest")
@@ -752,7 +771,7 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
         level = np.zeros_like(level)
     out = (_upsample(level, H, W), _nearest(weight / _PRIME_BLOCK_PX ** 2, H, W))
     if also is not None:
-        part = gaussian_filter(_blocks((clear & also).astype(np.float64), 0.0).sum(axis=2), sigma, mode="nearest")
+        part = gaussian_filter(_block_counts(clear & also), sigma, mode="nearest")
         out += (_nearest(part / np.maximum(weight, 1e-9), H, W),)
     return out
 
