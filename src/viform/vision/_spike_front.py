@@ -378,6 +378,24 @@ def components_of_pixels(ys, xs, height, width, reach, min_pixels, index):  # pr
 
 
 @njit(cache=True)
+def box_overlaps(a, b, iou):  # pragma: no cover - compiled
+    """Intersection areas (or with ``iou``, intersection over union: 0 where the union is empty) of every box
+    of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
+    out = np.empty((a.shape[0], b.shape[0]))
+    for i in range(a.shape[0]):
+        ax, ay, aw, ah = a[i, 0], a[i, 1], a[i, 2], a[i, 3]
+        for j in range(b.shape[0]):
+            ix = min(ax + aw, b[j, 0] + b[j, 2]) - max(ax, b[j, 0])
+            iy = min(ay + ah, b[j, 1] + b[j, 3]) - max(ay, b[j, 1])
+            inter = max(ix, 0.0) * max(iy, 0.0)
+            if iou:
+                union = aw * ah + b[j, 2] * b[j, 3] - inter
+                inter = inter / union if union > 0 else 0.0
+            out[i, j] = inter
+    return out
+
+
+@njit(cache=True)
 def theil_sen(ts, xs, ys):  # pragma: no cover - compiled
     """Velocity (vx, vy) of points (ts, xs, ys): the median over pairs of (Δx/Δt, Δy/Δt) (Theil–Sen)."""
     n = ts.size

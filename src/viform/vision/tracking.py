@@ -887,24 +887,14 @@ def _components_of_mask(mask, merge_px, min_pixels):
 
 def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Area of the intersection of every box of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
-    ix = np.clip(np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2])
-                 - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
-    iy = np.clip(np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3])
-                 - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
-    return ix * iy
+    return _front.box_overlaps(np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64), False)
 
 
 def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Intersection over union of every box of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
-    a = np.asarray(a, np.float64).reshape(-1, 4)
-    b = np.asarray(b, np.float64).reshape(-1, 4)
-    ix = np.clip(np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2])
-                 - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
-    iy = np.clip(np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3])
-                 - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
-    inter = ix * iy
-    union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None, :] - inter
-    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+    a = np.ascontiguousarray(np.asarray(a, np.float64).reshape(-1, 4))
+    b = np.ascontiguousarray(np.asarray(b, np.float64).reshape(-1, 4))
+    return _front.box_overlaps(a, b, True)
 
 
 # --------------------------------------------------------------------------- association
@@ -1123,6 +1113,9 @@ class Tracker:
         mostly = inside >= 0.6
         single = ~used & (mostly.sum(axis=1) == 1)
         owner = np.where(single, np.argmax(mostly, axis=1), -1)
+        # one piece alone in a prediction, large enough: an ordinary detection
+        pieces = np.bincount(owner[owner >= 0], minlength=live.size)
+        owner[(owner >= 0) & (pieces[np.maximum(owner, 0)] == 1) & (counts >= p.min_pixels)] = -1
         for h in np.unique(owner[owner >= 0]):
             if int(live[h]) in taken:
                 owner[owner == h] = -1
