@@ -160,8 +160,9 @@ def _words(packed: np.ndarray) -> np.ndarray:
     t, n_bytes = packed.shape
     n_words = -(-n_bytes // 8)
     if n_bytes != n_words * 8:
-        padded = np.zeros((t, n_words * 8), np.uint8)
+        padded = np.empty((t, n_words * 8), np.uint8)
         padded[:, :n_bytes] = packed
+        padded[:, n_bytes:] = 0
         packed = padded
     return np.ascontiguousarray(packed).view("<u8").astype(np.uint64, copy=False)
 
