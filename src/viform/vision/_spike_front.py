@@ -5,8 +5,9 @@ The front end reads spikes as packed bits (64 pixels a word, least significant b
 three numbers of that pixel (its last spike, the start of its open window, the intervals
 counted in it). Once per output step every pixel's window is turned into an interval estimate
 and compared with its background (:func:`_evaluate`); the foreground comes out as packed bits
-again. Pixels are independent, so the words are split into chunks run in parallel, and the
-result does not depend on the chunking.
+again. Pixels are independent, so the words are split into chunks run in parallel, each chunk
+runs groups of words through all of a block's ticks in turn (a group's state stays in cache), and
+the result depends neither on the chunking nor on the grouping.
 """
 
 from __future__ import annotations

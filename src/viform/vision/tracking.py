@@ -302,8 +302,8 @@ class SpikeChangeDetector:
             p = self.parameters
             _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
                                      self.group_words, self.n_pixels, self.spk, self.total, self.fired, self.fg_bits,
-                                     self.word_due,
-                                     self.anchor, self.span1, self.n1, self.win_span, self.win_n, self.mixed, self.bg,
+                                     self.word_due, self.anchor, self.span1, self.n1, self.win_span, self.win_n,
+                                     self.mixed, self.bg,
                                      self.censored, self.fg, self.flag_since, self.prev, self.due, out,
                                      math.exp(-p.threshold_log), math.exp(p.threshold_log),
                                      math.exp(p.prime_threshold_log), math.exp(p.left_log),
