@@ -5,8 +5,9 @@ The front end reads spikes as packed bits (64 pixels a word, least significant b
 three numbers of that pixel (its last spike, the start of its open window, the intervals
 counted in it). Once per output step every pixel's window is turned into an interval estimate
 and compared with its background (:func:`_evaluate`); the foreground comes out as packed bits
-again. Pixels are independent, so the words are split into chunks run in parallel, and the
-result does not depend on the chunking.
+again. Pixels are independent, so the words are split into chunks run in parallel, each chunk
+runs groups of words through all of a block's ticks in turn (a group's state stays in cache), and
+the result depends neither on the chunking nor on the grouping.
 """
 
 from __future__ import annotations
@@ -185,7 +186,7 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
 
 
 @njit(parallel=True, cache=True)
-def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, n_pixels,
+def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, group_words, n_pixels,
                       spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
                       fg, flag_since, prev, due, out, k_lo, k_hi, k_prime, k_left, background_ticks,
                       hold_ticks):  # pragma: no cover - compiled
@@ -200,56 +201,69 @@ def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, 
     """
     T = words.shape[0]
     for ch in prange(chunk_lo.size):
-        lo, hi = chunk_lo[ch], chunk_hi[ch]
-        step = 0
-        for t in range(T):
-            tick = first_tick + t
-            for i in range(lo, hi):
-                w = words[t, i]
-                if not w:
-                    continue
-                fired[i] |= w
-                while w:
-                    s = i * 64 + _cttz(w)
-                    w &= w - np.uint64(1)
-                    lt = spk[s, LAST]
-                    if lt < 0:  # the first spike opens the first interval; the one it ends reaches
-                        anchor[s] = tick  # back before the stream: the background is at least tick + 1
-                        if bg[s] <= 0.0:
-                            bg[s] = tick + 1.0
-                            censored[s] = True
-                    else:
-                        if spk[s, COUNT] == 0:
-                            spk[s, FIRST] = tick  # the end of the step's first interval
-                        spk[s, COUNT] += 1
-                    spk[s, BEFORE] = lt
-                    spk[s, LAST] = tick
-                    total[s] += 1
-            if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T - 1):
-                for i in range(lo, hi):
-                    cand = fired[i] | fg_bits[i]
-                    whole = tick >= word_due[i]
-                    if whole:  # some pixel's silence may change it: the whole word (and its soonest due anew)
-                        top = min(64, n_pixels - i * 64)
-                        cand = ~np.uint64(0) if top == 64 else (np.uint64(1) << np.uint64(top)) - np.uint64(1)
-                    if cand:
-                        bits = fg_bits[i] & ~cand
-                        soonest = np.inf if whole else word_due[i]  # (a bound: a spike may only delay a due)
-                        while cand:
-                            j = _cttz(cand)
-                            cand &= cand - np.uint64(1)
-                            s = i * 64 + j
-                            if _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
-                                         fg, flag_since, prev, due, k_lo, k_hi, k_prime, k_left,
-                                         background_ticks, hold_ticks) != 0:
-                                bits |= np.uint64(1) << j
-                            if due[s] < soonest:
-                                soonest = due[s]
-                        fg_bits[i] = bits
-                        word_due[i] = soonest
-                        fired[i] = np.uint64(0)
-                    out[step, i] = fg_bits[i]
-                step += 1
+        # pixels are independent: a group of ``group_words`` words is run through all the block's ticks
+        # before the next, so its pixels' state stays in cache
+        for g0 in range(chunk_lo[ch], chunk_hi[ch], group_words):
+            g1 = min(g0 + group_words, chunk_hi[ch])
+            step = 0
+            for t in range(T):
+                tick = first_tick + t
+                for i in range(g0, g1):
+                    w = words[t, i]
+                    if not w:
+                        continue
+                    fired[i] |= w
+                    while w:
+                        s = i * 64 + _cttz(w)
+                        w &= w - np.uint64(1)
+                        lt = spk[s, LAST]
+                        if lt < 0:  # the first spike opens the first interval; the one it ends reaches
+                            anchor[s] = tick  # back before the stream: the background is at least tick + 1
+                            if bg[s] <= 0.0:
+                                bg[s] = tick + 1.0
+                                censored[s] = True
+                        else:
+                            if spk[s, COUNT] == 0:
+                                spk[s, FIRST] = tick  # the end of the step's first interval
+                            spk[s, COUNT] += 1
+                        spk[s, BEFORE] = lt
+                        spk[s, LAST] = tick
+                        total[s] += 1
+                if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T - 1):
+                    for i in range(g0, g1):
+                        _evaluate_word(i, tick, n_pixels, spk, fired, fg_bits, word_due, anchor, span1, n1,
+                                       win_span, win_n, mixed, bg, censored, fg, flag_since, prev, due, k_lo, k_hi,
+                                       k_prime, k_left, background_ticks, hold_ticks)
+                        out[step, i] = fg_bits[i]
+                    step += 1
+
+
+@njit(cache=True, inline="always")
+def _evaluate_word(i, tick, n_pixels, spk, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg,
+                   censored, fg, flag_since, prev, due, k_lo, k_hi, k_prime, k_left, background_ticks,
+                   hold_ticks):  # pragma: no cover - compiled
+    """Evaluate word ``i`` at the end of tick ``tick``: the pixels that fired, hold foreground or are due."""
+    cand = fired[i] | fg_bits[i]
+    whole = tick >= word_due[i]
+    if whole:  # some pixel's silence may change it: the whole word (and its soonest due anew)
+        top = min(64, n_pixels - i * 64)
+        cand = ~np.uint64(0) if top == 64 else (np.uint64(1) << np.uint64(top)) - np.uint64(1)
+    if cand:
+        bits = fg_bits[i] & ~cand
+        soonest = np.inf if whole else word_due[i]  # (a bound: a spike may only delay a due)
+        while cand:
+            j = _cttz(cand)
+            cand &= cand - np.uint64(1)
+            s = i * 64 + j
+            if _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
+                         fg, flag_since, prev, due, k_lo, k_hi, k_prime, k_left,
+                         background_ticks, hold_ticks) != 0:
+                bits |= np.uint64(1) << j
+            if due[s] < soonest:
+                soonest = due[s]
+        fg_bits[i] = bits
+        word_due[i] = soonest
+        fired[i] = np.uint64(0)
 
 
 @njit(cache=True)
@@ -362,6 +376,24 @@ def components_of_pixels(ys, xs, height, width, reach, min_pixels, index):  # pr
     for k in range(n):
         pixel_label[k] = label[root[k]]
     return boxes, counts, pixel_label
+
+
+@njit(cache=True)
+def box_overlaps(a, b, iou):  # pragma: no cover - compiled
+    """Intersection areas (or with ``iou``, intersection over union: 0 where the union is empty) of every box
+    of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
+    out = np.empty((a.shape[0], b.shape[0]))
+    for i in range(a.shape[0]):
+        ax, ay, aw, ah = a[i, 0], a[i, 1], a[i, 2], a[i, 3]
+        for j in range(b.shape[0]):
+            ix = min(ax + aw, b[j, 0] + b[j, 2]) - max(ax, b[j, 0])
+            iy = min(ay + ah, b[j, 1] + b[j, 3]) - max(ay, b[j, 1])
+            inter = max(ix, 0.0) * max(iy, 0.0)
+            if iou:
+                union = aw * ah + b[j, 2] * b[j, 3] - inter
+                inter = inter / union if union > 0 else 0.0
+            out[i, j] = inter
+    return out
 
 
 @njit(cache=True)

@@ -160,10 +160,15 @@ def _words(packed: np.ndarray) -> np.ndarray:
     t, n_bytes = packed.shape
     n_words = -(-n_bytes // 8)
     if n_bytes != n_words * 8:
-        padded = np.zeros((t, n_words * 8), np.uint8)
+        padded = np.empty((t, n_words * 8), np.uint8)
         padded[:, :n_bytes] = packed
+        padded[:, n_bytes:] = 0
         packed = padded
     return np.ascontiguousarray(packed).view("<u8").astype(np.uint64, copy=False)
+
+
+#: Words of packed pixels the front end runs through a block's ticks together (their state stays in cache).
+GROUP_WORDS = 64
 
 
 class SpikeChangeDetector:
@@ -223,6 +228,7 @@ class SpikeChangeDetector:
         chunks = max(1, min(get_num_threads(), self.n_words))
         edges = np.linspace(0, self.n_words, chunks + 1).round().astype(np.int64)
         self._chunks = (edges[:-1].copy(), edges[1:].copy())
+        self.group_words = GROUP_WORDS
         self.next_tick = 0
         self.primed = False
         self._primed_ever = None
@@ -295,8 +301,9 @@ class SpikeChangeDetector:
         if t:
             p = self.parameters
             _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
-                                     self.n_pixels, self.spk, self.total, self.fired, self.fg_bits, self.word_due,
-                                     self.anchor, self.span1, self.n1, self.win_span, self.win_n, self.mixed, self.bg,
+                                     self.group_words, self.n_pixels, self.spk, self.total, self.fired, self.fg_bits,
+                                     self.word_due, self.anchor, self.span1, self.n1, self.win_span, self.win_n,
+                                     self.mixed, self.bg,
                                      self.censored, self.fg, self.flag_since, self.prev, self.due, out,
                                      math.exp(-p.threshold_log), math.exp(p.threshold_log),
                                      math.exp(p.prime_threshold_log), math.exp(p.left_log),
@@ -332,7 +339,9 @@ class SpikeChangeDetector:
         p = self.parameters
         t = self.next_tick - 1  # the state was evaluated at this tick
         up = self.upright
-        last, n_win, s_win = up(self.spk[:, _front.LAST]), up(self.win_n), up(self.win_span)
+        # (contiguous copies of what is only read: the arithmetic below runs on whole images)
+        last, n_win, s_win = (np.ascontiguousarray(up(a)) for a in (self.spk[:, _front.LAST], self.win_n,
+                                                                   self.win_span))
         bg, censored, prev, flag_since = up(self.bg), up(self.censored), up(self.prev), up(self.flag_since)
         k_hi = math.exp(p.threshold_log)
         tau = np.where(n_win > 0, s_win / np.maximum(n_win, 1), 0.0)
@@ -417,6 +426,17 @@ class SpikeChangeDetector:
                 self._groups.append((self._step_end(t + 1 + wait), stored[y, x].copy(), sign,
                                      lower[y, x].copy(), upper[y, x].copy(), t))
 
+    def _touching(self, s: np.ndarray, px: int, sign: int) -> int:
+        """Pixels within ``px`` of the stored pixels ``s`` (not theirs) whose foreground state is ``sign``."""
+        r, c = np.divmod(s, self.stored_width)
+        y = self.height - 1 - r if self.flip else r
+        y0, y1 = max(int(y.min()) - px, 0), min(int(y.max()) + px + 1, self.height)  # the part that can touch
+        x0, x1 = max(int(c.min()) - px, 0), min(int(c.max()) + px + 1, self.width)
+        mine = np.zeros((y1 - y0, x1 - x0), np.bool_)
+        mine[y - y0, c - x0] = True
+        fg = self.upright(self.fg)[y0:y1, x0:x1]
+        return int((_grown(mine, px) & ~mine & (fg == sign)).sum())
+
     def _step_end(self, tick: float) -> int:
         """The first end of an output step at or after ``tick`` (a check there adds no evaluation)."""
         return int(math.ceil(tick / self.step_ticks)) * self.step_ticks
@@ -449,11 +469,8 @@ class SpikeChangeDetector:
                 changed = has & (last > t0) & (hi * k < lower0)
             if changed.sum() > 0.01 * s.size:  # (a stray pixel of a large group is noise)
                 continue
-            mine = np.zeros(self.spk.shape[0], np.bool_)
-            mine[s] = True
-            mine = self.upright(mine)
-            touching = _grown(mine, max(p.merge_px, 1)) & ~mine & (self.upright(self.fg) == sign)
-            if touching.sum() >= p.min_pixels:
+            touching = self._touching(s, max(p.merge_px, 1), sign)
+            if touching >= p.min_pixels:
                 # still, but joined to foreground of the same sign that is not (the part of a long object in
                 # view since the start that it has not left, while its front moves on): decided later
                 self._groups.append((self._step_end(self.next_tick + p.prime_confirm_ticks), s, sign, lower0, upper0,
@@ -681,6 +698,15 @@ def _blocks(a: np.ndarray, fill=None, block: int = _PRIME_BLOCK_PX) -> np.ndarra
     return pad.reshape(hb, b, wb, b).transpose(0, 2, 1, 3).reshape(hb, wb, b * b)
 
 
+def _block_counts(mask: np.ndarray, block: int = _PRIME_BLOCK_PX) -> np.ndarray:
+    """Set pixels of a bool (H, W) image per b × b block (hb, wb), float64 (whole numbers: exact in any order)."""
+    H, W = mask.shape
+    hb, wb = -(-H // block), -(-W // block)
+    pad = np.zeros((hb * block, wb * block), np.uint8)
+    pad[:H, :W] = mask
+    return pad.reshape(hb, block, wb, block).sum(axis=(1, 3), dtype=np.int64).astype(np.float64)
+
+
 def _nearest(blocks: np.ndarray, H: int, W: int, block: int = _PRIME_BLOCK_PX) -> np.ndarray:
     """Block values (hb, wb) of b × b px back to pixels, each pixel its block's value."""
     return blocks[np.arange(H) // block][:, np.arange(W) // block]
@@ -734,7 +760,7 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
     of its pixels around each pixel (per block).
     """
     H, W = values.shape
-    n = _blocks(clear.astype(np.float64), 0.0).sum(axis=2)
+    n = _block_counts(clear)
     total = _blocks(np.where(clear, values, 0.0), 0.0).sum(axis=2)
     sigma = max(window_px / 8.0 / _PRIME_BLOCK_PX, 0.5)
     weight = gaussian_filter(n, sigma, mode="nearest")
@@ -746,7 +772,7 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
         level = np.zeros_like(level)
     out = (_upsample(level, H, W), _nearest(weight / _PRIME_BLOCK_PX ** 2, H, W))
     if also is not None:
-        part = gaussian_filter(_blocks((clear & also).astype(np.float64), 0.0).sum(axis=2), sigma, mode="nearest")
+        part = gaussian_filter(_block_counts(clear & also), sigma, mode="nearest")
         out += (_nearest(part / np.maximum(weight, 1e-9), H, W),)
     return out
 
@@ -862,24 +888,14 @@ def _components_of_mask(mask, merge_px, min_pixels):
 
 def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Area of the intersection of every box of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
-    ix = np.clip(np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2])
-                 - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
-    iy = np.clip(np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3])
-                 - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
-    return ix * iy
+    return _front.box_overlaps(np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64), False)
 
 
 def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Intersection over union of every box of ``a`` (N, 4) with every box of ``b`` (M, 4), (x, y, w, h)."""
-    a = np.asarray(a, np.float64).reshape(-1, 4)
-    b = np.asarray(b, np.float64).reshape(-1, 4)
-    ix = np.clip(np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2])
-                 - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
-    iy = np.clip(np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3])
-                 - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
-    inter = ix * iy
-    union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None, :] - inter
-    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+    a = np.ascontiguousarray(np.asarray(a, np.float64).reshape(-1, 4))
+    b = np.ascontiguousarray(np.asarray(b, np.float64).reshape(-1, 4))
+    return _front.box_overlaps(a, b, True)
 
 
 # --------------------------------------------------------------------------- association
@@ -1098,6 +1114,9 @@ class Tracker:
         mostly = inside >= 0.6
         single = ~used & (mostly.sum(axis=1) == 1)
         owner = np.where(single, np.argmax(mostly, axis=1), -1)
+        # one piece alone in a prediction, large enough: an ordinary detection
+        pieces = np.bincount(owner[owner >= 0], minlength=live.size)
+        owner[(owner >= 0) & (pieces[np.maximum(owner, 0)] == 1) & (counts >= p.min_pixels)] = -1
         for h in np.unique(owner[owner >= 0]):
             if int(live[h]) in taken:
                 owner[owner == h] = -1
