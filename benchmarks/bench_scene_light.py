@@ -147,7 +147,7 @@ def main(argv=None):
             reference_light = scene.illuminance_lux
         duration = args.ticks / CLOCK_HZ
         auto = sensor.light_sample_ticks_for(scene, "auto", duration)
-        samples = [auto] if name != "four-images" else sorted({auto, 1})
+        samples = sorted({auto, 1})
         times = (np.arange(args.ticks, step=max(1, args.ticks // 8)) + 0.5) / CLOCK_HZ
         err = light_error(scene, times[::2])
         lux = scene.illuminance_lux_many(times)

@@ -12,6 +12,7 @@ stream, so the bits are those of one call over the whole field with every run's 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from viform.light.sampled import lux_to_rates, rects_to_words, word_ranges
 from viform.sensors._spike_kernels import _LANES, SPARSE_FIRING, _run_block
@@ -22,6 +23,21 @@ STRETCH_TICKS = 256
 RATES_BYTES = 24 << 20
 #: Above this fraction of dirty words the whole field runs per sample (gathering would cost more).
 WHOLE_FIELD_FRACTION = 0.7
+
+
+_NEVER_LAZY = np.iinfo(np.int64).max  # a saturation bound no charge per tick reaches
+
+
+@njit(cache=True)
+def _mark_pixels(rects, width, inside):
+    """``inside[p]`` = True for the pixels (row-major, flat) of the rectangles (row0, row1, col0, col1)."""
+    height = inside.size // width
+    for k in range(rects.shape[0]):
+        c0, c1 = max(0, rects[k, 2]), min(width, rects[k, 3])
+        if c1 <= c0:
+            continue
+        for r in range(max(0, rects[k, 0]), min(height, rects[k, 1])):
+            inside[r * width + c0:r * width + c1] = True
 
 
 class SampledRuns:
@@ -77,20 +93,35 @@ class SampledRuns:
         j0, j1 = first // s, -(-last // s)
         times = (np.arange(j0, j1) + 0.5) * (s / self.clock_hz)
         seg_end = (np.arange(j0, j1, dtype=np.int64) + 1) * s
-        dirty = rects_to_words(self.sampler.dirty_rects(times), self.height, self.width, _LANES)
+        rects = self.sampler.dirty_rects(times)
+        dirty = rects_to_words(rects, self.height, self.width, _LANES)
         if dirty.size == 0:
             self._call(words, self.static_rates[None], np.array([last], np.int64), first, state, None)
             return
         if dirty.size >= WHOLE_FIELD_FRACTION * self.n_words:
             everything = np.arange(self.n_words, dtype=np.int64)
-            self._dynamic(words, times, seg_end, first, last, state, self._group(everything), whole=True)
+            self._dynamic(words, times, seg_end, first, last, state, self._changing(self._group(everything), rects),
+                          whole=True)
             return
         still = np.setdiff1d(np.arange(self.n_words, dtype=np.int64), dirty, assume_unique=True)
         static_group = self._group(still)
         sub = np.empty((words.shape[0], still.size), np.uint64)
         self._call(sub, static_group["static"][None], np.array([last], np.int64), first, state, static_group)
         words[:, still] = sub
-        self._dynamic(words, times, seg_end, first, last, state, self._group(dirty), whole=False)
+        self._dynamic(words, times, seg_end, first, last, state, self._changing(self._group(dirty), rects),
+                      whole=False)
+
+    def _changing(self, group: dict, rects: np.ndarray) -> dict:
+        """The group with the saturation shortcut of :func:`_run_block` turned off for the pixels inside
+        ``rects``: their light changes from sample to sample, and the shortcut would replay the draws it
+        defers at every change (through :func:`_settle`, one call per pixel and change), so running them
+        tick by tick draws the same targets in the same order — same bits — for less work. Pixels of the
+        group outside the rectangles keep their light and the shortcut."""
+        inside = np.zeros(self.pixels, np.bool_)
+        _mark_pixels(np.ascontiguousarray(rects, dtype=np.int64), self.width, inside)
+        changed = dict(group)
+        changed["bounds"] = np.where(inside[group["pix"]], _NEVER_LAZY, group["bounds"])
+        return changed
 
     def _dynamic(self, words, times, seg_end, first, last, state, group, whole):
         n_pixels = group["pix"].size

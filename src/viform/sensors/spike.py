@@ -586,12 +586,24 @@ class SpikeSensor(Sensor):
                     out = np.empty((last - first, row_bytes), dtype=np.uint8)
                 if per_tick_light:
                     # light at the middle of each interval of `sample` ticks, held over it
-                    times = (np.arange(first, last) // sample + 0.5) * (sample / p.clock_hz)
                     n = last - first
-                    tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
+                    if sample == 1:
+                        times = (np.arange(first, last) // sample + 0.5) * (sample / p.clock_hz)
+                        tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
+                    else:  # each sample's scalars once, copied to its ticks (the kernel reads its first)
+                        j = np.arange(first, last) // sample
+                        u = int(j[-1] - j[0]) + 1
+                        times = (np.arange(j[0], j[-1] + 1) + 0.5) * (sample / p.clock_hz)
+                        tick_scalars(times, params, kind, scalars[:u], xtab[:u], ytab[:u])
+                        at = j - j[0]
+                        scalars[:n] = scalars[at]
+                        if xtab.shape[0] > 1:
+                            xtab[:n] = xtab[at]
+                        if ytab.shape[0] > 1:
+                            ytab[:n] = ytab[at]
                     _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round,
                                      state.charge, state.target, state.counter, q, index, *tables, *fixed_tables,
-                                     state.keys, p.photon_noise, reset_readout, dead_ticks, band_rows)
+                                     state.keys, p.photon_noise, reset_readout, dead_ticks, band_rows, first, sample)
                 elif sampled is not None:
                     sampled.run(out, first, last, state)
                     if caller_state:
