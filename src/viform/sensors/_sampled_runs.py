@@ -29,15 +29,12 @@ _NEVER_LAZY = np.iinfo(np.int64).max  # a saturation bound no charge per tick re
 
 
 @njit(cache=True)
-def _mark_pixels(rects, width, inside):
-    """``inside[p]`` = True for the pixels (row-major, flat) of the rectangles (row0, row1, col0, col1)."""
-    height = inside.size // width
-    for k in range(rects.shape[0]):
-        c0, c1 = max(0, rects[k, 2]), min(width, rects[k, 3])
-        if c1 <= c0:
-            continue
-        for r in range(max(0, rects[k, 0]), min(height, rects[k, 1])):
-            inside[r * width + c0:r * width + c1] = True
+def _varying_pixels(rates, varying):
+    """``varying[p]`` = True where pixel p's charge per tick differs between the rows (samples) of ``rates``."""
+    for i in range(1, rates.shape[0]):
+        for p in range(rates.shape[1]):
+            if rates[i, p] != rates[0, p]:
+                varying[p] = True
 
 
 class SampledRuns:
@@ -93,35 +90,20 @@ class SampledRuns:
         j0, j1 = first // s, -(-last // s)
         times = (np.arange(j0, j1) + 0.5) * (s / self.clock_hz)
         seg_end = (np.arange(j0, j1, dtype=np.int64) + 1) * s
-        rects = self.sampler.dirty_rects(times)
-        dirty = rects_to_words(rects, self.height, self.width, _LANES)
+        dirty = rects_to_words(self.sampler.dirty_rects(times), self.height, self.width, _LANES)
         if dirty.size == 0:
             self._call(words, self.static_rates[None], np.array([last], np.int64), first, state, None)
             return
         if dirty.size >= WHOLE_FIELD_FRACTION * self.n_words:
             everything = np.arange(self.n_words, dtype=np.int64)
-            self._dynamic(words, times, seg_end, first, last, state, self._changing(self._group(everything), rects),
-                          whole=True)
+            self._dynamic(words, times, seg_end, first, last, state, self._group(everything), whole=True)
             return
         still = np.setdiff1d(np.arange(self.n_words, dtype=np.int64), dirty, assume_unique=True)
         static_group = self._group(still)
         sub = np.empty((words.shape[0], still.size), np.uint64)
         self._call(sub, static_group["static"][None], np.array([last], np.int64), first, state, static_group)
         words[:, still] = sub
-        self._dynamic(words, times, seg_end, first, last, state, self._changing(self._group(dirty), rects),
-                      whole=False)
-
-    def _changing(self, group: dict, rects: np.ndarray) -> dict:
-        """The group with the saturation shortcut of :func:`_run_block` turned off for the pixels inside
-        ``rects``: their light changes from sample to sample, and the shortcut would replay the draws it
-        defers at every change (through :func:`_settle`, one call per pixel and change), so running them
-        tick by tick draws the same targets in the same order — same bits — for less work. Pixels of the
-        group outside the rectangles keep their light and the shortcut."""
-        inside = np.zeros(self.pixels, np.bool_)
-        _mark_pixels(np.ascontiguousarray(rects, dtype=np.int64), self.width, inside)
-        changed = dict(group)
-        changed["bounds"] = np.where(inside[group["pix"]], _NEVER_LAZY, group["bounds"])
-        return changed
+        self._dynamic(words, times, seg_end, first, last, state, self._group(dirty), whole=False)
 
     def _dynamic(self, words, times, seg_end, first, last, state, group, whole):
         n_pixels = group["pix"].size
@@ -133,24 +115,35 @@ class SampledRuns:
             k1 = min(last, int(seg_end[c1 - 1]))
             rates = np.empty((c1 - c0, n_pixels), np.int64)
             self.sampler.render(times[c0:c1], group["starts"], group["stops"], group["a"], group["b"], rates)
-            self._call(sub[k0 - first:k1 - first], rates, seg_end[c0:c1], k0, state, None if whole else group)
+            # the saturation shortcut of _run_block defers a saturated pixel's draws until its light changes,
+            # then replays them one pixel at a time (_settle): for pixels whose light changes within the chunk
+            # it saves nothing, so they run tick by tick — the same draws in the same order, the same bits
+            bounds = self.bounds if whole else group["bounds"]
+            varying = np.zeros(n_pixels, np.bool_)
+            _varying_pixels(rates, varying)
+            bounds = np.where(varying, _NEVER_LAZY, bounds)
+            self._call(sub[k0 - first:k1 - first], rates, seg_end[c0:c1], k0, state, None if whole else group,
+                       bounds)
         if not whole:
             words[:, group["words"]] = sub
 
-    def _call(self, words, rates, seg_end, first, state, group):
-        """One kernel call over the whole field (``group`` None) or over a group's gathered state."""
+    def _call(self, words, rates, seg_end, first, state, group, bounds=None):
+        """One kernel call over the whole field (``group`` None) or over a group's gathered state; ``bounds``:
+        the saturation bounds of the call's pixels (default: the sensor's)."""
         p = self.plan.p
         plan = self.plan
+        if bounds is None:
+            bounds = self.bounds if group is None else group["bounds"]
         if group is None:
             _run_block(words, rates, seg_end, first, state.charge, state.target, state.counter, plan.q, plan.index,
                        *plan.tables, *self.fixed_tables, state.keys, p.photon_noise, plan.reset_readout,
-                       plan.dead_ticks, plan.mode, self.bounds, state.pending_ticks, state.pending_rate, SPARSE_FIRING)
+                       plan.dead_ticks, plan.mode, bounds, state.pending_ticks, state.pending_rate, SPARSE_FIRING)
             return
         pix = group["pix"]
         charge, target, counter = state.charge[pix], state.target[pix], state.counter[pix]
         keys, pending_ticks, pending_rate = state.keys[pix], state.pending_ticks[pix], state.pending_rate[pix]
         _run_block(words, rates, seg_end, first, charge, target, counter, group["q"], group["index"], *plan.tables,
                    *self.fixed_tables, keys, p.photon_noise, plan.reset_readout, plan.dead_ticks, plan.mode,
-                   group["bounds"], pending_ticks, pending_rate, SPARSE_FIRING)
+                   bounds, pending_ticks, pending_rate, SPARSE_FIRING)
         state.charge[pix], state.target[pix], state.counter[pix] = charge, target, counter
         state.pending_ticks[pix], state.pending_rate[pix] = pending_ticks, pending_rate

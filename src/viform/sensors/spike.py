@@ -475,9 +475,11 @@ class SpikeSensor(Sensor):
         light_sample_ticks : int or "auto"
             The scene is evaluated at the middle of every interval of ``light_sample_ticks``
             ticks and held over it; 1 evaluates it at the middle of every tick. "auto" (default):
-            the scene's choice (:meth:`light_sample_ticks_for`): 1 for every built-in scene, and for
-            a described scene the longest hold that misplaces its fastest edge by at most
-            :data:`~viform.light.sampled.LIGHT_ERROR_PX`.
+            the scene's choice (:meth:`light_sample_ticks_for`): for a moving or flickering built-in
+            scene, and a described scene rendered per sample, the longest hold that misplaces its
+            fastest edge by at most :data:`~viform.light.sampled.LIGHT_ERROR_PX` and keeps 32 samples
+            per flicker period; 1 for still scenes, steps, videos, described full-field patterns and
+            scenes whose light is not compiled.
         reuse_buffer : bool
             Yield every block in the same output buffer, overwritten by the next block: for
             consumers that use each block at once (writers, reducers), it saves allocating and
