@@ -9,6 +9,9 @@ both reset modes, dead time, noise-free and exact models, threshold spread and e
 kernels must reproduce them bit for bit; a change of the random streams must come as a new
 sampler version with these kept selectable.
 
+The moving scenes run at one light sample per tick (their "auto" holds the light longer); "held-translating"
+holds it over 5 ticks through the per-tick kernel, recorded before that kernel reused a held sample's charge.
+
 Regenerate (only for a deliberate change of the streams): ``python tests/sensors/test_spike_golden.py``.
 """
 
@@ -43,12 +46,15 @@ def _lux_for(electrons_per_tick):
     return electrons_per_tick / E_PER_LUX_TICK
 
 
+#: Light at every tick's middle: the moving scenes' "auto" holds the light longer (see the cases' scenes).
+_PER_TICK = {"light_sample_ticks": 1}
+
 # name: (sensor factory, scene factory, ticks, simulate options)
 CASES = {
     "q1-hdr": (lambda: SpikeSensor(threshold_electrons=1), lambda: HDRScene(8, 16, 0.001, 8.0), 160, {}),
     "q3-translating": (lambda: SpikeSensor(threshold_electrons=3),
                        lambda: TranslatingScene(8, 24, (3000.0, 700.0), pattern="edge", min_lux=_lux_for(0.05),
-                                                max_lux=_lux_for(30.0)), 160, {}),
+                                                max_lux=_lux_for(30.0)), 160, _PER_TICK),
     "q100-still": (lambda: SpikeSensor(), lambda: StillScene(_texture(8, 24, 0.05, 300.0)), 200, {}),
     "q100-saturated": (lambda: SpikeSensor(), lambda: StillScene(_texture(8, 16, 10.0, 3e6)), 200, {}),
     "q100-empty-start": (lambda: SpikeSensor(random_initial_charge=False),
@@ -56,7 +62,7 @@ CASES = {
     "q100-readout-hdr": (lambda: SpikeSensor(reset="readout"), lambda: HDRScene(8, 16, 0.01, 7.0), 200, {}),
     "q16250-chip-translating": (lambda: SpikeSensor(threshold_electrons=16250.0),
                                 lambda: TranslatingScene(8, 24, (2000.0, 0.0), min_lux=_lux_for(100.0),
-                                                         max_lux=_lux_for(3e4)), 200, {}),
+                                                         max_lux=_lux_for(3e4)), 200, _PER_TICK),
     "q2e4-spread-video": (lambda: SpikeSensor(threshold_electrons=2e4, threshold_spread_fraction=0.1),
                           lambda: VideoScene(_lux_for(2e3) * (0.5 + np.random.default_rng(4).random((5, 8, 16))),
                                              2500.0, "hold"), 200, {}),
@@ -66,7 +72,7 @@ CASES = {
                         200, {}),
     "noise-free-readout": (lambda: SpikeSensor(photon_noise=False, reset="readout"),
                            lambda: RotatingScene(8, 24, 60.0, min_lux=_lux_for(1.0), max_lux=_lux_for(120.0)),
-                           200, {}),
+                           200, _PER_TICK),
     "dead-time-self": (lambda: SpikeSensor(dead_time_s=2e-5), lambda: StillScene(_texture(8, 24, 0.1, 3e3)), 200,
                        {}),
     "dead-time-readout": (lambda: SpikeSensor(dead_time_s=6e-5, reset="readout"),
@@ -75,7 +81,10 @@ CASES = {
                              lambda: StepScene(StillScene(_texture(8, 16, 0.1, 3e3)), 0.002, 5.0), 200, {}),
     "fixed-patterns-flicker": (lambda: SpikeSensor(gain_spread_fraction=0.2, dark_current_spread_fraction=1.0,
                                                    hot_pixel_fraction=0.1, hot_pixel_dark_current_e_per_s=3e5),
-                               lambda: FlickerScene(StillScene(_texture(8, 16, 0.5, 50.0)), 400.0), 200, {}),
+                               lambda: FlickerScene(StillScene(_texture(8, 16, 0.5, 50.0)), 400.0), 200, _PER_TICK),
+    "held-translating": (lambda: SpikeSensor(threshold_electrons=20, gain_spread_fraction=0.1),
+                         lambda: TranslatingScene(8, 24, (4000.0, 900.0), min_lux=_lux_for(0.5),
+                                                  max_lux=_lux_for(60.0)), 200, {"light_sample_ticks": 5}),
     "numpy-light-sampled": (lambda: SpikeSensor(threshold_electrons=40),
                             lambda: TranslatingScene(8, 24, (2000.0, 0.0), min_lux=_lux_for(0.2),
                                                      max_lux=_lux_for(60.0)), 200,
@@ -87,6 +96,7 @@ GOLDEN = {
     'dead-time-readout': '5bd55f405fcbc5ce8f6f929d',
     'dead-time-self': '4f1433844c05074a813ea26c',
     'fixed-patterns-flicker': '1258cc93562d625a7218758d',
+    'held-translating': '9dddfe10ac2a310b6482cda1',
     'noise-free-readout': '3f7faad647fe147730414065',
     'noise-free-self': '195f6c21ecd723808c967074',
     'numpy-light-sampled': 'c37c9d3f47e107637c1182f5',

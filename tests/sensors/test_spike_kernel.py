@@ -162,6 +162,7 @@ def outcome(name: str, block_ticks: int | None = None, seed: int = 11) -> str:
     import viform.sensors.spike as spike_module
 
     make_sensor, make_scene, n_ticks, options, twin = CASES[name]
+    options = {"light_sample_ticks": 1, **options}  # recorded with light at every tick ("auto" holds moving light)
     sensor, scene = make_sensor(), make_scene()
     state = _state_for(sensor, scene, twin, seed)
     digest = hashlib.blake2b(digest_size=12)

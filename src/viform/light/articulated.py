@@ -204,24 +204,71 @@ class WavingHandScene(Scene):
         return math.hypot(b[0] - a[0], b[1] - a[1]) / (2 * dt_s)
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
-        s = self.s
-        sh, el, wr = self.joints(float(t_s))
+        img = self._static.copy()
+        self._paint(float(t_s), img)
+        return img
+
+    def _arm_box(self, t_s: float):
+        """Joints, hand tip and the box (row0, row1, col0, col1) the arm is drawn in at ``t_s``."""
+        sh, el, wr = self.joints(t_s)
         hy, hx = wr[0] + 0.35 * (wr[0] - el[0]), wr[1] + 0.35 * (wr[1] - el[1])
-        # only the arm's bounding box changes with time: evaluate the capsules there
         pts = np.array([sh, el, wr, (hy, hx)])
-        pad = 0.06 * s + 2
+        pad = 0.06 * self.s + 2
         r0, c0 = (max(0, int(v)) for v in pts.min(axis=0) - pad)
         r1, c1 = int(min(self.height, pts[:, 0].max() + pad + 1)), int(min(self.width, pts[:, 1].max() + pad + 1))
-        img = self._static.copy()
+        return sh, el, wr, (hy, hx), (r0, r1, c0, c1)
+
+    def _paint(self, t_s: float, img: np.ndarray) -> list:
+        """Draw the arm at ``t_s`` over ``img`` (which holds the still body and wall); return the box written
+        (see :class:`~viform.light.sampled.PaintedSampler`)."""
+        s = self.s
+        # only the arm's bounding box changes with time: evaluate the capsules there
+        sh, el, wr, tip, (r0, r1, c0, c1) = self._arm_box(t_s)
         if r1 <= r0 or c1 <= c0:
-            return img
+            return []
         yy, xx = self._yy[r0:r1, c0:c1], self._xx[r0:r1, c0:c1]
         sleeve = np.maximum(_capsule(yy, xx, sh, el, 0.045 * s), _capsule(yy, xx, el, wr, 0.04 * s))
-        hand = _capsule(yy, xx, wr, (hy, hx), 0.055 * s)
+        hand = _capsule(yy, xx, wr, tip, 0.055 * s)
         sub = img[r0:r1, c0:c1]
         sub = sub * (1 - sleeve) + self.shirt_lux * sleeve
         img[r0:r1, c0:c1] = sub * (1 - hand) + self.skin_lux * hand
-        return img
+        return [(r0, r1, c0, c1)]
+
+    def _paint_rects(self, times_s: np.ndarray) -> np.ndarray:
+        """The arm's box at each of ``times_s`` (one pixel of margin)."""
+        boxes = np.array([self._arm_box(t)[4] for t in np.asarray(times_s, dtype=np.float64).tolist()])
+        return (boxes + np.array([-1, 1, -1, 1])).reshape(-1, 4)
+
+    def max_speed_px_per_s(self) -> float:
+        """A bound on the speed of any point of the arm, px/s: the upper arm's peak rate times its length
+        plus the forearm's peak rate times the farthest reach past the elbow (hand tip and radius)."""
+        rate = 2 * math.pi * self.wave_hz
+        up = abs(self.upper_arm_amplitude_rad) * rate
+        fore = up + abs(self.forearm_amplitude_rad) * rate
+        return up * self.upper_len + fore * (1.35 * self.fore_len + 0.055 * self.s + 1.0)
+
+    def compiled_light(self):
+        """The still body and wall once, and per light sample only the arm's box drawn by :meth:`_paint`
+        (kind "sampled", :class:`~viform.light.sampled.PaintedSampler`): the light of
+        :meth:`illuminance_lux`, bit for bit."""
+        if not self._own_light(WavingHandScene):
+            return None
+        if getattr(self, "_compiled", None) is None:
+            from viform.light.compiled import CompiledLight
+            from viform.light.sampled import PaintedSampler
+
+            # the arm blends wall, shirt and skin with weights in [0, 1]: below the largest of them
+            peak = max(float(self._static.max()), self.shirt_lux, self.skin_lux)
+            sampler = PaintedSampler(self._static, self._paint, self._paint_rects, peak)
+            self._compiled = CompiledLight("sampled", self.height, self.width, sampler=sampler)
+        return self._compiled
+
+    def auto_light_sample_ticks(self, clock_hz: float, duration_s: float | None = None) -> int:
+        """The longest hold (ticks) that misplaces the arm's fastest point by at most
+        :data:`~viform.light.sampled.LIGHT_ERROR_PX` (:func:`~viform.light.sampled.auto_light_sample_ticks`)."""
+        from viform.light.sampled import auto_light_sample_ticks
+
+        return auto_light_sample_ticks(self.max_speed_px_per_s(), clock_hz)
 
     def describe(self) -> dict:
         return {**super().describe(), "wall_lux": self.wall_lux, "shirt_lux": self.shirt_lux,

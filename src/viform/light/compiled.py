@@ -18,16 +18,9 @@ the simulator then works from it:
   sin(a + b) = sin a·cos b + cos a·sin b), so no transcendental is evaluated per pixel.
 
 * ``"sampled"`` — light that renders itself per light sample, only where it can change
-  (:mod:`viform.light.sampled`): the simulator runs the pixels it leaves static as one run of
+  (:mod:`viform.light.sampled`: a described scene's layers, or a built-in scene's moving parts
+  painted over its background by its own code): the simulator runs the pixels it leaves static as one run of
   constant light per stretch of ticks, the others one run per light sample.
-
-* ``"dilemma"`` — the comparison scene :class:`~viform.light.dilemma.DilemmaScene`: a static
-  background with a vehicle (a box whose front moves), propeller blades (pixels of a disc whose
-  angle to the nearest of three blades is < 14°), a Gaussian blob added over a small moving box,
-  and a PWM LED. Static per-pixel data ride in ``frames`` (background, disc angle, LED mask);
-  per tick, the vehicle's front, the blades' rotation and the LED's level are scalars, and the
-  blob's values over its box are computed by NumPy with the scene's own expression (so the light
-  is the scene's bit for bit, :func:`dilemma_tick_data`), the rest in the kernel.
 
 Per-tick quantities are computed by compiled scalar code from the absolute tick time, so a
 tick's light is the same number whatever block it falls in (the simulator's same-seed,
@@ -47,13 +40,6 @@ from numba import njit, prange
 KIND_FRAME_MODULATED = 0  # frames[0]·m(t)
 KIND_VIDEO_LINEAR = 1
 KIND_PATTERN = 2
-KIND_DILEMMA = 3
-#: Parameters of the "dilemma" kind, in order (see :meth:`CompiledLight.parameters`).
-DILEMMA_PARAMETERS = ("vehicle_front0_px", "vehicle_speed_px_per_s", "vehicle_span_px", "vehicle_length_px",
-                      "vehicle_row0", "vehicle_row1", "vehicle_lux", "prop_omega_rad_per_s", "blade_cos",
-                      "prop_lux", "object_x0_px", "object_speed_px_per_s", "width", "object_reach_px",
-                      "object_row_px", "object_denominator", "object_lux", "object_row0", "object_row1",
-                      "led_frequency_hz", "led_duty", "led_on_lux", "led_off_lux", "box_width")
 #: Patterns (the functions of the same names in :mod:`viform.light.scenes`).
 PATTERN_CODES = {"texture": 0, "edge": 1, "bars": 2}
 #: Modulations m(t).
@@ -68,7 +54,7 @@ class CompiledLight:
 
     Attributes
     ----------
-    kind : {"frames", "frames-modulated", "video-linear", "pattern", "dilemma", "sampled"}
+    kind : {"frames", "frames-modulated", "video-linear", "pattern", "sampled"}
     frames : ndarray, (F, H, W)
         Lux frames: "frames" (float64), "frames-modulated" (one frame times m(t)),
         "video-linear"; the kernels read them as float64.
@@ -97,14 +83,11 @@ class CompiledLight:
     period_px: float = 48.0
     motion: tuple = ("translate", 0.0, 0.0, 0.0, 0.0)
     modulation: tuple = ("none",)
-    dilemma: dict | None = None  # "dilemma": the scene's constants, by :data:`DILEMMA_PARAMETERS`
     sampler: object = None  # "sampled": a :class:`~viform.light.sampled.LightSampler`
 
     @property
     def lux_max(self) -> float:
         """An upper bound of the light, lux (for the fixed-point range check)."""
-        if self.kind == "dilemma":
-            return self.max_lux
         if self.kind == "sampled":
             return float(self.sampler.lux_max)
         peak = float(self.frames.max()) if self.frames is not None else self.max_lux
@@ -116,8 +99,6 @@ class CompiledLight:
         return peak
 
     def kernel_kind(self) -> int:
-        if self.kind == "dilemma":
-            return KIND_DILEMMA
         if self.kind == "frames-modulated":
             return KIND_FRAME_MODULATED
         if self.kind == "video-linear":
@@ -132,8 +113,6 @@ class CompiledLight:
 
     def parameters(self) -> np.ndarray:
         """The float parameters the compiled per-tick code reads (see :func:`tick_scalars`)."""
-        if self.kind == "dilemma":
-            return np.array([float(self.dilemma[k]) for k in DILEMMA_PARAMETERS], dtype=np.float64)
         motion = self.motion
         rotate = motion[0] == "rotate"
         m = self.modulation
@@ -159,45 +138,8 @@ def _modulation(t, code, a, b):
 
 
 def tick_scalars(times, params, kind, scalars, xtab, ytab):
-    """Fill the per-tick scalars (and tables) at ``times`` (s): :func:`dilemma_tick_data` for the
-    "dilemma" kind, else :func:`_tick_scalars` (compiled)."""
-    if kind == KIND_DILEMMA:
-        dilemma_tick_data(times, params, scalars, xtab)
-    else:
-        _tick_scalars(times, params, kind, scalars, xtab, ytab)
-
-
-def dilemma_tick_data(times, params, scalars, xtab):
-    """Per-tick data of the dilemma scene, computed as :class:`~viform.light.dilemma.DilemmaScene` does.
-
-    ``scalars[i]``: vehicle front (px), blade rotation ω·t (rad), the LED's light (lux), the
-    blob box's first and last column + 1. ``xtab[i, r, j]``: the blob's light (lux) at row
-    ``object_row0 + r`` and column ``first + j``. Same Python/NumPy arithmetic as the scene's
-    ``_moving`` and ``illuminance_lux`` (float modulo of Python, ``np.exp``), so the light is the
-    scene's to the bit.
-    """
-    d = dict(zip(DILEMMA_PARAMETERS, params.tolist(), strict=True))
-    width = int(d["width"])
-    reach = d["object_reach_px"]
-    n = len(times)
-    ox = np.empty(n)
-    c0 = np.empty(n, dtype=np.int64)
-    span = d["vehicle_span_px"]
-    for i, t in enumerate(times.tolist()):
-        scalars[i, 0] = (d["vehicle_front0_px"] + d["vehicle_speed_px_per_s"] * t) % span
-        scalars[i, 1] = d["prop_omega_rad_per_s"] * t
-        phase = (t * d["led_frequency_hz"]) % 1.0
-        scalars[i, 2] = d["led_on_lux"] if phase < d["led_duty"] else d["led_off_lux"]
-        o = (d["object_x0_px"] + d["object_speed_px_per_s"] * t) % width
-        ox[i] = o
-        c0[i] = max(0, int(o - reach))
-        scalars[i, 3] = c0[i]
-        scalars[i, 4] = min(width, int(o + reach) + 2)
-    rows = np.arange(int(d["object_row0"]), int(d["object_row1"]), dtype=np.float64)
-    box = int(d["box_width"])
-    x = (c0[:, None] + np.arange(box))[:, None, :].astype(np.float64)
-    arg = (x - ox[:, None, None]) ** 2 + (rows[None, :, None] - d["object_row_px"]) ** 2
-    xtab[:n] = d["object_lux"] * np.exp(-arg / d["object_denominator"])
+    """Fill the per-tick scalars (and tables) at ``times`` (s) (:func:`_tick_scalars`, compiled)."""
+    _tick_scalars(times, params, kind, scalars, xtab, ytab)
 
 
 @njit(cache=True, parallel=True)
@@ -297,9 +239,6 @@ def row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, out):
     width = xs.size
     m = scalars[k, 6]
     base = y * width
-    if kind == KIND_DILEMMA:
-        _dilemma_row(k, y, xs, scalars, xtab, frames, params, out)
-        return
     if kind == KIND_FRAME_MODULATED:
         for x in range(width):
             out[x] = frames[0, base + x] * m
@@ -345,46 +284,8 @@ def row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, out):
             out[x] = (lo + span * value) * m
 
 
-@njit(cache=True, inline="always")
-def _dilemma_row(k, y, xs, scalars, xtab, frames, params, out):
-    """One row of the dilemma scene's light at tick row ``k``, in the order the scene draws it:
-    background, vehicle, blades, + blob, LED (``frames``: background, disc angle (NaN off the
-    disc), LED mask)."""
-    width = xs.size
-    base = y * width
-    front = scalars[k, 0]
-    rear = front - params[3]
-    omega_t = scalars[k, 1]
-    led_lux = scalars[k, 2]
-    c0 = np.int64(scalars[k, 3])
-    c1 = np.int64(scalars[k, 4])
-    vehicle_row = params[4] <= y < params[5]
-    blob_row = params[17] <= y < params[18]
-    r = y - np.int64(params[17])
-    for x in range(width):
-        v = frames[0, base + x]
-        if vehicle_row and xs[x] <= front and xs[x] > rear:
-            v = params[6]
-        theta = frames[1, base + x]
-        if theta == theta and math.cos(3.0 * (theta - omega_t)) > params[8]:
-            v = params[9]
-        if blob_row and c0 <= x < c1:
-            v += xtab[k, r, x - c0]
-        if frames[2, base + x] != 0.0:
-            v = led_lux
-        out[x] = v
-
-
 def tick_buffers(light: CompiledLight, n_ticks: int):
     """Per-tick scalar and table buffers for ``n_ticks`` ticks."""
-    if light.kind == "dilemma":
-        d = light.dilemma
-        rows = int(d["object_row1"]) - int(d["object_row0"])
-        # ytab is unused by this kind; Fortran order gives the kernel call its own signature, so numba
-        # compiles it from the current sources instead of loading a kernel cached before this kind existed
-        # (numba's cache checks only the kernel's own file, not the light code it inlines)
-        return (np.zeros((n_ticks, N_SCALARS)), np.zeros((n_ticks, rows, int(d["box_width"]))),
-                np.zeros((1, 2, 2), order="F"))
     tables = light.kind == "pattern" and light.pattern == "texture"
     scalars = np.zeros((n_ticks, N_SCALARS))
     xtab = np.zeros((n_ticks if tables else 1, 4, light.width if tables else 1))
@@ -394,9 +295,6 @@ def tick_buffers(light: CompiledLight, n_ticks: int):
 
 def tick_bytes(light: CompiledLight) -> int:
     """Bytes of per-tick buffers for one tick."""
-    if light.kind == "dilemma":
-        d = light.dilemma
-        return 8 * N_SCALARS + 8 * 3 * (int(d["object_row1"]) - int(d["object_row0"])) * int(d["box_width"])
     tables = light.kind == "pattern" and light.pattern == "texture"
     return 8 * N_SCALARS + (32 * (light.width + light.height) if tables else 0)
 
@@ -419,12 +317,5 @@ def evaluate(light: CompiledLight, times_s) -> np.ndarray:
     scalars, xtab, ytab = tick_buffers(light, times.size)
     tick_scalars(times, params, kind, scalars, xtab, ytab)
     out = np.empty((times.size, light.height, light.width))
-    if kind == KIND_DILEMMA:
-        xs = np.arange(light.width, dtype=np.float64)
-        frames = light.flat_frames()
-        for i in range(times.size):
-            for y in range(light.height):
-                row_lux(kind, i, y, xs, scalars, xtab, ytab, frames, params, out[i, y])
-        return out
     _evaluate(kind, times, scalars, xtab, ytab, light.flat_frames(), params, light.height, light.width, out)
     return out

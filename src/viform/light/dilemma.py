@@ -154,6 +154,8 @@ class DilemmaScene(Scene):
         self.object_lux = 3.0 * self.brightness
         self._cache: dict = {}
         self._cache_limit = max(16, int(256e6 // (8 * h * w)))  # frames kept for window means
+        self._disc_box = self._mask_box(self._prop_disc)
+        self._led_box = self._mask_box(self.led)
 
     # ------------------------------------------------------------------ truth
     def vehicle_front_px(self, t_s: float) -> float:
@@ -186,9 +188,53 @@ class DilemmaScene(Scene):
         return lux
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
-        lux = self._moving(float(t_s), self._background.copy())
-        lux[self.led] = self.led_on_lux if self.led_is_on(float(t_s)) else self.led_off_lux
+        lux = self._background.copy()
+        self._paint(float(t_s), lux)
         return lux
+
+    def _paint(self, t_s: float, lux: np.ndarray) -> list:
+        """Draw the moving parts and the LED at ``t_s`` over ``lux`` (which holds the background); return the
+        boxes (row0, row1, col0, col1) written (see :class:`~viform.light.sampled.PaintedSampler`)."""
+        self._moving(t_s, lux)
+        lux[self.led] = self.led_on_lux if self.led_is_on(t_s) else self.led_off_lux
+        front = self.vehicle_front_px(t_s)
+        v0, v1 = self.vehicle_rows
+        cols = np.flatnonzero((self._x[0] <= front) & (self._x[0] > front - self.vehicle_length_px))
+        boxes = [self._disc_box, self._led_box, self._blob_box(t_s)]
+        if cols.size:
+            boxes.append((v0, v1, int(cols[0]), int(cols[-1]) + 1))
+        return boxes
+
+    def _blob_box(self, t_s: float) -> tuple[int, int, int, int]:
+        """The box :meth:`_moving` evaluates the small object's Gaussian in at ``t_s``."""
+        ox = (self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width
+        reach = 5 * self.object_sigma_px
+        return (max(0, int(self.object_row_px - reach)), min(self.height, int(self.object_row_px + reach) + 2),
+                max(0, int(ox - reach)), min(self.width, int(ox + reach) + 2))
+
+    def _paint_rects(self, times_s: np.ndarray) -> np.ndarray:
+        """Boxes holding every pixel :meth:`_paint` writes at any of ``times_s`` (one pixel of margin
+        on the moving boxes' columns)."""
+        t = np.asarray(times_s, dtype=np.float64)
+        front = np.floor((self.vehicle_front0_px + self.vehicle_speed_px_per_s * t)
+                         % (self.width + self.vehicle_length_px))
+        v0, v1 = self.vehicle_rows
+        vehicle = np.stack([np.full(t.shape, v0), np.full(t.shape, v1),
+                            front - np.ceil(self.vehicle_length_px) - 1, front + 2], axis=1)
+        ox = (self.object_x0_px + self.object_speed_px_per_s * t) % self.width
+        reach = 5 * self.object_sigma_px
+        y0, y1, _, _ = self._blob_box(0.0)
+        blob = np.stack([np.full(t.shape, y0), np.full(t.shape, y1), np.floor(ox - reach) - 1,
+                         np.floor(ox + reach) + 3], axis=1)
+        fixed = np.array([self._disc_box, self._led_box], dtype=np.float64)
+        return np.concatenate([vehicle, blob, fixed]).astype(np.int64)
+
+    @staticmethod
+    def _mask_box(mask: np.ndarray) -> tuple[int, int, int, int]:
+        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        if rows.size == 0:
+            return (0, 0, 0, 0)
+        return (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
 
     def moving_mask(self, t_s: float) -> np.ndarray:
         """Pixels covered at ``t_s`` by the fast-moving parts (propeller blades, vehicle)."""
@@ -390,33 +436,29 @@ class DilemmaScene(Scene):
         }
 
     def compiled_light(self):
-        """The scene's light for the compiled simulator (kind "dilemma" of :mod:`viform.light.compiled`):
-        the same light as :meth:`illuminance_lux`, bit for bit, evaluated in the spike kernel."""
+        """The scene's light for the compiled simulator: the background once, and per light sample only the
+        moving parts and the LED, drawn by :meth:`_paint` (kind "sampled",
+        :class:`~viform.light.sampled.PaintedSampler`): the light of :meth:`illuminance_lux`, bit for bit."""
         if not self._own_light(DilemmaScene):
             return None
-        from viform.light.compiled import CompiledLight
+        if getattr(self, "_compiled", None) is None:
+            from viform.light.compiled import CompiledLight
+            from viform.light.sampled import PaintedSampler
 
-        reach = 5 * self.object_sigma_px
-        row0 = max(0, int(self.object_row_px - reach))
-        row1 = min(self.height, int(self.object_row_px + reach) + 2)
-        theta = np.where(self._prop_disc, self._prop_theta, np.nan)
-        frames = np.stack([self._background, theta, self.led.astype(np.float64)])
-        constants = {
-            "vehicle_front0_px": self.vehicle_front0_px, "vehicle_speed_px_per_s": self.vehicle_speed_px_per_s,
-            "vehicle_span_px": self.width + self.vehicle_length_px, "vehicle_length_px": self.vehicle_length_px,
-            "vehicle_row0": self.vehicle_rows[0], "vehicle_row1": self.vehicle_rows[1],
-            "vehicle_lux": self.vehicle_lux, "prop_omega_rad_per_s": self.prop_omega_rad_per_s,
-            "blade_cos": math.cos(3.0 * math.radians(14.0)), "prop_lux": self.prop_lux,
-            "object_x0_px": self.object_x0_px, "object_speed_px_per_s": self.object_speed_px_per_s,
-            "width": self.width, "object_reach_px": reach, "object_row_px": self.object_row_px,
-            "object_denominator": 2 * self.object_sigma_px ** 2, "object_lux": self.object_lux,
-            "object_row0": row0, "object_row1": row1, "led_frequency_hz": self.led_frequency_hz,
-            "led_duty": self.led_duty, "led_on_lux": self.led_on_lux, "led_off_lux": self.led_off_lux,
-            "box_width": int(2 * reach) + 3,
-        }
-        peak = max(float(self._background.max()), self.vehicle_lux, self.prop_lux) + self.object_lux
-        return CompiledLight("dilemma", self.height, self.width, frames=frames, dilemma=constants,
-                             max_lux=max(peak, self.led_on_lux, self.led_off_lux))
+            peak = max(float(self._background.max()), self.vehicle_lux, self.prop_lux) + self.object_lux
+            sampler = PaintedSampler(self._background, self._paint, self._paint_rects,
+                                     max(peak, self.led_on_lux, self.led_off_lux))
+            self._compiled = CompiledLight("sampled", self.height, self.width, sampler=sampler)
+        return self._compiled
+
+    def auto_light_sample_ticks(self, clock_hz: float, duration_s: float | None = None) -> int:
+        """The longest hold (ticks) that misplaces the fastest part by at most
+        :data:`~viform.light.sampled.LIGHT_ERROR_PX` and keeps 32 samples per LED period
+        (:func:`~viform.light.sampled.auto_light_sample_ticks`)."""
+        from viform.light.sampled import auto_light_sample_ticks
+
+        ticks = auto_light_sample_ticks(self.max_speed_px_per_s(), clock_hz)
+        return max(1, min(ticks, int(clock_hz / (self.led_frequency_hz * 32))))
 
     def regions(self) -> dict:
         """Masks and geometry the comparison metrics use."""

@@ -161,3 +161,74 @@ def spans_from_static(static, rows, c0s, c1s, offs, width, out):
             o = offs[s]
             for c in range(c0s[s], c1s[s]):
                 out[i, o + c - c0s[s]] = static[base + c]
+
+
+class PaintedSampler(LightSampler):
+    """Light that is a static background with parts painted over it per instant by the scene's own code.
+
+    A scene whose light is ``background`` with a few moving or flickering parts drawn over it (a vehicle,
+    propeller blades, objects, an arm: the built-in scenes) hands its drawing to this sampler:
+
+    * ``paint(t_s, canvas)`` draws the light at ``t_s`` into ``canvas`` (a float64 (H, W) array that holds
+      ``background``) and returns the boxes (row0, row1, col0, col1), ends exclusive, that it wrote;
+    * ``rects(times_s)`` returns boxes (k, 4) whose union holds every pixel ``paint`` may write at any of
+      ``times_s`` (a bound: it may be larger).
+
+    The scene's :meth:`~viform.light.scenes.Scene.illuminance_lux` is ``paint`` on a copy of the
+    background, so the light rendered here is the scene's light to the bit. Per light sample the sampler
+    paints once into one canvas, converts the dirty pixels to charge in compiled code and restores the
+    painted boxes from the background: its work is the painted area, never the whole field.
+    """
+
+    def __init__(self, background: np.ndarray, paint, rects, lux_max: float):
+        self.background = np.ascontiguousarray(background, dtype=np.float64)
+        self.height, self.width = self.background.shape
+        self._paint = paint
+        self._rects = rects
+        self.lux_max = float(lux_max)
+        self._canvas = self.background.copy()
+
+    def static_lux(self) -> np.ndarray:
+        return self.background
+
+    def dirty_rects(self, times_s) -> np.ndarray:
+        rects = np.asarray(self._rects(np.asarray(times_s, dtype=np.float64)), dtype=np.int64).reshape(-1, 4)
+        rects[:, 0:2] = np.clip(rects[:, 0:2], 0, self.height)
+        rects[:, 2:4] = np.clip(rects[:, 2:4], 0, self.width)
+        return rects
+
+    def render(self, times_s, starts, stops, a, b, out) -> None:
+        canvas, background = self._canvas, self.background
+        flat = canvas.reshape(-1)
+        starts = np.ascontiguousarray(starts, dtype=np.int64)
+        stops = np.ascontiguousarray(stops, dtype=np.int64)
+        rates = out.dtype == np.int64
+        for i, t in enumerate(np.asarray(times_s, dtype=np.float64).tolist()):
+            boxes = self._paint(t, canvas)
+            try:
+                if rates:
+                    _gather_rates(flat, starts, stops, a, b, out[i])
+                else:
+                    _gather_lux(flat, starts, stops, out[i])
+            finally:
+                for r0, r1, c0, c1 in boxes:
+                    canvas[r0:r1, c0:c1] = background[r0:r1, c0:c1]
+
+
+@njit(cache=True)
+def _gather_rates(flat, starts, stops, a, b, out):
+    """``out`` = rint(a·lux + b) of the pixels of the flat ranges laid end to end (as :func:`lux_to_rates`)."""
+    o = 0
+    for k in range(starts.size):
+        for p in range(starts[k], stops[k]):
+            out[o] = np.int64(np.rint(flat[p] * a[o] + b[o]))
+            o += 1
+
+
+@njit(cache=True)
+def _gather_lux(flat, starts, stops, out):
+    o = 0
+    for k in range(starts.size):
+        for p in range(starts[k], stops[k]):
+            out[o] = flat[p]
+            o += 1

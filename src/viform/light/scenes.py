@@ -410,6 +410,20 @@ class _PatternScene(Scene):
     def compiled_light(self):
         return self._pattern_light()
 
+    @abstractmethod
+    def max_speed_px_per_s(self) -> float:
+        """The fastest image speed of the pattern anywhere in the field, px/s."""
+
+    def auto_light_sample_ticks(self, clock_hz: float, duration_s: float | None = None) -> int:
+        """The longest hold (ticks) that misplaces the pattern by at most
+        :data:`~viform.light.sampled.LIGHT_ERROR_PX` anywhere in the field
+        (:func:`~viform.light.sampled.auto_light_sample_ticks`); 1 when a subclass changed the light."""
+        if self.compiled_light() is None:
+            return 1
+        from viform.light.sampled import auto_light_sample_ticks
+
+        return auto_light_sample_ticks(self.max_speed_px_per_s(), clock_hz)
+
     # truth: the whole field is one rigid surface (no objects, no range)
     def truth_kinds(self) -> tuple[str, ...]:
         return ("motion", "objects")
@@ -454,6 +468,9 @@ class TranslatingScene(_PatternScene):
     def _motion(self) -> tuple:
         return ("translate", *self.origin_px, *self.velocity_px_per_s)
 
+    def max_speed_px_per_s(self) -> float:
+        return math.hypot(*self.velocity_px_per_s)
+
     def motion_px_per_s(self, t_s: float) -> np.ndarray:
         """Constant velocity (vx, vy) at every pixel, px/s."""
         return np.broadcast_to(np.asarray(self.velocity_px_per_s)[:, None, None], (2, *self.shape)).copy()
@@ -483,6 +500,10 @@ class RotatingScene(_PatternScene):
 
     def _motion(self) -> tuple:
         return ("rotate", self._cx, self._cy, self.angular_speed_rad_per_s)
+
+    def max_speed_px_per_s(self) -> float:
+        """|ω| times the distance from the centre to the farthest pixel edge, px/s."""
+        return abs(self.angular_speed_rad_per_s) * math.hypot(self._cx + 0.5, self._cy + 0.5)
 
     def motion_px_per_s(self, t_s: float) -> np.ndarray:
         """ω × r about the image centre: (vx, vy) = ω·(−(y − cy), x − cx), px/s (y down, ω > 0 turns x towards y)."""
@@ -640,6 +661,18 @@ class FlickerScene(Scene):
         if base.kind == "pattern" and base.modulation[0] == "none":
             return replace(base, modulation=modulation)
         return None
+
+    def auto_light_sample_ticks(self, clock_hz: float, duration_s: float | None = None) -> int:
+        """The base scene's choice, and at most a 32nd of the modulation's period (1 when the light is not
+        compiled)."""
+        if self.compiled_light() is None:
+            return 1
+        ticks = self.base.auto_light_sample_ticks(clock_hz, duration_s)
+        if isinstance(self.base, StillScene):
+            from viform.light.sampled import MAX_AUTO_SAMPLE_TICKS
+
+            ticks = MAX_AUTO_SAMPLE_TICKS
+        return int(max(1, min(ticks, math.floor(clock_hz / (self.frequency_hz * 32)))))
 
     def mean_illuminance_lux(self, t0_s, t1_s, samples=32):
         if isinstance(self.base, StillScene):

@@ -12,6 +12,7 @@ stream, so the bits are those of one call over the whole field with every run's 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from viform.light.sampled import lux_to_rates, rects_to_words, word_ranges
 from viform.sensors._spike_kernels import _LANES, SPARSE_FIRING, _run_block
@@ -22,6 +23,18 @@ STRETCH_TICKS = 256
 RATES_BYTES = 24 << 20
 #: Above this fraction of dirty words the whole field runs per sample (gathering would cost more).
 WHOLE_FIELD_FRACTION = 0.7
+
+
+_NEVER_LAZY = np.iinfo(np.int64).max  # a saturation bound no charge per tick reaches
+
+
+@njit(cache=True)
+def _varying_pixels(rates, varying):
+    """``varying[p]`` = True where pixel p's charge per tick differs between the rows (samples) of ``rates``."""
+    for i in range(1, rates.shape[0]):
+        for p in range(rates.shape[1]):
+            if rates[i, p] != rates[0, p]:
+                varying[p] = True
 
 
 class SampledRuns:
@@ -102,24 +115,35 @@ class SampledRuns:
             k1 = min(last, int(seg_end[c1 - 1]))
             rates = np.empty((c1 - c0, n_pixels), np.int64)
             self.sampler.render(times[c0:c1], group["starts"], group["stops"], group["a"], group["b"], rates)
-            self._call(sub[k0 - first:k1 - first], rates, seg_end[c0:c1], k0, state, None if whole else group)
+            # the saturation shortcut of _run_block defers a saturated pixel's draws until its light changes,
+            # then replays them one pixel at a time (_settle): for pixels whose light changes within the chunk
+            # it saves nothing, so they run tick by tick — the same draws in the same order, the same bits
+            bounds = self.bounds if whole else group["bounds"]
+            varying = np.zeros(n_pixels, np.bool_)
+            _varying_pixels(rates, varying)
+            bounds = np.where(varying, _NEVER_LAZY, bounds)
+            self._call(sub[k0 - first:k1 - first], rates, seg_end[c0:c1], k0, state, None if whole else group,
+                       bounds)
         if not whole:
             words[:, group["words"]] = sub
 
-    def _call(self, words, rates, seg_end, first, state, group):
-        """One kernel call over the whole field (``group`` None) or over a group's gathered state."""
+    def _call(self, words, rates, seg_end, first, state, group, bounds=None):
+        """One kernel call over the whole field (``group`` None) or over a group's gathered state; ``bounds``:
+        the saturation bounds of the call's pixels (default: the sensor's)."""
         p = self.plan.p
         plan = self.plan
+        if bounds is None:
+            bounds = self.bounds if group is None else group["bounds"]
         if group is None:
             _run_block(words, rates, seg_end, first, state.charge, state.target, state.counter, plan.q, plan.index,
                        *plan.tables, *self.fixed_tables, state.keys, p.photon_noise, plan.reset_readout,
-                       plan.dead_ticks, plan.mode, self.bounds, state.pending_ticks, state.pending_rate, SPARSE_FIRING)
+                       plan.dead_ticks, plan.mode, bounds, state.pending_ticks, state.pending_rate, SPARSE_FIRING)
             return
         pix = group["pix"]
         charge, target, counter = state.charge[pix], state.target[pix], state.counter[pix]
         keys, pending_ticks, pending_rate = state.keys[pix], state.pending_ticks[pix], state.pending_rate[pix]
         _run_block(words, rates, seg_end, first, charge, target, counter, group["q"], group["index"], *plan.tables,
                    *self.fixed_tables, keys, p.photon_noise, plan.reset_readout, plan.dead_ticks, plan.mode,
-                   group["bounds"], pending_ticks, pending_rate, SPARSE_FIRING)
+                   bounds, pending_ticks, pending_rate, SPARSE_FIRING)
         state.charge[pix], state.target[pix], state.counter[pix] = charge, target, counter
         state.pending_ticks[pix], state.pending_rate[pix] = pending_ticks, pending_rate

@@ -770,7 +770,8 @@ def _store_row_bits(out, k, bit0, n_bits, row_words, aligned):
 
 @njit(cache=True, parallel=True)
 def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round, charge, target,
-                     counter, q, index, bins, scaled, accept, keys, noise, reset_readout, dead_ticks, band_rows):
+                     counter, q, index, bins, scaled, accept, keys, noise, reset_readout, dead_ticks, band_rows,
+                     first_tick, sample_ticks):
     """Integrate-and-fire with the light computed per pixel and tick in compiled code.
 
     The light of pixel p in tick k is :func:`viform.light.compiled.pixel_lux` from the
@@ -782,7 +783,10 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
     one for the charge, one that adds, compares and packs 64 lanes per word, then only the lanes
     that fired. ``out`` (uint8,
     ticks × packed frame bytes) receives the bits in the .dat order. Work items are bands of
-    ``band_rows`` rows × windows of ticks, so the light tables stay in cache.
+    ``band_rows`` rows × windows of ticks, so the light tables stay in cache. The light is held over
+    light samples of ``sample_ticks`` ticks (absolute ticks j·S … j·S + S − 1; ``first_tick``: the
+    block's first): a row's charge per tick is computed at a sample's first tick (or the window's)
+    and reused for the rest of the sample.
     """
     n_ticks = out.shape[0]
     n_pixels = charge.size
@@ -815,9 +819,11 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
                 cw[:width] = charge[base:base + width]
                 tw[:width] = target[base:base + width]
                 for k in range(w0, w1):
-                    row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, lux)
-                    # charge this tick, rint(a·lux + b) in fixed point
-                    if fast_round:
+                    if k > w0 and (first_tick + k) % sample_ticks != 0:
+                        pass  # the same light sample as tick k − 1: its charge per tick is in `rate`
+                    elif fast_round:
+                        row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, lux)
+                        # charge this tick, rint(a·lux + b) in fixed point
                         # below 2^51, adding 1.5·2^52 rounds to an integer (half to even, as
                         # rint) held in the low mantissa bits: vectorizes where a float → int64
                         # conversion does not (AVX2)
@@ -826,6 +832,7 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
                         for x in range(width):
                             rate[x] -= _ROUNDING_MAGIC_BITS
                     else:
+                        row_lux(kind, k, y, xs, scalars, xtab, ytab, frames, params, lux)
                         for x in range(width):
                             rate[x] = np.int64(np.rint(a[base + x] * lux[x] + b[base + x]))
                     for w in range(n_row_words):

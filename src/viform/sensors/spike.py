@@ -475,9 +475,11 @@ class SpikeSensor(Sensor):
         light_sample_ticks : int or "auto"
             The scene is evaluated at the middle of every interval of ``light_sample_ticks``
             ticks and held over it; 1 evaluates it at the middle of every tick. "auto" (default):
-            the scene's choice (:meth:`light_sample_ticks_for`): 1 for every built-in scene, and for
-            a described scene the longest hold that misplaces its fastest edge by at most
-            :data:`~viform.light.sampled.LIGHT_ERROR_PX`.
+            the scene's choice (:meth:`light_sample_ticks_for`): for a moving or flickering built-in
+            scene, and a described scene rendered per sample, the longest hold that misplaces its
+            fastest edge by at most :data:`~viform.light.sampled.LIGHT_ERROR_PX` and keeps 32 samples
+            per flicker period; 1 for still scenes, steps, videos, described full-field patterns and
+            scenes whose light is not compiled.
         reuse_buffer : bool
             Yield every block in the same output buffer, overwritten by the next block: for
             consumers that use each block at once (writers, reducers), it saves allocating and
@@ -586,12 +588,24 @@ class SpikeSensor(Sensor):
                     out = np.empty((last - first, row_bytes), dtype=np.uint8)
                 if per_tick_light:
                     # light at the middle of each interval of `sample` ticks, held over it
-                    times = (np.arange(first, last) // sample + 0.5) * (sample / p.clock_hz)
                     n = last - first
-                    tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
+                    if sample == 1:
+                        times = (np.arange(first, last) // sample + 0.5) * (sample / p.clock_hz)
+                        tick_scalars(times, params, kind, scalars[:n], xtab[:n], ytab[:n])
+                    else:  # each sample's scalars once, copied to its ticks (the kernel reads its first)
+                        j = np.arange(first, last) // sample
+                        u = int(j[-1] - j[0]) + 1
+                        times = (np.arange(j[0], j[-1] + 1) + 0.5) * (sample / p.clock_hz)
+                        tick_scalars(times, params, kind, scalars[:u], xtab[:u], ytab[:u])
+                        at = j - j[0]
+                        scalars[:n] = scalars[at]
+                        if xtab.shape[0] > 1:
+                            xtab[:n] = xtab[at]
+                        if ytab.shape[0] > 1:
+                            ytab[:n] = ytab[at]
                     _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, fast_round,
                                      state.charge, state.target, state.counter, q, index, *tables, *fixed_tables,
-                                     state.keys, p.photon_noise, reset_readout, dead_ticks, band_rows)
+                                     state.keys, p.photon_noise, reset_readout, dead_ticks, band_rows, first, sample)
                 elif sampled is not None:
                     sampled.run(out, first, last, state)
                     if caller_state:

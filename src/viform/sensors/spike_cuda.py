@@ -288,9 +288,9 @@ def packed_blocks_cuda(sensor, scene, duration_s, seed, block_ticks, light_sampl
     """As :meth:`SpikeSensor._packed_blocks`, on the GPU: (first tick, packed bits uint8 (T, 8·⌈H·W/64⌉))."""
     from numba import cuda
 
-    # pixel_lux does not draw the dilemma and sampled kinds: the scene's light per sample, which gives the same bits
+    # pixel_lux does not draw the sampled kind: the scene's light per sample, which gives the same bits
     plan = sensor.run_plan(scene, duration_s, seed, block_ticks, light_sample_ticks, state, compiled_light, True,
-                           drop_light_kinds=("dilemma", "sampled"))
+                           drop_light_kinds=("sampled",))
     p, n_ticks, height, width, pixels, row_bytes = (plan.p, plan.n_ticks, plan.height, plan.width, plan.pixels,
                                                     plan.row_bytes)
     sample, light, block_ticks, q, index, tables = (plan.sample, plan.light, plan.block_ticks, plan.q,
