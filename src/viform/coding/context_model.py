@@ -347,7 +347,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
             if two:
                 m2 = rec_m[r + 1]
                 o2 = rec_o[r + 1]
-                rc = _euint(rc, out, probs, _P_M2, m2)
+                rc = _euint(rc, out, probs, np.int64(_P_M2), m2)
                 pred = (nb4 + 2) // 4 if nb4 > 0 else 0
                 e = o2 - pred
                 rc = _ebit(rc, out, probs, _P_FWS + fb, 1 if e < 0 else 0)
@@ -368,7 +368,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
                 if not strict and m2 > 0:
                     e = g - m2 * ref
                     rc = _ebit(rc, out, probs, _P_GSIGN, 1 if e < 0 else 0)
-                    rc = _euint(rc, out, probs, _P_GRES, abs(e) - (1 if e < 0 else 0))
+                    rc = _euint(rc, out, probs, np.int64(_P_GRES), abs(e) - (1 if e < 0 else 0))
                 rec_s[r] = a + g
                 a = a + g + o2
                 ref = o2
@@ -396,7 +396,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
             if not strict and m > 0:
                 e = g - m * ref
                 rc = _ebit(rc, out, probs, _P_GSIGN + 1, 1 if e < 0 else 0)
-                rc = _euint(rc, out, probs, _P_GRES + _EG, abs(e) - (1 if e < 0 else 0))
+                rc = _euint(rc, out, probs, np.int64(_P_GRES + _EG), abs(e) - (1 if e < 0 else 0))
             s = a + g
             rec_s[r] = s
             nb4 = _nb_mean(p, width, s + (ref + 1) // 2, rec_start, counts, rec_s, rec_o, ref0, ptr)
@@ -422,7 +422,7 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
             if not strict and m > 0:
                 e = tail_g[p] - m * ref
                 rc = _ebit(rc, out, probs, _P_GSIGN + 2, 1 if e < 0 else 0)
-                rc = _euint(rc, out, probs, _P_GRES + 2 * _EG, abs(e) - (1 if e < 0 else 0))
+                rc = _euint(rc, out, probs, np.int64(_P_GRES + 2 * _EG), abs(e) - (1 if e < 0 else 0))
     return encoder_flush(rc, out)
 
 
@@ -480,7 +480,7 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
             if two:
                 if r + 1 >= cap:
                     return 2
-                m2, rc = _duint(rc, data, probs, _P_M2)
+                m2, rc = _duint(rc, data, probs, np.int64(_P_M2))
                 pred = (nb4 + 2) // 4 if nb4 > 0 else 0
                 neg, rc = _dbit(rc, data, probs, _P_FWS + fb)
                 mag, rc = _duint(rc, data, probs, _P_FW + fb * _EG)
@@ -517,7 +517,7 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
                 g = m2 * ref
                 if not strict and m2 > 0:
                     neg, rc = _dbit(rc, data, probs, _P_GSIGN)
-                    mag, rc = _duint(rc, data, probs, _P_GRES)
+                    mag, rc = _duint(rc, data, probs, np.int64(_P_GRES))
                     g += -mag - 1 if neg else mag
                 if g < m2 or g > big:
                     return 1
@@ -551,7 +551,7 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
             g = m * ref
             if not strict and m > 0:
                 neg, rc = _dbit(rc, data, probs, _P_GSIGN + 1)
-                mag, rc = _duint(rc, data, probs, _P_GRES + _EG)
+                mag, rc = _duint(rc, data, probs, np.int64(_P_GRES + _EG))
                 g += -mag - 1 if neg else mag
             if g < m or g > big:
                 return 1
@@ -595,7 +595,7 @@ def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict,
             g = m * ref
             if not strict and m > 0:
                 neg, rc = _dbit(rc, data, probs, _P_GSIGN + 2)
-                mag, rc = _duint(rc, data, probs, _P_GRES + 2 * _EG)
+                mag, rc = _duint(rc, data, probs, np.int64(_P_GRES + 2 * _EG))
                 g += -mag - 1 if neg else mag
             if g < m or g > big:
                 return 1

@@ -509,7 +509,7 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
                 if not more:
                     break
                 iv = ticks[r + k] - a
-                rc = _euint(rc, out, probs, _P_COLDV, iv - lo)
+                rc = _euint(rc, out, probs, np.int64(_P_COLDV), iv - lo)
                 _update(st, q, iv, iv, model)
             else:
                 p, f = _predict(st[q, 0], st[q, 1], lo)
@@ -623,7 +623,7 @@ def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_sp
                 more, rc = _dbit(rc, data, probs, _P_COLD + (1 if a >= seg_start else 0))
                 if more == 0:
                     break
-                iv, rc = _duint(rc, data, probs, _P_COLDV)
+                iv, rc = _duint(rc, data, probs, np.int64(_P_COLDV))
                 iv += lo
                 if rc[3] or iv > rem:
                     return 3, r + c

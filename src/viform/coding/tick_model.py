@@ -516,7 +516,7 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
                 if not more:
                     break
                 iv = ticks[r + k] - a
-                rc = _euint(rc, out, probs, _P_COLDV, iv - lo)
+                rc = _euint(rc, out, probs, np.int64(_P_COLDV), iv - lo)
                 s = _update(s, iv, iv)
             else:
                 p, f, stop, zc, sb, h1, tr, rl, dev, have = _contexts(s, lo, rem, a, cur, prv, col, has_left,
@@ -636,7 +636,7 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
                 more, rc = _dbit(rc, data, probs, _P_COLD + (1 if a >= seg_start else 0))
                 if more == 0:
                     break
-                iv, rc = _duint(rc, data, probs, _P_COLDV)
+                iv, rc = _duint(rc, data, probs, np.int64(_P_COLDV))
                 iv += lo
                 if rc[3] or iv > rem:
                     return 3, r + c
