@@ -27,6 +27,15 @@ def pytest_cmdline_main(config):
         config.option.numprocesses = workers
         config.option.dist = "worksteal"
 
+def pytest_configure(config):
+    """Every test process compiles each viform kernel under its file lock, so the workers of one run
+    compile a kernel once between them and load it from numba's cache (viform._numba_cache)."""
+    from viform._numba_cache import share_compiles
+
+    share_compiles()
+    os.environ["VIFORM_SHARE_COMPILES"] = "1"  # and so do the commands the tests start in subprocesses
+
+
 #: The real recordings (README, "Tests that read real recordings"): ``$VIFORM_SPIKE_DATA`` if set,
 #: else ``<repo>/../shared/data/spike``.
 SHARED_SPIKE_DATA = Path(os.environ.get("VIFORM_SPIKE_DATA")

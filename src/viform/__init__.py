@@ -7,3 +7,10 @@ Data flows one way: scene (``viform.light``) → sensor (``viform.sensors``) →
 """
 
 __version__ = "0.1.0"
+
+if __import__("os").environ.get("VIFORM_SHARE_COMPILES") == "1":
+    # processes started together (a test run's workers and the commands they start, parallel jobs)
+    # compile each kernel once between them: viform._numba_cache
+    from viform._numba_cache import share_compiles as _share_compiles
+
+    _share_compiles()

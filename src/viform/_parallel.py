@@ -54,9 +54,11 @@ def one_line_warnings(fn):
 def _run_with_one_line_warnings(fn, *args, **kwargs):
     import warnings
 
+    from viform._numba_cache import share_compiles
     from viform._validate import show_warning
 
     warnings.showwarning = show_warning  # this worker process shows every warning so from now on
+    share_compiles()  # workers that start together compile each kernel once between them
     return fn(*args, **kwargs)
 
 

@@ -788,6 +788,9 @@ def main_cli() -> None:
     parser.add_argument("--json", help="also write the whole result (counts and examples) to this file")
     args = parser.parse_args()
     if args.worker:
+        from viform._numba_cache import share_compiles
+
+        share_compiles()  # the suite's own workers may be compiling the same kernels
         worker(args.seed, args.cases, args.result, args.bomb_mb)
         return
     started = time.perf_counter()

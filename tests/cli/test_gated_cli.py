@@ -88,3 +88,26 @@ def test_gated_set_changes_the_ccd_and_bad_names_are_refused(capsys):
     assert len(err) == 1 and "--set" in err[0] and "gate_jitter_s" in err[0]
     assert main(["gated", "--set", "pulses=5"]) == 2  # the command's own flag sets it
     assert "--pulses" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("visibility_m", [1e-300, 1.0, 150.0, 1e6])
+def test_fog_backscatter_is_the_mediums_own_return_at_any_visibility(visibility_m):
+    """The fog figures' backscatter is the medium's laser return through the same gate and mode:
+    never negative (a fog dense enough to hide the scene returns nothing from past its first
+    millimetres), and where the fog is moderate it is what the fog adds to the background."""
+    from viform.cli.gated import fog_comparison
+    from viform.light.active import Medium, fog_scene
+    from viform.sensors.gated_ccd import GatedInterlineCCD
+
+    result, _ = fog_comparison(visibility_m, 1e5, 20)
+    for mode, row in result["modes"].items():
+        assert row["backscatter_electrons"] >= 0.0, (mode, row)
+        assert row["backscatter_electrons"] <= row["background_mean_electrons"] * (1 + 1e-9), (mode, row)
+    if visibility_m == 150.0:  # moderate fog: the foggy background minus the clear one, within 5 %
+        fog = fog_scene(visibility_m=visibility_m, ambient_lux=1.0)
+        bg = fog.retro_coefficient_per_sr == 0
+        sensor = GatedInterlineCCD(pulses=20, gate_range_m=result["gate_range_m"], mode="ungated",
+                                   frame_rate_hz=25.0)
+        added = (sensor.electron_budget(fog)["photo"]
+                 - sensor.electron_budget(fog.with_(medium=Medium(0.0)))["photo"])[bg].mean()
+        assert result["modes"]["ungated"]["backscatter_electrons"] == pytest.approx(added, rel=0.05)

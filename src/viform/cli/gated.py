@@ -186,7 +186,7 @@ def fog_comparison(fog_visibility_m: float, ambient_lux: float, pulses: int, see
     """Signs in fog (seed 004's motivation), un-gated against gated (accumulate) from 10 m before the
     nearest surface: expected electrons of signs, background and backscatter, and the simulated signs'
     contrast; returns (the figures, the two images in electrons)."""
-    from viform.light.active import Medium, fog_scene
+    from viform.light.active import fog_scene
     from viform.sensors.gated_ccd import GatedInterlineCCD
 
     fog = fog_scene(visibility_m=fog_visibility_m, ambient_lux=min(ambient_lux, 1.0))
@@ -199,11 +199,17 @@ def fog_comparison(fog_visibility_m: float, ambient_lux: float, pulses: int, see
         sensor = GatedInterlineCCD(pulses=fog_x, gate_range_m=fog_gate, mode=mode, frame_rate_hz=25.0,
                                    **sensor_kw)
         image = images[f"{mode}, X={fog_x}"] = sensor.capture_frame(fog, seed=seed).electrons
-        photo = sensor.electron_budget(fog)["photo"]
-        clear = sensor.electron_budget(fog.with_(medium=Medium(0.0)))["photo"]
+        per_pulse = sensor.per_pulse_electrons(fog)
+        photo = sensor.electron_budget(fog, per_pulse=per_pulse)["photo"]
+        # the medium's own laser return, through the same gate and mode: a sum of non-negative
+        # terms (not the foggy frame minus a clear one, which goes negative once the fog hides
+        # more surface light than it scatters back)
+        only_fog = {"gated": {"total": per_pulse["gated"]["backscatter"]},
+                    "all": {"total": per_pulse["all"]["backscatter"]}, "ambient_per_s": 0.0}
+        backscatter = sensor.electron_budget(fog, per_pulse=only_fog)["photo"]
         rows[mode] = {"sign_mean_electrons": float(photo[signs].mean()),
                       "background_mean_electrons": float(photo[bg].mean()),
-                      "backscatter_electrons": float((photo - clear)[bg].mean()),
+                      "backscatter_electrons": float(backscatter[bg].mean()),
                       "sign_contrast": float((image[signs].mean() - image[bg].mean())
                                              / max(image[bg].std(ddof=1), 1e-9))}
     return {"visibility_m": fog_visibility_m, "gate_range_m": fog_gate, "pulses": fog_x, "modes": rows}, images
