@@ -367,7 +367,8 @@ def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, co
 # trailing zeros), so a tick without spikes costs no branch per pixel, and the per-spike
 # Gamma draw stays off the common path.
 _LANES = 64
-_TILE_WORDS = 4  # words (× 64 pixels) per work item of the constant-light kernel: state, rates in L1
+_TILE_WORDS = 8  # words (× 64 pixels) per work item of the constant-light kernel: one cache line of bits a tick
+_TICK_CHUNK = 64  # ticks a tile's busy words run before the next word: the chunk's bits stay in L1
 _NO_TARGET = np.int64(0x7FFFFFFFFFFFFFFF)  # target of padding lanes: they never fire
 #: Lane modes of the constant-light kernel: any option through :func:`_fire`; the two
 #: noise-free models without dead time, resolved in the vector loop itself.
@@ -639,12 +640,15 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                         if lazy_mask[j >> 6] & bit:  # left laziness above: its state is back
                             lazy_mask[j >> 6] &= ~bit
                         e[j] = r
-            for w in range(nw):  # a word's 64 lanes through the run's ticks, then the next word
+            dense = np.uint64(0)  # the words that run tick by tick
+            for w in range(nw):  # dim words: each lane's crossings through the run, then the next lane
                 base = w * _LANES
                 sparse = lazy_mask[w] == 0
                 for i in range(base, base + _LANES):
                     sparse &= e[i] <= sparse_rate[i]
-                if sparse:
+                if not sparse:
+                    dense |= np.uint64(1) << np.uint64(w)
+                else:
                     # every lane fires rarely in this run: visit each lane's crossings instead of each tick
                     for kk in range(k, end):
                         words[kk, w0 + w] = 0
@@ -687,41 +691,49 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                                 drawn[i] = counter[p0 + i]
                         c[i] = ci
                         t[i] = ti
-                    continue
-                for kk in range(k, end):
-                    if mode == MODE_NOISE_FREE_SELF:
-                        word, over = _lanes_noise_free_self(c, e, t, base)
-                        if over:  # crossings lost inside the tick: the charge modulo the target
-                            for i in range(base, base + _LANES):
-                                if c[i] >= t[i]:
-                                    c[i] %= t[i]
-                    elif mode == MODE_NOISE_FREE_READOUT:
-                        word = _lanes_noise_free_readout(c, e, t, base)
-                    else:
-                        word = _lanes_add_compare(c, e, t, base)
-                        todo = word & ~lazy_mask[w]
-                        while todo != 0:
-                            i = base + np.int64(trailing_zeros(todo))
-                            todo &= todo - np.uint64(1)
-                            ci = c[i]
-                            ti = t[i]
-                            if fast and ci - ti < one_by_one[i]:
-                                # _fire's common case: one Gamma target per crossing (draw `drawn[i]` of
-                                # the pixel's stream), the later crossings of the tick lost
-                                while ci >= ti:
-                                    ci -= ti
-                                    ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
-                                    if ti == 0:
-                                        ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
-                                    drawn[i] += 1
-                                c[i] = ci
-                                t[i] = ti
+            # busy words tick by tick, in chunks of ticks across the tile's words: each tick's bits of the
+            # tile are one cache line, written while it is in L1
+            if dense != 0:
+                for k0 in range(k, end, _TICK_CHUNK):
+                    k1 = min(k0 + _TICK_CHUNK, end)
+                    for w in range(nw):
+                        if not (dense >> np.uint64(w)) & np.uint64(1):
+                            continue
+                        base = w * _LANES
+                        for kk in range(k0, k1):
+                            if mode == MODE_NOISE_FREE_SELF:
+                                word, over = _lanes_noise_free_self(c, e, t, base)
+                                if over:  # crossings lost inside the tick: the charge modulo the target
+                                    for i in range(base, base + _LANES):
+                                        if c[i] >= t[i]:
+                                            c[i] %= t[i]
+                            elif mode == MODE_NOISE_FREE_READOUT:
+                                word = _lanes_noise_free_readout(c, e, t, base)
                             else:
-                                counter[p0 + i] = drawn[i]
-                                c[i], t[i] = _fire_general(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins, keys,
-                                                           noise, reset_readout, counter)
-                                drawn[i] = counter[p0 + i]
-                    words[kk, w0 + w] = word
+                                word = _lanes_add_compare(c, e, t, base)
+                                todo = word & ~lazy_mask[w]
+                                while todo != 0:
+                                    i = base + np.int64(trailing_zeros(todo))
+                                    todo &= todo - np.uint64(1)
+                                    ci = c[i]
+                                    ti = t[i]
+                                    if fast and ci - ti < one_by_one[i]:
+                                        # _fire's common case: one Gamma target per crossing (draw `drawn[i]` of
+                                        # the pixel's stream), the later crossings of the tick lost
+                                        while ci >= ti:
+                                            ci -= ti
+                                            ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
+                                            if ti == 0:
+                                                ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
+                                            drawn[i] += 1
+                                        c[i] = ci
+                                        t[i] = ti
+                                    else:
+                                        counter[p0 + i] = drawn[i]
+                                        c[i], t[i] = _fire_general(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins,
+                                                                   keys, noise, reset_readout, counter)
+                                        drawn[i] = counter[p0 + i]
+                            words[kk, w0 + w] = word
             if lazy_ok:
                 for j in range(n):
                     if lazy_from[j] >= 0:
