@@ -3,7 +3,7 @@ no module imports one from a higher layer, and no modules import each other in a
 
 Layers, lowest first (README, docs/CONTRIBUTING.md)::
 
-    _validate, _lazy, _numba_cache → _io, _parallel → light → stream → sensors → coding, imaging, isp, display
+    _validate, _lazy → _io, _parallel → light → stream → sensors → coding, imaging, isp, display
     → vision → datasets → measure → report → cli
 
 Modules of one layer may import each other (a module of ``imaging`` one of ``coding``), as
@@ -22,7 +22,7 @@ PACKAGE = SRC / "viform"
 
 #: Groups of the package (first part of the module name below ``viform``), lowest layer first.
 LAYERS = (
-    ("_validate", "_lazy", "_numba_cache"),
+    ("_validate", "_lazy"),
     ("_io", "_parallel"),
     ("light",),
     ("stream",),
@@ -37,6 +37,9 @@ LAYERS = (
 #: The top-level package (``viform/__init__.py``) sits below everything: it may import nothing of the package
 #: that would import it back.
 TOP = "viform"
+#: Modules below the top-level package itself, which it may import: they import nothing of the package
+#: (``_numba_cache``, installed on import when ``VIFORM_SHARE_COMPILES=1``).
+BELOW_TOP = ("_numba_cache",)
 
 #: Circles known to be in the code, by the work that removes them, with the modules that form them
 #: (none now: the spike kernels and the scene catalogue have their own modules).
@@ -85,6 +88,8 @@ def layer_of(module: str) -> int:
     if module == TOP:
         return -1
     group = module.split(".")[1]
+    if group in BELOW_TOP:
+        return -2
     for i, layer in enumerate(LAYERS):
         if group in layer:
             return i
