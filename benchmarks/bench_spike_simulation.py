@@ -111,12 +111,16 @@ def still_scene(firing_per_tick: float, height: int = HEIGHT, width: int = WIDTH
 
 
 def run_packed(sensor, scene, n_ticks):
-    """The packed stream as one array (ticks × pixels/8)."""
-    return np.concatenate([b for _, b in sensor.simulate_packed(scene, n_ticks / CLOCK_HZ, seed=1)])
+    """The packed stream's blocks (each ticks × pixels/8), as the file writers take them (no copy into one
+    array: the loops' output is not copied either)."""
+    return [b for _, b in sensor.simulate_packed(scene, n_ticks / CLOCK_HZ, seed=1)]
 
 
-def firing(packed: np.ndarray) -> float:
-    return float(np.unpackbits(packed).mean())
+def firing(packed) -> float:
+    """Mean spikes per pixel-tick of packed bits (one array, or a list of blocks)."""
+    blocks = packed if isinstance(packed, list) else [packed]
+    ones = sum(int(np.unpackbits(b).sum()) for b in blocks)
+    return ones / sum(b.size * 8 for b in blocks)
 
 
 def main(argv=None):

@@ -221,7 +221,7 @@ def test_vectorized_noise_free_kernel_matches_the_general_lanes(reset):
         lux = scene.illuminance_lux_many((np.arange(first, last) + 0.5) / sensor.parameters.clock_hz)
         rates = sensor._fixed_point_rates(lux.reshape(last - first, -1), 20, 50)
         seg_end = np.arange(first + 1, last + 1, dtype=np.int64)
-        module._run_block(words, rates, seg_end, first, state.charge, state.target, state.counter,
+        module._run_block(words.view(np.uint8), rates, seg_end, first, state.charge, state.target, state.counter,
                           q, index, *tables, *module.fixed_point_tables(tables[0]), state.keys, False,
                           reset == "readout", 0.0, module.MODE_GENERAL,
                           bounds, state.pending_ticks, state.pending_rate, module.SPARSE_FIRING)

@@ -244,9 +244,10 @@ def test_saturated_pixels_are_only_counted_in_the_kernel():
     rates = sensor._fixed_point_rates(scene.illuminance_lux(0.0).reshape(1, -1), 4, 64)
     words = np.empty((500, 4), dtype=np.uint64)
     drawn_before = state.counter.copy()
-    module._run_block(words, rates, np.array([500], np.int64), 0, state.charge, state.target, state.counter,
-                      q, index, *tables, *module.fixed_point_tables(tables[0]), state.keys, True, False, 0.0,
-                      module.MODE_GENERAL, bounds, state.pending_ticks, state.pending_rate, module.SPARSE_FIRING)
+    module._run_block(words.view(np.uint8), rates, np.array([500], np.int64), 0, state.charge, state.target,
+                      state.counter, q, index, *tables, *module.fixed_point_tables(tables[0]), state.keys, True,
+                      False, 0.0, module.MODE_GENERAL, bounds, state.pending_ticks, state.pending_rate,
+                      module.SPARSE_FIRING)
     above = rates[0] >= bounds
     assert above.sum() > 30 and (~above).sum() > 30
     assert np.all(state.pending_ticks[above] == 500) and not state.pending_ticks[~above].any()
@@ -313,8 +314,9 @@ def test_dim_words_run_crossing_by_crossing_give_the_tick_by_tick_bits(make_sens
         words = np.empty((300, 4), dtype=np.uint64)
         for first, last in ((0, 100), (100, 300)):  # two blocks: runs cross a block boundary
             block = words[first:last]
-            module._run_block(block, rates, seg_end, first, state.charge, state.target, state.counter, q, index,
-                              *tables, *sensor._fixed_point_tables(height, width), state.keys, p.photon_noise,
+            module._run_block(block.view(np.uint8), rates, seg_end, first, state.charge, state.target,
+                              state.counter, q, index, *tables, *sensor._fixed_point_tables(height, width),
+                              state.keys, p.photon_noise,
                               p.reset == "readout", p.dead_time_s * p.clock_hz, mode,
                               sensor._saturation_bounds(height, width), state.pending_ticks, state.pending_rate,
                               sparse_firing)
@@ -329,3 +331,42 @@ def test_dim_words_run_crossing_by_crossing_give_the_tick_by_tick_bits(make_sens
     assert bits[190:].mean(axis=0).max() > 0.3  # bright pixels (saturated, or at the dead-time limit)
     firing = bits.mean(axis=0)
     assert ((firing > 0) & (firing < 0.05)).any()  # and dim ones that do fire
+
+
+@pytest.mark.parametrize("reset", ["self", "readout"])
+def test_noise_free_chunks_write_the_dat_frame_bits_of_the_general_lanes(reset):
+    """The noise-free modes run busy words in chunks of ticks with the charge in vector registers and write
+    each tick's bits straight into the .dat frame (⌈H·W/8⌉ bytes, here ending inside a byte and inside the
+    last word); from dark to above one crossing per tick (lanes left to the tick by tick loop), over runs
+    and a block boundary, the bits and state equal those of the general lanes (every crossing through
+    ``_fire``) written into whole 64-bit words."""
+    from viform.sensors import _spike_kernels as module
+
+    sensor = SpikeSensor(photon_noise=False, reset=reset, threshold_electrons=30)
+    height, width = 7, 37  # 259 pixels: 33 bytes a tick, the last word one byte
+    lux = _texture(height, width, 0.01, 3e5, seed=5)
+    # the first two words below one crossing per tick (there the chunks run), the others up to saturation
+    one_per_tick = 30.0 / float(sensor.electrons_per_tick(1.0))
+    lux.flat[:128] = one_per_tick * np.linspace(0.001, 0.95, 128)
+    runs = np.stack([lux, lux * 0.3, lux]).reshape(3, -1)
+    rates = sensor._fixed_point_rates(runs, height, width)
+    seg_end = np.array([150, 151, 400], dtype=np.int64)
+    q, _, index, tables = sensor._pixel_tables(height, width)
+    mode = module.MODE_NOISE_FREE_READOUT if reset == "readout" else module.MODE_NOISE_FREE_SELF
+    results = []
+    for kernel_mode, row_bytes in ((mode, 33), (module.MODE_GENERAL, 40)):
+        state = sensor.initial_state(height, width, 2)
+        out = np.full((400, row_bytes), 0xAB, dtype=np.uint8)
+        for first, last in ((0, 130), (130, 400)):
+            module._run_block(out[first:last], rates, seg_end, first, state.charge, state.target, state.counter,
+                              q, index, *tables, *sensor._fixed_point_tables(height, width), state.keys, False,
+                              reset == "readout", 0.0, kernel_mode, sensor._saturation_bounds(height, width),
+                              state.pending_ticks, state.pending_rate, 0.0)
+        results.append((out, state))
+    (chunks, chunk_state), (general, general_state) = results
+    assert np.array_equal(chunks, general[:, :33])
+    assert not general[:, 33:].any()  # the padding lanes never fire
+    for name in ("charge", "target"):  # (no draws without photon noise: the counter is not read)
+        assert np.array_equal(getattr(chunk_state, name), getattr(general_state, name)), name
+    firing = np.unpackbits(chunks, axis=1, count=height * width, bitorder="little").mean(axis=0)
+    assert firing.max() == 1.0 and 0.0 < firing.min() < 0.01  # saturated and dim pixels both present

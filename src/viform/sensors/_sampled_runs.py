@@ -135,15 +135,16 @@ class SampledRuns:
         if bounds is None:
             bounds = self.bounds if group is None else group["bounds"]
         if group is None:
-            _run_block(words, rates, seg_end, first, state.charge, state.target, state.counter, plan.q, plan.index,
-                       *plan.tables, *self.fixed_tables, state.keys, p.photon_noise, plan.reset_readout,
-                       plan.dead_ticks, plan.mode, bounds, state.pending_ticks, state.pending_rate, SPARSE_FIRING)
+            _run_block(words.view(np.uint8), rates, seg_end, first, state.charge, state.target, state.counter,
+                       plan.q, plan.index, *plan.tables, *self.fixed_tables, state.keys, p.photon_noise,
+                       plan.reset_readout, plan.dead_ticks, plan.mode, bounds, state.pending_ticks,
+                       state.pending_rate, SPARSE_FIRING)
             return
         pix = group["pix"]
         charge, target, counter = state.charge[pix], state.target[pix], state.counter[pix]
         keys, pending_ticks, pending_rate = state.keys[pix], state.pending_ticks[pix], state.pending_rate[pix]
-        _run_block(words, rates, seg_end, first, charge, target, counter, group["q"], group["index"], *plan.tables,
-                   *self.fixed_tables, keys, p.photon_noise, plan.reset_readout, plan.dead_ticks, plan.mode,
-                   bounds, pending_ticks, pending_rate, SPARSE_FIRING)
+        _run_block(words.view(np.uint8), rates, seg_end, first, charge, target, counter, group["q"],
+                   group["index"], *plan.tables, *self.fixed_tables, keys, p.photon_noise, plan.reset_readout,
+                   plan.dead_ticks, plan.mode, bounds, pending_ticks, pending_rate, SPARSE_FIRING)
         state.charge[pix], state.target[pix], state.counter[pix] = charge, target, counter
         state.pending_ticks[pix], state.pending_rate[pix] = pending_ticks, pending_rate

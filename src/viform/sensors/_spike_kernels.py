@@ -377,6 +377,9 @@ MODE_GENERAL, MODE_NOISE_FREE_SELF, MODE_NOISE_FREE_READOUT = 0, 1, 2
 #: word's crossings one by one instead of its ticks: there a tick by tick pass costs more than
 #: the crossings it finds (the cost of a crossing is about 20 lane-ticks).
 SPARSE_FIRING = 0.05
+#: The share of ``sparse_firing`` below which the noise-free modes visit crossings: their tick by tick
+#: pass (:func:`_noise_free_self_chunk`) costs a few hundredths of a crossing per lane-tick.
+_NOISE_FREE_SPARSE = 0.05
 _VECTOR = ir.VectorType(ir.IntType(64), 8)
 _I64 = ir.IntType(64)
 
@@ -435,6 +438,149 @@ def _noise_free_readout8(typingctx, c, e, t, base):
         return _mask_bits(builder, fired)
 
     return types.uint64(c, e, t, base), codegen
+
+
+def _noise_free_chunk_codegen(readout):
+    """Code of :func:`_noise_free_self_chunk` / :func:`_noise_free_readout_chunk`."""
+
+    def codegen(context, builder, signature, args):
+        words, col, k0, k1, c, e, t, base = args
+        words_type = signature.args[0]
+        array = context.make_array(words_type)(context, builder, words)
+        # address of the word: byte 8·col of row kk, data + kk·strides[0] + 8·col (rows of whole bytes)
+        data = builder.add(builder.ptrtoint(array.data, _I64), builder.mul(col, ir.Constant(_I64, 8)))
+        row_stride = builder.extract_value(array.strides, 0)
+        charge, rate, target, pointers = [], [], [], []
+        for j in range(8):
+            index = builder.add(base, ir.Constant(_I64, 8 * j))
+            pc, pe, pt = (_vector_pointer(context, builder, signature.args[4 + i], (c, e, t)[i], index)
+                          for i in range(3))
+            pointers.append(pc)
+            charge.append(builder.load(pc, align=8))
+            rate.append(builder.load(pe, align=8))
+            target.append(builder.load(pt, align=8))
+        start = builder.basic_block
+        run = builder.append_basic_block("chunk.run")
+        loop = builder.append_basic_block("chunk.loop")
+        done = builder.append_basic_block("chunk.done")
+        leave = builder.append_basic_block("chunk.leave")
+        if readout:
+            builder.branch(run)
+        else:
+            # self-reset: only where no lane can cross twice in a tick (c < t and e ≤ t in every lane)
+            within = None
+            for j in range(8):
+                lane_ok = builder.and_(builder.icmp_signed("<", charge[j], target[j]),
+                                       builder.icmp_signed("<=", rate[j], target[j]))
+                within = lane_ok if within is None else builder.and_(within, lane_ok)
+            bits = builder.bitcast(within, ir.IntType(8))
+            builder.cbranch(builder.icmp_unsigned("==", bits, ir.Constant(ir.IntType(8), 0xFF)), run, leave)
+        builder.position_at_end(run)
+        entry = builder.basic_block
+        builder.cbranch(builder.icmp_signed("<", k0, k1), loop, done)
+        builder.position_at_end(loop)
+        kk = builder.phi(_I64)
+        kk.add_incoming(k0, entry)
+        phis, after, masks = [], [], []
+        zero = ir.Constant(_VECTOR, [0] * 8)
+        for j in range(8):
+            phis.append(builder.phi(_VECTOR))
+            phis[j].add_incoming(charge[j], entry)
+        for j in range(8):
+            x = builder.add(phis[j], rate[j])
+            fired = builder.icmp_signed(">=", x, target[j])
+            after.append(builder.select(fired, zero if readout else builder.sub(x, target[j]), x))
+            masks.append(fired)
+        # the 8 comparison masks as one <64 x i1>, i.e. one 64-bit word (AVX-512: kunpck, kmovq)
+        while len(masks) > 1:
+            n = len(masks[0].type)
+            order = ir.Constant(ir.VectorType(ir.IntType(32), 2 * n), list(range(2 * n)))
+            masks = [builder.shuffle_vector(masks[i], masks[i + 1], order) for i in range(0, len(masks), 2)]
+        word = builder.bitcast(masks[0], _I64)
+        slot = builder.inttoptr(builder.add(data, builder.mul(kk, row_stride)), _I64.as_pointer())
+        builder.store(word, slot, align=1)
+        following = builder.add(kk, ir.Constant(_I64, 1))
+        kk.add_incoming(following, loop)
+        for j in range(8):
+            phis[j].add_incoming(after[j], loop)
+        builder.cbranch(builder.icmp_signed("<", following, k1), loop, done)
+        builder.position_at_end(done)
+        finals = [builder.phi(_VECTOR) for _ in range(8)]
+        for j in range(8):
+            finals[j].add_incoming(charge[j], entry)
+            finals[j].add_incoming(after[j], loop)
+        for j in range(8):
+            builder.store(finals[j], pointers[j], align=8)
+        builder.branch(leave)
+        builder.position_at_end(leave)
+        ran = builder.phi(ir.IntType(1))
+        ran.add_incoming(ir.Constant(ir.IntType(1), 1), done)
+        if not readout:
+            ran.add_incoming(ir.Constant(ir.IntType(1), 0), start)
+        return ran
+
+    return codegen
+
+
+def _chunk_signature(words, col, k0, k1, c, e, t, base):
+    if not (isinstance(words, types.Array) and words.ndim == 2 and words.dtype == types.uint8
+            and words.layout == "C"):
+        return None
+    if not all(isinstance(x, types.Integer) for x in (col, k0, k1, base)):
+        return None
+    return types.boolean(words, types.int64, types.int64, types.int64, c, e, t, types.int64)
+
+
+@intrinsic
+def _noise_free_self_chunk(typingctx, words, col, k0, k1, c, e, t, base):
+    """Noise-free self-reset of the 64 lanes ``base`` … ``base + 63`` through ticks ``k0`` … ``k1 − 1``:
+    each tick c += e, c −= t where c reached t, and the word of lanes that fired stored at bytes
+    8·col … 8·col + 7 of row kk of ``words`` (uint8; the caller checks that they are in the row). The
+    8 × 8 charges stay in vector registers for the whole chunk, and the 8 comparison masks become the
+    word directly (AVX-512: kunpck, one kmovq store; no per-lane shifts). Runs only where every lane
+    has c < t and e ≤ t (then no crossing is lost inside a tick); returns whether it ran."""
+    sig = _chunk_signature(words, col, k0, k1, c, e, t, base)
+    return (sig, _noise_free_chunk_codegen(False)) if sig is not None else None
+
+
+@intrinsic
+def _noise_free_readout_chunk(typingctx, words, col, k0, k1, c, e, t, base):
+    """Noise-free readout reset of 64 lanes through ticks ``k0`` … ``k1 − 1`` (as
+    :func:`_noise_free_self_chunk`, the lanes that fired drained to 0); always runs (returns True)."""
+    sig = _chunk_signature(words, col, k0, k1, c, e, t, base)
+    return (sig, _noise_free_chunk_codegen(True)) if sig is not None else None
+
+
+@intrinsic
+def _store_word(typingctx, words, kk, col, word):
+    """Store the uint64 ``word`` at bytes 8·col … 8·col + 7 of row kk of the uint8 array ``words`` (C
+    order), in one unaligned store (the caller checks that they are in the row)."""
+    if not (isinstance(words, types.Array) and words.ndim == 2 and words.dtype == types.uint8
+            and words.layout == "C"):
+        return None
+
+    def codegen(context, builder, signature, args):
+        array = context.make_array(signature.args[0])(context, builder, args[0])
+        kk, col, word = args[1], args[2], args[3]
+        address = builder.add(builder.ptrtoint(array.data, _I64),
+                              builder.add(builder.mul(kk, builder.extract_value(array.strides, 0)),
+                                          builder.mul(col, ir.Constant(_I64, 8))))
+        builder.store(word, builder.inttoptr(address, _I64.as_pointer()), align=1)
+        return context.get_dummy_value()
+
+    return types.none(words, types.int64, types.int64, types.uint64), codegen
+
+
+@njit(cache=True, inline="always")
+def _put_word(words, kk, col, word):
+    """Spike word ``col`` (pixels 64·col … 64·col + 63) of tick kk into its bytes of ``words`` (uint8,
+    ticks × packed bytes, .dat order): a row's last word keeps only the bytes the row has."""
+    byte = 8 * col
+    if byte + 8 <= words.shape[1]:
+        _store_word(words, kk, col, word)
+    else:
+        for j in range(words.shape[1] - byte):
+            words[kk, byte + j] = np.uint8((word >> np.uint64(8 * j)) & np.uint64(0xFF))
 
 
 @njit(cache=True, inline="always")
@@ -544,8 +690,10 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
     """Integrate-and-fire over one block of ticks in runs of constant light, 64 pixels per word.
 
     ``rates[s, p]`` is the fixed-point charge per tick of pixel p in run s, which ends
-    (exclusive) at absolute tick ``seg_end[s]``; the runs cover the block. ``words[k, w]``
-    receives the spikes of pixels 64·w … 64·w + 63 in tick k (bit i: pixel 64·w + i).
+    (exclusive) at absolute tick ``seg_end[s]``; the runs cover the block. ``words`` (uint8, ticks ×
+    bytes, C order) receives the spikes in the .dat bit order: bytes 8·w … 8·w + 7 of row k hold
+    pixels 64·w … 64·w + 63 in tick k (bit i of the little-endian word: pixel 64·w + i); a row may end
+    inside its last word (⌈H·W/8⌉ bytes: the file's frame, no copy), the word is cut there.
     Charge sums are exact integers, so adding a run's rate tick by tick gives the bits the
     event-driven form (a jump to each crossing) gave.
 
@@ -566,7 +714,8 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
     (the tick of the next crossing from the charge still missing, then the same crossing rules)
     instead of tick by tick: the same bits and state for any ``sparse_firing``, less work.
     """
-    n_ticks, n_words = words.shape
+    n_ticks = words.shape[0]
+    n_words = (words.shape[1] + 7) // 8
     n_pixels = charge.size
     lazy_ok = mode == MODE_GENERAL and noise and not reset_readout and dead_ticks == 0.0
     fast = lazy_ok  # photon noise, self-reset, no dead time: the common case inlined below
@@ -600,7 +749,8 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
             drawn[j] = counter[p]
             key[j] = keys[p]
             row0[j] = np.int64(index[p]) * TABLE_SIZE
-            sparse_rate[j] = _fixed_charge(sparse_firing * q[p])
+            share = 1.0 if mode == MODE_GENERAL else _NOISE_FREE_SPARSE
+            sparse_rate[j] = _fixed_charge(sparse_firing * share * q[p])
         s = 0
         while seg_end[s] <= first_tick:
             s += 1
@@ -651,7 +801,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                 else:
                     # every lane fires rarely in this run: visit each lane's crossings instead of each tick
                     for kk in range(k, end):
-                        words[kk, w0 + w] = 0
+                        _put_word(words, kk, w0 + w, np.uint64(0))
                     for i in range(base, base + min(_LANES, n - base)):
                         ci = c[i]
                         ti = t[i]
@@ -670,7 +820,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                                 break
                             kk += m
                             ci += m * ei
-                            words[kk - 1, w0 + w] |= np.uint64(1) << np.uint64(i - base)
+                            words[kk - 1, 8 * (w0 + w) + ((i - base) >> 3)] |= np.uint8(1 << ((i - base) & 7))
                             if mode == MODE_NOISE_FREE_SELF:
                                 ci -= ti
                                 if ci >= ti:
@@ -700,6 +850,13 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                         if not (dense >> np.uint64(w)) & np.uint64(1):
                             continue
                         base = w * _LANES
+                        whole = 8 * (w0 + w) + 8 <= words.shape[1]  # the word's 8 bytes are in the row
+                        if whole and mode == MODE_NOISE_FREE_READOUT:
+                            _noise_free_readout_chunk(words, w0 + w, k0, k1, c, e, t, base)
+                            continue
+                        if whole and mode == MODE_NOISE_FREE_SELF and _noise_free_self_chunk(words, w0 + w, k0, k1,
+                                                                                             c, e, t, base):
+                            continue
                         for kk in range(k0, k1):
                             if mode == MODE_NOISE_FREE_SELF:
                                 word, over = _lanes_noise_free_self(c, e, t, base)
@@ -733,7 +890,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                                         c[i], t[i] = _fire_general(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins,
                                                                    keys, noise, reset_readout, counter)
                                         drawn[i] = counter[p0 + i]
-                            words[kk, w0 + w] = word
+                            _put_word(words, kk, w0 + w, word)
             if lazy_ok:
                 for j in range(n):
                     if lazy_from[j] >= 0:

@@ -536,7 +536,8 @@ class SpikeSensor(Sensor):
 
     def _packed_blocks(self, scene, duration_s, seed, block_ticks, light_sample_ticks, progress, state,
                        reuse_buffer, compiled_light, packed_only=False, device="cpu"):
-        """(first tick, packed bits uint8 (T, 8·⌈H·W/64⌉)) per block: the kernels' own output."""
+        """(first tick, packed bits uint8 (T, ⌈H·W/8⌉) in constant light, else (T, 8·⌈H·W/64⌉)) per block:
+        the kernels' own output."""
         light_sample_ticks = self.light_sample_ticks_for(scene, light_sample_ticks, duration_s)
         if resolve_device(device) == "cuda":
             if block_ticks is None:
@@ -571,6 +572,8 @@ class SpikeSensor(Sensor):
 
             sampled = SampledRuns(self, light, sample, height, width, plan, bounds)
         segments = _Segments(self, scene, light, sample, height, width)
+        # constant light: the kernel writes the .dat frames themselves (⌈H·W/8⌉ bytes a tick, no copy)
+        out_bytes = row_bytes if per_tick_light or sampled is not None else (plan.pixels + 7) // 8
         buffer = None
         bar = None
         if progress:
@@ -582,10 +585,10 @@ class SpikeSensor(Sensor):
                 last = min(first + block_ticks, n_ticks)
                 if reuse_buffer:
                     if buffer is None or buffer.shape[0] < last - first:
-                        buffer = np.empty((last - first, row_bytes), dtype=np.uint8)
+                        buffer = np.empty((last - first, out_bytes), dtype=np.uint8)
                     out = buffer[: last - first]
                 else:
-                    out = np.empty((last - first, row_bytes), dtype=np.uint8)
+                    out = np.empty((last - first, out_bytes), dtype=np.uint8)
                 if per_tick_light:
                     # light at the middle of each interval of `sample` ticks, held over it
                     n = last - first
@@ -613,7 +616,7 @@ class SpikeSensor(Sensor):
                                     state.pending_ticks, state.pending_rate)
                 else:
                     rates, seg_end = segments.block(first, last)
-                    _run_block(out.view(np.uint64), rates, seg_end, first, state.charge, state.target,
+                    _run_block(out, rates, seg_end, first, state.charge, state.target,
                                state.counter, q, index, *tables, *fixed_tables, state.keys, p.photon_noise,
                                reset_readout, dead_ticks, mode, bounds, state.pending_ticks, state.pending_rate,
                                SPARSE_FIRING)
