@@ -447,3 +447,41 @@ def test_foreground_does_not_depend_on_how_the_words_are_grouped(stream):
     assert masks[0].any()
     np.testing.assert_array_equal(masks[0], masks[1])
     np.testing.assert_array_equal(masks[0], masks[2])
+
+
+def test_start_up_kernels_are_the_numpy_and_scipy_operations_exactly():
+    # the compiled start-up check must keep the tracks: the same booleans and the same IEEE results as the
+    # NumPy / scipy.ndimage expressions it replaces, on random masks of every shape (edges included)
+    from scipy.ndimage import binary_closing, binary_opening, maximum_filter
+
+    from viform.vision import _spike_front as front
+    from viform.vision.tracking import _blocks
+
+    rng = np.random.default_rng(0)
+    square = np.ones((3, 3), bool)
+    for _ in range(200):
+        h, w = (int(v) for v in rng.integers(1, 24, 2))
+        m = rng.random((h, w)) < rng.random()
+        px = int(rng.integers(0, 4))
+        np.testing.assert_array_equal(front.dilate_square(m, px), maximum_filter(m, size=2 * px + 1, mode="constant"))
+        np.testing.assert_array_equal(front.opened_closed(m), m & binary_opening(binary_closing(m, square), square))
+        b = int(rng.integers(1, 9))
+        v = np.round(rng.normal(size=(h, w)), int(rng.integers(1, 4)))  # ties, and an even count per block
+        np.testing.assert_array_equal(front.block_medians(v, b), np.median(_blocks(v, block=b), axis=2))
+    # per-pixel values at tick t: never fired, one spike, measured and unmeasured windows
+    n = 4000
+    last = rng.integers(-1, 500, n)
+    n_win = np.where(rng.random(n) < 0.3, 0, rng.integers(1, 9, n))
+    s_win = n_win * rng.integers(0, 60, n)
+    t, k_hi = 520, math.exp(0.4)
+    got = front.prime_values(last.reshape(40, 100), n_win.reshape(40, 100), s_win.reshape(40, 100), t, k_hi)
+    tau = np.where(n_win > 0, s_win / np.maximum(n_win, 1), 0.0)
+    silence = t - last
+    measured = (n_win > 0) & (silence <= tau * k_hi + 1.0)
+    bound = np.where(last < 0, t + 1.0, np.maximum(last + 1.0, silence))
+    want = (measured, bound, np.maximum(np.where(measured, tau, np.maximum(bound, tau)), 1e-3),
+            (s_win + 1.0) / np.maximum(n_win, 1),
+            np.maximum(np.where(measured, (s_win - 1.0) / np.maximum(n_win, 1), bound), 1e-3))
+    assert measured.any() and (~measured).any()
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a.ravel(), b)

@@ -414,3 +414,130 @@ def theil_sen(ts, xs, ys):  # pragma: no cover - compiled
     if k == 0:
         return 0.0, 0.0
     return np.median(vx[:k]), np.median(vy[:k])
+
+
+# --------------------------------------------------------------------------- start-up checks
+
+@njit(cache=True)
+def _dilate_rows(mask, px, out):  # pragma: no cover - compiled
+    """``out[y, x]`` = any of ``mask[y, x − px … x + px]`` (outside the image: False)."""
+    H, W = mask.shape
+    for y in range(H):
+        run = 0  # set pixels in the window
+        for x in range(min(px, W)):
+            run += mask[y, x]
+        for x in range(W):
+            if x + px < W:
+                run += mask[y, x + px]
+            if x - px - 1 >= 0:
+                run -= mask[y, x - px - 1]
+            out[y, x] = run > 0
+
+
+@njit(cache=True)
+def _dilate_cols(mask, px, out):  # pragma: no cover - compiled
+    """``out[y, x]`` = any of ``mask[y − px … y + px, x]`` (outside the image: False)."""
+    H, W = mask.shape
+    run = np.zeros(W, np.int64)
+    for y in range(min(px, H)):
+        for x in range(W):
+            run[x] += mask[y, x]
+    for y in range(H):
+        for x in range(W):
+            if y + px < H:
+                run[x] += mask[y + px, x]
+            if y - px - 1 >= 0:
+                run[x] -= mask[y - px - 1, x]
+            out[y, x] = run[x] > 0
+
+
+@njit(cache=True)
+def dilate_square(mask, px):  # pragma: no cover - compiled
+    """``mask`` (H, W) bool dilated by the (2·px + 1)² square, outside the image False
+    (``scipy.ndimage.maximum_filter(mask, 2·px + 1, mode="constant")``, exactly: whole booleans)."""
+    tmp = np.empty(mask.shape, np.bool_)
+    out = np.empty(mask.shape, np.bool_)
+    _dilate_rows(mask, px, tmp)
+    _dilate_cols(tmp, px, out)
+    return out
+
+
+@njit(cache=True)
+def erode_square(mask, px):  # pragma: no cover - compiled
+    """``mask`` eroded by the (2·px + 1)² square, outside the image False (so the image's edges erode):
+    ``scipy.ndimage.binary_erosion`` with its default border, exactly."""
+    return ~dilate_square(~mask, px) & _inner(mask.shape, px)
+
+
+@njit(cache=True)
+def _inner(shape, px):  # pragma: no cover - compiled
+    """Pixels at least ``px`` from the image's edge."""
+    H, W = shape
+    out = np.zeros((H, W), np.bool_)
+    for y in range(px, H - px):
+        for x in range(px, W - px):
+            out[y, x] = True
+    return out
+
+
+@njit(cache=True)
+def opened_closed(mask):  # pragma: no cover - compiled
+    """``mask & opening(closing(mask))`` with the 3 × 3 square and scipy.ndimage's borders (outside False)."""
+    closed = erode_square(dilate_square(mask, 1), 1)
+    return mask & dilate_square(erode_square(closed, 1), 1)
+
+
+@njit(cache=True)
+def prime_values(last, n_win, s_win, t, k_hi):  # pragma: no cover - compiled
+    """Per pixel at tick ``t``, from its last spike and its window (``s_win`` ticks over ``n_win`` intervals):
+    whether the interval is measured, the lower bound of an unmeasured one, and the arguments of the
+    logarithms the start-up check takes: the interval (≥ 10⁻³), its longest and shortest values (ticks).
+
+    The same IEEE operations in the same order as the NumPy expressions of
+    :meth:`~viform.vision.tracking.SpikeChangeDetector._prime` (whose logarithms stay NumPy's).
+    """
+    H, W = last.shape
+    measured = np.empty((H, W), np.bool_)
+    bound = np.empty((H, W))
+    value = np.empty((H, W))
+    upper = np.empty((H, W))
+    lower = np.empty((H, W))
+    for y in range(H):
+        for x in range(W):
+            n = n_win[y, x]
+            s = s_win[y, x]
+            lt = last[y, x]
+            nn = float(max(n, 1))
+            tau = s / nn if n > 0 else 0.0
+            silence = t - lt
+            m = n > 0 and silence <= tau * k_hi + 1.0
+            b = t + 1.0 if lt < 0 else max(lt + 1.0, float(silence))
+            measured[y, x] = m
+            bound[y, x] = b
+            v = tau if m else max(b, tau)
+            value[y, x] = max(v, 1e-3)
+            upper[y, x] = (s + 1.0) / nn
+            lower[y, x] = max((s - 1.0) / nn if m else b, 1e-3)
+    return measured, bound, value, upper, lower
+
+
+@njit(cache=True)
+def block_medians(a, block):  # pragma: no cover - compiled
+    """Median of each ``block`` × ``block`` block of ``a`` (H, W) float64, the edges padded with the edge
+    values (as ``np.pad(mode="edge")``): (⌈H/b⌉, ⌈W/b⌉). An even count's median is the mean of its two
+    middle values, (a + b) / 2, as NumPy's."""
+    H, W = a.shape
+    hb, wb = -(-H // block), -(-W // block)
+    out = np.empty((hb, wb))
+    buf = np.empty(block * block)
+    for by in range(hb):
+        for bx in range(wb):
+            k = 0
+            for y in range(by * block, (by + 1) * block):
+                yy = min(y, H - 1)
+                for x in range(bx * block, (bx + 1) * block):
+                    buf[k] = a[yy, min(x, W - 1)]
+                    k += 1
+            out[by, bx] = np.median(buf)
+    return out
+
