@@ -485,3 +485,20 @@ def test_start_up_kernels_are_the_numpy_and_scipy_operations_exactly():
     assert measured.any() and (~measured).any()
     for a, b in zip(got, want, strict=True):
         np.testing.assert_array_equal(a.ravel(), b)
+
+
+@pytest.mark.parametrize("every", [7, 40, 100])
+def test_pixel_by_pixel_and_spike_by_spike_ingest_leave_the_same_state(stream, every):
+    # words are ingested spike by spike or, when dense, pixel by pixel (a 64 × T bit transpose): every word
+    # one way, every word the other, and the default choice leave the same per-pixel state and masks
+    runs = []
+    for run_ticks, per_tick in ((1, 0.0), (65, 0.0), (None, None)):
+        det = SpikeChangeDetector(stream.height, stream.width, every, TrackerParameters())
+        if run_ticks is not None:
+            det.dense_run_ticks, det.dense_spikes_per_tick = run_ticks, per_tick
+        masks = np.concatenate([det.feed(stream.spikes[a:a + 300]) for a in range(0, stream.n_ticks, 300)])
+        runs.append((masks, det.spk.copy(), det.total.copy(), det.bg.copy(), det.anchor.copy()))
+    assert runs[0][0].any()
+    for other in runs[1:]:
+        for a, b in zip(runs[0], other, strict=True):
+            np.testing.assert_array_equal(a, b)

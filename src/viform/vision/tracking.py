@@ -229,6 +229,7 @@ class SpikeChangeDetector:
         edges = np.linspace(0, self.n_words, chunks + 1).round().astype(np.int64)
         self._chunks = (edges[:-1].copy(), edges[1:].copy())
         self.group_words = GROUP_WORDS
+        self.dense_run_ticks, self.dense_spikes_per_tick = _front.DENSE_RUN_TICKS, _front.DENSE_SPIKES_PER_TICK
         self.next_tick = 0
         self.primed = False
         self._primed_ever = None
@@ -301,7 +302,8 @@ class SpikeChangeDetector:
         if t:
             p = self.parameters
             _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
-                                     self.group_words, self.n_pixels, self.spk, self.total, self.fired, self.fg_bits,
+                                     self.group_words, self.dense_run_ticks, self.dense_spikes_per_tick,
+                                     self.n_pixels, self.spk, self.total, self.fired, self.fg_bits,
                                      self.word_due, self.anchor, self.span1, self.n1, self.win_span, self.win_n,
                                      self.mixed, self.bg,
                                      self.censored, self.fg, self.flag_since, self.prev, self.due, out,
