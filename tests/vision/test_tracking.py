@@ -502,3 +502,17 @@ def test_pixel_by_pixel_and_spike_by_spike_ingest_leave_the_same_state(stream, e
     for other in runs[1:]:
         for a, b in zip(runs[0], other, strict=True):
             np.testing.assert_array_equal(a, b)
+
+
+def test_foreground_does_not_depend_on_the_chunks_run_in_parallel(stream):
+    # the words are split into one chunk per thread: 1, 2 or 3 chunks give the same masks and state
+    runs = []
+    for chunks in (1, 2, 3):
+        det = SpikeChangeDetector(stream.height, stream.width, 10, TrackerParameters())
+        edges = np.linspace(0, det.n_words, chunks + 1).round().astype(np.int64)
+        det._chunks = (edges[:-1].copy(), edges[1:].copy())
+        runs.append((det.feed(stream.spikes), det.spk.copy(), det.bg.copy()))
+    assert runs[0][0].any()
+    for other in runs[1:]:
+        for a, b in zip(runs[0], other, strict=True):
+            np.testing.assert_array_equal(a, b)
