@@ -447,3 +447,72 @@ def test_foreground_does_not_depend_on_how_the_words_are_grouped(stream):
     assert masks[0].any()
     np.testing.assert_array_equal(masks[0], masks[1])
     np.testing.assert_array_equal(masks[0], masks[2])
+
+
+def test_start_up_kernels_are_the_numpy_and_scipy_operations_exactly():
+    # the compiled start-up check must keep the tracks: the same booleans and the same IEEE results as the
+    # NumPy / scipy.ndimage expressions it replaces, on random masks of every shape (edges included)
+    from scipy.ndimage import binary_closing, binary_opening, maximum_filter
+
+    from viform.vision import _spike_front as front
+    from viform.vision.tracking import _blocks
+
+    rng = np.random.default_rng(0)
+    square = np.ones((3, 3), bool)
+    for _ in range(200):
+        h, w = (int(v) for v in rng.integers(1, 24, 2))
+        m = rng.random((h, w)) < rng.random()
+        px = int(rng.integers(0, 4))
+        np.testing.assert_array_equal(front.dilate_square(m, px), maximum_filter(m, size=2 * px + 1, mode="constant"))
+        np.testing.assert_array_equal(front.opened_closed(m), m & binary_opening(binary_closing(m, square), square))
+        b = int(rng.integers(1, 9))
+        v = np.round(rng.normal(size=(h, w)), int(rng.integers(1, 4)))  # ties, and an even count per block
+        np.testing.assert_array_equal(front.block_medians(v, b), np.median(_blocks(v, block=b), axis=2))
+    # per-pixel values at tick t: never fired, one spike, measured and unmeasured windows
+    n = 4000
+    last = rng.integers(-1, 500, n)
+    n_win = np.where(rng.random(n) < 0.3, 0, rng.integers(1, 9, n))
+    s_win = n_win * rng.integers(0, 60, n)
+    t, k_hi = 520, math.exp(0.4)
+    got = front.prime_values(last.reshape(40, 100), n_win.reshape(40, 100), s_win.reshape(40, 100), t, k_hi)
+    tau = np.where(n_win > 0, s_win / np.maximum(n_win, 1), 0.0)
+    silence = t - last
+    measured = (n_win > 0) & (silence <= tau * k_hi + 1.0)
+    bound = np.where(last < 0, t + 1.0, np.maximum(last + 1.0, silence))
+    want = (measured, bound, np.maximum(np.where(measured, tau, np.maximum(bound, tau)), 1e-3),
+            (s_win + 1.0) / np.maximum(n_win, 1),
+            np.maximum(np.where(measured, (s_win - 1.0) / np.maximum(n_win, 1), bound), 1e-3))
+    assert measured.any() and (~measured).any()
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a.ravel(), b)
+
+
+@pytest.mark.parametrize("every", [7, 40, 100])
+def test_pixel_by_pixel_and_spike_by_spike_ingest_leave_the_same_state(stream, every):
+    # words are ingested spike by spike or, when dense, pixel by pixel (a 64 × T bit transpose): every word
+    # one way, every word the other, and the default choice leave the same per-pixel state and masks
+    runs = []
+    for run_ticks, per_tick in ((1, 0.0), (65, 0.0), (None, None)):
+        det = SpikeChangeDetector(stream.height, stream.width, every, TrackerParameters())
+        if run_ticks is not None:
+            det.dense_run_ticks, det.dense_spikes_per_tick = run_ticks, per_tick
+        masks = np.concatenate([det.feed(stream.spikes[a:a + 300]) for a in range(0, stream.n_ticks, 300)])
+        runs.append((masks, det.spk.copy(), det.total.copy(), det.bg.copy(), det.anchor.copy()))
+    assert runs[0][0].any()
+    for other in runs[1:]:
+        for a, b in zip(runs[0], other, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_foreground_does_not_depend_on_the_chunks_run_in_parallel(stream):
+    # the words are split into one chunk per thread: 1, 2 or 3 chunks give the same masks and state
+    runs = []
+    for chunks in (1, 2, 3):
+        det = SpikeChangeDetector(stream.height, stream.width, 10, TrackerParameters())
+        edges = np.linspace(0, det.n_words, chunks + 1).round().astype(np.int64)
+        det._chunks = (edges[:-1].copy(), edges[1:].copy())
+        runs.append((det.feed(stream.spikes), det.spk.copy(), det.bg.copy()))
+    assert runs[0][0].any()
+    for other in runs[1:]:
+        for a, b in zip(runs[0], other, strict=True):
+            np.testing.assert_array_equal(a, b)

@@ -3,11 +3,14 @@
 The front end reads spikes as packed bits (64 pixels a word, least significant bit first, the
 ``.dat`` layout): per tick it visits only the words that hold a spike, and per spike it touches
 three numbers of that pixel (its last spike, the start of its open window, the intervals
-counted in it). Once per output step every pixel's window is turned into an interval estimate
-and compared with its background (:func:`_evaluate`); the foreground comes out as packed bits
-again. Pixels are independent, so the words are split into chunks run in parallel, each chunk
-runs groups of words through all of a block's ticks in turn (a group's state stays in cache), and
-the result depends neither on the chunking nor on the grouping.
+counted in it); a word that fires densely (most pixels every few ticks, at a low threshold Q)
+is instead transposed over a run of up to 64 ticks, so each pixel's spikes in the run are one
+word whose bit counts give the same numbers at once. Once per output step every pixel's window
+is turned into an interval estimate and compared with its background (:func:`_evaluate`); the
+foreground comes out as packed bits again. Pixels are independent, so the words are split into
+chunks run in parallel, each chunk runs groups of words through all of a block's ticks in turn
+(a group's state stays in cache), and the result depends neither on the chunking nor on the
+grouping.
 """
 
 from __future__ import annotations
@@ -38,6 +41,102 @@ def _cttz(typingctx, x):  # pragma: no cover - compiled
         return builder.call(fn, [args[0], ir.Constant(ir.IntType(1), 1)])
 
     return sig, codegen
+
+
+@intrinsic
+def _ctlz(typingctx, x):  # pragma: no cover - compiled
+    """Count of leading zero bits of a uint64 (LLVM's ctlz; x ≠ 0)."""
+    sig = types.uint64(types.uint64)
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        fnty = ir.FunctionType(i64, [i64, ir.IntType(1)])
+        fn = builder.module.declare_intrinsic("llvm.ctlz", [i64], fnty)
+        return builder.call(fn, [args[0], ir.Constant(ir.IntType(1), 1)])
+
+    return sig, codegen
+
+
+@intrinsic
+def _ctpop(typingctx, x):  # pragma: no cover - compiled
+    """Count of set bits of a uint64 (LLVM's ctpop)."""
+    sig = types.uint64(types.uint64)
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        fn = builder.module.declare_intrinsic("llvm.ctpop", [i64], ir.FunctionType(i64, [i64]))
+        return builder.call(fn, [args[0]])
+
+    return sig, codegen
+
+
+@njit(cache=True, inline="always")
+def _transpose64(a):  # pragma: no cover - compiled
+    """Transpose a 64 × 64 bit matrix in place: bit j of ``a[k]`` becomes bit k of ``a[j]`` (block swaps,
+    Warren, *Hacker's Delight*, 2nd ed., §7-3)."""
+    j = 32
+    m = np.uint64(0x00000000FFFFFFFF)
+    while j != 0:
+        k = 0
+        while k < 64:
+            t = ((a[k] >> np.uint64(j)) ^ a[k + j]) & m
+            a[k + j] ^= t
+            a[k] ^= t << np.uint64(j)
+            k = (k + j + 1) & ~j
+        j >>= 1
+        m ^= m << np.uint64(j)
+
+
+#: A word that held at least this many spikes per tick over the last run of at least ``DENSE_RUN_TICKS`` ticks
+#: (the ticks up to a step's end, 64 at most) is ingested pixel by pixel over the next (its 64 × T bits
+#: transposed: each pixel's spikes in one word) rather than spike by spike; both give the same state.
+DENSE_SPIKES_PER_TICK = 1.0
+DENSE_RUN_TICKS = 24
+
+
+@njit(cache=True, inline="always")
+def _ingest_spike(s, tick, spk, total, anchor, bg, censored):  # pragma: no cover - compiled
+    """One spike of pixel ``s`` at ``tick``."""
+    lt = spk[s, LAST]
+    if lt < 0:  # the first spike opens the first interval; the one it ends reaches
+        anchor[s] = tick  # back before the stream: the background is at least tick + 1
+        if bg[s] <= 0.0:
+            bg[s] = tick + 1.0
+            censored[s] = True
+    else:
+        if spk[s, COUNT] == 0:
+            spk[s, FIRST] = tick  # the end of the step's first interval
+        spk[s, COUNT] += 1
+    spk[s, BEFORE] = lt
+    spk[s, LAST] = tick
+    total[s] += 1
+
+
+@njit(cache=True, inline="always")
+def _ingest_pixel(s, t0, m, spk, total, anchor, bg, censored):  # pragma: no cover - compiled
+    """All spikes of pixel ``s`` in the ticks t0 … t0 + 63 at once (bit k of ``m``: a spike at t0 + k): the
+    state :func:`_ingest_spike` leaves after them one by one."""
+    c = _ctpop(m)
+    k_last = 63 - _ctlz(m)
+    lt = spk[s, LAST]
+    ending = m  # the spikes that end an interval
+    if lt < 0:
+        first = t0 + _cttz(m)
+        anchor[s] = first
+        if bg[s] <= 0.0:
+            bg[s] = first + 1.0
+            censored[s] = True
+        ending &= m - np.uint64(1)  # (the first spike ends none)
+    if ending:
+        if spk[s, COUNT] == 0:
+            spk[s, FIRST] = t0 + _cttz(ending)
+        spk[s, COUNT] += _ctpop(ending)
+    if c >= 2:
+        spk[s, BEFORE] = t0 + 63 - _ctlz(m & ~(np.uint64(1) << np.uint64(k_last)))
+    else:
+        spk[s, BEFORE] = lt
+    spk[s, LAST] = t0 + k_last
+    total[s] += c
 
 
 @njit(cache=True, inline="always")
@@ -186,14 +285,16 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
 
 
 @njit(parallel=True, cache=True)
-def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, group_words, n_pixels,
+def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, group_words,
+                      dense_run_ticks, dense_spikes_per_tick, n_pixels,
                       spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
                       fg, flag_since, prev, due, out, k_lo, k_hi, k_prime, k_left, background_ticks,
                       hold_ticks):  # pragma: no cover - compiled
     """Feed ticks ``first_tick`` … of ``words`` (T, n_words) uint64; write each completed step's foreground bits.
 
     Per spike only the pixel's row of ``spk`` (last spike, the one before, the step's first,
-    intervals counted) and its spike total change. At the end of a step, only the pixels of words
+    intervals counted) and its spike total change; a word dense with spikes is ingested pixel by
+    pixel over a run of ticks (:func:`_ingest_pixel`: the same state). At the end of a step, only the pixels of words
     that fired, hold foreground, or reached a pixel's ``due`` tick are evaluated (:func:`_evaluate`).
     ``out`` has one row per step ending in the block (plus one when ``evaluate_at_end`` and the block
     does not end on a step: the state is then evaluated at the block's last tick, and that row is
@@ -201,35 +302,63 @@ def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, 
     """
     T = words.shape[0]
     for ch in prange(chunk_lo.size):
+        bits = np.zeros(64, np.uint64)
+        dense = np.zeros(group_words, np.bool_)
+        count = np.zeros(group_words, np.int64)
         # pixels are independent: a group of ``group_words`` words is run through all the block's ticks
-        # before the next, so its pixels' state stays in cache
+        # before the next, so its pixels' state stays in cache; a run of ticks up to a step's end (64 at
+        # most) at a time: words that held many spikes in the last run pixel by pixel, the others spike
+        # by spike (the same state either way)
         for g0 in range(chunk_lo[ch], chunk_hi[ch], group_words):
             g1 = min(g0 + group_words, chunk_hi[ch])
+            dense[:] = False
             step = 0
-            for t in range(T):
-                tick = first_tick + t
+            t = 0
+            while t < T:
+                t0 = first_tick + t
+                n = min(step_ticks - t0 % step_ticks, T - t, 64)
+                long_run = n >= dense_run_ticks
+                if long_run:
+                    count[:] = 0
+                some_dense = False
+                for i in range(g1 - g0):
+                    some_dense |= dense[i]
+                for k in range(n):  # spike by spike
+                    for i in range(g0, g1):
+                        if some_dense and dense[i - g0]:
+                            continue
+                        w = words[t + k, i]
+                        if not w:
+                            continue
+                        fired[i] |= w
+                        if long_run:
+                            count[i - g0] += _ctpop(w)
+                        while w:
+                            s = i * 64 + _cttz(w)
+                            w &= w - np.uint64(1)
+                            _ingest_spike(s, t0 + k, spk, total, anchor, bg, censored)
                 for i in range(g0, g1):
-                    w = words[t, i]
-                    if not w:
-                        continue
-                    fired[i] |= w
-                    while w:
-                        s = i * 64 + _cttz(w)
-                        w &= w - np.uint64(1)
-                        lt = spk[s, LAST]
-                        if lt < 0:  # the first spike opens the first interval; the one it ends reaches
-                            anchor[s] = tick  # back before the stream: the background is at least tick + 1
-                            if bg[s] <= 0.0:
-                                bg[s] = tick + 1.0
-                                censored[s] = True
-                        else:
-                            if spk[s, COUNT] == 0:
-                                spk[s, FIRST] = tick  # the end of the step's first interval
-                            spk[s, COUNT] += 1
-                        spk[s, BEFORE] = lt
-                        spk[s, LAST] = tick
-                        total[s] += 1
-                if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T - 1):
+                    if some_dense and dense[i - g0]:
+                        # pixel by pixel: bit k of bits[j] is pixel j's spike at tick t0 + k
+                        any_ = np.uint64(0)
+                        for k in range(n):
+                            w = words[t + k, i]
+                            bits[k] = w
+                            any_ |= w
+                        for k in range(n, 64):
+                            bits[k] = 0
+                        fired[i] |= any_
+                        _transpose64(bits)
+                        while any_:
+                            j = _cttz(any_)
+                            any_ &= any_ - np.uint64(1)
+                            m = bits[j]
+                            count[i - g0] += _ctpop(m)
+                            _ingest_pixel(i * 64 + j, t0, m, spk, total, anchor, bg, censored)
+                    dense[i - g0] = long_run and count[i - g0] >= n * dense_spikes_per_tick
+                t += n
+                tick = first_tick + t - 1
+                if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T):
                     for i in range(g0, g1):
                         _evaluate_word(i, tick, n_pixels, spk, fired, fg_bits, word_due, anchor, span1, n1,
                                        win_span, win_n, mixed, bg, censored, fg, flag_since, prev, due, k_lo, k_hi,
@@ -414,3 +543,130 @@ def theil_sen(ts, xs, ys):  # pragma: no cover - compiled
     if k == 0:
         return 0.0, 0.0
     return np.median(vx[:k]), np.median(vy[:k])
+
+
+# --------------------------------------------------------------------------- start-up checks
+
+@njit(cache=True)
+def _dilate_rows(mask, px, out):  # pragma: no cover - compiled
+    """``out[y, x]`` = any of ``mask[y, x − px … x + px]`` (outside the image: False)."""
+    H, W = mask.shape
+    for y in range(H):
+        run = 0  # set pixels in the window
+        for x in range(min(px, W)):
+            run += mask[y, x]
+        for x in range(W):
+            if x + px < W:
+                run += mask[y, x + px]
+            if x - px - 1 >= 0:
+                run -= mask[y, x - px - 1]
+            out[y, x] = run > 0
+
+
+@njit(cache=True)
+def _dilate_cols(mask, px, out):  # pragma: no cover - compiled
+    """``out[y, x]`` = any of ``mask[y − px … y + px, x]`` (outside the image: False)."""
+    H, W = mask.shape
+    run = np.zeros(W, np.int64)
+    for y in range(min(px, H)):
+        for x in range(W):
+            run[x] += mask[y, x]
+    for y in range(H):
+        for x in range(W):
+            if y + px < H:
+                run[x] += mask[y + px, x]
+            if y - px - 1 >= 0:
+                run[x] -= mask[y - px - 1, x]
+            out[y, x] = run[x] > 0
+
+
+@njit(cache=True)
+def dilate_square(mask, px):  # pragma: no cover - compiled
+    """``mask`` (H, W) bool dilated by the (2·px + 1)² square, outside the image False
+    (``scipy.ndimage.maximum_filter(mask, 2·px + 1, mode="constant")``, exactly: whole booleans)."""
+    tmp = np.empty(mask.shape, np.bool_)
+    out = np.empty(mask.shape, np.bool_)
+    _dilate_rows(mask, px, tmp)
+    _dilate_cols(tmp, px, out)
+    return out
+
+
+@njit(cache=True)
+def erode_square(mask, px):  # pragma: no cover - compiled
+    """``mask`` eroded by the (2·px + 1)² square, outside the image False (so the image's edges erode):
+    ``scipy.ndimage.binary_erosion`` with its default border, exactly."""
+    return ~dilate_square(~mask, px) & _inner(mask.shape, px)
+
+
+@njit(cache=True)
+def _inner(shape, px):  # pragma: no cover - compiled
+    """Pixels at least ``px`` from the image's edge."""
+    H, W = shape
+    out = np.zeros((H, W), np.bool_)
+    for y in range(px, H - px):
+        for x in range(px, W - px):
+            out[y, x] = True
+    return out
+
+
+@njit(cache=True)
+def opened_closed(mask):  # pragma: no cover - compiled
+    """``mask & opening(closing(mask))`` with the 3 × 3 square and scipy.ndimage's borders (outside False)."""
+    closed = erode_square(dilate_square(mask, 1), 1)
+    return mask & dilate_square(erode_square(closed, 1), 1)
+
+
+@njit(cache=True)
+def prime_values(last, n_win, s_win, t, k_hi):  # pragma: no cover - compiled
+    """Per pixel at tick ``t``, from its last spike and its window (``s_win`` ticks over ``n_win`` intervals):
+    whether the interval is measured, the lower bound of an unmeasured one, and the arguments of the
+    logarithms the start-up check takes: the interval (≥ 10⁻³), its longest and shortest values (ticks).
+
+    The same IEEE operations in the same order as the NumPy expressions of
+    :meth:`~viform.vision.tracking.SpikeChangeDetector._prime` (whose logarithms stay NumPy's).
+    """
+    H, W = last.shape
+    measured = np.empty((H, W), np.bool_)
+    bound = np.empty((H, W))
+    value = np.empty((H, W))
+    upper = np.empty((H, W))
+    lower = np.empty((H, W))
+    for y in range(H):
+        for x in range(W):
+            n = n_win[y, x]
+            s = s_win[y, x]
+            lt = last[y, x]
+            nn = float(max(n, 1))
+            tau = s / nn if n > 0 else 0.0
+            silence = t - lt
+            m = n > 0 and silence <= tau * k_hi + 1.0
+            b = t + 1.0 if lt < 0 else max(lt + 1.0, float(silence))
+            measured[y, x] = m
+            bound[y, x] = b
+            v = tau if m else max(b, tau)
+            value[y, x] = max(v, 1e-3)
+            upper[y, x] = (s + 1.0) / nn
+            lower[y, x] = max((s - 1.0) / nn if m else b, 1e-3)
+    return measured, bound, value, upper, lower
+
+
+@njit(cache=True)
+def block_medians(a, block):  # pragma: no cover - compiled
+    """Median of each ``block`` × ``block`` block of ``a`` (H, W) float64, the edges padded with the edge
+    values (as ``np.pad(mode="edge")``): (⌈H/b⌉, ⌈W/b⌉). An even count's median is the mean of its two
+    middle values, (a + b) / 2, as NumPy's."""
+    H, W = a.shape
+    hb, wb = -(-H // block), -(-W // block)
+    out = np.empty((hb, wb))
+    buf = np.empty(block * block)
+    for by in range(hb):
+        for bx in range(wb):
+            k = 0
+            for y in range(by * block, (by + 1) * block):
+                yy = min(y, H - 1)
+                for x in range(bx * block, (bx + 1) * block):
+                    buf[k] = a[yy, min(x, W - 1)]
+                    k += 1
+            out[by, bx] = np.median(buf)
+    return out
+

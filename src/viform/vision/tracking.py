@@ -47,7 +47,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import binary_closing, binary_opening, gaussian_filter, maximum_filter, median_filter
+from scipy.ndimage import gaussian_filter, median_filter
 from scipy.optimize import linear_sum_assignment
 
 from viform._validate import ViformError, check_int, check_positive
@@ -229,6 +229,7 @@ class SpikeChangeDetector:
         edges = np.linspace(0, self.n_words, chunks + 1).round().astype(np.int64)
         self._chunks = (edges[:-1].copy(), edges[1:].copy())
         self.group_words = GROUP_WORDS
+        self.dense_run_ticks, self.dense_spikes_per_tick = _front.DENSE_RUN_TICKS, _front.DENSE_SPIKES_PER_TICK
         self.next_tick = 0
         self.primed = False
         self._primed_ever = None
@@ -301,7 +302,8 @@ class SpikeChangeDetector:
         if t:
             p = self.parameters
             _front.spike_front_block(words, first, self.step_ticks, bool(extra), self._chunks[0], self._chunks[1],
-                                     self.group_words, self.n_pixels, self.spk, self.total, self.fired, self.fg_bits,
+                                     self.group_words, self.dense_run_ticks, self.dense_spikes_per_tick,
+                                     self.n_pixels, self.spk, self.total, self.fired, self.fg_bits,
                                      self.word_due, self.anchor, self.span1, self.n1, self.win_span, self.win_n,
                                      self.mixed, self.bg,
                                      self.censored, self.fg, self.flag_since, self.prev, self.due, out,
@@ -339,30 +341,25 @@ class SpikeChangeDetector:
         p = self.parameters
         t = self.next_tick - 1  # the state was evaluated at this tick
         up = self.upright
-        # (contiguous copies of what is only read: the arithmetic below runs on whole images)
-        last, n_win, s_win = (np.ascontiguousarray(up(a)) for a in (self.spk[:, _front.LAST], self.win_n,
-                                                                   self.win_span))
         bg, censored, prev, flag_since = up(self.bg), up(self.censored), up(self.prev), up(self.flag_since)
-        k_hi = math.exp(p.threshold_log)
-        tau = np.where(n_win > 0, s_win / np.maximum(n_win, 1), 0.0)
-        silence = t - last
-        measured = (n_win > 0) & (silence <= tau * k_hi + 1.0)
-        bound = np.where(last < 0, t + 1.0, np.maximum(last + 1.0, silence))  # the interval is longer than this
-        value = np.where(measured, tau, np.maximum(bound, np.where(n_win > 0, tau, 0.0)))
-        log_v = np.log(np.maximum(value, 1e-3))
+        # per pixel, in one compiled pass: measured or not, the bound an unmeasured interval is longer than,
+        # the interval (or that bound), and the longest and shortest the measured interval can be
+        measured, bound, value, upper, lower = _front.prime_values(
+            up(self.spk[:, _front.LAST]), up(self.win_n), up(self.win_span), t,
+            math.exp(p.threshold_log))
+        log_v = np.log(value)
         H, W = log_v.shape
         # the robust median around, and whether it is measured: bounds above the median do not move it
         # (on 16-px blocks: the window is 96 px)
         b = 2 * _PRIME_BLOCK_PX
         size = max(1, p.prime_window_px // b) | 1
-        med_b = median_filter(np.median(_blocks(log_v, block=b), axis=2), size=size, mode="nearest")
+        med_b = median_filter(_front.block_medians(log_v, b), size=size, mode="nearest")
         median = _nearest(med_b, H, W, b)
         low_frac = median_filter(_blocks(~measured & (log_v < median), block=b).mean(axis=2), size=size,
                                  mode="nearest")
         median_measured = _nearest(low_frac, H, W, b) < 0.1
         thr = p.prime_threshold_log
-        upper = np.log((s_win + 1.0) / np.maximum(n_win, 1))  # the longest the measured interval can be
-        lower = np.log(np.maximum(np.where(measured, (s_win - 1.0) / np.maximum(n_win, 1), bound), 1e-3))
+        upper, lower = np.log(upper), np.log(lower)
         # objects are at least 3 px across (an opening removes thin lines of static texture)
         back = up(self._given_back)  # static, given back: not an object
         bright = _opened(measured & ~up(self.mixed) & (upper < median - thr)) & ~back  # not a falling transition
@@ -719,7 +716,7 @@ def _grown(mask: np.ndarray, px: int = 2) -> np.ndarray:
     if rows.size:
         r0, r1 = max(rows[0] - px, 0), min(rows[-1] + px + 1, mask.shape[0])
         c0, c1 = max(cols[0] - px, 0), min(cols[-1] + px + 1, mask.shape[1])
-        out[r0:r1, c0:c1] = maximum_filter(mask[r0:r1, c0:c1], size=2 * px + 1, mode="constant")
+        out[r0:r1, c0:c1] = _front.dilate_square(mask[r0:r1, c0:c1], px)
     return out
 
 
@@ -785,9 +782,7 @@ def _opened(mask: np.ndarray) -> np.ndarray:
         return out
     r0, r1 = max(rows[0] - 3, 0), min(rows[-1] + 4, mask.shape[0])  # only the part that holds the mask
     c0, c1 = max(cols[0] - 3, 0), min(cols[-1] + 4, mask.shape[1])
-    part = mask[r0:r1, c0:c1]
-    square = np.ones((3, 3), bool)
-    out[r0:r1, c0:c1] = part & binary_opening(binary_closing(part, square), square)
+    out[r0:r1, c0:c1] = _front.opened_closed(mask[r0:r1, c0:c1])
     return out
 
 
