@@ -271,6 +271,25 @@ def test_packed_frames_are_the_dat_layout(shape):
         assert packed.tobytes() == pack_frames(spikes, flip)
 
 
+@pytest.mark.parametrize("shape", [(12, 40), (8, 32), (3, 8)])
+def test_packed_blocks_in_constant_light_are_fresh_arrays(shape):
+    """In constant light the kernels write the .dat frames in place: blocks kept past the next one still
+    hold their own ticks (none is a view of a reused buffer), upright or flipped, and match the bool stream."""
+    from viform.stream.dat import pack_frames
+
+    sensor = SpikeSensor(threshold_electrons=20)
+    rng = np.random.default_rng(3)
+    scene = StillScene(rng.uniform(0.5, 30.0, shape))
+    spikes = sensor.capture(scene, 0.004, seed=5).spikes
+    assert spikes.any() and not spikes.all()
+    for flip in (False, True):
+        blocks = [b for _, b in sensor.simulate_packed(scene, 0.004, seed=5, block_ticks=37, flip=flip)]
+        assert len(blocks) == 5
+        for i, a in enumerate(blocks):
+            assert not any(np.shares_memory(a, b) for b in blocks[i + 1:])
+        assert np.concatenate(blocks).tobytes() == pack_frames(spikes, flip)
+
+
 if __name__ == "__main__":
     names = sys.argv[1:] or sorted(CASES)
     for name in names:

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from llvmlite import ir
 from numba import get_num_threads, njit, prange, types
+from numba.core import cgutils
 from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.extending import intrinsic
 
@@ -204,18 +205,27 @@ MAX_RATE_FIXED_POINT = float(1 << 61)
 _JUMP_INTERVALS = 48.0
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _initial_targets(target, charge, counter, q, index, bins, keys,
                      noise, random_initial):
-    for p in range(q.size):
-        if noise and random_initial:
+    """First target (and with ``random_initial`` the stationary charge) of every pixel, each from its own
+    stream (``counter[p]`` advanced): the same values whatever the thread count."""
+    if not noise:
+        # _next_target without photon noise, written out: the inlined helper's array arguments cost
+        # reference-count updates per pixel (≈ 70 ns, more than the work)
+        for p in prange(q.size):
+            t = max(np.int64(1), np.int64(q[p] * 4294967296.0 + 0.5))
+            target[p] = t
+            counter[p] += 1
+            if random_initial:  # the noise-free pixel's stationary state: a uniform fraction of Q collected
+                u = uniform_from_hash(splitmix64(keys[p] ^ np.uint64(0x5EED5EED5EED5EED)))
+                charge[p] = np.int64(u * t)
+        return
+    for p in prange(q.size):
+        if random_initial:
             charge[p], target[p] = _equilibrium_state(p, q, index, bins, keys, counter)
         else:
             target[p] = _next_target(p, q, index, bins, keys, noise, counter)
-            if random_initial:
-                # the noise-free pixel's stationary state: a uniform fraction of Q collected
-                u = uniform_from_hash(splitmix64(keys[p] ^ np.uint64(0x5EED5EED5EED5EED)))
-                charge[p] = np.int64(u * target[p])
 
 
 @njit(cache=True, inline="always")
@@ -491,14 +501,13 @@ def _noise_free_chunk_codegen(readout):
             fired = builder.icmp_signed(">=", x, target[j])
             after.append(builder.select(fired, zero if readout else builder.sub(x, target[j]), x))
             masks.append(fired)
-        # the 8 comparison masks as one <64 x i1>, i.e. one 64-bit word (AVX-512: kunpck, kmovq)
-        while len(masks) > 1:
-            n = len(masks[0].type)
-            order = ir.Constant(ir.VectorType(ir.IntType(32), 2 * n), list(range(2 * n)))
-            masks = [builder.shuffle_vector(masks[i], masks[i + 1], order) for i in range(0, len(masks), 2)]
-        word = builder.bitcast(masks[0], _I64)
-        slot = builder.inttoptr(builder.add(data, builder.mul(kk, row_stride)), _I64.as_pointer())
-        builder.store(word, slot, align=1)
+        # each 8-lane comparison mask stored as its byte of the word (AVX-512: kmovb to memory, a store-port
+        # uop): merging the 8 masks into one 64-bit word first (kunpck) costs 7 more uops on the vector
+        # port that the add/compare/subtract already saturate (≈ 1.3× slower per tick)
+        row = builder.add(data, builder.mul(kk, row_stride))
+        for j in range(8):
+            slot = builder.inttoptr(builder.add(row, ir.Constant(_I64, j)), ir.IntType(8).as_pointer())
+            builder.store(builder.bitcast(masks[j], ir.IntType(8)), slot, align=1)
         following = builder.add(kk, ir.Constant(_I64, 1))
         kk.add_incoming(following, loop)
         for j in range(8):
@@ -569,6 +578,32 @@ def _store_word(typingctx, words, kk, col, word):
         return context.get_dummy_value()
 
     return types.none(words, types.int64, types.int64, types.uint64), codegen
+
+
+@intrinsic
+def _prefetch_for_write(typingctx, words, kk, byte):
+    """Hint the CPU to fetch, for writing, the cache line holding byte ``byte`` of row kk of the uint8
+    array ``words`` (C order); a hint only (``llvm.prefetch``, x86 PREFETCHW): it never faults and
+    changes no value."""
+    if not (isinstance(words, types.Array) and words.ndim == 2 and words.dtype == types.uint8
+            and words.layout == "C"):
+        return None
+
+    def codegen(context, builder, signature, args):
+        array = context.make_array(signature.args[0])(context, builder, args[0])
+        kk, byte = args[1], args[2]
+        address = builder.add(builder.ptrtoint(array.data, _I64),
+                              builder.add(builder.mul(kk, builder.extract_value(array.strides, 0)), byte))
+        pointer = builder.inttoptr(address, ir.IntType(8).as_pointer())
+        i32 = ir.IntType(32)
+        prefetch = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(),
+                                                                                  [pointer.type, i32, i32, i32]),
+                                                  "llvm.prefetch.p0")
+        # write, keep in all cache levels, data cache
+        builder.call(prefetch, [pointer, ir.Constant(i32, 1), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+
+    return types.none(words, types.int64, types.int64), codegen
 
 
 @njit(cache=True, inline="always")
@@ -726,6 +761,8 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
         p0 = w0 * _LANES
         n = min(nw * _LANES, n_pixels - p0)
         size = nw * _LANES
+        tile_byte0 = 8 * w0  # the tile's first and last byte in a frame
+        tile_byte1 = min(8 * (w0 + nw), words.shape[1]) - 1
         c = np.zeros(size, dtype=np.int64)
         t = np.full(size, _NO_TARGET)
         e = np.zeros(size, dtype=np.int64)
@@ -741,16 +778,20 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
         # charge per tick up to which a lane fires rarely (≤ 1 spike in 20 ticks on average): words whose
         # lanes are all below it are run crossing by crossing (same bits, less work than tick by tick)
         sparse_rate = np.zeros(size, dtype=np.int64)
+        # the tile's pixels through views indexed from 0: indices p0 + j, whose sign the compiler cannot
+        # prove, made the vectorized loops gather every element (microcoded, ≈ 2 ms a block at 400×250)
+        c[:n] = charge[p0:p0 + n]
+        t[:n] = target[p0:p0 + n]
+        drawn[:n] = counter[p0:p0 + n]
+        key[:n] = keys[p0:p0 + n]
+        tile_q = q[p0:p0 + n]
+        tile_index = index[p0:p0 + n]
+        share = 1.0 if mode == MODE_GENERAL else _NOISE_FREE_SPARSE
         for j in range(n):
-            p = p0 + j
-            c[j] = charge[p]
-            t[j] = target[p]
-            one_by_one[j] = min(_fixed_charge(_JUMP_INTERVALS * q[p]), _fixed_charge(8.0 * q[p] * q[p]))
-            drawn[j] = counter[p]
-            key[j] = keys[p]
-            row0[j] = np.int64(index[p]) * TABLE_SIZE
-            share = 1.0 if mode == MODE_GENERAL else _NOISE_FREE_SPARSE
-            sparse_rate[j] = _fixed_charge(sparse_firing * share * q[p])
+            qj = tile_q[j]
+            one_by_one[j] = min(_fixed_charge(_JUMP_INTERVALS * qj), _fixed_charge(8.0 * qj * qj))
+            row0[j] = np.int64(tile_index[j]) * TABLE_SIZE
+            sparse_rate[j] = _fixed_charge(sparse_firing * share * qj)
         s = 0
         while seg_end[s] <= first_tick:
             s += 1
@@ -761,8 +802,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                 s += 1
                 continue
             if not lazy_ok:
-                for j in range(n):
-                    e[j] = rates[s, p0 + j]
+                e[:n] = rates[s, p0:p0 + n]
             else:
                 for j in range(n):
                     p = p0 + j
@@ -847,6 +887,13 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                 for k0 in range(k, end, _TICK_CHUNK):
                     k1 = min(k0 + _TICK_CHUNK, end)
                     for w in range(nw):
+                        # the next chunk's rows of the tile's bytes (≤ 64: one or two cache lines a row), fetched
+                        # for writing while this chunk runs, a share of the rows per word: the rows are a frame
+                        # apart, so the hardware prefetchers do not see them coming and every first store to a
+                        # line would wait for its read (≈ 1.4× slower per tick at 400×250)
+                        for kk in range(k1 + (w * _TICK_CHUNK) // nw, min(k1 + ((w + 1) * _TICK_CHUNK) // nw, end)):
+                            _prefetch_for_write(words, kk, tile_byte0)
+                            _prefetch_for_write(words, kk, tile_byte1)
                         if not (dense >> np.uint64(w)) & np.uint64(1):
                             continue
                         base = w * _LANES
@@ -898,11 +945,13 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                         lazy_from[j] = -1
             k = end
             s += 1
+        counter[p0:p0 + n] = drawn[:n]
+        tile_charge = charge[p0:p0 + n]
+        tile_target = target[p0:p0 + n]
         for j in range(n):
-            counter[p0 + j] = drawn[j]
             if not lazy_mask[j >> 6] & (np.uint64(1) << np.uint64(j & 63)):
-                charge[p0 + j] = c[j]
-                target[p0 + j] = t[j]
+                tile_charge[j] = c[j]
+                tile_target[j] = t[j]
 
 
 _LIGHT_WINDOW = 16  # ticks per window of the per-tick kernel: the window's light tables stay in cache

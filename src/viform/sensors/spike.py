@@ -523,8 +523,11 @@ class SpikeSensor(Sensor):
         if pixels % 8:
             raise ViformError(f"width × height = {width}×{height} is not a multiple of 8 pixels; packed frames "
                               "(.dat) hold whole bytes")
+        # a block that the flip or the cut of the row padding copies reuses the kernels' buffer; one that is the
+        # kernels' output itself (constant light: the .dat frames are written in place) is a fresh array
         for first, packed in self._packed_blocks(scene, duration_s, seed, block_ticks, light_sample_ticks, progress,
-                                                 None, True, compiled_light, packed_only=True, device=device):
+                                                 None, "copied" if flip else "padded", compiled_light,
+                                                 packed_only=True, device=device):
             frames = packed[:, : pixels // 8]
             if flip:
                 if width % 8 == 0:
@@ -537,7 +540,9 @@ class SpikeSensor(Sensor):
     def _packed_blocks(self, scene, duration_s, seed, block_ticks, light_sample_ticks, progress, state,
                        reuse_buffer, compiled_light, packed_only=False, device="cpu"):
         """(first tick, packed bits uint8 (T, ⌈H·W/8⌉) in constant light, else (T, 8·⌈H·W/64⌉)) per block:
-        the kernels' own output."""
+        the kernels' own output. ``reuse_buffer``: one buffer for every block (True or "copied": the caller
+        copies each block), a fresh one per block (False), or "padded": reused only where the rows are
+        padded past the frame's ⌈H·W/8⌉ bytes (the caller then copies the frame out)."""
         light_sample_ticks = self.light_sample_ticks_for(scene, light_sample_ticks, duration_s)
         if resolve_device(device) == "cuda":
             if block_ticks is None:
@@ -574,6 +579,8 @@ class SpikeSensor(Sensor):
         segments = _Segments(self, scene, light, sample, height, width)
         # constant light: the kernel writes the .dat frames themselves (⌈H·W/8⌉ bytes a tick, no copy)
         out_bytes = row_bytes if per_tick_light or sampled is not None else (plan.pixels + 7) // 8
+        if reuse_buffer == "padded":  # the caller copies each block only where its rows carry padding
+            reuse_buffer = out_bytes > plan.pixels // 8
         buffer = None
         bar = None
         if progress:
