@@ -557,8 +557,8 @@ def _noise_free_self_chunk(typingctx, words, col, k0, k1, c, e, t, base):
     """Noise-free self-reset of the 64 lanes ``base`` … ``base + 63`` through ticks ``k0`` … ``k1 − 1``:
     each tick c += e, c −= t where c reached t, and the word of lanes that fired stored at bytes
     8·col … 8·col + 7 of row kk of ``words`` (uint8; the caller checks that they are in the row). The
-    8 × 8 charges stay in vector registers for the whole chunk, and the 8 comparison masks become the
-    word directly (AVX-512: kunpck, one kmovq store; no per-lane shifts). Runs only where every lane
+    8 × 8 charges stay in vector registers for the whole chunk, and each of the 8 comparison masks is
+    stored as its byte of the word (AVX-512: kmovb to memory; no per-lane shifts). Runs only where every lane
     has c < t and e ≤ t (then no crossing is lost inside a tick); returns whether it ran."""
     sig = _chunk_signature(words, col, k0, k1, c, e, t, base)
     return (sig, _noise_free_chunk_codegen(False)) if sig is not None else None
