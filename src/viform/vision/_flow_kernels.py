@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 from numba import njit, prange
-from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.cpython.unsafe.numbers import leading_zeros, trailing_zeros
 
 from viform.imaging.multi_interval import interval_consistent
 from viform.vision._spike_front import _ctpop
@@ -84,41 +84,43 @@ def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolera
     n = 1
     i_b = 1
     i_a = 1
-    grow_b = not cut
-    grow_a = not cut
+    grow_b = not cut and nb > 1
+    grow_a = not cut and na > 1
+    n_tab = limits.shape[0]
+    s_tab = limits.shape[1]
     while grow_b or grow_a:
-        for side in range(2):
-            if side == 0 and grow_b:
-                if i_b >= nb:
-                    grow_b = False
-                    continue
-                new = before[i_b - 1] - before[i_b]
-            elif side == 1 and grow_a:
-                if i_a >= na:
-                    grow_a = False
-                    continue
-                new = after[i_a] - after[i_a - 1]
-            else:
-                continue
+        if grow_b:
+            new = before[i_b - 1] - before[i_b]
+            ok = True
             if adaptive:
                 span = hi - lo
-                if n < limits.shape[0] and span < limits.shape[1]:
+                if n < n_tab and span < s_tab:
                     ok = limits[n, span, 0] <= new <= limits[n, span, 1]
                 else:
                     ok = interval_consistent(new, span / n, n, noise_q, tolerance)
-                if not ok:
-                    if side == 0:
-                        grow_b = False
-                    else:
-                        grow_a = False
-                    continue
-            if side == 0:
+            if ok:
                 lo = before[i_b]
                 i_b += 1
+                n += 1
+                grow_b = i_b < nb
             else:
+                grow_b = False
+        if grow_a:
+            new = after[i_a] - after[i_a - 1]
+            ok = True
+            if adaptive:
+                span = hi - lo
+                if n < n_tab and span < s_tab:
+                    ok = limits[n, span, 0] <= new <= limits[n, span, 1]
+                else:
+                    ok = interval_consistent(new, span / n, n, noise_q, tolerance)
+            if ok:
                 hi = after[i_a]
                 i_a += 1
-            n += 1
+                n += 1
+                grow_a = i_a < na
+            else:
+                grow_a = False
     if i_b == i_a and not cut:
         total = 0.0
         for w in range(i_b):
@@ -258,27 +260,41 @@ def advance_rates(bits8, n, first, ring, count, next_inst, instants, m_all, k_si
 
 
 @njit(cache=True, parallel=True)
-def count_spikes(bits8, p, counts):
-    """Add each pixel's spikes in ``bits8`` (n, ⌈P/8⌉) uint64 of 0/1 bytes to ``counts`` (P,)."""
-    n, p8 = bits8.shape
-    chunk = 128
-    for ch in prange((p8 + chunk - 1) // chunk):
-        q0 = ch * chunk
-        q1 = min(q0 + chunk, p8)
-        acc = np.zeros(chunk, np.uint64)
-        for i0 in range(0, n, 255):  # a byte holds up to 255 spikes
-            for q in range(q1 - q0):
-                acc[q] = 0
-            for i in range(i0, min(n, i0 + 255)):
-                row = bits8[i]
-                for q in range(q1 - q0):
-                    acc[q] += row[q0 + q]
-            for q in range(q1 - q0):
-                a = acc[q]
-                for b in range(8):
-                    j = 8 * (q0 + q) + b
-                    if j < p:
-                        counts[j] += np.int64((a >> np.uint64(8 * b)) & np.uint64(0xFF))
+def collect_before(bits8, n, first, k_side, nearest, found):
+    """Ticks [first, first + n) of ``bits8`` read from the last back: each pixel with fewer than
+    ``k_side`` spikes ``found`` takes its spikes nearest the end first (``nearest[j, i]``, the i-th
+    nearest found), until it has K. Chunks of pixels that all have K are not read.
+    """
+    p = found.size
+    chunk = 1024
+    one = np.uint64(1)
+    for ch in prange((p + chunk - 1) // chunk):
+        j0 = ch * chunk
+        width = min(j0 + chunk, p) - j0
+        words = np.empty(chunk, np.uint64)
+        acc = np.empty((8, chunk // 8), np.uint64)
+        t1 = n
+        while t1 > 0:
+            short = False
+            for jj in range(width):
+                if found[j0 + jj] < k_side:
+                    short = True
+                    break
+            if not short:
+                break
+            t0 = max(0, t1 - 64)
+            _pack_ticks(bits8, t0, t1, j0, width, acc, words)
+            for jj in range(width):
+                j = j0 + jj
+                c = found[j]
+                word = words[jj]
+                while word != 0 and c < k_side:
+                    high = 63 - np.int64(leading_zeros(word))
+                    nearest[j, c] = first + t0 + high
+                    word ^= one << np.uint64(high)
+                    c += 1
+                found[j] = c
+            t1 = t0
 
 
 @njit(cache=True, parallel=True)

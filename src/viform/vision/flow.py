@@ -441,7 +441,7 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
     pixel keeps its last 2K spike ticks, and an instant's rate is computed as soon as the
     pixel has K spikes after it. Memory: the instants pending within the horizon.
     """
-    from viform.vision._flow_kernels import advance_rates, count_spikes, force_rates
+    from viform.vision._flow_kernels import advance_rates, collect_before, force_rates
 
     k_side = check_int("spikes_per_side", spikes_per_side, 1)
     check_positive("tolerance", tolerance)
@@ -460,16 +460,22 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
     h, w = source.height, source.width
     pixels = h * w
     block = _block_ticks(pixels)
-    # where to start: every pixel's K spikes before the first instant, or the horizon
+    # where to start: every pixel's K spikes before the first instant, or the horizon. The blocks
+    # read back to there are read once: each pixel's K spikes nearest the instant are kept (what a
+    # forward pass from the start would leave in its ring), and the forward pass starts after it.
     first = int(instants[0])
     start = first + 1
-    counts = np.zeros(pixels, np.int64)
+    ring = np.zeros((pixels, 1 << (2 * k_side - 1).bit_length()), np.int64)  # a power of two ≥ 2K per pixel
+    count = np.zeros(pixels, np.int64)
     floor = max(0, first + 1 - horizon)
-    while start > floor and counts.min() < k_side:
+    while start > floor and count.min() < k_side:
         a = max(floor, start - block)
-        count_spikes(_byte_words(source.read_ticks(a, start), pixels), pixels, counts)
+        collect_before(_byte_words(source.read_ticks(a, start), pixels), start - a, a, k_side, ring, count)
         start = a
         block = min(2 * block, _block_ticks(pixels) * 8)
+    # nearest first → oldest first, as a forward pass leaves its ring (count: the spikes it holds)
+    nearest = np.clip(count[:, None] - 1 - np.arange(k_side), 0, None)
+    ring[:, :k_side] = np.take_along_axis(ring[:, :k_side], nearest, axis=1)
     block = _block_ticks(pixels)
     lo_cut = start - 1  # a spike missing before the instant: taken just before the first tick read
     span = max(int(instants[-1] - instants[0]), 1)
@@ -481,8 +487,6 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
     out_used = np.empty((n_slots, pixels), np.int16)
     out_span = np.empty((n_slots, pixels), np.int32)
     out_cut = np.empty((n_slots, pixels), np.bool_)
-    ring = np.zeros((pixels, 1 << (2 * k_side - 1).bit_length()), np.int64)  # a power of two ≥ 2K per pixel
-    count = np.zeros(pixels, np.int64)
     next_inst = np.zeros(pixels, np.int64)
     emitted = 0
     position = start
@@ -508,9 +512,12 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
             # instants past the slots are not pending yet: read no further than the first of them
             # (a pixel's ring holds only the spikes its pending instants need)
             stop = min(stop, max(int(instants[emitted + n_slots]) + 1, position + 1))
-        bits8 = _byte_words(source.read_ticks(position, stop), pixels)
-        advance_rates(bits8, stop - position, position, ring, count, next_inst, instants[: emitted + n_slots],
-                      instants.size, *args, lo_cut, out_rate, out_used, out_span, out_cut)
+        # ticks up to the first instant were read already (above); the blocks stay where they were
+        read_from = max(position, first + 1)
+        if stop > read_from:
+            bits8 = _byte_words(source.read_ticks(read_from, stop), pixels)
+            advance_rates(bits8, stop - read_from, read_from, ring, count, next_inst, instants[: emitted + n_slots],
+                          instants.size, *args, lo_cut, out_rate, out_used, out_span, out_cut)
         position = stop
         # instants whose horizon has passed are completed with what was found
         late = int(np.searchsorted(instants, position - horizon, side="left"))
