@@ -64,22 +64,34 @@ def consistent_limits(n_max, span_max, noise_q, tolerance):
     return limits
 
 
-@njit(cache=True)
-def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolerance, limits):
-    """Rate (spikes per tick), intervals used, span (ticks) and censoring of one pixel at one instant.
+@njit(cache=True, inline="always")
+def ring_rate(ring, j, count, n_after, k_side, lo_cut, hi_cut, adaptive, noise_q, tolerance, limits):
+    """Rate (spikes per tick), intervals used, span (ticks) and censoring of pixel j at one instant,
+    from its ring of spike ticks (``ring`` (P, size), size a power of two ≥ 2K; ``count`` spikes seen,
+    the ``n_after`` most recent after the instant).
 
-    ``before[:nb]`` are the spike ticks at or before the instant (nearest first), ``after[:na]``
-    those after it; ``lo_cut``/``hi_cut`` stand for a spike missing on that side (the stream's or
-    the search's end). ``limits`` (:func:`consistent_limits`) holds the test's verdicts as ranges of
-    whole intervals for spans up to its size (the same verdicts, without the divisions and root).
-    The span grows from the interval holding the instant one interval a side at a time, a side
-    stopping at the first interval inconsistent with the span's mean (the Wilson–Hilferty test of
-    :mod:`viform.imaging.multi_interval`) when ``adaptive``. With equal growth on both sides the
-    rate is Σ 1/span over the windows of m intervals that hold the
-    instant (unbiased for any stationary tick sequence, as there); else intervals / span.
+    The spikes at or before the instant (up to K, nearest first) and the ``n_after`` after it are read
+    from the ring in place; ``lo_cut``/``hi_cut`` stand for a spike missing on that side (the stream's
+    or the search's end). The span grows from the interval holding the instant one interval a side
+    at a time, a side stopping at the first interval inconsistent with the span's mean (the
+    Wilson–Hilferty test of :mod:`viform.imaging.multi_interval`) when ``adaptive``; ``limits``
+    (:func:`consistent_limits`) holds that test's verdicts as ranges of whole intervals for spans up
+    to its size (the same verdicts, without the divisions and root). With equal growth on both
+    sides the rate is Σ 1/span over the windows of m intervals that hold the instant (unbiased for
+    any stationary tick sequence, as there); else intervals / span. Inlined into its callers (no
+    arrays passed: a call per pixel and instant would cost more than the arithmetic).
     """
-    lo = before[0] if nb > 0 else lo_cut
-    hi = after[0] if na > 0 else hi_cut
+    mask = ring.shape[1] - 1
+    a0 = count - n_after  # ring index of the first spike after the instant; before it, the earlier ones
+    nb = 0
+    for b in range(k_side):
+        idx = a0 - 1 - b
+        if idx < 0 or idx <= count - ring.shape[1] - 1:
+            break
+        nb += 1
+    na = n_after
+    lo = ring[j, (a0 - 1) & mask] if nb > 0 else lo_cut
+    hi = ring[j, a0 & mask] if na > 0 else hi_cut
     cut = nb == 0 or na == 0
     n = 1
     i_b = 1
@@ -90,7 +102,7 @@ def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolera
     s_tab = limits.shape[1]
     while grow_b or grow_a:
         if grow_b:
-            new = before[i_b - 1] - before[i_b]
+            new = ring[j, (a0 - i_b) & mask] - ring[j, (a0 - 1 - i_b) & mask]
             ok = True
             if adaptive:
                 span = hi - lo
@@ -99,14 +111,14 @@ def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolera
                 else:
                     ok = interval_consistent(new, span / n, n, noise_q, tolerance)
             if ok:
-                lo = before[i_b]
+                lo = ring[j, (a0 - 1 - i_b) & mask]
                 i_b += 1
                 n += 1
                 grow_b = i_b < nb
             else:
                 grow_b = False
         if grow_a:
-            new = after[i_a] - after[i_a - 1]
+            new = ring[j, (a0 + i_a) & mask] - ring[j, (a0 + i_a - 1) & mask]
             ok = True
             if adaptive:
                 span = hi - lo
@@ -115,7 +127,7 @@ def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolera
                 else:
                     ok = interval_consistent(new, span / n, n, noise_q, tolerance)
             if ok:
-                hi = after[i_a]
+                hi = ring[j, (a0 + i_a) & mask]
                 i_a += 1
                 n += 1
                 grow_a = i_a < na
@@ -123,30 +135,12 @@ def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolera
                 grow_a = False
     if i_b == i_a and not cut:
         total = 0.0
-        for w in range(i_b):
-            total += 1.0 / (after[i_b - 1 - w] - before[w])
+        for w in range(i_b):  # after[i_b − 1 − w] − before[w]
+            total += 1.0 / (ring[j, (a0 + i_b - 1 - w) & mask] - ring[j, (a0 - 1 - w) & mask])
         rate = total
     else:
         rate = n / max(hi - lo, 1)
     return rate, n, hi - lo, cut
-
-
-@njit(cache=True)
-def _complete(ring, count, j, k_side, instant, n_after, lo_cut, hi_cut, adaptive, noise_q, tolerance, limits,
-              before, after):
-    """Rate of pixel j at ``instant`` from its ring (P, size: a power of two ≥ 2K): the n_after
-    most recent spikes are after the instant."""
-    mask = ring.shape[1] - 1
-    for a in range(n_after):  # chronological: nearest to the instant first
-        after[a] = ring[j, (count - n_after + a) & mask]
-    nb = 0
-    for b in range(k_side):
-        idx = count - n_after - 1 - b
-        if idx < 0 or idx <= count - ring.shape[1] - 1:
-            break
-        before[b] = ring[j, idx & mask]
-        nb += 1
-    return window_rate(before, nb, after, n_after, lo_cut, hi_cut, adaptive, noise_q, tolerance, limits)
 
 
 @njit(cache=True)
@@ -212,8 +206,6 @@ def advance_rates(bits8, n, first, ring, count, next_inst, instants, m_all, k_si
                 break
         if not pending:
             continue
-        before = np.empty(k_side, np.int64)
-        after = np.empty(k_side, np.int64)
         words = np.empty(chunk, np.uint64)
         acc = np.empty((8, chunk // 8), np.uint64)
         for t0 in range(0, n, 64):
@@ -247,14 +239,16 @@ def advance_rates(bits8, n, first, ring, count, next_inst, instants, m_all, k_si
                     word &= word - one
                     c += 1
                     while c >= k_side and m < m_total and ring[j, (c - k_side) & mask] > instants[m]:
-                        r, used, span, cut = _complete(ring, c, j, k_side, instants[m], k_side, lo_cut, 0,
-                                                       adaptive, noise_q, tolerance, limits, before, after)
+                        r, used, span, cut = ring_rate(ring, j, c, k_side, k_side, lo_cut, 0, adaptive, noise_q,
+                                                       tolerance, limits)
                         s = m % n_slots
                         out_rate[s, j] = r
                         out_used[s, j] = used
                         out_span[s, j] = span
                         out_cut[s, j] = cut
                         m += 1
+                    if m >= m_all:
+                        break  # the pixel is done: its ring is not read again
                 count[j] = c
                 next_inst[j] = m
 
@@ -310,8 +304,6 @@ def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_
     for j in prange(p):
         if next_inst[j] >= upto:
             continue
-        before = np.empty(k_side, np.int64)
-        after = np.empty(k_side, np.int64)
         c = count[j]
         while next_inst[j] < upto:
             m = next_inst[j]
@@ -319,8 +311,8 @@ def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_
             n_after = 0
             while n_after < min(k_side, c) and n_after < size and ring[j, (c - 1 - n_after) & mask] > k:
                 n_after += 1
-            r, used, span, cut = _complete(ring, c, j, k_side, k, n_after, lo_cut, hi_cut, adaptive, noise_q,
-                                           tolerance, limits, before, after)
+            r, used, span, cut = ring_rate(ring, j, c, n_after, k_side, lo_cut, hi_cut, adaptive, noise_q,
+                                           tolerance, limits)
             s = m % n_slots
             out_rate[s, j] = r
             out_used[s, j] = used
