@@ -1,7 +1,8 @@
 """Compiled kernels of :mod:`viform.vision.flow` (private; the module's notes explain the method).
 
-* :func:`advance_rates` / :func:`force_rates`: multi-interval rates at many instants in one
-  sequential pass over the spikes (a ring of each pixel's last 2K spike ticks);
+* :func:`collect_before`, :func:`advance_rates` / :func:`force_rates`: multi-interval rates at
+  many instants in one pass over the spikes (a ring of each pixel's last 2K spike ticks; the
+  rate by :func:`ring_rate`, the adaptive test by the table of :func:`consistent_limits`);
 * :func:`segment_log_light`: regions of similar light (Kruskal-ordered merging);
 * :func:`shift_gain`, :func:`best_shift`, :func:`unexplained_share`: the layered cost of one
   region moving over a still background, and its search;

@@ -436,10 +436,12 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
 
     Notes
     -----
-    The stream is read once, in blocks, from where every pixel has K spikes before the first
-    instant (or ``horizon_ticks`` before it) to where every instant is complete; each
-    pixel keeps its last 2K spike ticks, and an instant's rate is computed as soon as the
-    pixel has K spikes after it. Memory: the instants pending within the horizon.
+    The stream is read once, in blocks: backwards from the first instant until every pixel has
+    K spikes at or before it (or ``horizon_ticks`` back), each pixel keeping its K nearest, then
+    forwards to where every instant is complete; each pixel keeps its last 2K spike ticks, and
+    an instant's rate is computed as soon as the pixel has K spikes after it (the adaptive
+    test's verdicts looked up in a table of the test's own). Memory: the instants pending within
+    the horizon.
     """
     from viform.vision._flow_kernels import advance_rates, collect_before, force_rates
 
