@@ -215,3 +215,25 @@ def test_chained_steps_compose():
     chained = estimate_flow(spikes, 0.001, 0.001, chain_steps=4, chain_above_px=1.0, refine="none")
     assert chained.info["chained_steps"] == 4
     assert estimate_flow(spikes, 0.001, 0.001).info["chained_steps"] == 1
+
+
+@pytest.mark.parametrize("k_side, adaptive", [(4, True), (2, False), (1, True)])
+def test_one_pass_images_equal_multi_interval_imaging_on_any_width(k_side, adaptive):
+    """Widths not a multiple of 8 (the padded last word), more pixels than one chunk (1,024), dark
+    pixels (censored on both sides), a pixel firing every tick, instants at both ends and repeated."""
+    from viform.imaging.multi_interval import multi_interval_rate
+    from viform.stream.container import SpikeStream
+
+    rng = np.random.default_rng(11)
+    rate = rng.choice([0.0, 0.003, 0.05, 0.3, 0.8], size=(37, 53))
+    rate[0, :5] = 0.0
+    rate[1, 1] = 1.0
+    spikes = SpikeStream(rng.random((600, 37, 53)) < rate, 40e3, 100.0)
+    ticks = [0, 1, 1, 64, 65, 200, 263, 599]
+    images = list(spike_rate_images(spikes, ticks, spikes_per_side=k_side, adaptive=adaptive, horizon_ticks=600))
+    assert [k for k, _ in images] == ticks
+    for k, image in images:
+        expected, used, censored = multi_interval_rate(spikes, k, k_side, adaptive=adaptive)
+        np.testing.assert_allclose(image.rate, expected, rtol=1e-6)  # float32
+        assert np.array_equal(image.intervals, used) and np.array_equal(image.censored, censored)
+    assert images[0][1].censored[0, :5].all()  # no spike at all: censored

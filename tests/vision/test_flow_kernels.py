@@ -121,3 +121,22 @@ def test_rim_mean_is_the_5x5_mean_over_the_rim():
         got = rim_mean_exceeds(rim_r.astype(np.int64), rim_c.astype(np.int64), values, 20, 26, 2, threshold)
         near = np.abs(mean[rim_r, rim_c] - threshold) < 1e-9  # ties only up to rounding
         assert np.array_equal(got[~near], mean[rim_r, rim_c][~near] > threshold)
+
+
+@pytest.mark.parametrize("noise_q, tolerance", [(1.0, 3.0), (100.0, 3.0), (16250.0, 2.0), (1e4, 0.5)])
+def test_tabled_verdicts_are_the_tests_verdicts(noise_q, tolerance):
+    """consistent_limits gives, for every (intervals, span) it tables, exactly the whole intervals
+    interval_consistent accepts (checked interval by interval, up to well past the range)."""
+    from viform.imaging.multi_interval import interval_consistent
+    from viform.vision._flow_kernels import consistent_limits
+
+    limits = consistent_limits(8, 160, noise_q, tolerance)
+    accepted = 0
+    for n in range(1, 8):
+        for span in range(n, 160):
+            first, last = limits[n, span]
+            for interval in range(1, 4 * span // n + 8):
+                verdict = interval_consistent(interval, span / n, n, noise_q, tolerance)
+                assert verdict == (first <= interval <= last), (n, span, interval)
+                accepted += verdict
+    assert accepted > 0

@@ -1,7 +1,8 @@
 """Compiled kernels of :mod:`viform.vision.flow` (private; the module's notes explain the method).
 
-* :func:`advance_rates` / :func:`force_rates`: multi-interval rates at many instants in one
-  sequential pass over the spikes (a ring of each pixel's last 2K spike ticks);
+* :func:`collect_before`, :func:`advance_rates` / :func:`force_rates`: multi-interval rates at
+  many instants in one pass over the spikes (a ring of each pixel's last 2K spike ticks; the
+  rate by :func:`ring_rate`, the adaptive test by the table of :func:`consistent_limits`);
 * :func:`segment_log_light`: regions of similar light (Kruskal-ordered merging);
 * :func:`shift_gain`, :func:`best_shift`, :func:`unexplained_share`: the layered cost of one
   region moving over a still background, and its search;
@@ -14,64 +15,129 @@ import math
 
 import numpy as np
 from numba import njit, prange
+from numba.cpython.unsafe.numbers import leading_zeros, trailing_zeros
 
 from viform.imaging.multi_interval import interval_consistent
+from viform.vision._spike_front import _ctpop
 
 # ---------------------------------------------------------------------- images
 
 
 @njit(cache=True)
-def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolerance):
-    """Rate (spikes per tick), intervals used, span (ticks) and censoring of one pixel at one instant.
+def consistent_limits(n_max, span_max, noise_q, tolerance):
+    """The adaptive test's verdicts as ranges: ``limits[n, span]`` = (first, last) whole interval
+    (ticks) that :func:`~viform.imaging.multi_interval.interval_consistent` accepts beside n
+    intervals spanning ``span`` ticks (mean span / n), for n < ``n_max`` and span < ``span_max``.
 
-    ``before[:nb]`` are the spike ticks at or before the instant (nearest first), ``after[:na]``
-    those after it; ``lo_cut``/``hi_cut`` stand for a spike missing on that side (the stream's or
-    the search's end). The span grows from the interval holding the instant one interval a side
-    at a time, a side stopping at the first interval inconsistent with the span's mean (the
-    Wilson–Hilferty test of :mod:`viform.imaging.multi_interval`) when ``adaptive``. With equal
-    growth on both sides the rate is Σ 1/span over the windows of m intervals that hold the
-    instant (unbiased for any stationary tick sequence, as there); else intervals / span.
+    The test accepts τ when τ/μ lies between two bounds; τ/μ rounds monotonically in τ, so the
+    accepted whole τ form one range, found here with the test itself at its ends: a table lookup
+    gives exactly the test's verdict. (first > last: none accepted.)
     """
-    lo = before[0] if nb > 0 else lo_cut
-    hi = after[0] if na > 0 else hi_cut
+    limits = np.zeros((n_max, span_max, 2), np.int64)
+    limits[:, :, 0] = 1
+    for n in range(1, n_max):
+        for span in range(1, span_max):
+            mean = span / n
+            var = (1.0 / noise_q + 1.0 / (6.0 * mean * mean)) / 9.0
+            centre = 1.0 - 1.0 / (9.0 * noise_q)
+            reach = tolerance * np.sqrt(var * (1.0 + 1.0 / n))
+            low = max(centre - reach, 0.0)
+            high = centre + reach
+            last = int(math.floor(high * high * high * mean)) + 2
+            while last >= 1 and not interval_consistent(last, mean, n, noise_q, tolerance):
+                if last / mean < low * low * low:  # below the range: nothing is accepted
+                    last = 0
+                    break
+                last -= 1
+            if last < 1:
+                limits[n, span, 0] = 1
+                limits[n, span, 1] = 0
+                continue
+            first = min(max(int(math.ceil(low * low * low * mean)) - 2, 1), last)
+            while not interval_consistent(first, mean, n, noise_q, tolerance):
+                first += 1
+            while first > 1 and interval_consistent(first - 1, mean, n, noise_q, tolerance):
+                first -= 1
+            while interval_consistent(last + 1, mean, n, noise_q, tolerance):
+                last += 1
+            limits[n, span, 0] = first
+            limits[n, span, 1] = last
+    return limits
+
+
+@njit(cache=True, inline="always")
+def ring_rate(ring, j, count, n_after, k_side, lo_cut, hi_cut, adaptive, noise_q, tolerance, limits):
+    """Rate (spikes per tick), intervals used, span (ticks) and censoring of pixel j at one instant,
+    from its ring of spike ticks (``ring`` (P, size), size a power of two ≥ 2K; ``count`` spikes seen,
+    the ``n_after`` most recent after the instant).
+
+    The spikes at or before the instant (up to K, nearest first) and the ``n_after`` after it are read
+    from the ring in place; ``lo_cut``/``hi_cut`` stand for a spike missing on that side (the stream's
+    or the search's end). The span grows from the interval holding the instant one interval a side
+    at a time, a side stopping at the first interval inconsistent with the span's mean (the
+    Wilson–Hilferty test of :mod:`viform.imaging.multi_interval`) when ``adaptive``; ``limits``
+    (:func:`consistent_limits`) holds that test's verdicts as ranges of whole intervals for spans up
+    to its size (the same verdicts, without the divisions and root). With equal growth on both
+    sides the rate is Σ 1/span over the windows of m intervals that hold the instant (unbiased for
+    any stationary tick sequence, as there); else intervals / span. Inlined into its callers (no
+    arrays passed: a call per pixel and instant would cost more than the arithmetic).
+    """
+    mask = ring.shape[1] - 1
+    a0 = count - n_after  # ring index of the first spike after the instant; before it, the earlier ones
+    nb = 0
+    for b in range(k_side):
+        idx = a0 - 1 - b
+        if idx < 0 or idx <= count - ring.shape[1] - 1:
+            break
+        nb += 1
+    na = n_after
+    lo = ring[j, (a0 - 1) & mask] if nb > 0 else lo_cut
+    hi = ring[j, a0 & mask] if na > 0 else hi_cut
     cut = nb == 0 or na == 0
     n = 1
     i_b = 1
     i_a = 1
-    grow_b = not cut
-    grow_a = not cut
+    grow_b = not cut and nb > 1
+    grow_a = not cut and na > 1
+    n_tab = limits.shape[0]
+    s_tab = limits.shape[1]
     while grow_b or grow_a:
-        for side in range(2):
-            if side == 0 and grow_b:
-                if i_b >= nb:
-                    grow_b = False
-                    continue
-                new = before[i_b - 1] - before[i_b]
-            elif side == 1 and grow_a:
-                if i_a >= na:
-                    grow_a = False
-                    continue
-                new = after[i_a] - after[i_a - 1]
-            else:
-                continue
+        if grow_b:
+            new = ring[j, (a0 - i_b) & mask] - ring[j, (a0 - 1 - i_b) & mask]
+            ok = True
             if adaptive:
-                if not interval_consistent(new, (hi - lo) / n, n, noise_q, tolerance):
-                    if side == 0:
-                        grow_b = False
-                    else:
-                        grow_a = False
-                    continue
-            if side == 0:
-                lo = before[i_b]
+                span = hi - lo
+                if n < n_tab and span < s_tab:
+                    ok = limits[n, span, 0] <= new <= limits[n, span, 1]
+                else:
+                    ok = interval_consistent(new, span / n, n, noise_q, tolerance)
+            if ok:
+                lo = ring[j, (a0 - 1 - i_b) & mask]
                 i_b += 1
+                n += 1
+                grow_b = i_b < nb
             else:
-                hi = after[i_a]
+                grow_b = False
+        if grow_a:
+            new = ring[j, (a0 + i_a) & mask] - ring[j, (a0 + i_a - 1) & mask]
+            ok = True
+            if adaptive:
+                span = hi - lo
+                if n < n_tab and span < s_tab:
+                    ok = limits[n, span, 0] <= new <= limits[n, span, 1]
+                else:
+                    ok = interval_consistent(new, span / n, n, noise_q, tolerance)
+            if ok:
+                hi = ring[j, (a0 + i_a) & mask]
                 i_a += 1
-            n += 1
+                n += 1
+                grow_a = i_a < na
+            else:
+                grow_a = False
     if i_b == i_a and not cut:
         total = 0.0
-        for w in range(i_b):
-            total += 1.0 / (after[i_b - 1 - w] - before[w])
+        for w in range(i_b):  # after[i_b − 1 − w] − before[w]
+            total += 1.0 / (ring[j, (a0 + i_b - 1 - w) & mask] - ring[j, (a0 - 1 - w) & mask])
         rate = total
     else:
         rate = n / max(hi - lo, 1)
@@ -79,90 +145,156 @@ def window_rate(before, nb, after, na, lo_cut, hi_cut, adaptive, noise_q, tolera
 
 
 @njit(cache=True)
-def _complete(ring, count, j, k_side, instant, n_after, lo_cut, hi_cut, adaptive, noise_q, tolerance,
-              before, after):
-    """Rate of pixel j at ``instant`` from its ring (P, size: a power of two ≥ 2K): the n_after
-    most recent spikes are after the instant."""
-    mask = ring.shape[1] - 1
-    for a in range(n_after):  # chronological: nearest to the instant first
-        after[a] = ring[j, (count - n_after + a) & mask]
-    nb = 0
-    for b in range(k_side):
-        idx = count - n_after - 1 - b
-        if idx < 0 or idx <= count - ring.shape[1] - 1:
-            break
-        before[b] = ring[j, idx & mask]
-        nb += 1
-    return window_rate(before, nb, after, n_after, lo_cut, hi_cut, adaptive, noise_q, tolerance)
+def _pack_ticks(bits8, t0, t1, j0, width, acc, words):
+    """Each pixel's spikes of ticks [t0, t1) (t1 − t0 ≤ 64) as one word, tick t0 in bit 0.
 
-
-#: De Bruijn multiplier and table: the index of the lowest set bit of a 64-bit word without a loop.
-_DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
-_DEBRUIJN_INDEX = np.zeros(64, np.int64)
-for _k in range(64):
-    _DEBRUIJN_INDEX[((1 << _k) * 0x03F79D71B4CB0A89 % (1 << 64)) >> 58] = _k
-del _k
+    ``bits8`` (n, P8) uint64: 8 pixels' bytes (0 or 1) per word. A shift and an OR per 8 pixels
+    and tick put up to 8 ticks of each pixel in its byte of ``acc`` (8, width / 8) uint64; the bytes
+    of the 8 groups then make the pixel's word (``words``, the chunk's ``width`` pixels).
+    """
+    q0 = j0 // 8
+    w8 = (width + 7) // 8
+    n_groups = (t1 - t0 + 7) // 8
+    for g in range(n_groups):
+        row_acc = acc[g]
+        for q in range(w8):
+            row_acc[q] = 0
+        for r in range(min(8, t1 - t0 - 8 * g)):
+            row = bits8[t0 + 8 * g + r]
+            sh = np.uint64(r)
+            for q in range(w8):
+                row_acc[q] |= row[q0 + q] << sh
+    bytes_ = acc.view(np.uint8)  # (8, 8 · w8): byte j of group g holds ticks 8g … 8g + 7 of pixel j
+    for jj in range(width):
+        words[jj] = 0
+    for g in range(n_groups):
+        sh = np.uint64(8 * g)
+        row_b = bytes_[g]
+        for jj in range(width):
+            words[jj] |= np.uint64(row_b[jj]) << sh
 
 
 @njit(cache=True, parallel=True)
-def advance_rates(bits, first, ring, count, next_inst, instants, k_side, adaptive, noise_q, tolerance,
-                  lo_cut, out_rate, out_used, out_span, out_cut):
-    """Feed ticks [first, first + n) of ``bits`` (n, P) to every pixel's ring of spike ticks
+def advance_rates(bits8, n, first, ring, count, next_inst, instants, m_all, k_side, adaptive, noise_q, tolerance,
+                  limits, lo_cut, out_rate, out_used, out_span, out_cut):
+    """Feed ticks [first, first + n) of ``bits8`` to every pixel's ring of spike ticks
     (``ring`` (P, size), size a power of two ≥ 2K; ``count`` the spikes seen per pixel).
 
-    Whenever a pixel has K spikes after its next pending instant, that instant's rate is
-    computed and written to slot ``m % n_slots`` of the outputs (n_slots, P). Ticks are taken
-    64 at a time: each pixel's spikes among them are packed into one word (a vectorized pass
-    over the rows), then walked lowest bit first, the pixel's ring staying in cache.
+    ``bits8`` (n, ⌈P/8⌉) uint64 holds the ticks' bytes (0 or 1, one per pixel, the last word
+    padded with zeros). Whenever a pixel has K spikes after its next pending instant, that
+    instant's rate is computed and written to slot ``m % n_slots`` of the outputs (n_slots, P).
+    A pixel with all ``m_all`` instants of the pass done is left alone (nothing reads its ring
+    again). Ticks are taken 64 at a time: each pixel's spikes among them are packed into one
+    word (:func:`_pack_ticks`), then walked lowest bit first (LLVM's count of trailing zeros),
+    the pixel's ring staying in cache; a word wholly at or before the pixel's next instant only
+    leaves its last ``size`` spikes in the ring (the earlier ones would be overwritten), so only
+    those are written.
     """
-    n, p = bits.shape
+    p = count.size
     m_total = instants.size
     n_slots = out_rate.shape[0]
-    mask = ring.shape[1] - 1
+    size = ring.shape[1]
+    mask = size - 1
     chunk = 1024
     one = np.uint64(1)
-    shift = np.uint64(58)
     for ch in prange((p + chunk - 1) // chunk):
-        before = np.empty(k_side, np.int64)
-        after = np.empty(k_side, np.int64)
-        words = np.zeros(chunk, np.uint64)
         j0 = ch * chunk
         width = min(j0 + chunk, p) - j0
+        pending = False
+        for jj in range(width):
+            if next_inst[j0 + jj] < m_all:
+                pending = True
+                break
+        if not pending:
+            continue
+        words = np.empty(chunk, np.uint64)
+        acc = np.empty((8, chunk // 8), np.uint64)
         for t0 in range(0, n, 64):
-            for jj in range(width):
-                words[jj] = 0
-            for i in range(t0, min(n, t0 + 64)):
-                row = bits[i]
-                bit = np.uint64(i - t0)
-                for jj in range(width):
-                    words[jj] |= np.uint64(row[j0 + jj]) << bit
+            t1 = min(n, t0 + 64)
+            _pack_ticks(bits8, t0, t1, j0, width, acc, words)
+            base = first + t0
             for jj in range(width):
                 word = words[jj]
                 if word == 0:
                     continue
                 j = j0 + jj
-                c = count[j]
                 m = next_inst[j]
+                if m >= m_all:
+                    continue
+                c = count[j]
+                if m >= m_total or base + t1 - t0 - 1 <= instants[m]:
+                    # no instant completes within this word: only its last `size` spikes stay in the ring
+                    skip = np.int64(_ctpop(word)) - size
+                    if skip > 0:
+                        c += skip
+                        for _ in range(skip):
+                            word &= word - one
+                    while word != 0:
+                        ring[j, c & mask] = base + np.int64(trailing_zeros(word))
+                        word &= word - one
+                        c += 1
+                    count[j] = c
+                    continue
                 while word != 0:
-                    low = word & (~word + one)
-                    word ^= low
-                    ring[j, c & mask] = first + t0 + _DEBRUIJN_INDEX[(low * _DEBRUIJN) >> shift]
+                    ring[j, c & mask] = base + np.int64(trailing_zeros(word))
+                    word &= word - one
                     c += 1
                     while c >= k_side and m < m_total and ring[j, (c - k_side) & mask] > instants[m]:
-                        r, used, span, cut = _complete(ring, c, j, k_side, instants[m], k_side, lo_cut, 0,
-                                                       adaptive, noise_q, tolerance, before, after)
+                        r, used, span, cut = ring_rate(ring, j, c, k_side, k_side, lo_cut, 0, adaptive, noise_q,
+                                                       tolerance, limits)
                         s = m % n_slots
                         out_rate[s, j] = r
                         out_used[s, j] = used
                         out_span[s, j] = span
                         out_cut[s, j] = cut
                         m += 1
+                    if m >= m_all:
+                        break  # the pixel is done: its ring is not read again
                 count[j] = c
                 next_inst[j] = m
 
 
 @njit(cache=True, parallel=True)
-def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_q, tolerance, lo_cut, hi_cut,
+def collect_before(bits8, n, first, k_side, nearest, found):
+    """Ticks [first, first + n) of ``bits8`` read from the last back: each pixel with fewer than
+    ``k_side`` spikes ``found`` takes its spikes nearest the end first (``nearest[j, i]``, the i-th
+    nearest found), until it has K. Chunks of pixels that all have K are not read.
+    """
+    p = found.size
+    chunk = 1024
+    one = np.uint64(1)
+    for ch in prange((p + chunk - 1) // chunk):
+        j0 = ch * chunk
+        width = min(j0 + chunk, p) - j0
+        words = np.empty(chunk, np.uint64)
+        acc = np.empty((8, chunk // 8), np.uint64)
+        t1 = n
+        while t1 > 0:
+            short = False
+            for jj in range(width):
+                if found[j0 + jj] < k_side:
+                    short = True
+                    break
+            if not short:
+                break
+            t0 = max(0, t1 - 64)
+            _pack_ticks(bits8, t0, t1, j0, width, acc, words)
+            for jj in range(width):
+                j = j0 + jj
+                c = found[j]
+                word = words[jj]
+                while word != 0 and c < k_side:
+                    high = 63 - np.int64(leading_zeros(word))
+                    nearest[j, c] = first + t0 + high
+                    word ^= one << np.uint64(high)
+                    c += 1
+                found[j] = c
+            t1 = t0
+
+
+@njit(cache=True, parallel=True)
+def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_q, tolerance, limits, lo_cut,
+                hi_cut,
                 out_rate, out_used, out_span, out_cut):
     """Complete every pending instant before index ``upto`` with the spikes seen so far (fewer
     than K after it: the search stopped at ``hi_cut``)."""
@@ -173,8 +305,6 @@ def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_
     for j in prange(p):
         if next_inst[j] >= upto:
             continue
-        before = np.empty(k_side, np.int64)
-        after = np.empty(k_side, np.int64)
         c = count[j]
         while next_inst[j] < upto:
             m = next_inst[j]
@@ -182,8 +312,8 @@ def force_rates(ring, count, next_inst, instants, upto, k_side, adaptive, noise_
             n_after = 0
             while n_after < min(k_side, c) and n_after < size and ring[j, (c - 1 - n_after) & mask] > k:
                 n_after += 1
-            r, used, span, cut = _complete(ring, c, j, k_side, k, n_after, lo_cut, hi_cut, adaptive, noise_q,
-                                           tolerance, before, after)
+            r, used, span, cut = ring_rate(ring, j, c, n_after, k_side, lo_cut, hi_cut, adaptive, noise_q,
+                                           tolerance, limits)
             s = m % n_slots
             out_rate[s, j] = r
             out_used[s, j] = used

@@ -61,7 +61,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass, field
-from functools import partial
+from functools import lru_cache, partial
 from pathlib import Path
 
 import numpy as np
@@ -384,6 +384,32 @@ def _block_ticks(pixels: int) -> int:
     return int(np.clip(2 ** 23 // max(1, pixels), 8, 256))
 
 
+def _byte_words(block, pixels: int) -> np.ndarray:
+    """Ticks (n, …) of spikes as (n, ⌈P/8⌉) uint64: each word 8 pixels' bytes (0 or 1), the last
+    padded with zeros; a view of the block where its layout allows, else an aligned copy."""
+    n = block.shape[0]
+    flat = np.ascontiguousarray(block).reshape(n, pixels).view(np.uint8)
+    if pixels % 8 or flat.ctypes.data % 8:
+        padded = np.zeros((n, -(-pixels // 8) * 8), np.uint8)
+        padded[:, :pixels] = flat
+        flat = padded
+    return flat.view(np.uint64)
+
+
+#: Spans (ticks) up to which the adaptive test's verdicts are tabled (:func:`_test_limits`).
+TABLED_SPAN_TICKS = 2048
+
+
+@lru_cache(maxsize=8)
+def _test_limits(k_side: int, noise_q: float, tolerance: float) -> np.ndarray:
+    """The adaptive test's verdicts as interval ranges per (intervals, span), read-only (shared by calls)."""
+    from viform.vision._flow_kernels import consistent_limits
+
+    limits = consistent_limits(2 * k_side, TABLED_SPAN_TICKS, float(noise_q), float(tolerance))
+    limits.setflags(write=False)
+    return limits
+
+
 def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool = True, tolerance: float = 3.0,
                       horizon_ticks: int = 1024, noise_threshold_electrons: float | None = None):
     """Multi-interval rate images at many instants, in one pass over the spikes: yields ``(tick, RateImage)``.
@@ -410,12 +436,14 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
 
     Notes
     -----
-    The stream is read once, in blocks, from where every pixel has K spikes before the first
-    instant (or ``horizon_ticks`` before it) to where every instant is complete; each
-    pixel keeps its last 2K spike ticks, and an instant's rate is computed as soon as the
-    pixel has K spikes after it. Memory: the instants pending within the horizon.
+    The stream is read once, in blocks: backwards from the first instant until every pixel has
+    K spikes at or before it (or ``horizon_ticks`` back), each pixel keeping its K nearest, then
+    forwards to where every instant is complete; each pixel keeps its last 2K spike ticks, and
+    an instant's rate is computed as soon as the pixel has K spikes after it (the adaptive
+    test's verdicts looked up in a table of the test's own). Memory: the instants pending within
+    the horizon.
     """
-    from viform.vision._flow_kernels import advance_rates, force_rates
+    from viform.vision._flow_kernels import advance_rates, collect_before, force_rates
 
     k_side = check_int("spikes_per_side", spikes_per_side, 1)
     check_positive("tolerance", tolerance)
@@ -434,16 +462,22 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
     h, w = source.height, source.width
     pixels = h * w
     block = _block_ticks(pixels)
-    # where to start: every pixel's K spikes before the first instant, or the horizon
+    # where to start: every pixel's K spikes before the first instant, or the horizon. The blocks
+    # read back to there are read once: each pixel's K spikes nearest the instant are kept (what a
+    # forward pass from the start would leave in its ring), and the forward pass starts after it.
     first = int(instants[0])
     start = first + 1
-    counts = np.zeros(pixels, np.int64)
+    ring = np.zeros((pixels, 1 << (2 * k_side - 1).bit_length()), np.int64)  # a power of two ≥ 2K per pixel
+    count = np.zeros(pixels, np.int64)
     floor = max(0, first + 1 - horizon)
-    while start > floor and counts.min() < k_side:
+    while start > floor and count.min() < k_side:
         a = max(floor, start - block)
-        counts += source.read_ticks(a, start).reshape(start - a, pixels).sum(axis=0, dtype=np.int64)
+        collect_before(_byte_words(source.read_ticks(a, start), pixels), start - a, a, k_side, ring, count)
         start = a
         block = min(2 * block, _block_ticks(pixels) * 8)
+    # nearest first → oldest first, as a forward pass leaves its ring (count: the spikes it holds)
+    nearest = np.clip(count[:, None] - 1 - np.arange(k_side), 0, None)
+    ring[:, :k_side] = np.take_along_axis(ring[:, :k_side], nearest, axis=1)
     block = _block_ticks(pixels)
     lo_cut = start - 1  # a spike missing before the instant: taken just before the first tick read
     span = max(int(instants[-1] - instants[0]), 1)
@@ -455,12 +489,10 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
     out_used = np.empty((n_slots, pixels), np.int16)
     out_span = np.empty((n_slots, pixels), np.int32)
     out_cut = np.empty((n_slots, pixels), np.bool_)
-    ring = np.zeros((pixels, 1 << (2 * k_side - 1).bit_length()), np.int64)  # a power of two ≥ 2K per pixel
-    count = np.zeros(pixels, np.int64)
     next_inst = np.zeros(pixels, np.int64)
     emitted = 0
     position = start
-    args = (k_side, bool(adaptive), float(q), float(tolerance))
+    args = (k_side, bool(adaptive), float(q), float(tolerance), _test_limits(k_side, q, tolerance))
 
     def ready(upto):
         nonlocal emitted
@@ -482,9 +514,12 @@ def spike_rate_images(source, ticks, *, spikes_per_side: int = 4, adaptive: bool
             # instants past the slots are not pending yet: read no further than the first of them
             # (a pixel's ring holds only the spikes its pending instants need)
             stop = min(stop, max(int(instants[emitted + n_slots]) + 1, position + 1))
-        bits = source.read_ticks(position, stop).reshape(stop - position, pixels).view(np.uint8)
-        advance_rates(bits, position, ring, count, next_inst, instants[: emitted + n_slots], *args, lo_cut,
-                      out_rate, out_used, out_span, out_cut)
+        # ticks up to the first instant were read already (above); the blocks stay where they were
+        read_from = max(position, first + 1)
+        if stop > read_from:
+            bits8 = _byte_words(source.read_ticks(read_from, stop), pixels)
+            advance_rates(bits8, stop - read_from, read_from, ring, count, next_inst, instants[: emitted + n_slots],
+                          instants.size, *args, lo_cut, out_rate, out_used, out_span, out_cut)
         position = stop
         # instants whose horizon has passed are completed with what was found
         late = int(np.searchsorted(instants, position - horizon, side="left"))
