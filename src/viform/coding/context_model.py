@@ -307,10 +307,11 @@ def new_probabilities(young):
 
 @njit(cache=True, nogil=True)
 def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_start, seg_end, width, strict,
-                   out, rec_s, young=False):
+                   out, rec_s, young):
     """Code one segment's records into ``out``; returns the byte count (> out.size: retry bigger).
 
-    ``young`` (version 5): young contexts learn at their running frequency (see :func:`_adapt`).
+    ``young`` (a bool, True for version 5, always passed: an omitted argument is another compiled
+    specialisation): young contexts learn at their running frequency (see :func:`_adapt`).
     """
     npix = counts.size
     probs = new_probabilities(young)
@@ -430,8 +431,11 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
 
 @njit(cache=True, nogil=True)
 def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict, n_rec,
-                   counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s, young=False):
+                   counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s, young):
     """Inverse of :func:`encode_segment`. Returns an error code (0 ok); arrays are filled in place.
+
+    ``data``: the coded bytes as a read-only uint8 array (``np.frombuffer``), as every reader passes
+    them (a writable array would be another compiled specialisation); ``young`` as for encoding.
 
     ``rec_m, rec_g, rec_o, rec_s`` must hold at least ``n_rec`` records.
     """
