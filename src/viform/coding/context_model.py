@@ -223,7 +223,10 @@ def _dbucket(d, have):
 
 @njit(cache=True)
 def _nb_width(n, q, rec_start, counts, rec_s, rec_o, ref0, ptr, slot):
-    """Width of neighbour pixel n's interval holding tick q (−1 unknown); ptr[slot] walks forward."""
+    """Width of neighbour pixel n's interval holding tick q (−1 unknown); ptr[slot] walks forward.
+
+    Callers pass ``slot`` as ``np.int64(k)``, not a literal ``k``: numba would compile one copy per literal.
+    """
     lo = rec_start[n] + (1 if ref0[n] == 0 and counts[n] > 0 else 0)
     hi = rec_start[n] + counts[n]
     k = max(ptr[slot], lo)
@@ -247,17 +250,17 @@ def _nb_mean(p, width, q, rec_start, counts, rec_s, rec_o, ref0, ptr):
     tot = np.int64(0)
     cnt = 0
     if col > 0:
-        w = _nb_width(p - 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 0)
+        w = _nb_width(p - 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, np.int64(0))
         if w > 0:
             tot += w
             cnt += 1
     if row > 0:
-        w = _nb_width(p - width, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 1)
+        w = _nb_width(p - width, q, rec_start, counts, rec_s, rec_o, ref0, ptr, np.int64(1))
         if w > 0:
             tot += w
             cnt += 1
         if col + 1 < width:
-            w = _nb_width(p - width + 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 2)
+            w = _nb_width(p - width + 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, np.int64(2))
             if w > 0:
                 tot += w
                 cnt += 1
