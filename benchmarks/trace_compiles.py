@@ -25,7 +25,8 @@ Run::
 ``--cold`` gives the command an empty numba cache (``NUMBA_CACHE_DIR``) and an empty viform cache
 (``VIFORM_CACHE_DIR``) in a temporary folder, removed afterwards; without it the command uses the
 caches as they are (and then lists only what was missing). The command's total CPU (user + sys of
-every process it started and waited for) and the load average before and after are printed too.
+every process it started and waited for), the CPU of each Python process that exited normally (the
+subprocesses of tests: start-up and cache loads), and the load average before and after are printed too.
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def _install(event):
             if stack:
                 stack[-1][2] += inclusive
             data = ev.data or {}
-            rec = {"pid": os.getpid(), "name": _name(data.get("dispatcher")),
+            rec = {"kind": "compile", "pid": os.getpid(), "name": _name(data.get("dispatcher")),
                    "sig": "(" + ", ".join(str(a) for a in data.get("args", ())) + ")",
                    "cpu_s": inclusive, "self_cpu_s": inclusive - nested,
                    "wall_s": time.perf_counter() - w0, "depth": len(stack)}
@@ -108,8 +109,19 @@ class _Finder(importlib.abc.MetaPathFinder):
         return spec
 
 
+def _at_exit():
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    rec = {"kind": "process", "pid": os.getpid(), "argv": sys.argv[:6], "cpu_s": ru.ru_utime + ru.ru_stime}
+    with _write_lock:
+        with open(_OUT, "a") as fh:
+            fh.write(json.dumps(rec) + "\n")
+
+
 if _OUT:
     sys.meta_path.insert(0, _Finder())
+    import atexit
+    atexit.register(_at_exit)
 '''
 
 
@@ -212,8 +224,15 @@ def main(argv=None) -> int:
         if os.path.exists(out):
             with open(out) as fh:
                 records = [json.loads(line) for line in fh if line.strip()]
+        procs = [r for r in records if r.get("kind") == "process"]
+        records = [r for r in records if r.get("kind", "compile") == "compile"]
         summary = summarise(records)
         report(summary, args.top)
+        if procs:
+            print(f"\nPython processes that exited normally: {len(procs)}, "
+                  f"{sum(p['cpu_s'] for p in procs):.1f} CPU-s; costliest:")
+            for p in sorted(procs, key=lambda p: -p["cpu_s"])[:10]:
+                print(f"  {p['cpu_s']:7.2f}  {' '.join(p['argv'])[:100]}")
         print(f"\ncommand: exit {rc}, {wall:.1f} s wall, CPU user {user:.1f} s + sys {sys_:.1f} s = "
               f"{(user + sys_) / 60:.2f} CPU-min; load after: {_load()}")
         if args.json:
@@ -222,7 +241,8 @@ def main(argv=None) -> int:
                                         "processes": len(v["pids"])} for s, v in d["sigs"].items()}}
                        for n, d in summary["by_name"].items()}
             with open(args.json, "w") as fh:
-                json.dump({**summary, "by_name": by_name, "records": records, "command": command,
+                json.dump({**summary, "by_name": by_name, "records": records, "processes_exited": procs,
+                           "command": command,
                            "exit": rc, "wall_s": wall, "cpu_user_s": user, "cpu_sys_s": sys_}, fh, indent=1)
         return rc
     finally:
