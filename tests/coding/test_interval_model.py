@@ -34,13 +34,15 @@ def _code(spikes, width, segment_ticks):
                               enc_state.tau_ref, seg.start_tick, counts, ticks)
         out = np.empty(4 * seg.n_spikes + n_pix + 4096, np.uint8)
         end = seg.start_tick + seg.n_ticks
-        n = im.encode_segment(counts, ticks, enc_state.anchor, st_e, pr_e, seg.start_tick, end, width, out)
+        n = im.encode_segment(counts, ticks, enc_state.anchor, st_e, pr_e, seg.start_tick, end, width, out, 3)
         assert n <= out.size
         total += n
         got_counts = np.empty(n_pix, np.int64)
         got = np.empty(seg.n_spikes + 1, np.int64)
-        err, n_sp = im.decode_segment(out[:n], n_pix, enc_state.anchor, st_d, pr_d, seg.start_tick, end, width,
-                                      seg.n_spikes, got_counts, got)
+        # read-only bytes, as the readers pass them (the same compiled specialisation)
+        data = np.frombuffer(out[:n].tobytes(), np.uint8)
+        err, n_sp = im.decode_segment(data, n_pix, enc_state.anchor, st_d, pr_d, seg.start_tick, end, width,
+                                      seg.n_spikes, got_counts, got, 3)
         assert err == 0 and n_sp == seg.n_spikes
         assert np.array_equal(got_counts, counts) and np.array_equal(got[:n_sp], ticks[:n_sp])
         # spike ticks back to the first-spike records (the strict rule) give the same records

@@ -148,6 +148,6 @@ def test_size_is_the_information_coded():
 
 def test_a_value_outside_the_range_sets_the_error_flag():
     """Bytes that no encoder writes for n = 3 (the code word past the range) decode to the flag, not a crash."""
-    data = np.full(8, 0xFF, np.uint8)
+    data = np.frombuffer(b"\xff" * 8, np.uint8)  # read-only, as the readers pass bytes (one compiled form)
     v, st = rc.decode_uniform(rc.decoder_start(data), data, 3)
     assert st[3] == 1 and 0 <= v < 3

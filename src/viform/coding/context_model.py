@@ -223,7 +223,10 @@ def _dbucket(d, have):
 
 @njit(cache=True)
 def _nb_width(n, q, rec_start, counts, rec_s, rec_o, ref0, ptr, slot):
-    """Width of neighbour pixel n's interval holding tick q (−1 unknown); ptr[slot] walks forward."""
+    """Width of neighbour pixel n's interval holding tick q (−1 unknown); ptr[slot] walks forward.
+
+    Callers pass ``slot`` as ``np.int64(k)``, not a literal ``k``: numba would compile one copy per literal.
+    """
     lo = rec_start[n] + (1 if ref0[n] == 0 and counts[n] > 0 else 0)
     hi = rec_start[n] + counts[n]
     k = max(ptr[slot], lo)
@@ -247,17 +250,17 @@ def _nb_mean(p, width, q, rec_start, counts, rec_s, rec_o, ref0, ptr):
     tot = np.int64(0)
     cnt = 0
     if col > 0:
-        w = _nb_width(p - 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 0)
+        w = _nb_width(p - 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, np.int64(0))
         if w > 0:
             tot += w
             cnt += 1
     if row > 0:
-        w = _nb_width(p - width, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 1)
+        w = _nb_width(p - width, q, rec_start, counts, rec_s, rec_o, ref0, ptr, np.int64(1))
         if w > 0:
             tot += w
             cnt += 1
         if col + 1 < width:
-            w = _nb_width(p - width + 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, 2)
+            w = _nb_width(p - width + 1, q, rec_start, counts, rec_s, rec_o, ref0, ptr, np.int64(2))
             if w > 0:
                 tot += w
                 cnt += 1
@@ -307,10 +310,11 @@ def new_probabilities(young):
 
 @njit(cache=True, nogil=True)
 def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, seg_start, seg_end, width, strict,
-                   out, rec_s, young=False):
+                   out, rec_s, young):
     """Code one segment's records into ``out``; returns the byte count (> out.size: retry bigger).
 
-    ``young`` (version 5): young contexts learn at their running frequency (see :func:`_adapt`).
+    ``young`` (a bool, True for version 5, always passed: an omitted argument is another compiled
+    specialisation): young contexts learn at their running frequency (see :func:`_adapt`).
     """
     npix = counts.size
     probs = new_probabilities(young)
@@ -430,8 +434,11 @@ def encode_segment(counts, rec_m, rec_g, rec_o, tail_m, tail_g, anchor0, ref0, s
 
 @njit(cache=True, nogil=True)
 def decode_segment(data, npix, anchor0, ref0, seg_start, seg_end, width, strict, n_rec,
-                   counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s, young=False):
+                   counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s, young):
     """Inverse of :func:`encode_segment`. Returns an error code (0 ok); arrays are filled in place.
+
+    ``data``: the coded bytes as a read-only uint8 array (``np.frombuffer``), as every reader passes
+    them (a writable array would be another compiled specialisation); ``young`` as for encoding.
 
     ``rec_m, rec_g, rec_o, rec_s`` must hold at least ``n_rec`` records.
     """

@@ -443,12 +443,14 @@ def _nb_mu(st, q, width, npix):
 # ---------------------------------------------------------------------------- encoder
 
 @njit(cache=True, nogil=True)
-def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, out, model=3):
+def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, out, model):
     """Code one segment: per pixel (row-major) its spike ticks ``ticks`` (grouped by pixel, ``counts`` each).
 
     ``last0``: each pixel's last spike tick before the segment (−1: never fired); ``st``: the
     predictor state (P, STATE_ROWS) and ``probs`` the adaptive probabilities, both advanced in
-    place. Returns the byte count (> out.size: retry bigger from copies of the state).
+    place; ``model``: the predictor, 3 (version 3's) or 4 (versions 4 and later), an int, always
+    passed (numba compiles an omitted or literal argument as another specialisation).
+    Returns the byte count (> out.size: retry bigger from copies of the state).
     """
     npix = counts.size
     rc = encoder_start()
@@ -542,8 +544,11 @@ def encode_segment(counts, ticks, last0, st, probs, seg_start, seg_end, width, o
 # ---------------------------------------------------------------------------- decoder
 
 @njit(cache=True, nogil=True)
-def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_spikes, counts, ticks, model=3):
+def decode_segment(data, npix, last0, st, probs, seg_start, seg_end, width, n_spikes, counts, ticks, model):
     """Inverse of :func:`encode_segment`. Returns (error code, spikes decoded); arrays filled in place.
+
+    ``data``: the coded bytes as a read-only uint8 array (``np.frombuffer`` of the payload), as every
+    reader passes them: a writable array would be another compiled specialisation.
 
     ``ticks`` must hold the spikes: when it is full the code is 2 (the caller may grow it and
     decode again from copies of the state, or give up when the segment states fewer spikes).

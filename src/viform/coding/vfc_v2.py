@@ -25,7 +25,8 @@ def _encode_payload_v2(seg: Segment, anchor0, ref0, width: int, strict: bool, zc
     while True:
         out = np.empty(size, np.uint8)
         n = context_model.encode_segment(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
-                                         seg.start_tick, seg.start_tick + seg.n_ticks, width, strict, out, rec_s)
+                                         seg.start_tick, seg.start_tick + seg.n_ticks, width, strict, out, rec_s,
+                                         False)
         if n <= size:
             break
         size = 2 * n
@@ -73,7 +74,7 @@ def _decode_records(data, n_pixels: int, width: int, anchor0, ref0, strict: bool
     while True:
         rec_m, rec_g, rec_o, rec_s = (np.empty(cap, np.int64) for _ in range(4))
         err = context_model.decode_segment(data, n_pixels, anchor0, ref0, start, start + n_ticks, width, strict,
-                                           n_rec, counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s)
+                                           n_rec, counts, rec_m, rec_g, rec_o, tail_m, tail_g, rec_s, False)
         if err != context_model.TOO_MANY_RECORDS or cap >= n_rec:
             break
         cap = min(n_rec, 4 * cap)

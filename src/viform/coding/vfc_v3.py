@@ -41,7 +41,7 @@ def _encode_payload_v3(seg: Segment, anchor0, ref0, width: int, ivstate: np.ndar
         ivprobs[...] = start_probs
         out = np.empty(size, np.uint8)
         n = interval_model.encode_segment(tick_counts, ticks, anchor0, ivstate, ivprobs, seg.start_tick,
-                                          seg.start_tick + seg.n_ticks, width, out)
+                                          seg.start_tick + seg.n_ticks, width, out, 3)
         if n <= size:
             break
         size = 2 * n
@@ -56,7 +56,8 @@ def _encode_payload_v3(seg: Segment, anchor0, ref0, width: int, ivstate: np.ndar
     while 8 * n >= 0.8 * n_spikes:
         out2 = np.empty(size, np.uint8)
         n2 = context_model.encode_segment(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
-                                          seg.start_tick, seg.start_tick + seg.n_ticks, width, True, out2, rec_s)
+                                          seg.start_tick, seg.start_tick + seg.n_ticks, width, True, out2, rec_s,
+                                          False)
         if n2 <= size:
             if n2 < n:
                 flag, body = _FLAG_RECORDS, out2[:n2]
@@ -104,7 +105,7 @@ def _decode_payload_v3(payload: bytes, n_pixels: int, width: int, anchor0, ref0,
         interval_model.ticks_from_records(seg.counts, seg.m, seg.g, seg.o, seg.tail_m, seg.tail_g, anchor0, ref0,
                                           start, tick_counts, ticks)
         interval_model.encode_segment(tick_counts, ticks, anchor0, ivstate, ivprobs, start, start + n_ticks, width,
-                                      np.empty(1, np.uint8))
+                                      np.empty(1, np.uint8), 3)
         return seg, spikes
     tick_counts = np.empty(n_pixels, np.int64)
     # the tick array grows with the spikes actually decoded (×4 and decode again when full), never to the
@@ -116,7 +117,7 @@ def _decode_payload_v3(payload: bytes, n_pixels: int, width: int, anchor0, ref0,
         ivprobs[...] = start_probs
         ticks = np.empty(cap, np.int64)
         err, _ = interval_model.decode_segment(data, n_pixels, anchor0, ivstate, ivprobs, start, start + n_ticks, width,
-                                               spikes, tick_counts, ticks)
+                                               spikes, tick_counts, ticks, 3)
         if err != 2 or cap >= spikes:
             break
         cap = min(spikes, 4 * cap)

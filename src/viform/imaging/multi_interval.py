@@ -80,7 +80,9 @@ DEFAULT_NOISE_THRESHOLD_ELECTRONS = 1.0e4
 def _collect(block, rows_descending, first, left, found, count, wanted):
     """Record up to ``wanted`` spike ticks per listed pixel, in reading order.
 
-    ``block`` (n, P); row i is tick first + i, or first − i when ``rows_descending``.
+    ``block`` (n, P), C-contiguous, one row per tick from its first; when ``rows_descending`` the
+    rows are read last first and the last row is tick ``first`` (row n − 1 − i is tick first − i),
+    so a backward search passes the block as read, not a reversed view (one compiled form).
     Pixels are split in chunks across threads; rows outer so reads stay contiguous.
     """
     n = block.shape[0]
@@ -91,9 +93,10 @@ def _collect(block, rows_descending, first, left, found, count, wanted):
         j1 = min(j0 + chunk, m)
         for i in range(n):
             tick = first - i if rows_descending else first + i
+            row = n - 1 - i if rows_descending else i
             for jj in range(j0, j1):
                 j = left[jj]
-                if count[j] < wanted and block[i, j]:
+                if count[j] < wanted and block[row, j]:
                     found[count[j], j] = tick
                     count[j] += 1
 
@@ -128,7 +131,7 @@ def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
             if forward:
                 _collect(block, False, a, left, found, count, wanted)
             else:
-                _collect(block[::-1], True, b - 1, left, found, count, wanted)
+                _collect(block, True, b - 1, left, found, count, wanted)
             left = left[count[left] < wanted]
             pos = b if forward else a
             chunk = min(2 * chunk, limit)

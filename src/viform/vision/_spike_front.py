@@ -612,8 +612,9 @@ def _inner(shape, px):  # pragma: no cover - compiled
 @njit(cache=True)
 def opened_closed(mask):  # pragma: no cover - compiled
     """``mask & opening(closing(mask))`` with the 3 × 3 square and scipy.ndimage's borders (outside False)."""
-    closed = erode_square(dilate_square(mask, 1), 1)
-    return mask & dilate_square(erode_square(closed, 1), 1)
+    one = np.int64(1)  # not a literal 1: the dilation compiled for the int px the trackers pass serves
+    closed = erode_square(dilate_square(mask, one), one)
+    return mask & dilate_square(erode_square(closed, one), one)
 
 
 @njit(cache=True)

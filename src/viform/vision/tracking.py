@@ -277,6 +277,10 @@ class SpikeChangeDetector:
         words = np.ascontiguousarray(words, dtype=np.uint64)
         if words.ndim != 2 or words.shape[1] != self.n_words:
             raise ViformError(f"packed spikes must have shape (T, {self.n_words}); got {words.shape}")
+        # a read-only view whatever the caller holds (spikes read from a file are read-only): the kernel
+        # is compiled once, for read-only words, not once for each kind of array
+        words = words.view()
+        words.flags.writeable = False
         outs, start = [], 0
         while True:  # split at the priming checks and the primed groups' deadlines: the same ticks whatever the blocks
             prime_at = self._next_prime_check()
@@ -344,9 +348,10 @@ class SpikeChangeDetector:
         bg, censored, prev, flag_since = up(self.bg), up(self.censored), up(self.prev), up(self.flag_since)
         # per pixel, in one compiled pass: measured or not, the bound an unmeasured interval is longer than,
         # the interval (or that bound), and the longest and shortest the measured interval can be
+        # (contiguous copies: the kernel is compiled once, for C arrays, whatever the views' layouts)
         measured, bound, value, upper, lower = _front.prime_values(
-            up(self.spk[:, _front.LAST]), up(self.win_n), up(self.win_span), t,
-            math.exp(p.threshold_log))
+            np.ascontiguousarray(up(self.spk[:, _front.LAST])), np.ascontiguousarray(up(self.win_n)),
+            np.ascontiguousarray(up(self.win_span)), t, math.exp(p.threshold_log))
         log_v = np.log(value)
         H, W = log_v.shape
         # the robust median around, and whether it is measured: bounds above the median do not move it
@@ -716,7 +721,8 @@ def _grown(mask: np.ndarray, px: int = 2) -> np.ndarray:
     if rows.size:
         r0, r1 = max(rows[0] - px, 0), min(rows[-1] + px + 1, mask.shape[0])
         c0, c1 = max(cols[0] - px, 0), min(cols[-1] + px + 1, mask.shape[1])
-        out[r0:r1, c0:c1] = _front.dilate_square(mask[r0:r1, c0:c1], px)
+        # a contiguous copy of the part: one compiled form whatever the part's layout
+        out[r0:r1, c0:c1] = _front.dilate_square(np.ascontiguousarray(mask[r0:r1, c0:c1]), px)
     return out
 
 
@@ -782,7 +788,7 @@ def _opened(mask: np.ndarray) -> np.ndarray:
         return out
     r0, r1 = max(rows[0] - 3, 0), min(rows[-1] + 4, mask.shape[0])  # only the part that holds the mask
     c0, c1 = max(cols[0] - 3, 0), min(cols[-1] + 4, mask.shape[1])
-    out[r0:r1, c0:c1] = _front.opened_closed(mask[r0:r1, c0:c1])
+    out[r0:r1, c0:c1] = _front.opened_closed(np.ascontiguousarray(mask[r0:r1, c0:c1]))  # one compiled form
     return out
 
 
