@@ -18,9 +18,12 @@
 
     PYTHONPATH=src python benchmarks/bench_tracking.py [--seeds 1,2,3,4,5] [--sizes 250x400,125x200]
         [--every 10,2] [--spikeone-seeds 1,2,3] [--frame-seeds 1,2,3] [--streams DIR]
-        [--skip scores,speed,frames]
+        [--skip scores,speed,frames] [--profile]
 
-``--streams DIR`` keeps the simulated clips (``.dat``) for later runs.
+``--streams DIR`` keeps the simulated clips (``.dat``) for later runs. ``--profile`` adds, for each
+400×250 clip of the throughput part, where the tracker's CPU-seconds go: the compiled front end
+(ingest and per-step evaluation), the start-up priming checks and their confirmation, the per-step
+grouping, the association in Python, and reading the file.
 """
 
 from __future__ import annotations
@@ -200,6 +203,66 @@ def speed(args, folder):
                           f"{'met' if n / wall >= goal else 'NOT met'})")
 
 
+#: The tracker's stages timed by ``--profile`` (CPU-s, the process's): (label, owner, method).
+_STAGES = (("front end (compiled: ingest + per-step evaluation)", "SpikeChangeDetector", "_feed"),
+           ("start-up priming checks", "SpikeChangeDetector", "_prime"),
+           ("primed groups' confirmation", "SpikeChangeDetector", "_confirm"),
+           ("grouping (foreground pixels, union-find)", "SpikeChangeDetector", "components"),
+           ("association (Tracker.update, Python)", "Tracker", "update"),
+           ("  of which regrouping", "Tracker", "_regroup"),
+           ("packed words from the stored bytes", None, "_words"))
+
+
+def profile(folder):
+    """CPU-seconds per stage of one tracking run on each 400×250 clip (stages timed by wrapping their methods)."""
+    from viform.vision import tracking
+
+    print(f"\n== Where the tracker's CPU goes (400×250, one run each after a warm-up); load average "
+          f"{os.getloadavg()[0]:.1f} ==")
+    spent = {}
+
+    def timed(owner, name, label):
+        fn = getattr(owner, name)
+
+        def wrapper(*a, **k):
+            c = time.process_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                spent[label] = spent.get(label, 0.0) + time.process_time() - c
+        return fn, wrapper
+
+    saved = []
+    for label, owner, name in _STAGES:
+        obj = tracking if owner is None else getattr(tracking, owner)
+        fn, wrapper = timed(obj, name, label)
+        saved.append((obj, name, fn))
+        setattr(obj, name, wrapper)
+    try:
+        for sensor in ("spikeone", "q100"):
+            path = _clip(folder, sensor, 250, 400, 1, 0.2)
+            reader = type(open_spikes(path))
+            fn, wrapper = timed(reader, "read_packed", "reading the file (checked blocks)")
+            reader.read_packed = wrapper
+            try:
+                for every in (40, 10):
+                    track_spikes(open_spikes(path).slice_time(0, 4e-3), every)  # compiled outside the timing
+                    spent.clear()
+                    c0 = time.process_time()
+                    src = open_spikes(path)
+                    track_spikes(src, every)
+                    cpu = time.process_time() - c0
+                    print(f"  {sensor:>8}, {src.n_ticks} ticks, every {every:>2}: {cpu:.2f} CPU-s "
+                          f"({src.n_ticks / cpu:,.0f} ticks/CPU-s)")
+                    for label, v in sorted(spent.items(), key=lambda kv: -kv[1]):
+                        print(f"      {label:<52} {v:6.3f} CPU-s {100 * v / cpu:5.1f} %")
+            finally:
+                reader.read_packed = fn
+    finally:
+        for obj, name, fn in saved:
+            setattr(obj, name, fn)
+
+
 class _Marked:
     """A ``.dat`` source that notes the time of the first read at or past tick ``mark``."""
 
@@ -273,6 +336,7 @@ def main():
     ap.add_argument("--streams", default=None)
     ap.add_argument("--frame-seeds", default="1,2,3")
     ap.add_argument("--skip", default="")
+    ap.add_argument("--profile", action="store_true", help="CPU-seconds per stage of the tracker (400×250 clips)")
     a = ap.parse_args()
     skip = set(filter(None, a.skip.split(",")))
     with tempfile.TemporaryDirectory() as tmp:
@@ -282,6 +346,8 @@ def main():
             scores(a, folder)
         if "speed" not in skip:
             speed(a, folder)
+        if a.profile:
+            profile(folder)
         if "frames" not in skip:
             frames(a)
 
