@@ -90,8 +90,6 @@ _P_OC = _P_OB + _NS * 2 * 5
 _P_MB = _P_OC + _NRL * 2 * 5 * _NT
 _P_MC = _P_MB + 2 * _NK * 12
 NPROB = _P_MC + 4 * 2 * _NT * 12
-#: int64 slots of the packed contexts (the mixer's weights follow)
-_WBASE = (NPROB + 1) // 2
 #: mixer weight sets (decision: zero, sign, one, magnitude × noise bucket), three weights each
 _NWSET = 4 * _NS
 _W0 = int(0.4 * 65536)
@@ -106,101 +104,95 @@ ERRORS = {1: "value out of range", 2: "more spikes than the segment states", 3: 
 
 
 def new_probabilities() -> np.ndarray:
-    """The model's adaptive state at the start of a stream: every context at p = ½, the mixer's weights.
-
-    int64: the contexts packed two to a slot (an int32 each, ``p << 6 | n``: probability of a 0 in
-    1/65536 and bits seen, saturating at 30) in the first :data:`_WBASE` slots, then the mixer's
-    weights. Packing keeps the contexts a spike touches in fewer cache lines (the coded bytes are
-    those of the unpacked layout, the arithmetic is the same).
-    """
-    probs = np.zeros(_WBASE + 3 * _NWSET, np.int64)
-    probs.view(np.int32)[:NPROB] = (1 << (_PB - 1)) << 6
-    probs[_WBASE:] = _W0
+    """The model's adaptive state at the start of a stream: every context at p = ½, the mixer's weights."""
+    probs = np.zeros(2 * NPROB + 3 * _NWSET, np.int64)
+    probs[0:2 * NPROB:2] = 1 << (_PB - 1)
+    probs[2 * NPROB:] = _W0
     return probs
 
 
 # ---------------------------------------------------------------------------- probabilities
 
 @njit(cache=True, inline="always")
-def _adapt(cnt, wt, i, bit):
-    v = np.int64(cnt[i])
-    p = v >> 6
-    n = v & 63
+def _adapt(probs, i, bit):
+    p = probs[2 * i]
+    n = probs[2 * i + 1]
     target = 0 if bit else 65536
     p += ((target - p) * _RECIP[n]) >> 16
-    p = min(max(p, np.int64(32)), np.int64(_PMAX))
-    cnt[i] = (p << 6) | min(n + 1, _LIMIT)
+    probs[2 * i] = min(max(p, np.int64(32)), np.int64(_PMAX))
+    if n < _LIMIT:
+        probs[2 * i + 1] = n + 1
 
 
 @njit(cache=True, inline="always")
-def _mixed(cnt, wt, ia, ib, ic, wset):
+def _mixed(probs, ia, ib, ic, wset):
     """P(bit = 0) in 1/4096 mixed from contexts ia, ib, ic with weight set wset, and the stretched inputs."""
-    s1 = _ST[cnt[ia] >> 10]
-    s2 = _ST[cnt[ib] >> 10]
-    s3 = _ST[cnt[ic] >> 10]
-    w = _WBASE + 3 * wset
-    dot = (wt[w] * s1 + wt[w + 1] * s2 + wt[w + 2] * s3) >> 16
+    s1 = _ST[probs[2 * ia] >> 4]
+    s2 = _ST[probs[2 * ib] >> 4]
+    s3 = _ST[probs[2 * ic] >> 4]
+    w = 2 * NPROB + 3 * wset
+    dot = (probs[w] * s1 + probs[w + 1] * s2 + probs[w + 2] * s3) >> 16
     return _SQ[min(max(dot, -2047), 2047) + 2047], s1, s2, s3
 
 
 @njit(cache=True, inline="always")
-def _learn(cnt, wt, ia, ib, ic, wset, pm, s1, s2, s3, bit):
+def _learn(probs, ia, ib, ic, wset, pm, s1, s2, s3, bit):
     err = ((4096 if bit == 0 else 0) - pm) * _LR
-    w = _WBASE + 3 * wset
-    wt[w] += (s1 * err + 0x8000) >> 16
-    wt[w + 1] += (s2 * err + 0x8000) >> 16
-    wt[w + 2] += (s3 * err + 0x8000) >> 16
-    _adapt(cnt, wt, ia, bit)
-    _adapt(cnt, wt, ib, bit)
-    _adapt(cnt, wt, ic, bit)
+    w = 2 * NPROB + 3 * wset
+    probs[w] += (s1 * err + 0x8000) >> 16
+    probs[w + 1] += (s2 * err + 0x8000) >> 16
+    probs[w + 2] += (s3 * err + 0x8000) >> 16
+    _adapt(probs, ia, bit)
+    _adapt(probs, ib, bit)
+    _adapt(probs, ic, bit)
 
 
 @njit(cache=True, inline="always")
-def _ebit(rc, out, cnt, wt, i, bit):
-    rc = encode_bit(rc, out, np.int64(cnt[i]) >> 6, _PB, bit)
-    _adapt(cnt, wt, i, bit)
+def _ebit(rc, out, probs, i, bit):
+    rc = encode_bit(rc, out, probs[2 * i], _PB, bit)
+    _adapt(probs, i, bit)
     return rc
 
 
 @njit(cache=True, inline="always")
-def _dbit(rc, data, cnt, wt, i):
-    bit, rc = decode_bit(rc, data, np.int64(cnt[i]) >> 6, _PB)
-    _adapt(cnt, wt, i, bit)
+def _dbit(rc, data, probs, i):
+    bit, rc = decode_bit(rc, data, probs[2 * i], _PB)
+    _adapt(probs, i, bit)
     return bit, rc
 
 
 @njit(cache=True, inline="always")
-def _emix(rc, out, cnt, wt, ia, ib, ic, wset, bit):
-    pm, s1, s2, s3 = _mixed(cnt, wt, ia, ib, ic, wset)
+def _emix(rc, out, probs, ia, ib, ic, wset, bit):
+    pm, s1, s2, s3 = _mixed(probs, ia, ib, ic, wset)
     rc = encode_bit(rc, out, pm, 12, bit)
-    _learn(cnt, wt, ia, ib, ic, wset, pm, s1, s2, s3, bit)
+    _learn(probs, ia, ib, ic, wset, pm, s1, s2, s3, bit)
     return rc
 
 
 @njit(cache=True, inline="always")
-def _dmix(rc, data, cnt, wt, ia, ib, ic, wset):
-    pm, s1, s2, s3 = _mixed(cnt, wt, ia, ib, ic, wset)
+def _dmix(rc, data, probs, ia, ib, ic, wset):
+    pm, s1, s2, s3 = _mixed(probs, ia, ib, ic, wset)
     bit, rc = decode_bit(rc, data, pm, 12)
-    _learn(cnt, wt, ia, ib, ic, wset, pm, s1, s2, s3, bit)
+    _learn(probs, ia, ib, ic, wset, pm, s1, s2, s3, bit)
     return bit, rc
 
 
 @njit(cache=True)
-def _euint(rc, out, cnt, wt, base, v):
+def _euint(rc, out, probs, base, v):
     """Adaptive Elias-gamma code of v ≥ 0 (v < 2**40): unary length, two modelled mantissa bits."""
     x = v + 1
     n = 0
     while (x >> (n + 1)) > 0:
         n += 1
     for i in range(n):
-        rc = _ebit(rc, out, cnt, wt, base + min(i, 23), 1)
-    rc = _ebit(rc, out, cnt, wt, base + min(n, 23), 0)
+        rc = _ebit(rc, out, probs, base + min(i, 23), 1)
+    rc = _ebit(rc, out, probs, base + min(n, 23), 0)
     node = 1
     nb = min(n, 23)
     for k in range(n - 1, -1, -1):
         bit = (x >> k) & 1
         if n - 1 - k < 2:
-            rc = _ebit(rc, out, cnt, wt, base + 24 + nb * 3 + node - 1, bit)
+            rc = _ebit(rc, out, probs, base + 24 + nb * 3 + node - 1, bit)
             node = node * 2 + bit if node == 1 else node
         else:
             rc = encode_plain(rc, out, bit)
@@ -208,10 +200,10 @@ def _euint(rc, out, cnt, wt, base, v):
 
 
 @njit(cache=True)
-def _duint(rc, data, cnt, wt, base):
+def _duint(rc, data, probs, base):
     n = 0
     while True:
-        bit, rc = _dbit(rc, data, cnt, wt, base + min(n, 23))
+        bit, rc = _dbit(rc, data, probs, base + min(n, 23))
         if bit == 0:
             break
         n += 1
@@ -222,7 +214,7 @@ def _duint(rc, data, cnt, wt, base):
     nb = min(n, 23)
     for k in range(n - 1, -1, -1):
         if n - 1 - k < 2:
-            bit, rc = _dbit(rc, data, cnt, wt, base + 24 + nb * 3 + node - 1)
+            bit, rc = _dbit(rc, data, probs, base + 24 + nb * 3 + node - 1)
             node = node * 2 + bit if node == 1 else node
         else:
             bit, rc = decode_plain(rc, data)
@@ -231,20 +223,20 @@ def _duint(rc, data, cnt, wt, base):
 
 
 @njit(cache=True)
-def _emag(rc, out, cnt, wt, ba, bb, bc, wset, v):
+def _emag(rc, out, probs, ba, bb, bc, wset, v):
     """Elias-gamma code of v ≥ 0 whose unary length bits are mixed from three context sets."""
     x = v + 1
     n = 0
     while (x >> (n + 1)) > 0:
         n += 1
     for i in range(n + 1):
-        rc = _emix(rc, out, cnt, wt, ba + min(i, 23), bb + min(i, 11), bc + min(i, 11), wset, 1 if i < n else 0)
+        rc = _emix(rc, out, probs, ba + min(i, 23), bb + min(i, 11), bc + min(i, 11), wset, 1 if i < n else 0)
     node = 1
     nb = min(n, 23)
     for k in range(n - 1, -1, -1):
         bit = (x >> k) & 1
         if n - 1 - k < 2:
-            rc = _ebit(rc, out, cnt, wt, ba + 24 + nb * 3 + node - 1, bit)
+            rc = _ebit(rc, out, probs, ba + 24 + nb * 3 + node - 1, bit)
             node = node * 2 + bit if node == 1 else node
         else:
             rc = encode_plain(rc, out, bit)
@@ -252,10 +244,10 @@ def _emag(rc, out, cnt, wt, ba, bb, bc, wset, v):
 
 
 @njit(cache=True)
-def _dmag(rc, data, cnt, wt, ba, bb, bc, wset):
+def _dmag(rc, data, probs, ba, bb, bc, wset):
     n = 0
     while True:
-        bit, rc = _dmix(rc, data, cnt, wt, ba + min(n, 23), bb + min(n, 11), bc + min(n, 11), wset)
+        bit, rc = _dmix(rc, data, probs, ba + min(n, 23), bb + min(n, 11), bc + min(n, 11), wset)
         if bit == 0:
             break
         n += 1
@@ -266,7 +258,7 @@ def _dmag(rc, data, cnt, wt, ba, bb, bc, wset):
     nb = min(n, 23)
     for k in range(n - 1, -1, -1):
         if n - 1 - k < 2:
-            bit, rc = _dbit(rc, data, cnt, wt, ba + 24 + nb * 3 + node - 1)
+            bit, rc = _dbit(rc, data, probs, ba + 24 + nb * 3 + node - 1)
             node = node * 2 + bit if node == 1 else node
         else:
             bit, rc = decode_plain(rc, data)
@@ -467,8 +459,6 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
     """
     npix = counts.size
     n_ticks = seg_end - seg_start
-    cnt = probs.view(np.int32)
-    wt = probs
     rc = encoder_start()
     buf = np.empty((2, width, n_ticks), np.int32)
     firstw = np.zeros(npix, np.int64)
@@ -486,7 +476,7 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
         k = 0
         if a < 0:
             lf = 1 if (has_left and counts[q - 1] > 0) else 0
-            rc = _ebit(rc, out, cnt, wt, _P_NEW + lf, 1 if c > 0 else 0)
+            rc = _ebit(rc, out, probs, _P_NEW + lf, 1 if c > 0 else 0)
             if c == 0:
                 _fill(cur[col], ticks, r, 0, a, seg_start, n_ticks)
                 continue
@@ -495,24 +485,24 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
             if nb <= 0:
                 nb = _nb_mu(st, q, width, npix)
             fb = _RB if nb <= 0 else _rbucket(nb)
-            rc = _ebit(rc, out, cnt, wt, _P_TWO + fb, 1 if c >= 2 else 0)
+            rc = _ebit(rc, out, probs, _P_TWO + fb, 1 if c >= 2 else 0)
             s = (s[0], s[1], s[2], np.int64(0), s[4], s[5], s[6])
             if c >= 2:
                 iv = ticks[r + 1] - ticks[r]
                 e = iv - nb
-                rc = _ebit(rc, out, cnt, wt, _P_FWS + fb, 1 if e < 0 else 0)
-                rc = _euint(rc, out, cnt, wt, _P_FW + fb * _EG, e if e >= 0 else -e - 1)
+                rc = _ebit(rc, out, probs, _P_FWS + fb, 1 if e < 0 else 0)
+                rc = _euint(rc, out, probs, _P_FW + fb * _EG, e if e >= 0 else -e - 1)
                 below = phase <= iv
-                rc = _ebit(rc, out, cnt, wt, _P_PHB, 1 if below else 0)
+                rc = _ebit(rc, out, probs, _P_PHB, 1 if below else 0)
                 if below:
                     rc = encode_uniform(rc, out, phase - 1, iv)
                 else:
-                    rc = _euint(rc, out, cnt, wt, _P_PH + _rbucket(iv) * _EG, phase - iv - 1)
+                    rc = _euint(rc, out, probs, _P_PH + _rbucket(iv) * _EG, phase - iv - 1)
                 s = _update(s, iv, iv)
                 a = ticks[r + 1]
                 k = 2
             else:
-                rc = _euint(rc, out, cnt, wt, _P_PH + fb * _EG, phase - 1)
+                rc = _euint(rc, out, probs, _P_PH + fb * _EG, phase - 1)
                 a = ticks[r]
                 k = 1
         while True:
@@ -522,34 +512,34 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
                 break
             more = k < c
             if (s[3] & _NMASK) == 0:
-                rc = _ebit(rc, out, cnt, wt, _P_COLD + (1 if a >= seg_start else 0), 1 if more else 0)
+                rc = _ebit(rc, out, probs, _P_COLD + (1 if a >= seg_start else 0), 1 if more else 0)
                 if not more:
                     break
                 iv = ticks[r + k] - a
-                rc = _euint(rc, out, cnt, wt, np.int64(_P_COLDV), iv - lo)
+                rc = _euint(rc, out, probs, np.int64(_P_COLDV), iv - lo)
                 s = _update(s, iv, iv)
             else:
                 p, f, stop, zc, sb, h1, tr, rl, dev, have = _contexts(s, lo, rem, a, cur, prv, col, has_left,
                                                                       has_up, seg_start, n_ticks)
-                rc = _ebit(rc, out, cnt, wt, stop, 1 if more else 0)
+                rc = _ebit(rc, out, probs, stop, 1 if more else 0)
                 if not more:
                     break
                 iv = ticks[r + k] - a
                 d = iv - p
-                rc = _emix(rc, out, cnt, wt, _P_Z + zc, _P_ZB + (f * _NS + sb) * 5 + h1,
-                           _P_ZC + (rl * 5 + h1) * _NT + tr, sb, 1 if d == 0 else 0)
+                rc = _emix(rc, out, probs, _P_Z + zc, _P_ZB + (f * _NS + sb) * 5 + h1, _P_ZC + (rl * 5 + h1) * _NT + tr,
+                           sb, 1 if d == 0 else 0)
                 if d != 0:
                     neg = 1 if d < 0 else 0
-                    rc = _emix(rc, out, cnt, wt, _P_SG + zc, _P_SB + (sb * 5 + h1) * _NT + tr,
+                    rc = _emix(rc, out, probs, _P_SG + zc, _P_SB + (sb * 5 + h1) * _NT + tr,
                                _P_SC + (rl * 5 + h1) * 8 + f, _NS + sb, neg)
                     ad = -d if neg else d
-                    rc = _emix(rc, out, cnt, wt, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr,
+                    rc = _emix(rc, out, probs, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr,
                                _P_OB + (sb * 2 + neg) * 5 + h1, _P_OC + ((rl * 2 + neg) * 5 + h1) * _NT + tr,
                                2 * _NS + sb, 1 if ad == 1 else 0)
                     if ad > 1:
                         nk = _nbk(dev, have, neg)
                         ma = _P_MAG + (((sb * 2 + neg) * _NK + nk) * _RB + _rbucket(p)) * _EG
-                        rc = _emag(rc, out, cnt, wt, ma, _P_MB + (neg * _NK + nk) * 12,
+                        rc = _emag(rc, out, probs, ma, _P_MB + (neg * _NK + nk) * 12,
                                    _P_MC + (((s[3] >> _NBITS) * 2 + neg) * _NT + tr) * 12, 3 * _NS + sb, ad - 2)
                 s = _update(s, iv, p)
             a = a + iv
@@ -571,8 +561,6 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
     decode again from copies of the state, or give up when the segment states fewer spikes).
     """
     n_ticks = seg_end - seg_start
-    cnt = probs.view(np.int32)
-    wt = probs
     rc = decoder_start(data)
     cap = min(n_spikes, ticks.size)
     buf = np.empty((2, width, n_ticks), np.int32)
@@ -593,7 +581,7 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
         c = 0
         if a < 0:
             lf = 1 if (has_left and counts[q - 1] > 0) else 0
-            fires, rc = _dbit(rc, data, cnt, wt, _P_NEW + lf)
+            fires, rc = _dbit(rc, data, probs, _P_NEW + lf)
             if fires == 0:
                 _fill(cur[col], ticks, r, 0, a, seg_start, n_ticks)
                 if rc[2] > data.size + 8:
@@ -604,22 +592,22 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
             if nb <= 0:
                 nb = _nb_mu(st, q, width, npix)
             fb = _RB if nb <= 0 else _rbucket(nb)
-            two, rc = _dbit(rc, data, cnt, wt, _P_TWO + fb)
+            two, rc = _dbit(rc, data, probs, _P_TWO + fb)
             s = (s[0], s[1], s[2], np.int64(0), s[4], s[5], s[6])
             if two:
                 if r + 2 > cap:
                     return 2, r
-                neg, rc = _dbit(rc, data, cnt, wt, _P_FWS + fb)
-                mag, rc = _duint(rc, data, cnt, wt, _P_FW + fb * _EG)
+                neg, rc = _dbit(rc, data, probs, _P_FWS + fb)
+                mag, rc = _duint(rc, data, probs, _P_FW + fb * _EG)
                 iv = nb - mag - 1 if neg else nb + mag
                 if iv < 1 or iv >= n_ticks or rc[3]:
                     return 1, r
-                below, rc = _dbit(rc, data, cnt, wt, _P_PHB)
+                below, rc = _dbit(rc, data, probs, _P_PHB)
                 if below:
                     phase, rc = decode_uniform(rc, data, iv)
                     phase += 1
                 else:
-                    phase, rc = _duint(rc, data, cnt, wt, _P_PH + _rbucket(iv) * _EG)
+                    phase, rc = _duint(rc, data, probs, _P_PH + _rbucket(iv) * _EG)
                     phase += iv + 1
                 t0 = base + phase
                 if rc[3] or phase > seg_end or t0 + iv >= seg_end:
@@ -632,7 +620,7 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
             else:
                 if r + 1 > cap:
                     return 2, r
-                phase, rc = _duint(rc, data, cnt, wt, _P_PH + fb * _EG)
+                phase, rc = _duint(rc, data, probs, _P_PH + fb * _EG)
                 phase += 1
                 if rc[3] or phase > seg_end - base - 1:
                     return 3, r
@@ -645,10 +633,10 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
             if rem < lo:
                 break
             if (s[3] & _NMASK) == 0:
-                more, rc = _dbit(rc, data, cnt, wt, _P_COLD + (1 if a >= seg_start else 0))
+                more, rc = _dbit(rc, data, probs, _P_COLD + (1 if a >= seg_start else 0))
                 if more == 0:
                     break
-                iv, rc = _duint(rc, data, cnt, wt, np.int64(_P_COLDV))
+                iv, rc = _duint(rc, data, probs, np.int64(_P_COLDV))
                 iv += lo
                 if rc[3] or iv > rem:
                     return 3, r + c
@@ -656,17 +644,17 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
             else:
                 p, f, stop, zc, sb, h1, tr, rl, dev, have = _contexts(s, lo, rem, a, cur, prv, col, has_left,
                                                                       has_up, seg_start, n_ticks)
-                more, rc = _dbit(rc, data, cnt, wt, stop)
+                more, rc = _dbit(rc, data, probs, stop)
                 if more == 0:
                     break
-                zero, rc = _dmix(rc, data, cnt, wt, _P_Z + zc, _P_ZB + (f * _NS + sb) * 5 + h1,
+                zero, rc = _dmix(rc, data, probs, _P_Z + zc, _P_ZB + (f * _NS + sb) * 5 + h1,
                                  _P_ZC + (rl * 5 + h1) * _NT + tr, sb)
                 if zero:
                     d = np.int64(0)
                 else:
-                    neg, rc = _dmix(rc, data, cnt, wt, _P_SG + zc, _P_SB + (sb * 5 + h1) * _NT + tr,
+                    neg, rc = _dmix(rc, data, probs, _P_SG + zc, _P_SB + (sb * 5 + h1) * _NT + tr,
                                     _P_SC + (rl * 5 + h1) * 8 + f, _NS + sb)
-                    one, rc = _dmix(rc, data, cnt, wt, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr,
+                    one, rc = _dmix(rc, data, probs, _P_ONE + ((sb * 2 + neg) * 5 + h1) * _NT + tr,
                                     _P_OB + (sb * 2 + neg) * 5 + h1, _P_OC + ((rl * 2 + neg) * 5 + h1) * _NT + tr,
                                     2 * _NS + sb)
                     if one:
@@ -674,7 +662,7 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
                     else:
                         nk = _nbk(dev, have, neg)
                         ma = _P_MAG + (((sb * 2 + neg) * _NK + nk) * _RB + _rbucket(p)) * _EG
-                        ad, rc = _dmag(rc, data, cnt, wt, ma, _P_MB + (neg * _NK + nk) * 12,
+                        ad, rc = _dmag(rc, data, probs, ma, _P_MB + (neg * _NK + nk) * 12,
                                        _P_MC + (((s[3] >> _NBITS) * 2 + neg) * _NT + tr) * 12, 3 * _NS + sb)
                         ad += 2
                     d = -ad if neg else ad
