@@ -215,8 +215,7 @@ def compare(scene, sensors, duration_s, at, out_dir, height, width, brightness, 
     if visibility_m is not None and scene != "night-road-fog":
         raise ViformError("--visibility-m applies to the night-road-fog scene only")
     options.update(scene_options(scene, scene_set))
-    announce_preparation()
     doc = run(scene, out_dir, keys, duration_s, height, width, seed, instants, progress=True,
               command=shlex.join(["viform", *sys.argv[1:]]) if sys.argv else "", scene_options=options,
-              started_s=started, settings=changed)
+              started_s=started, settings=changed, on_valid=announce_preparation)
     finish(doc, out_dir, time.perf_counter() - started, as_json, json_file, {"settings": changed} if changed else None)

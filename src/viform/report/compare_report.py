@@ -48,10 +48,12 @@ def default_instants(duration_s: float) -> list[float]:
 
 
 def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed: int = 0,
-                   progress: bool = True, settings: dict | None = None) -> dict:
+                   progress: bool = True, settings: dict | None = None, on_valid=None) -> dict:
     """Shoot ``scene`` with each sensor and score it; returns shots, metrics and the verdict.
 
     ``settings`` maps a sensor's name to its parameters' values ({name: {parameter: value}}).
+    ``on_valid``: called with no arguments once every input is checked, before the first shot (a command
+    announces a first-run compilation there, so a refused input prints its error alone).
     """
     duration_s = check_positive("--duration", duration_s)
     keys = check_sensors(sensors)
@@ -73,6 +75,8 @@ def run_comparison(scene, duration_s: float, sensors=None, instants_s=None, seed
     for t in instants:
         if not 0 <= t < duration_s:
             raise ViformError(f"instant {t!r} s is outside the clip [0, {duration_s:g}) s")
+    if on_valid is not None:
+        on_valid()
     shots, timings = [], {}
     bar = None
     if progress:
@@ -657,8 +661,11 @@ def metrics_table(doc: dict) -> str:
 
 def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, height: int = 64,
             width: int = 128, seed: int = 0, instants_s=None, progress: bool = True, command: str = "",
-            scene_options: dict | None = None, started_s: float | None = None, settings: dict | None = None) -> dict:
+            scene_options: dict | None = None, started_s: float | None = None, settings: dict | None = None,
+            on_valid=None) -> dict:
     """Load the scene, run the comparison, write the report; return the metrics document.
+
+    ``on_valid``: see :func:`run_comparison`.
 
     ``started_s``: ``time.perf_counter()`` at the command's start; the reported wall time runs from it.
     ``settings``: {sensor name: {parameter: value}} (see :func:`run_comparison`).
@@ -675,5 +682,5 @@ def compare(scene_spec: str, out_dir, sensors=None, duration_s: float = 0.04, he
     else:
         scene = load_scene(scene_spec, height, width, resize=True, settings=scene_options or None)
     started = time.perf_counter() if started_s is None else started_s
-    result = run_comparison(scene, duration_s, keys, instants_s, seed, progress, settings)
+    result = run_comparison(scene, duration_s, keys, instants_s, seed, progress, settings, on_valid)
     return write_report(result, out_dir, command, started_s=started)
