@@ -66,6 +66,15 @@ def consistent_limits(n_max, span_max, noise_q, tolerance):
 
 
 @njit(cache=True, inline="always")
+def _accepted(interval, span, n, noise_q, tolerance, limits):
+    """Whether the adaptive test accepts ``interval`` (ticks) beside n intervals spanning ``span`` ticks:
+    from the table ``limits`` (:func:`consistent_limits`) where it reaches, else the test itself."""
+    if n < limits.shape[0] and span < limits.shape[1]:
+        return limits[n, span, 0] <= interval <= limits[n, span, 1]
+    return interval_consistent(interval, span / n, n, noise_q, tolerance)
+
+
+@njit(cache=True, inline="always")
 def ring_rate(ring, j, count, n_after, k_side, lo_cut, hi_cut, adaptive, noise_q, tolerance, limits):
     """Rate (spikes per tick), intervals used, span (ticks) and censoring of pixel j at one instant,
     from its ring of spike ticks (``ring`` (P, size), size a power of two ≥ 2K; ``count`` spikes seen,
@@ -99,18 +108,10 @@ def ring_rate(ring, j, count, n_after, k_side, lo_cut, hi_cut, adaptive, noise_q
     i_a = 1
     grow_b = not cut and nb > 1
     grow_a = not cut and na > 1
-    n_tab = limits.shape[0]
-    s_tab = limits.shape[1]
     while grow_b or grow_a:
         if grow_b:
             new = ring[j, (a0 - i_b) & mask] - ring[j, (a0 - 1 - i_b) & mask]
-            ok = True
-            if adaptive:
-                span = hi - lo
-                if n < n_tab and span < s_tab:
-                    ok = limits[n, span, 0] <= new <= limits[n, span, 1]
-                else:
-                    ok = interval_consistent(new, span / n, n, noise_q, tolerance)
+            ok = not adaptive or _accepted(new, hi - lo, n, noise_q, tolerance, limits)
             if ok:
                 lo = ring[j, (a0 - 1 - i_b) & mask]
                 i_b += 1
@@ -120,13 +121,7 @@ def ring_rate(ring, j, count, n_after, k_side, lo_cut, hi_cut, adaptive, noise_q
                 grow_b = False
         if grow_a:
             new = ring[j, (a0 + i_a) & mask] - ring[j, (a0 + i_a - 1) & mask]
-            ok = True
-            if adaptive:
-                span = hi - lo
-                if n < n_tab and span < s_tab:
-                    ok = limits[n, span, 0] <= new <= limits[n, span, 1]
-                else:
-                    ok = interval_consistent(new, span / n, n, noise_q, tolerance)
+            ok = not adaptive or _accepted(new, hi - lo, n, noise_q, tolerance, limits)
             if ok:
                 hi = ring[j, (a0 + i_a) & mask]
                 i_a += 1
