@@ -115,8 +115,13 @@ def test_zarr_frames_and_previews(tmp_path, capsys):
     (["capture", "highspeed", "dilemma", "--duration", "100", "--out", "{t}/a.npz"], "GB"),  # 11 GB of frames
     (["capture", "cmos", "dilemma", "--duration", "0.01", "--out", "{t}/a.npz", "--preview", "{t}/p.jpg"],
      "--preview"),
+    # 33 × 49 pixels do not fill whole bytes: a .dat is refused before anything is simulated or written
+    (["capture", "spike", "dilemma", "--duration", "0.001", "--out", "{t}/a.dat", "--height", "33", "--width", "49"],
+     "--height = 33 and --width = 49"),
 ])
-def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, needle):
+def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, monkeypatch, args, needle):
+    # as on a first run (kernels not compiled yet): the compile notice must not come before the error
+    monkeypatch.setattr("viform.cli.compare.kernels_cached", lambda: False)
     code, _, err = run([a.replace("{t}", str(tmp_path)) for a in args], capsys)
     assert code == 2
     assert needle in err and len(err.strip().splitlines()) == 1

@@ -184,11 +184,14 @@ def _spike_preview(path, stream, rate_per_tick: float) -> float:
 
 
 def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int = 0, preview=None,
-                device: str = "cpu", settings: dict | None = None) -> dict:
+                device: str = "cpu", settings: dict | None = None, on_valid=None) -> dict:
     """Shoot ``scene`` with the catalogue's sensor ``sensor_name`` (with ``settings``) and save its
     output (see the module notes); returns a summary.
 
     Spike streams are simulated block by block straight into the file (bounded memory).
+    ``on_valid``, when given, is called once every input has been checked, just before the
+    simulation starts (the CLI prints its first-run compile notice there, so that a refused input
+    prints its error alone).
     """
     from viform.sensors.catalog import entry
     from viform.stream.sidecar import provenance
@@ -201,6 +204,12 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
 
         if suffix not in FORMATS:
             raise ViformError(f"--out = {str(out_path)!r}: a spike stream is saved as one of {', '.join(FORMATS)}")
+        if suffix == ".dat" and (scene.height * scene.width) % 8:
+            raise ViformError(f"height = {scene.height} and width = {scene.width} make {scene.height * scene.width} "
+                              "pixels, not a multiple of 8: a .dat file packs whole bytes per frame; choose a size "
+                              "whose pixel count is a multiple of 8, or save as .npz or .zarr")
+        if on_valid is not None:
+            on_valid()
         # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
         lazy = sensor.stream(scene, duration_s, seed=seed, progress=True, reuse_buffer=suffix in (".dat", ".zarr"),
                              device=device)
@@ -219,6 +228,8 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
         raise ViformError(f"SCENE = {scene.name!r} has no range: the gated camera needs a laser-lit scene with "
                           "distances (built-in: night-road-fog)")
     check_frame_budget(max(1.0, duration_s * sensor.frame_rate_hz), scene.height, scene.width)
+    if on_valid is not None:
+        on_valid()
     meta = {"scene": scene.describe(), "seed": seed, **provenance()}
     extra = {}
     stack = sensor.capture(scene, duration_s, seed=seed)
@@ -317,10 +328,8 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
 
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
                        settings=scene_settings(scene_set))
-    if spike:
-        announce_preparation()
     summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview, device=device,
-                          settings=overrides)
+                          settings=overrides, on_valid=announce_preparation if spike else None)
     if overrides:
         summary["settings"] = overrides
     if preview:

@@ -54,8 +54,8 @@ def _agree(path, name, given, declared):
 def _frame_bytes(height: int, stored_width: int) -> int:
     bits = height * stored_width
     if bits % 8:
-        raise ViformError(f"width × height = {stored_width}×{height} is not a multiple of 8 bits; "
-                          "the .dat layout packs whole bytes per frame")
+        raise ViformError(f"height = {height} rows × width = {stored_width} stored columns = {bits} bits is not a "
+                          "multiple of 8; the .dat layout packs whole bytes per frame")
     return bits // 8
 
 
