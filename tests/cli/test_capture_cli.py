@@ -118,10 +118,17 @@ def test_zarr_frames_and_previews(tmp_path, capsys):
     # 33 × 49 pixels do not fill whole bytes: a .dat is refused before anything is simulated or written
     (["capture", "spike", "dilemma", "--duration", "0.001", "--out", "{t}/a.dat", "--height", "33", "--width", "49"],
      "--height = 33 and --width = 49"),
+    # 100 ticks of 250 × 400 pixels = 1.25 MB on a disk with 1 MB free (patched below)
+    (["capture", "spike", "dilemma", "--duration", "0.0025", "--out", "{t}/a.dat"], "disk space"),
 ])
 def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, monkeypatch, args, needle):
     # as on a first run (kernels not compiled yet): the compile notice must not come before the error
     monkeypatch.setattr("viform.cli.compare.kernels_cached", lambda: False)
+    if needle == "disk space":  # a disk with 1 MB free: the 1.25 MB .dat cannot fit
+        import shutil
+        from collections import namedtuple
+
+        monkeypatch.setattr(shutil, "disk_usage", lambda _: namedtuple("u", "total used free")(10**9, 10**9, 10**6))
     code, _, err = run([a.replace("{t}", str(tmp_path)) for a in args], capsys)
     assert code == 2
     assert needle in err and len(err.strip().splitlines()) == 1

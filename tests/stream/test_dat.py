@@ -35,6 +35,25 @@ def test_round_trip(tmp_path):
     assert back.n_ticks == 7 and np.array_equal(back.read_ticks(0, 7), stream.spikes)
 
 
+def test_a_dat_that_cannot_fit_on_its_disk_is_refused_and_the_old_file_kept(tmp_path, monkeypatch):
+    """The size of a .dat is exact (ticks × bytes per frame): one larger than the free space is refused
+    before a byte is written, naming both sizes, and the file already there stays whole."""
+    import shutil
+    from collections import namedtuple
+
+    path = write_dat(tmp_path / "s.dat", random_stream())
+    old = path.read_bytes()
+    usage = namedtuple("usage", "total used free")
+    stream = random_stream(t=100)  # 100 ticks × 4 bytes = 400 bytes
+    monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(10**6, 10**6 - 399, 399))
+    with pytest.raises(ViformError, match=r"not enough disk space: s\.dat needs 400 bytes .*399 bytes free"):
+        write_dat(path, stream)
+    assert path.read_bytes() == old and sorted(p.name for p in tmp_path.iterdir()) == ["s.dat", "s.dat.json"]
+    monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(10**6, 10**6 - 400, 400))
+    write_dat(path, stream)  # exactly enough
+    assert read_dat(path, 4, 8).n_ticks == 100
+
+
 def test_416_column_variant(tmp_path):
     h, w = 250, 400
     frames = np.random.default_rng(1).random((2, h, w)) < 0.2

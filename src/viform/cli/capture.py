@@ -204,15 +204,15 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
 
         if suffix not in FORMATS:
             raise ViformError(f"--out = {str(out_path)!r}: a spike stream is saved as one of {', '.join(FORMATS)}")
-        if suffix == ".dat" and (scene.height * scene.width) % 8:
-            raise ViformError(f"height = {scene.height} and width = {scene.width} make {scene.height * scene.width} "
-                              "pixels, not a multiple of 8: a .dat file packs whole bytes per frame; choose a size "
-                              "whose pixel count is a multiple of 8, or save as .npz or .zarr")
-        if on_valid is not None:
-            on_valid()
         # .dat and .zarr writers pack each block at once, so the simulator may reuse its buffer
         lazy = sensor.stream(scene, duration_s, seed=seed, progress=True, reuse_buffer=suffix in (".dat", ".zarr"),
                              device=device)
+        if suffix == ".dat":  # whole bytes per frame, and room on the disk, before the first tick
+            from viform.stream.dat import check_dat_space
+
+            check_dat_space(out_path, lazy.n_ticks, lazy.height, lazy.width)
+        if on_valid is not None:
+            on_valid()
         save_spikes(out_path, lazy)
         stream = open_spikes(out_path)
         summary = {"file": str(out_path), "sensor": sensor_name, "kind": "spikes", "n_ticks": stream.n_ticks,

@@ -51,11 +51,50 @@ def _agree(path, name, given, declared):
     return int(declared)
 
 
+def check_dat_space(path, n_ticks: int, height: int, width: int) -> None:
+    """Refuse a ``.dat`` that cannot fit on its disk, before anything is simulated or written.
+
+    The file's size is exact (``n_ticks`` frames of ``height × width / 8`` bytes); the new file is
+    written beside any old one and renamed over it, so the whole size must be free.
+
+    Raises
+    ------
+    ViformError
+        When the disk holding ``path`` has less free space than the file needs, or when
+        ``height × width`` is not a multiple of 8 (whole bytes per frame).
+    """
+    import shutil
+
+    path = Path(path)
+    if (height * width) % 8:
+        raise ViformError(f"height = {height} and width = {width} make {height * width} pixels, not a multiple of 8: "
+                          "a .dat file packs whole bytes per frame; choose a size whose pixel count is a multiple "
+                          "of 8, or save as .npz or .zarr")
+    frame_bytes = _frame_bytes(height, width)
+    needed = int(n_ticks) * frame_bytes
+    folder = path.resolve().parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:  # the folder's own errors are reported where it is opened
+        return
+    if needed > free:
+        raise ViformError(f"not enough disk space: {path.name} needs {_bytes_text(needed)} ({int(n_ticks):,} ticks × "
+                          f"{frame_bytes:,} bytes) and {str(folder)!r} has {_bytes_text(free)} free; record "
+                          "fewer ticks (a shorter duration) or write to another disk")
+
+
+def _bytes_text(n: int) -> str:
+    for unit, size in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n} bytes"
+
+
 def _frame_bytes(height: int, stored_width: int) -> int:
     bits = height * stored_width
     if bits % 8:
         raise ViformError(f"height = {height} rows × width = {stored_width} stored columns = {bits} bits is not a "
-                          "multiple of 8; the .dat layout packs whole bytes per frame")
+                          "multiple of 8: the .dat layout packs whole bytes per frame")
     return bits // 8
 
 
@@ -343,7 +382,7 @@ def write_dat(path, source: SpikeSource, *, flip: bool = True, block_ticks: int 
     from viform.stream.sidecar import pending_sidecar_path, settle_sidecar
 
     path = Path(path)
-    _frame_bytes(source.height, source.width)
+    check_dat_space(path, source.n_ticks, source.height, source.width)
     # a simulator hands its packed bits as they are produced (bounded by its own budget)
     packed_blocks = getattr(source, "iter_packed_blocks", None)
     blocks = packed_blocks(block_ticks, flip) if packed_blocks is not None else None
