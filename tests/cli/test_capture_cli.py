@@ -120,6 +120,8 @@ def test_zarr_frames_and_previews(tmp_path, capsys):
      "--height = 33 and --width = 49"),
     # 100 ticks of 250 × 400 pixels = 1.25 MB on a disk with 1 MB free (patched below)
     (["capture", "spike", "dilemma", "--duration", "0.0025", "--out", "{t}/a.dat"], "disk space"),
+    # hours of simulation from a mistyped duration: refused with the estimate unless --force, as by simulate
+    (["capture", "spikeone", "dilemma", "--duration", "10", "--out", "{t}/a.npz"], "--force"),
 ])
 def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, monkeypatch, args, needle):
     # as on a first run (kernels not compiled yet): the compile notice must not come before the error

@@ -340,15 +340,17 @@ def check_request(command: click.Command, kwargs: dict) -> None:
                               "(a FIFO, socket or device cannot be read as data)")
 
 
-def check_simulation_work(duration_s: float, clock_hz: float, pixels: int, force: bool) -> None:
+def check_simulation_work(duration_s: float, clock_hz: float, pixels: int, force: bool,
+                          clock_flag: str = "--clock-hz") -> None:
     """Refuse, unless ``--force``, a simulation estimated to take more than :data:`FORCE_WORK_S`.
 
-    The user is told the size and the estimate before minutes of work, and how to go on.
+    The user is told the size and the estimate before minutes of work, and how to go on;
+    ``clock_flag`` is how the command's user sets the clock.
     """
     ticks = duration_s * clock_hz
     seconds = ticks * SIM_S_PER_TICK + ticks * pixels / SIM_PIXEL_TICKS_PER_S
     if seconds > FORCE_WORK_S and not force:
-        raise ViformError(f"--duration {duration_s:g} s at --clock-hz {clock_hz:g} Hz over {pixels:,} pixels is "
+        raise ViformError(f"--duration {duration_s:g} s at {clock_flag} {clock_hz:g} Hz over {pixels:,} pixels is "
                           f"{ticks:.3g} ticks ({ticks * pixels:.3g} pixel-ticks), about {seconds / 60:.0f} min of "
                           f"simulation or more (the limit without --force is {FORCE_WORK_S:.0f} s): add --force to "
                           "run it, or shorten --duration")

@@ -286,12 +286,15 @@ def run_capture(sensor_name: str, scene, duration_s: float, out_path, seed: int 
               help="Change one parameter of SENSOR by name, e.g. --set parasitic_light_sensitivity=0.01 or "
                    "--set threshold_level=7 (repeatable; viform sensors show SENSOR lists every parameter with "
                    "its unit, default and allowed values).")
+@click.option("--force", is_flag=True,
+              help="Spike sensors: run a simulation estimated to take more than a minute (refused without it, with "
+                   "the estimate), as viform simulate.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of a line of text.")
 @click.option("--json-file", type=click.Path(dir_okay=False), default=None, help="Also write the JSON summary here.")
 @scene_set_option
 @with_scene_list
 def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, max_lux, frame_rate_hz, device,
-            settings, as_json, json_file, scene_set):
+            settings, force, as_json, json_file, scene_set):
     """Shoot SCENE with SENSOR and save its output with every exposure window.
 
     SENSOR: {sensors} (viform sensors describes each).
@@ -328,6 +331,11 @@ def capture(sensor, scene, duration_s, out_path, preview, height, width, seed, m
 
     light = load_scene(scene, height, width, max_lux=max_lux, frame_rate_hz=frame_rate_hz,
                        settings=scene_settings(scene_set))
+    if spike:  # hours of simulation from a mistyped --duration are refused, as by viform simulate
+        from viform.cli._types import check_simulation_work
+
+        clock_hz = kind.build(height=None, width=None, **overrides).parameters.clock_hz
+        check_simulation_work(duration_s, clock_hz, light.height * light.width, force, "--set clock_hz =")
     summary = run_capture(sensor, light, duration_s, out_path, seed=seed, preview=preview, device=device,
                           settings=overrides, on_valid=announce_preparation if spike else None)
     if overrides:
