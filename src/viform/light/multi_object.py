@@ -261,12 +261,12 @@ class MultiObjectScene(Scene):
         if not self._own_light(MultiObjectScene):
             return None
         if getattr(self, "_compiled", None) is None:
+            from viform.light._objects_paint import ObjectsSampler
             from viform.light.compiled import CompiledLight
-            from viform.light.sampled import PaintedSampler
 
             # an object's texture peaks at 1.5 times its level; "over" compositing stays below the largest
             peak = max([float(self._background.max())] + [1.5 * self.object_lux(s) for s in self.specs])
-            sampler = PaintedSampler(self._background, self._paint, self._paint_rects, peak)
+            sampler = ObjectsSampler(self._background, self._paint, self._paint_rects, peak, self)
             self._compiled = CompiledLight("sampled", self.height, self.width, sampler=sampler)
         return self._compiled
 
@@ -356,3 +356,4 @@ class MultiObjectScene(Scene):
     def describe(self) -> dict:
         return {**super().describe(), "brightness": self.brightness, "speed": self.speed,
                 "background": self.background, "background_lux": self.background_lux, "t_ref_s": self.t_ref_s}
+
