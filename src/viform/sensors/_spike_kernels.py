@@ -780,6 +780,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
         e = np.zeros(size, dtype=np.int64)
         lazy_from = np.full(size, -1, dtype=np.int64)  # tick of the block where a lane's lazy run began
         lazy_mask = np.zeros(nw, dtype=np.uint64)
+        always = np.zeros(nw, dtype=np.uint64)  # noise-free self-reset: lanes that fire in every tick of the run
         # per lane, what a spike's common case reads (kept beside the lane state, in L1): the charge
         # past a crossing below which a crossing draws one target, the pixel's draw counter (the
         # lane's copy is the pixel's counter while the tile runs), stream key and table row
@@ -842,10 +843,20 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                         if lazy_mask[j >> 6] & bit:  # left laziness above: its state is back
                             lazy_mask[j >> 6] &= ~bit
                         e[j] = r
+            if mode == MODE_NOISE_FREE_SELF:
+                # a lane whose charge per tick reaches its (constant) target fires in every tick, and its charge
+                # goes to (c + e) mod t: it runs with e mod t < t (so the 64-lane chunks can take its word) and
+                # its bit is set in every tick of the run (``always``)
+                for w in range(nw):
+                    always[w] = np.uint64(0)
+                for j in range(n):
+                    if e[j] >= t[j]:
+                        e[j] %= t[j]
+                        always[j >> 6] |= np.uint64(1) << np.uint64(j & 63)
             dense = np.uint64(0)  # the words that run tick by tick
             for w in range(nw):  # dim words: each lane's crossings through the run, then the next lane
                 base = w * _LANES
-                sparse = lazy_mask[w] == 0
+                sparse = lazy_mask[w] == 0 and always[w] == 0
                 for i in range(base, base + _LANES):
                     sparse &= e[i] <= sparse_rate[i]
                 if not sparse:
@@ -915,6 +926,11 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                             continue
                         if whole and mode == MODE_NOISE_FREE_SELF and _noise_free_self_chunk(words, w0 + w, k0, k1,
                                                                                              c, e, t, base):
+                            if always[w] != 0:
+                                for kk in range(k0, k1):
+                                    for b in range(8):
+                                        words[kk, 8 * (w0 + w) + b] |= np.uint8((always[w] >> np.uint64(8 * b))
+                                                                                & np.uint64(0xFF))
                             continue
                         for kk in range(k0, k1):
                             if mode == MODE_NOISE_FREE_SELF:
@@ -923,6 +939,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                                     for i in range(base, base + _LANES):
                                         if c[i] >= t[i]:
                                             c[i] %= t[i]
+                                word |= always[w]
                             elif mode == MODE_NOISE_FREE_READOUT:
                                 word = _lanes_noise_free_readout(c, e, t, base)
                             else:
