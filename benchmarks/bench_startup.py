@@ -10,7 +10,13 @@ start-up: what it costs above the floor is viform's own start-up.
 
 It also lists the heavy optional libraries each command imports (``-X importtime``): none of
 dask, zarr, matplotlib, OpenCV, TrackEval or scipy.special should load before the first tick.
-Run: ``python benchmarks/bench_startup.py [--repeats 5]``.
+
+Bytecode: with ``PYTHONDONTWRITEBYTECODE`` set (as on some shared machines), no ``.pyc`` is written for an
+editable install's sources, so a start compiles every viform module that has none from source (≈ 0.13 CPU-s
+for ``simulate``, counted as viform's own start-up; an installed wheel ships its ``.pyc``, and a ``.pyc``
+already there is read either way). The header says whether it is set; ``--write-bytecode`` runs the commands
+without it (the warm-up run writes the ``.pyc``).
+Run: ``python benchmarks/bench_startup.py [--repeats 5] [--write-bytecode]``.
 """
 
 from __future__ import annotations
@@ -26,22 +32,22 @@ from pathlib import Path
 HEAVY = ("dask", "distributed", "zarr", "matplotlib", "cv2", "trackeval", "scipy.special", "torch", "numba.cuda")
 
 
-def cpu_seconds(command: list[str], repeats: int) -> tuple[float, float]:
+def cpu_seconds(command: list[str], repeats: int, env: dict | None = None) -> tuple[float, float]:
     """(least, median) CPU seconds of ``command`` over ``repeats`` runs after one warm-up run."""
-    subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True, env=env)
     times = []
     for _ in range(repeats):
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+        subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True, env=env)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         times.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     times.sort()
     return times[0], times[len(times) // 2]
 
 
-def heavy_imports(command: list[str]) -> list[str]:
+def heavy_imports(command: list[str], env: dict | None = None) -> list[str]:
     """The modules of :data:`HEAVY` that ``command`` (a ``python -m ...`` command) imports."""
-    result = subprocess.run([command[0], "-X", "importtime", *command[1:]], capture_output=True, text=True)
+    result = subprocess.run([command[0], "-X", "importtime", *command[1:]], capture_output=True, text=True, env=env)
     names = {line.rsplit("|", 1)[-1].strip() for line in result.stderr.splitlines() if line.startswith("import time:")}
     return [h for h in HEAVY if h in names]
 
@@ -49,7 +55,13 @@ def heavy_imports(command: list[str]) -> list[str]:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--write-bytecode", action="store_true",
+                        help="run the commands without PYTHONDONTWRITEBYTECODE (modules load from .pyc)")
     args = parser.parse_args(argv)
+    env = None
+    if args.write_bytecode:
+        env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    no_bytecode = bool((env if env is not None else os.environ).get("PYTHONDONTWRITEBYTECODE"))
     py = sys.executable
     with tempfile.TemporaryDirectory(prefix="viform-startup-") as tmp:
         out = str(Path(tmp) / "s.dat")
@@ -64,16 +76,18 @@ def main(argv=None):
             ("viform simulate, 4 ticks, noise-free", [*simulate, "--no-noise"]),
         ]
         print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; least (median) CPU-s of "
-              f"{args.repeats} runs")
+              f"{args.repeats} runs; PYTHONDONTWRITEBYTECODE "
+              + ("set: modules without a .pyc compile from source at every start (see --write-bytecode)" if no_bytecode
+                 else "not set: modules load from .pyc"))
         floors = {}
         for name, command in rows:
-            least, median = cpu_seconds(command, args.repeats)
+            least, median = cpu_seconds(command, args.repeats, env)
             floors[name] = least
             extra = ""
             if command[1:3] == ["-m", "viform"]:
                 # --help needs no kernel: its floor is NumPy; a simulation's is numba ready
                 floor = "import numpy" if "--help" in command else "numba ready (import, first cached kernel)"
-                heavy = heavy_imports(command)
+                heavy = heavy_imports(command, env)
                 extra = (f"  above {floor.split(' (')[0]} {least - floors[floor]:+.3f}; "
                          f"heavy imports: {', '.join(heavy) or 'none'}")
             print(f"  {name:44s} {least:6.3f} ({median:.3f}){extra}", flush=True)
