@@ -13,11 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from viform.light.multi_object import MultiObjectScene, _overlap_1d
 from viform.light.sampled import PaintedSampler
 
 
-def _paint_plan(scene: MultiObjectScene, times_s: np.ndarray) -> dict:
+def _paint_plan(scene, times_s: np.ndarray) -> dict:
     """What :meth:`MultiObjectScene._paint` draws at each of ``times_s``, as flat arrays for
     :func:`_composite_rates` / :func:`_composite_lux`: per drawn (instant, object) pair, in the order
     ``_paint`` draws them, its box and lux, and per row and column of the box the coverage and the
@@ -63,6 +62,11 @@ def _paint_plan(scene: MultiObjectScene, times_s: np.ndarray) -> dict:
         "alpha_rows": _overlap_1d(rows, rows + 1, ry0, ry1), "alpha_cols": _overlap_1d(cols, cols + 1, cx0, cx1),
         "sin_rows": np.sin(2 * np.pi * (rows + 0.5 - ry0) / p), "sin_cols": np.sin(2 * np.pi * (cols + 0.5 - cx0) / p),
     }
+
+
+def _overlap_1d(lo, hi, edges_lo, edges_hi):
+    """Length of [lo, hi) ∩ [edges_lo, edges_hi), elementwise."""
+    return np.clip(np.minimum(hi, edges_hi) - np.maximum(lo, edges_lo), 0.0, None)
 
 
 @njit(cache=True)

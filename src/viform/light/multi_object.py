@@ -46,6 +46,7 @@ from itertools import combinations
 import numpy as np
 
 from viform._validate import ViformError, check_choice, check_int, check_positive
+from viform.light._objects_paint import ObjectsSampler, _overlap_1d
 from viform.light.scenes import Scene, texture
 from viform.light.truth import FlowTruth, ObjectTruth
 
@@ -84,11 +85,6 @@ OBJECTS = (
                phase_rad=0.5 * math.pi),
     ObjectSpec(7, "bird", (12, 8), 1.5, (300, 60), (-3000, 2000), depth_rank=6),
 )
-
-
-def _overlap_1d(lo, hi, edges_lo, edges_hi):
-    """Length of [lo, hi) ∩ [edges_lo, edges_hi), elementwise."""
-    return np.clip(np.minimum(hi, edges_hi) - np.maximum(lo, edges_lo), 0.0, None)
 
 
 def _rect_intersection(a, b):
@@ -261,7 +257,6 @@ class MultiObjectScene(Scene):
         if not self._own_light(MultiObjectScene):
             return None
         if getattr(self, "_compiled", None) is None:
-            from viform.light._objects_paint import ObjectsSampler
             from viform.light.compiled import CompiledLight
 
             # an object's texture peaks at 1.5 times its level; "over" compositing stays below the largest
