@@ -263,27 +263,29 @@ def profile(folder):
             setattr(obj, name, fn)
 
 
-class _Marked:
-    """A ``.dat`` source that notes the time of the first read at or past tick ``mark``."""
-
-    def __init__(self, src, mark):
-        self._src, self._mark, self.at = src, mark, None
-
-    def __getattr__(self, name):
-        return getattr(self._src, name)
-
-    def read_packed(self, start, stop):
-        if self.at is None and start >= self._mark:
-            self.at = (start, time.perf_counter(), time.process_time())
-        return self._src.read_packed(start, stop)
-
-
 def _after_start_up(path, every, mark):
-    """(ticks, wall s, CPU-s) the tracker spends past its first read at or after tick ``mark``."""
-    src = _Marked(open_spikes(path), mark)
-    track_spikes(src, every)
+    """(ticks, wall s, CPU-s) the tracker spends from its first block fed at or after tick ``mark``.
+
+    Timed from the detector's side (the file's next block may already be read ahead, in a second
+    thread: the pipeline a live stream runs)."""
+    from viform.vision.tracking import SpikeChangeDetector
+
+    at = []
+    feed = SpikeChangeDetector.feed_words
+
+    def marked(self, words):
+        if not at and self.next_tick >= mark:
+            at.append((self.next_tick, time.perf_counter(), time.process_time()))
+        return feed(self, words)
+
+    src = open_spikes(path)
+    SpikeChangeDetector.feed_words = marked
+    try:
+        track_spikes(src, every)
+    finally:
+        SpikeChangeDetector.feed_words = feed
     w, c = time.perf_counter(), time.process_time()
-    first, w0, c0 = src.at
+    first, w0, c0 = at[0]
     return src.n_ticks - first, w - w0, c - c0
 
 

@@ -170,6 +170,9 @@ def _words(packed: np.ndarray) -> np.ndarray:
 #: Words of packed pixels the front end runs through a block's ticks together (their state stays in cache).
 GROUP_WORDS = 64
 
+#: Read a ``.dat`` file's next block of ticks in a second thread while the tracker works on the current one.
+PREFETCH_BLOCKS = True
+
 
 class SpikeChangeDetector:
     """Foreground from a spike stream, one mask per output step of ``step_ticks`` ticks.
@@ -1254,12 +1257,30 @@ def _packed_blocks(source, block_ticks: int, stop: int, layout):
     direct = callable(getattr(source, "read_packed", None))
     # a block of packed words is an eighth of the unpacked bytes: the reader's budget allows 8× the ticks
     block_ticks = max(1, min(block_ticks, 8 * block_ticks_for(source.height, layout[0], block_ticks)))
-    for first in range(0, stop, block_ticks):
-        last = min(first + block_ticks, stop)
-        if direct:
-            yield _words(source.read_packed(first, last))
-        else:
-            yield pack_spikes(source.read_ticks(first, last))
+    if not direct:
+        for first in range(0, stop, block_ticks):
+            yield pack_spikes(source.read_ticks(first, min(first + block_ticks, stop)))
+        return
+
+    def read(first):
+        return _words(source.read_packed(first, min(first + block_ticks, stop)))
+
+    firsts = range(0, stop, block_ticks)
+    if not PREFETCH_BLOCKS or len(firsts) < 2:
+        for first in firsts:
+            yield read(first)
+        return
+    # a file's next block is read (positioned reads and CRC-32 checks, which release the GIL) while the
+    # tracker works on this one: the same blocks in the same order, one more held. The first is read here,
+    # so that a warning about the file comes from the caller's thread
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1, thread_name_prefix="viform-read") as pool:
+        ahead = None
+        for k, first in enumerate(firsts):
+            words = read(first) if ahead is None else ahead.result()
+            ahead = pool.submit(read, firsts[k + 1]) if k + 1 < len(firsts) else None
+            yield words
 
 
 def track_frames(frames, times_s, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000,
