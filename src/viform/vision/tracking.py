@@ -173,6 +173,10 @@ GROUP_WORDS = 64
 #: Read a ``.dat`` file's next block of ticks in a second thread while the tracker works on the current one.
 PREFETCH_BLOCKS = True
 
+#: Run the front end on a ``.dat`` file's next block in a second thread while the current block's steps are
+#: associated.
+PIPELINE_FRONT_END = True
+
 
 class SpikeChangeDetector:
     """Foreground from a spike stream, one mask per output step of ``step_ticks`` ticks.
@@ -1225,8 +1229,10 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
     rows, times, n_det = [], [], 0
     block = max(step_ticks, (check_int("block_ticks", block_ticks, 1) // step_ticks) * step_ticks)
     n_usable = (source.n_ticks // step_ticks) * step_ticks
-    for words in _packed_blocks(source, block, n_usable, layout):
-        for bits in detector.feed_words(words):
+
+    def associate(steps):
+        nonlocal rows, n_det
+        for bits in steps:
             frame = len(times) + 1
             t_s = source.start_time_s + frame * step_ticks / source.clock_hz
             boxes, counts, pixels = detector.components(bits, p.merge_px, 1)
@@ -1236,6 +1242,27 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
             times.append(t_s)
             if on_step is not None:
                 on_step(frame, t_s, detector.mask(bits), reported)
+
+    blocks = _packed_blocks(source, block, n_usable, layout)
+    if not (PIPELINE_FRONT_END and callable(getattr(source, "read_packed", None))):
+        for words in blocks:
+            associate(detector.feed_words(words))
+    else:
+        # a file's blocks: the front end (compiled, without the GIL) runs on the next block in a second thread
+        # while this block's steps are grouped and associated here; nothing flows back from the association
+        # to the front end, so the steps are the same. (A source that simulates or converts its spikes may
+        # run parallel kernels of its own: it is read in turn.)
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(1, thread_name_prefix="viform-front") as pool:
+            done = None
+            for words in blocks:
+                running = pool.submit(detector.feed_words, words)
+                if done is not None:
+                    associate(done)
+                done = running.result()
+            if done is not None:
+                associate(done)
     return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det,
                           detector.upright(detector.total).copy())
 
