@@ -23,7 +23,8 @@
 ``--streams DIR`` keeps the simulated clips (``.dat``) for later runs. ``--profile`` adds, for each
 400×250 clip of the throughput part, where the tracker's CPU-seconds go: the compiled front end
 (ingest and per-step evaluation), the start-up priming checks and their confirmation, the per-step
-grouping, the association in Python, and reading the file.
+grouping, the association in Python, and reading the file (the stages run in turn for it: the read-ahead
+and the front end's own thread are off while profiling).
 """
 
 from __future__ import annotations
@@ -219,6 +220,11 @@ def profile(folder):
 
     print(f"\n== Where the tracker's CPU goes (400×250, one run each after a warm-up); load average "
           f"{os.getloadavg()[0]:.1f} ==")
+    # the stages in turn, in one thread (read-ahead and the front end's own thread off): a stage timed while
+    # another thread works would count that thread's CPU too
+    print("  stages run in turn (tracking.PREFETCH_BLOCKS and PIPELINE_FRONT_END off while profiling)")
+    threads = tracking.PREFETCH_BLOCKS, tracking.PIPELINE_FRONT_END
+    tracking.PREFETCH_BLOCKS = tracking.PIPELINE_FRONT_END = False
     spent = {}
 
     def timed(owner, name, label):
@@ -261,6 +267,7 @@ def profile(folder):
     finally:
         for obj, name, fn in saved:
             setattr(obj, name, fn)
+        tracking.PREFETCH_BLOCKS, tracking.PIPELINE_FRONT_END = threads
 
 
 def _after_start_up(path, every, mark):
