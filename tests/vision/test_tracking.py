@@ -516,3 +516,45 @@ def test_foreground_does_not_depend_on_the_chunks_run_in_parallel(stream):
     for other in runs[1:]:
         for a, b in zip(runs[0], other, strict=True):
             np.testing.assert_array_equal(a, b)
+
+
+def test_a_file_is_read_and_its_front_end_run_ahead_in_threads_with_the_same_tracks(stream, tmp_path, monkeypatch):
+    # a .dat file's next block is read (and checked) in another thread while the tracker works on the current
+    # one: the first block in the caller's thread, the others ahead, and the tracks those of reading in turn
+    import threading
+
+    from viform.stream.io import open_spikes, save_spikes
+    from viform.vision import tracking
+
+    path = save_spikes(tmp_path / "square.dat", stream)
+    readers = []
+
+    class Noted:
+        def __init__(self, src):
+            self._src = src
+
+        def __getattr__(self, name):
+            return getattr(self._src, name)
+
+        def read_packed(self, start, stop):
+            readers.append((start, threading.current_thread() is threading.main_thread()))
+            return self._src.read_packed(start, stop)
+
+    steps = {"ahead": [], "in turn": []}
+
+    def noted(key):
+        return lambda frame, t_s, mask, reported: steps[key].append((frame, t_s, mask.sum(), len(reported)))
+
+    # (the front end also runs a block ahead, in its own thread, of the association here)
+    ahead = track_spikes(Noted(open_spikes(path)), 10, PARAMS, block_ticks=100, on_step=noted("ahead"))
+    assert [s for s, _ in readers] == list(range(0, (stream.n_ticks // 10) * 10, 100))
+    assert readers[0][1] and not any(main for _, main in readers[1:])
+    monkeypatch.setattr(tracking, "PREFETCH_BLOCKS", False)
+    monkeypatch.setattr(tracking, "PIPELINE_FRONT_END", False)
+    in_turn = track_spikes(open_spikes(path), 10, PARAMS, block_ticks=100, on_step=noted("in turn"))
+    assert len(ahead.rows)
+    np.testing.assert_array_equal(ahead.rows, in_turn.rows)
+    np.testing.assert_array_equal(ahead.times_s, in_turn.times_s)
+    np.testing.assert_array_equal(ahead.spike_counts, in_turn.spike_counts)
+    assert ahead.detections == in_turn.detections
+    assert steps["ahead"] == steps["in turn"] and len(steps["ahead"]) == stream.n_ticks // 10

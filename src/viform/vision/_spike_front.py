@@ -284,7 +284,7 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
     return f
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)  # without the GIL: the next block is read meanwhile
 def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, group_words,
                       dense_run_ticks, dense_spikes_per_tick, n_pixels,
                       spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,

@@ -170,6 +170,13 @@ def _words(packed: np.ndarray) -> np.ndarray:
 #: Words of packed pixels the front end runs through a block's ticks together (their state stays in cache).
 GROUP_WORDS = 64
 
+#: Read a ``.dat`` file's next block of ticks in a second thread while the tracker works on the current one.
+PREFETCH_BLOCKS = True
+
+#: Run the front end on a ``.dat`` file's next block in a second thread while the current block's steps are
+#: associated.
+PIPELINE_FRONT_END = True
+
 
 class SpikeChangeDetector:
     """Foreground from a spike stream, one mask per output step of ``step_ticks`` ticks.
@@ -1222,8 +1229,10 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
     rows, times, n_det = [], [], 0
     block = max(step_ticks, (check_int("block_ticks", block_ticks, 1) // step_ticks) * step_ticks)
     n_usable = (source.n_ticks // step_ticks) * step_ticks
-    for words in _packed_blocks(source, block, n_usable, layout):
-        for bits in detector.feed_words(words):
+
+    def associate(steps):
+        nonlocal rows, n_det
+        for bits in steps:
             frame = len(times) + 1
             t_s = source.start_time_s + frame * step_ticks / source.clock_hz
             boxes, counts, pixels = detector.components(bits, p.merge_px, 1)
@@ -1233,6 +1242,27 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
             times.append(t_s)
             if on_step is not None:
                 on_step(frame, t_s, detector.mask(bits), reported)
+
+    blocks = _packed_blocks(source, block, n_usable, layout)
+    if not (PIPELINE_FRONT_END and callable(getattr(source, "read_packed", None))):
+        for words in blocks:
+            associate(detector.feed_words(words))
+    else:
+        # a file's blocks: the front end (compiled, without the GIL) runs on the next block in a second thread
+        # while this block's steps are grouped and associated here; nothing flows back from the association
+        # to the front end, so the steps are the same. (A source that simulates or converts its spikes may
+        # run parallel kernels of its own: it is read in turn.)
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(1, thread_name_prefix="viform-front") as pool:
+            done = None
+            for words in blocks:
+                running = pool.submit(detector.feed_words, words)
+                if done is not None:
+                    associate(done)
+                done = running.result()
+            if done is not None:
+                associate(done)
     return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det,
                           detector.upright(detector.total).copy())
 
@@ -1254,12 +1284,30 @@ def _packed_blocks(source, block_ticks: int, stop: int, layout):
     direct = callable(getattr(source, "read_packed", None))
     # a block of packed words is an eighth of the unpacked bytes: the reader's budget allows 8× the ticks
     block_ticks = max(1, min(block_ticks, 8 * block_ticks_for(source.height, layout[0], block_ticks)))
-    for first in range(0, stop, block_ticks):
-        last = min(first + block_ticks, stop)
-        if direct:
-            yield _words(source.read_packed(first, last))
-        else:
-            yield pack_spikes(source.read_ticks(first, last))
+    if not direct:
+        for first in range(0, stop, block_ticks):
+            yield pack_spikes(source.read_ticks(first, min(first + block_ticks, stop)))
+        return
+
+    def read(first):
+        return _words(source.read_packed(first, min(first + block_ticks, stop)))
+
+    firsts = range(0, stop, block_ticks)
+    if not PREFETCH_BLOCKS or len(firsts) < 2:
+        for first in firsts:
+            yield read(first)
+        return
+    # a file's next block is read (positioned reads and CRC-32 checks, which release the GIL) while the
+    # tracker works on this one: the same blocks in the same order, one more held. The first is read here,
+    # so that a warning about the file comes from the caller's thread
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1, thread_name_prefix="viform-read") as pool:
+        ahead = None
+        for k, first in enumerate(firsts):
+            words = read(first) if ahead is None else ahead.result()
+            ahead = pool.submit(read, firsts[k + 1]) if k + 1 < len(firsts) else None
+            yield words
 
 
 def track_frames(frames, times_s, parameters: TrackerParameters | None = None, tick_s: float = 1 / 40_000,
