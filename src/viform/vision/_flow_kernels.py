@@ -702,10 +702,12 @@ def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, r
     m = 6 if affine else 2
     cost = 0.0
     used = 0
-    jac = np.zeros(m)
+    hess = np.zeros((m, m))
+    grad = np.zeros(m)
+    jac = np.zeros(6)
     for _ in range(iterations):
-        hess = np.zeros((m, m))
-        grad = np.zeros(m)
+        hess[:] = 0.0
+        grad[:] = 0.0
         cost = 0.0
         used = 0
         for f in range(n_frames):
@@ -719,13 +721,25 @@ def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, r
                 x = c + frac * (params[0] + params[2] * xx + params[3] * yy)
                 if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
                     continue
-                res = bilinear(smooth1[f], y, x) - smooth0[r, c]
+                # :func:`bilinear` of the image and its two gradients at one point (the same arithmetic)
+                yc = min(max(y, 0.0), h - 1.0)
+                xc = min(max(x, 0.0), w - 1.0)
+                y0 = min(int(yc), max(h - 2, 0))
+                x0 = min(int(xc), max(w - 2, 0))
+                y1 = min(y0 + 1, h - 1)
+                x1 = min(x0 + 1, w - 1)
+                fy = yc - y0
+                fx = xc - x0
+                res = ((1 - fy) * ((1 - fx) * smooth1[f, y0, x0] + fx * smooth1[f, y0, x1])
+                       + fy * ((1 - fx) * smooth1[f, y1, x0] + fx * smooth1[f, y1, x1])) - smooth0[r, c]
                 ww = weight[f, r, c]
                 if res * res * ww > cap:
                     cost += cap
                     continue
-                gx = frac * bilinear(grad_x1[f], y, x)
-                gy = frac * bilinear(grad_y1[f], y, x)
+                gx = frac * ((1 - fy) * ((1 - fx) * grad_x1[f, y0, x0] + fx * grad_x1[f, y0, x1])
+                             + fy * ((1 - fx) * grad_x1[f, y1, x0] + fx * grad_x1[f, y1, x1]))
+                gy = frac * ((1 - fy) * ((1 - fx) * grad_y1[f, y0, x0] + fx * grad_y1[f, y0, x1])
+                             + fy * ((1 - fx) * grad_y1[f, y1, x0] + fx * grad_y1[f, y1, x1]))
                 jac[0] = gx
                 jac[1] = gy
                 if affine:
@@ -734,9 +748,10 @@ def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, r
                     jac[4] = gy * xx
                     jac[5] = gy * yy
                 for i in range(m):
-                    grad[i] += ww * jac[i] * res
+                    wj = ww * jac[i]  # (ww·jac_i)·…, as the products were always grouped
+                    grad[i] += wj * res
                     for j in range(m):
-                        hess[i, j] += ww * jac[i] * jac[j]
+                        hess[i, j] += wj * jac[j]
                 cost += res * res * ww
                 used += 1
         for i in range(2, m):
