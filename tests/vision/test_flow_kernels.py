@@ -10,6 +10,7 @@ from viform.vision._flow_kernels import (
     inner_depth,
     rim_mean_exceeds,
     shift_gain,
+    shift_gains,
     warp_costs,
     warp_costs_at,
 )
@@ -71,6 +72,18 @@ def test_grid_gains_are_shift_gain_to_the_last_bit(seed):
         for j, dx in enumerate(shifts):
             assert grid[i, j] == shift_gain(log0, log1, var0, var1, still, labels, 1, rows, cols, float(dy),
                                             float(dx), CAP, UNKNOWN, EXCEPTION)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_shift_gains_are_shift_gain_to_the_last_bit(seed):
+    log0, log1, var0, var1, still, labels, rows, cols = _images(seed)
+    # half-pixel shifts, some landing outside the field, some one axis whole
+    dys = np.array([2.5, -0.5, 3.0, 12.5, -7.5, 0.5, 1.0, -20.5])
+    dxs = np.array([3.5, 0.0, -1.5, 14.5, 2.0, -0.5, 29.5, 1.5])
+    got = shift_gains(log0, log1, var0, var1, still, labels, 1, rows, cols, dys, dxs, CAP, UNKNOWN, EXCEPTION)
+    for i, (dy, dx) in enumerate(zip(dys, dxs, strict=True)):
+        assert got[i] == shift_gain(log0, log1, var0, var1, still, labels, 1, rows, cols, dy, dx, CAP, UNKNOWN,
+                                    EXCEPTION)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

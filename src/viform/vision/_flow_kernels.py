@@ -7,6 +7,9 @@
 * :func:`shift_gain`, :func:`best_shift`, :func:`unexplained_share`: the layered cost of one
   region moving over a still background, and its search;
 * :func:`gauss_newton_motion`: sub-pixel translation or affine motion of a region (Lucas–Kanade).
+
+The layered-cost kernels compile with ``error_model="numpy"``: no zero-division check before each
+float division (their denominators are variances and counts, never zero), the same IEEE results.
 """
 
 from __future__ import annotations
@@ -407,7 +410,7 @@ def segment_log_light(log_light, sigma, tolerance, slack, n_bins):
 # ---------------------------------------------------------------------- the layered cost
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def bilinear(img, y, x):
     h, w = img.shape
     y = min(max(y, 0.0), h - 1.0)
@@ -422,7 +425,7 @@ def bilinear(img, y, x):
             + fy * ((1 - fx) * img[y1, x0] + fx * img[y1, x1]))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _shift_gain_whole(log0, log1, var0, var1, still, labels, region, rows, cols, iy, ix, cap, unknown, exception):
     """:func:`shift_gain` for a whole-pixel shift: every landing is a pixel, so no interpolation (the same
     sums: bilinear weights of 0 and 1 reproduce the pixel exactly)."""
@@ -446,7 +449,7 @@ def _shift_gain_whole(log0, log1, var0, var1, still, labels, region, rows, cols,
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx, cap, unknown, exception):
     """Cost of "``region`` moved by (dy, dx), all else still" minus the cost of "nothing moved".
 
@@ -488,7 +491,49 @@ def shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, dy, dx
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
+def shift_gains(log0, log1, var0, var1, still, labels, region, rows, cols, dys, dxs, cap, unknown, exception):
+    """:func:`shift_gain` at each shift (``dys[i]``, ``dxs[i]``), none of them whole-pixel in both axes, in
+    one pass over the pixels: each entry is the sum :func:`shift_gain` returns, to the last bit (the same
+    arithmetic, summed over the pixels in their order)."""
+    h, w = log0.shape
+    m = dys.size
+    out = np.zeros(m)
+    for k in range(rows.size):
+        r = rows[k]
+        c = cols[k]
+        a0 = log0[r, c]
+        b0 = var0[r, c]
+        s0 = still[r, c]
+        uncovered = min(unknown, s0 + exception) - s0
+        for i in range(m):
+            dy = dys[i]
+            dx = dxs[i]
+            y = r + dy
+            x = c + dx
+            if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
+                continue
+            y0 = min(int(y), max(h - 2, 0))
+            x0 = min(int(x), max(w - 2, 0))
+            y1 = min(y0 + 1, h - 1)
+            x1 = min(x0 + 1, w - 1)
+            fy = y - y0
+            fx = x - x0
+            v = ((1 - fy) * ((1 - fx) * log1[y0, x0] + fx * log1[y0, x1])
+                 + fy * ((1 - fx) * log1[y1, x0] + fx * log1[y1, x1])) - a0
+            e = min(v * v / (b0 + var1[int(np.rint(y)), int(np.rint(x))]), cap)
+            s = ((1 - fy) * ((1 - fx) * still[y0, x0] + fx * still[y0, x1])
+                 + fy * ((1 - fx) * still[y1, x0] + fx * still[y1, x1]))
+            total = out[i] + (min(e, s + exception) - s)
+            sr = int(np.rint(r - dy))
+            sc = int(np.rint(c - dx))
+            if not (0 <= sr < h and 0 <= sc < w and labels[sr, sc] == region):
+                total += uncovered
+            out[i] = total
+    return out
+
+
+@njit(cache=True, error_model="numpy")
 def grid_gains(log0, log1, var0, var1, still, labels, region, rows, cols, shifts_y, shifts_x, cap, unknown,
                exception):
     """:func:`shift_gain` at every whole-pixel shift (``shifts_y[i]``, ``shifts_x[j]``): (ny, nx).
@@ -529,14 +574,15 @@ def grid_gains(log0, log1, var0, var1, still, labels, region, rows, cols, shifts
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse_rows, coarse_cols, radius, cap,
                unknown, exception):
     """The shift with the lowest :func:`shift_gain`: an integer grid of step 2 within ``radius``
     on the ``coarse_*`` pixels (a sample weighted to the region's rim, where a uniform region's
     motion shows), then steps 1 and 0.5 around the best on all of the region's pixels
     (Gauss–Newton refines further). Returns (dy, dx, gain). Whole-pixel shifts are summed
-    pixel by pixel for many shifts at once (:func:`grid_gains`)."""
+    pixel by pixel for many shifts at once (:func:`grid_gains`), the eight half-pixel ones likewise
+    (:func:`shift_gains`)."""
     grid = np.arange(-radius, radius + 1, 2)
     coarse = grid_gains(log0, log1, var0, var1, still, labels, region, coarse_rows, coarse_cols, grid, grid, cap,
                         unknown, exception)
@@ -580,20 +626,26 @@ def best_shift(log0, log1, var0, var1, still, labels, region, rows, cols, coarse
                 fx = float(cx + j)
     cyf = fy
     cxf = fx
+    dys = np.empty(8)
+    dxs = np.empty(8)
+    n = 0
     for i in range(-1, 2):
         for j in range(-1, 2):
             if i == 0 and j == 0:
                 continue
-            g = shift_gain(log0, log1, var0, var1, still, labels, region, rows, cols, cyf + i * 0.5,
-                           cxf + j * 0.5, cap, unknown, exception)
-            if g < best:
-                best = g
-                fy = cyf + i * 0.5
-                fx = cxf + j * 0.5
+            dys[n] = cyf + i * 0.5
+            dxs[n] = cxf + j * 0.5
+            n += 1
+    half = shift_gains(log0, log1, var0, var1, still, labels, region, rows, cols, dys, dxs, cap, unknown, exception)
+    for n in range(8):
+        if half[n] < best:
+            best = half[n]
+            fy = dys[n]
+            fx = dxs[n]
     return fy, fx, best
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def unexplained_share(log0, log1, var0, var1, still, rows, cols, dy, dx, cap, exception):
     """Share of the region's in-field landings that the shift leaves unexplained (kept still)."""
     h, w = log0.shape
@@ -614,7 +666,7 @@ def unexplained_share(log0, log1, var0, var1, still, rows, cols, dy, dx, cap, ex
     return bad / max(n, 1)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, rows, cols, params, affine,
                         iterations, cap, ridge):
     """Gauss–Newton (Lucas–Kanade) on Σ_j Σ_x w_j·(s1_j(x + f_j·d(x)) − s0(x))² over the listed pixels.
@@ -641,13 +693,21 @@ def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, r
     scale = 1.0
     for k in range(n):
         scale = max(scale, abs(rows[k] - cy), abs(cols[k] - cx))
+    # each pixel's offset from the centroid, computed once (the same divisions every step made)
+    xs = np.empty(n)
+    ys = np.empty(n)
+    for k in range(n):
+        xs[k] = (cols[k] - cx) / scale
+        ys[k] = (rows[k] - cy) / scale
     m = 6 if affine else 2
     cost = 0.0
     used = 0
-    jac = np.zeros(m)
+    hess = np.zeros((m, m))
+    grad = np.zeros(m)
+    jac = np.zeros(6)
     for _ in range(iterations):
-        hess = np.zeros((m, m))
-        grad = np.zeros(m)
+        hess[:] = 0.0
+        grad[:] = 0.0
         cost = 0.0
         used = 0
         for f in range(n_frames):
@@ -655,19 +715,31 @@ def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, r
             for k in range(n):
                 r = rows[k]
                 c = cols[k]
-                xx = (c - cx) / scale
-                yy = (r - cy) / scale
+                xx = xs[k]
+                yy = ys[k]
                 y = r + frac * (params[1] + params[4] * xx + params[5] * yy)
                 x = c + frac * (params[0] + params[2] * xx + params[3] * yy)
                 if y < 0.0 or x < 0.0 or y > h - 1 or x > w - 1:
                     continue
-                res = bilinear(smooth1[f], y, x) - smooth0[r, c]
+                # :func:`bilinear` of the image and its two gradients at one point (the same arithmetic)
+                yc = min(max(y, 0.0), h - 1.0)
+                xc = min(max(x, 0.0), w - 1.0)
+                y0 = min(int(yc), max(h - 2, 0))
+                x0 = min(int(xc), max(w - 2, 0))
+                y1 = min(y0 + 1, h - 1)
+                x1 = min(x0 + 1, w - 1)
+                fy = yc - y0
+                fx = xc - x0
+                res = ((1 - fy) * ((1 - fx) * smooth1[f, y0, x0] + fx * smooth1[f, y0, x1])
+                       + fy * ((1 - fx) * smooth1[f, y1, x0] + fx * smooth1[f, y1, x1])) - smooth0[r, c]
                 ww = weight[f, r, c]
                 if res * res * ww > cap:
                     cost += cap
                     continue
-                gx = frac * bilinear(grad_x1[f], y, x)
-                gy = frac * bilinear(grad_y1[f], y, x)
+                gx = frac * ((1 - fy) * ((1 - fx) * grad_x1[f, y0, x0] + fx * grad_x1[f, y0, x1])
+                             + fy * ((1 - fx) * grad_x1[f, y1, x0] + fx * grad_x1[f, y1, x1]))
+                gy = frac * ((1 - fy) * ((1 - fx) * grad_y1[f, y0, x0] + fx * grad_y1[f, y0, x1])
+                             + fy * ((1 - fx) * grad_y1[f, y1, x0] + fx * grad_y1[f, y1, x1]))
                 jac[0] = gx
                 jac[1] = gy
                 if affine:
@@ -676,9 +748,10 @@ def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, r
                     jac[4] = gy * xx
                     jac[5] = gy * yy
                 for i in range(m):
-                    grad[i] += ww * jac[i] * res
+                    wj = ww * jac[i]  # (ww·jac_i)·…, as the products were always grouped
+                    grad[i] += wj * res
                     for j in range(m):
-                        hess[i, j] += ww * jac[i] * jac[j]
+                        hess[i, j] += wj * jac[j]
                 cost += res * res * ww
                 used += 1
         for i in range(2, m):
@@ -695,7 +768,7 @@ def gauss_newton_motion(smooth0, smooth1, grad_x1, grad_y1, weight, fractions, r
     return params, cost, used, cy, cx, scale
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def warp_costs(smooth0, smooth1, weight, rows, cols, flow_u, flow_v, cap):
     """min(w·(s1(x + f(x)) − s0(x))², cap) at each listed pixel, f a per-pixel flow (px); a pixel
     sent out of the field costs ``cap``."""
@@ -714,7 +787,7 @@ def warp_costs(smooth0, smooth1, weight, rows, cols, flow_u, flow_v, cap):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def warp_costs_at(smooth0, smooth1, weight, rows, cols, flow_u, flow_v, cap):
     """:func:`warp_costs` with the flow given per listed pixel (``flow_u[k]``, ``flow_v[k]``, px)."""
     h, w = smooth0.shape
