@@ -5,12 +5,16 @@ dilemma scene, 128×64 pixels, 40 ms — 32 points (``--standard``: the designer
 every sensor instead). It is run into fresh folders in this process without dask (the plain
 reference) and with 1 and 2 local dask workers (the LocalCluster's start-up included in the wall
 time, as a user sees it). Printed per run: wall s; CPU-seconds of this process and of its child
-processes (the dask workers and their nannies, counted when they exit), and their sum; the sum of
+processes (the dask workers, counted when they exit; those forked from multiprocessing's fork server
+through it), and their sum; the sum of
 the points' own CPU-seconds; the per-point overhead (the run's CPU beyond the points', per point);
 peak resident memory (this process; the largest child); the load average before and after. Then
 the ratios to the in-process run, wall and CPU, and the check that every run's metrics and images
 are identical (across worker counts and repetitions). ``--repeat N`` runs the list N times, every
-other time in reverse order, so that a change of the machine's load does not favour one side.
+other time in reverse order, so that a change of the machine's load does not favour one side. Each kind
+of run is first run once uncounted (``--no-warmup`` to skip it): the first run in this process pays its
+imports and numba's cache loads (0.52 CPU-s/point against 0.38 warm), which would flatter whichever
+side runs second.
 
 The machine may be shared: the load is printed beside every figure, and the CPU-seconds ratio
 (which a busy machine changes little) beside the wall ratio. The goal (≤ 0.6× the in-process wall
@@ -36,10 +40,28 @@ def load() -> str:
     return " ".join(f"{v:.2f}" for v in os.getloadavg())
 
 
+def _forkserver_cpu() -> float:
+    """CPU-seconds of multiprocessing's fork server (the sweep's workers are forked from it,
+    :data:`viform.measure.sweep.run.WORKER_START`) and of its children that have exited: they are not this
+    process's children, and the server lives on, so RUSAGE_CHILDREN does not count them."""
+    import multiprocessing.forkserver
+
+    import psutil
+
+    pid = multiprocessing.forkserver._forkserver._forkserver_pid
+    if not pid:
+        return 0.0
+    try:
+        t = psutil.Process(pid).cpu_times()
+    except psutil.NoSuchProcess:
+        return 0.0
+    return t.user + t.system + t.children_user + t.children_system
+
+
 def _cpu() -> tuple[float, float]:
     me = resource.getrusage(resource.RUSAGE_SELF)
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime
+    return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime + _forkserver_cpu()
 
 
 def _peak_mib() -> tuple[float, float]:
@@ -53,6 +75,7 @@ def run_once(plan, workers: int, out: str) -> dict:
     (me0, kids0), wall = _cpu(), time.perf_counter()
     doc = sweep(plan, out, workers=workers, progress=False)
     wall = time.perf_counter() - wall
+    time.sleep(0.5)  # the fork server reaps the workers it forked (their CPU then counts as its children's)
     me1, kids1 = _cpu()
     me, kids = me1 - me0, kids1 - kids0
     n = len(plan.points)
@@ -110,6 +133,8 @@ def main() -> None:
                     help="run the list this many times, in reverse order every other time; ratios per repetition")
     ap.add_argument("--plain", type=int, default=0,
                     help="also run the points on this many plain processes (no dask) in each repetition")
+    ap.add_argument("--no-warmup", action="store_true",
+                    help="count the first run of each kind too (it pays this process's imports and numba cache loads)")
     ap.add_argument("--one-per-task", action="store_true",
                     help="one point per dask task (no guided batches), to measure what batching saves")
     args = ap.parse_args()
@@ -127,6 +152,13 @@ def main() -> None:
           f"load {load()}", flush=True)
     last = None
     with tempfile.TemporaryDirectory() as tmp:
+        if not args.no_warmup:  # every measured run warm: this process's imports and numba cache loads paid here
+            print("warm-up (not counted):", flush=True)
+            for workers in counts:
+                run_once(plan, workers, os.path.join(tmp, f"warm{workers}"))
+            if args.plain:
+                plain_processes_once(plan, args.plain)
+            print("measured:", flush=True)
         for rep in range(args.repeat):
             results = {}
             for workers in counts if rep % 2 == 0 else counts[::-1]:
