@@ -6,7 +6,8 @@ every sensor instead). It is run into fresh folders in this process without dask
 reference) and with 1 and 2 local dask workers (the LocalCluster's start-up included in the wall
 time, as a user sees it). Printed per run: wall s; CPU-seconds of this process and of its child
 processes (the dask workers, counted when they exit; those forked from multiprocessing's fork server
-through it), and their sum; the sum of
+through it, which is stopped after each run so that the next starts a fresh one as a command does:
+``--keep-forkserver`` keeps it), and their sum; the sum of
 the points' own CPU-seconds; the per-point overhead (the run's CPU beyond the points', per point);
 peak resident memory (this process; the largest child); the load average before and after. Then
 the ratios to the in-process run, wall and CPU, and the check that every run's metrics and images
@@ -40,28 +41,19 @@ def load() -> str:
     return " ".join(f"{v:.2f}" for v in os.getloadavg())
 
 
-def _forkserver_cpu() -> float:
-    """CPU-seconds of multiprocessing's fork server (the sweep's workers are forked from it,
-    :data:`viform.measure.sweep.run.WORKER_START`) and of its children that have exited: they are not this
-    process's children, and the server lives on, so RUSAGE_CHILDREN does not count them."""
+def stop_forkserver() -> None:
+    """Stop multiprocessing's fork server (the sweep's workers are forked from it,
+    :data:`viform.measure.sweep.run.WORKER_START`) and wait for it: its CPU and its children's then count
+    in this process's RUSAGE_CHILDREN, and the next run starts a fresh one, as a command does."""
     import multiprocessing.forkserver
 
-    import psutil
-
-    pid = multiprocessing.forkserver._forkserver._forkserver_pid
-    if not pid:
-        return 0.0
-    try:
-        t = psutil.Process(pid).cpu_times()
-    except psutil.NoSuchProcess:
-        return 0.0
-    return t.user + t.system + t.children_user + t.children_system
+    multiprocessing.forkserver._forkserver._stop()
 
 
 def _cpu() -> tuple[float, float]:
     me = resource.getrusage(resource.RUSAGE_SELF)
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime + _forkserver_cpu()
+    return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime
 
 
 def _peak_mib() -> tuple[float, float]:
@@ -70,12 +62,15 @@ def _peak_mib() -> tuple[float, float]:
             resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)
 
 
-def run_once(plan, workers: int, out: str) -> dict:
+def run_once(plan, workers: int, out: str, keep_forkserver: bool = False) -> dict:
+    if not keep_forkserver:
+        stop_forkserver()
     before = load()
     (me0, kids0), wall = _cpu(), time.perf_counter()
     doc = sweep(plan, out, workers=workers, progress=False)
     wall = time.perf_counter() - wall
-    time.sleep(0.5)  # the fork server reaps the workers it forked (their CPU then counts as its children's)
+    if not keep_forkserver:
+        stop_forkserver()  # (after the wall time) its CPU and its workers' now count as children's
     me1, kids1 = _cpu()
     me, kids = me1 - me0, kids1 - kids0
     n = len(plan.points)
@@ -135,6 +130,8 @@ def main() -> None:
                     help="also run the points on this many plain processes (no dask) in each repetition")
     ap.add_argument("--no-warmup", action="store_true",
                     help="count the first run of each kind too (it pays this process's imports and numba cache loads)")
+    ap.add_argument("--keep-forkserver", action="store_true",
+                    help="keep the workers' fork server between runs (its start then paid once, by the warm-up)")
     ap.add_argument("--one-per-task", action="store_true",
                     help="one point per dask task (no guided batches), to measure what batching saves")
     args = ap.parse_args()
@@ -155,14 +152,15 @@ def main() -> None:
         if not args.no_warmup:  # every measured run warm: this process's imports and numba cache loads paid here
             print("warm-up (not counted):", flush=True)
             for workers in counts:
-                run_once(plan, workers, os.path.join(tmp, f"warm{workers}"))
+                run_once(plan, workers, os.path.join(tmp, f"warm{workers}"), args.keep_forkserver)
             if args.plain:
                 plain_processes_once(plan, args.plain)
             print("measured:", flush=True)
         for rep in range(args.repeat):
             results = {}
             for workers in counts if rep % 2 == 0 else counts[::-1]:
-                results[workers] = run_once(plan, workers, os.path.join(tmp, f"r{rep}w{workers}"))
+                results[workers] = run_once(plan, workers, os.path.join(tmp, f"r{rep}w{workers}"),
+                                            args.keep_forkserver)
             ref_name = counts[0]
             ref = results[ref_name]
             if args.plain:
