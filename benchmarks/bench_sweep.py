@@ -5,12 +5,17 @@ dilemma scene, 128×64 pixels, 40 ms — 32 points (``--standard``: the designer
 every sensor instead). It is run into fresh folders in this process without dask (the plain
 reference) and with 1 and 2 local dask workers (the LocalCluster's start-up included in the wall
 time, as a user sees it). Printed per run: wall s; CPU-seconds of this process and of its child
-processes (the dask workers and their nannies, counted when they exit), and their sum; the sum of
+processes (the dask workers, counted when they exit; those forked from multiprocessing's fork server
+through it, which is stopped after each run so that the next starts a fresh one as a command does:
+``--keep-forkserver`` keeps it), and their sum; the sum of
 the points' own CPU-seconds; the per-point overhead (the run's CPU beyond the points', per point);
 peak resident memory (this process; the largest child); the load average before and after. Then
 the ratios to the in-process run, wall and CPU, and the check that every run's metrics and images
 are identical (across worker counts and repetitions). ``--repeat N`` runs the list N times, every
-other time in reverse order, so that a change of the machine's load does not favour one side.
+other time in reverse order, so that a change of the machine's load does not favour one side. Each kind
+of run is first run once uncounted (``--no-warmup`` to skip it): the first run in this process pays its
+imports and numba's cache loads (0.52 CPU-s/point against 0.38 warm), which would flatter whichever
+side runs second.
 
 The machine may be shared: the load is printed beside every figure, and the CPU-seconds ratio
 (which a busy machine changes little) beside the wall ratio. The goal (≤ 0.6× the in-process wall
@@ -36,6 +41,15 @@ def load() -> str:
     return " ".join(f"{v:.2f}" for v in os.getloadavg())
 
 
+def stop_forkserver() -> None:
+    """Stop multiprocessing's fork server (the sweep's workers are forked from it,
+    :data:`viform.measure.sweep.run.WORKER_START`) and wait for it: its CPU and its children's then count
+    in this process's RUSAGE_CHILDREN, and the next run starts a fresh one, as a command does."""
+    import multiprocessing.forkserver
+
+    multiprocessing.forkserver._forkserver._stop()
+
+
 def _cpu() -> tuple[float, float]:
     me = resource.getrusage(resource.RUSAGE_SELF)
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -48,11 +62,15 @@ def _peak_mib() -> tuple[float, float]:
             resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)
 
 
-def run_once(plan, workers: int, out: str) -> dict:
+def run_once(plan, workers: int, out: str, keep_forkserver: bool = False) -> dict:
+    if not keep_forkserver:
+        stop_forkserver()
     before = load()
     (me0, kids0), wall = _cpu(), time.perf_counter()
     doc = sweep(plan, out, workers=workers, progress=False)
     wall = time.perf_counter() - wall
+    if not keep_forkserver:
+        stop_forkserver()  # (after the wall time) its CPU and its workers' now count as children's
     me1, kids1 = _cpu()
     me, kids = me1 - me0, kids1 - kids0
     n = len(plan.points)
@@ -110,6 +128,10 @@ def main() -> None:
                     help="run the list this many times, in reverse order every other time; ratios per repetition")
     ap.add_argument("--plain", type=int, default=0,
                     help="also run the points on this many plain processes (no dask) in each repetition")
+    ap.add_argument("--no-warmup", action="store_true",
+                    help="count the first run of each kind too (it pays this process's imports and numba cache loads)")
+    ap.add_argument("--keep-forkserver", action="store_true",
+                    help="keep the workers' fork server between runs (its start then paid once, by the warm-up)")
     ap.add_argument("--one-per-task", action="store_true",
                     help="one point per dask task (no guided batches), to measure what batching saves")
     args = ap.parse_args()
@@ -127,10 +149,18 @@ def main() -> None:
           f"load {load()}", flush=True)
     last = None
     with tempfile.TemporaryDirectory() as tmp:
+        if not args.no_warmup:  # every measured run warm: this process's imports and numba cache loads paid here
+            print("warm-up (not counted):", flush=True)
+            for workers in counts:
+                run_once(plan, workers, os.path.join(tmp, f"warm{workers}"), args.keep_forkserver)
+            if args.plain:
+                plain_processes_once(plan, args.plain)
+            print("measured:", flush=True)
         for rep in range(args.repeat):
             results = {}
             for workers in counts if rep % 2 == 0 else counts[::-1]:
-                results[workers] = run_once(plan, workers, os.path.join(tmp, f"r{rep}w{workers}"))
+                results[workers] = run_once(plan, workers, os.path.join(tmp, f"r{rep}w{workers}"),
+                                            args.keep_forkserver)
             ref_name = counts[0]
             ref = results[ref_name]
             if args.plain:

@@ -98,7 +98,8 @@ class Cluster:
 
 
 def worker_processes(pid: int) -> list:
-    """The dask worker processes below ``pid`` (spawned by their nannies)."""
+    """The dask worker processes below ``pid`` (spawned by their nannies, or forked by multiprocessing's fork
+    server: a sweep's workers, :data:`viform.measure.sweep.run.WORKER_START`)."""
     try:
         kids = psutil.Process(pid).children(recursive=True)
     except psutil.NoSuchProcess:
@@ -109,7 +110,11 @@ def worker_processes(pid: int) -> list:
             line = " ".join(kid.cmdline())
         except (psutil.NoSuchProcess, psutil.AccessDenied):
             continue
-        if "spawn_main" in line:
+        try:
+            forked = "multiprocessing.forkserver" in " ".join(kid.parent().cmdline())
+        except (psutil.NoSuchProcess, psutil.AccessDenied, AttributeError):
+            forked = False
+        if "spawn_main" in line or forked:
             found.append(kid)
     return found
 
