@@ -359,6 +359,52 @@ def test_points_are_shot_here_while_the_cluster_starts():
     assert _FakeCluster.closed == 2
 
 
+class _FakeClient(_FakeCluster):
+    def scheduler_info(self):
+        return {"workers": {}}
+
+
+def test_own_cluster_is_closed_while_the_results_are_written(tmp_path, monkeypatch):
+    """A finished sweep's own cluster is closed in a thread: the caller's ``close_later`` gets it to join after
+    writing its results (sweep() joins it itself without one); after a failure it is closed before raising."""
+    plan = tiny_plan(["cmos:exposure_s=1e-4,1e-3"])
+
+    def start_here(start, todo, here, computed, out):  # the cluster "comes up" after every point is shot here
+        for p in todo:
+            here(p)
+        return _FakeClient(), _FakeCluster(), []
+
+    monkeypatch.setattr(sw.run, "_start_while_shooting", start_here)
+    _FakeCluster.closed = 0
+    closing = []
+    doc = sw.sweep(plan, tmp_path / "a", workers=2, progress=False, close_later=closing)
+    assert doc["computed_here"] == len(plan.points) and (tmp_path / "a" / "sweep.json").exists()
+    assert len(closing) == 1 and closing[0].name == "viform-sweep-close"
+    closing[0].join(60)
+    assert _FakeCluster.closed == 2
+    assert {"cluster_up_s", "points_s", "closed_s", "store_s"} <= set(doc["timings"])
+
+    sw.sweep(plan, tmp_path / "b", workers=2, progress=False)  # no close_later: joined before returning
+    assert _FakeCluster.closed == 4
+
+    def start_fail(start, todo, here, computed, out):
+        return _FakeClient(), _FakeCluster(), todo  # points left for workers that cannot take them
+
+    monkeypatch.setattr(sw.run, "_start_while_shooting", start_fail)
+    closing = []
+    with pytest.raises(AttributeError):  # the fake client has no submit
+        sw.sweep(plan, tmp_path / "c", workers=2, progress=False, close_later=closing)
+    assert closing == [] and _FakeCluster.closed == 6
+
+    class _BadCluster(_FakeCluster):
+        def close(self):
+            raise RuntimeError("could not close")
+
+    monkeypatch.setattr(sw.run, "_start_while_shooting", lambda *a: (start_here(*a)[0], _BadCluster(), []))
+    with pytest.raises(RuntimeError, match="could not close"):  # said by the join, in the caller's thread
+        sw.sweep(plan, tmp_path / "d", workers=2, progress=False)
+
+
 def test_tasks_shrink_toward_the_end():
     """Guided batches: each task takes half the points left per worker (strided through the plan), the last
     ones a point each; every point once."""

@@ -446,11 +446,18 @@ def run_sweep_report(plan, out, *, workers=None, scheduler=None, client=None, me
                      device: str = "cpu", **run_options) -> dict:
     """Run a planned sweep into ``out`` and write its report; returns the sweep document.
 
-    ``run_options`` go to :func:`viform.measure.sweep.sweep` (e.g. ``connect_timeout_s``)."""
+    ``run_options`` go to :func:`viform.measure.sweep.sweep` (e.g. ``connect_timeout_s``). A local
+    cluster of the sweep's own is closed while the report is written (its workers' shut-down is waiting)."""
     started = time.perf_counter() if started_s is None else started_s
-    doc = sw.sweep(plan, out, workers=workers, scheduler=scheduler, client=client, memory_limit=memory_limit,
-                   progress=progress, crash_after_points=crash_after_points, device=device, **run_options)
-    write_sweep_report(doc, plan.context.make_scene(), out, command, started, demand_notes,
-                       scenes=plan.context.make_scene)
+    closing: list = []
+    try:
+        doc = sw.sweep(plan, out, workers=workers, scheduler=scheduler, client=client, memory_limit=memory_limit,
+                       progress=progress, crash_after_points=crash_after_points, device=device,
+                       close_later=closing, **run_options)
+        write_sweep_report(doc, plan.context.make_scene(), out, command, started, demand_notes,
+                           scenes=plan.context.make_scene)
+    finally:
+        for thread in closing:
+            thread.join()
     doc["report"] = str(Path(out) / "report.html")
     return doc

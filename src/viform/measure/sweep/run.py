@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -40,6 +41,36 @@ from viform.sensors.spike_cuda import DEVICES  # noqa: F401 -- a sweep's devices
 
 #: Contrast-to-noise at which a target counts as seen (as compare's verdict counts it).
 SEEN_CNR = 3.0
+
+
+def _close_all(parts) -> None:
+    """Close a sweep's own client and cluster, in this order (every one, even when one fails)."""
+    try:
+        for part in parts[:-1]:
+            part.close()
+    finally:
+        if parts:
+            parts[-1].close()
+
+
+class _Closing(threading.Thread):
+    """A thread that closes a sweep's own client and cluster; ``join()`` raises what closing them raised."""
+
+    def __init__(self, parts):
+        super().__init__(name="viform-sweep-close", daemon=True)
+        self.parts, self.error = parts, None
+
+    def run(self):
+        try:
+            _close_all(self.parts)
+        except BaseException as exc:  # noqa: BLE001 -- raised by join() in the caller's thread
+            self.error = exc
+
+    def join(self, timeout=None):
+        super().join(timeout)
+        if self.error is not None:
+            error, self.error = self.error, None
+            raise error
 
 
 def run_point(context: SweepContext, point: Point, scene=None, device: str = "cpu") -> dict:
@@ -281,7 +312,8 @@ def _start_while_shooting(start, todo, here, computed, out):
 
 def run_sweep(context: SweepContext, points, out, *, workers: int | None = None, scheduler: str | None = None,
               client=None, memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
-              device: str = "cpu", connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None) -> dict:
+              device: str = "cpu", connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None,
+              close_later: list | None = None) -> dict:
     """Run every point not already stored in ``out``; return the records (plan order) and run figures.
 
     ``workers=0`` runs the points in this process, one after the other (no dask); otherwise on a
@@ -298,6 +330,14 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
     lost scheduler (or one without a worker for ``connect_timeout_s``) stops the run with one
     line saying how many points are stored; running the same sweep again computes only the others.
     ``on_connect(scheduler, connect_timeout_s)`` is called just before a ``scheduler`` is reached.
+    The run figures include ``timings``, where the wall time went, in seconds from the start:
+    ``cluster_up_s`` (a local cluster of the sweep's own is up), ``first_task_s`` (the first task's
+    results are back), ``points_s`` (every point stored), ``closed_s`` (the client and cluster
+    closed, or handed to ``close_later``); and ``store_s``, the time spent storing points in this process.
+
+    ``close_later`` (a list): a local cluster of the sweep's own, once every point is stored, is closed
+    in a thread appended to it, which the caller joins after writing the results (closing the workers
+    takes 0.5–1.2 s of waiting, measured); without it, or after a failure, it is closed before returning.
     """
     out = Path(out)
     stored = {p.point_id: load_point(out, p, context) for p in points}
@@ -311,12 +351,16 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
 
         bar = tqdm(total=len(points), initial=len(records), unit="point", desc="sweep", leave=False)
 
+    timings = {"store_s": 0.0}  # where the wall time goes (see run_sweep's return)
+
     def take(result):
         nonlocal computed
+        t0 = time.perf_counter()
         store_point(out, result)
         rec = _restore(json.loads(json.dumps(_finite(result["record"]))))
         records[rec["point_id"]] = rec
         computed += 1
+        timings["store_s"] += time.perf_counter() - t0
         if bar is not None:
             bar.update(1)
         if crash_after_points is not None and computed >= crash_after_points:
@@ -324,6 +368,7 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
 
     n_workers = here_count = 0
     own_client = own_cluster = None
+    finished = False
     scenes: dict = {}
 
     def here(p):  # a point shot and stored in this process (its scene made once per setting)
@@ -348,6 +393,7 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
                 lambda: _open(n, None, memory_limit, connect_timeout_s), todo, here, lambda: computed, out)
             client = own_client
             here_count = computed
+            timings["cluster_up_s"] = time.perf_counter() - started
             n_workers = len(client.scheduler_info().get("workers", {}))
         else:
             todo_left = todo
@@ -361,29 +407,37 @@ def run_sweep(context: SweepContext, points, out, *, workers: int | None = None,
                 for _, results in completed(client, futures, connect_timeout_s):
                     if isinstance(results, BaseException):
                         raise results
+                    timings.setdefault("first_task_s", time.perf_counter() - started)
                     for result in results:  # a task's points, each stored whole
                         take(result)
             except SchedulerLost as exc:
                 raise ViformError(f"{exc}: {len(records)} of {len(points)} points are stored, each whole, in "
                                   f"{str(out / POINTS_DIR)!r}; run the same sweep again to compute the other "
                                   f"{len(points) - len(records)}") from None
+        timings["points_s"] = time.perf_counter() - started
+        finished = True
     finally:
         if bar is not None:
             bar.close()
-        if own_client is not None:
-            own_client.close()
-        if own_cluster is not None:
-            own_cluster.close()
+        parts = [part for part in (own_client, own_cluster) if part is not None]
+        if parts and finished and close_later is not None:  # closed while the caller writes the results
+            closing = _Closing(parts)
+            closing.start()
+            close_later.append(closing)
+        else:
+            _close_all(parts)
+    timings["closed_s"] = time.perf_counter() - started
     ordered = [records[p.point_id] for p in points]
     new = [r for r in ordered if r["point_id"] in {p.point_id for p in todo}]
     return {"records": ordered, "computed": computed, "computed_here": here_count, "reused": len(points) - computed,
             "seconds": time.perf_counter() - started, "workers": n_workers,
-            "cpu_seconds": sum(r.get("cpu_seconds", 0.0) for r in new)}
+            "cpu_seconds": sum(r.get("cpu_seconds", 0.0) for r in new), "timings": timings}
 
 
 def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | None = None, client=None,
           memory_limit="auto", progress: bool = True, crash_after_points: int | None = None,
-          device: str = "cpu", connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None) -> dict:
+          device: str = "cpu", connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, on_connect=None,
+          close_later: list | None = None) -> dict:
     """Run a planned sweep into ``out``: points, ``sweep.zarr`` and ``sweep.json``; returns the sweep document.
 
     ``device`` ("cpu" or "cuda") runs the spike sensor's simulations there; it is recorded with each
@@ -391,7 +445,9 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
     resumed on a CPU: the two give the same bits except in rare last-bit roundings, see
     :mod:`viform.sensors.spike_cuda`). ``connect_timeout_s`` bounds the wait for ``scheduler`` (at the
     start and after losing it; see :func:`run_sweep` for the faults), and ``on_connect`` is called
-    just before it is reached.
+    just before it is reached. A local cluster of the sweep's own is closed while the table and
+    ``sweep.json`` are written (joined before returning), or, with ``close_later`` (a list), in a thread
+    appended to it for the caller to join (:func:`run_sweep`).
     """
     from viform._io import check_output_folder
 
@@ -408,9 +464,21 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
     connect_timeout_s = check_connect_timeout(connect_timeout_s)
     device = check_device(device, plan.sensors)
     check_context(out, plan.context)
-    run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
-                    memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points,
-                    device=device, connect_timeout_s=connect_timeout_s, on_connect=on_connect)
+    closing = [] if close_later is None else close_later
+    try:
+        run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
+                        memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points,
+                        device=device, connect_timeout_s=connect_timeout_s, on_connect=on_connect,
+                        close_later=closing)
+        return _write_results(plan, out, run, device)
+    finally:
+        if close_later is None:
+            for thread in closing:
+                thread.join()
+
+
+def _write_results(plan: SweepPlan, out: Path, run: dict, device: str) -> dict:
+    """Write a run's ``sweep.zarr`` and ``sweep.json``; return the sweep document."""
     records = run["records"]
     result = answer(records, plan.demands, plan.objective)
     write_table(out / "sweep.zarr", records, plan.context)
@@ -422,4 +490,5 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
            "pareto": [list(p) for p in plan.pareto], "points": [_finite(r) for r in records]}
     write_json(out / "sweep.json", _finite(doc))
     doc["records"] = records
+    doc["timings"] = run["timings"]
     return doc
