@@ -213,3 +213,17 @@ def test_console_says_where_the_points_ran():
                                      "in this process while they started), 2.0 CPU-s")
     doc.update(workers=0, computed_here=5)
     assert console_lines(doc)[0] == "5 points (5 computed, 0 reused) in 3.0 s on no dask workers, 2.0 CPU-s"
+
+
+def test_a_folder_of_another_sweep_is_refused_before_the_compile_notice(swept, capsys, monkeypatch):
+    """--out holding a sweep of other options (here another --duration) is refused in one line, exit 2,
+    even on a first run whose spike sensor would announce its compile first; the folder is left as it was."""
+    monkeypatch.setattr("viform.cli.compare.kernels_cached", lambda: False)  # as on a first run
+    out, _ = swept
+    before = (out / "sweep.json").read_bytes()
+    args = [a if a != "0.012" else "0.016" for a in ARGS]
+    code = main([*args, "--workers", "0", "--sensor", "spikeone", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert f"--out {str(out)!r} holds a sweep made with other options" in err
+    assert (out / "sweep.json").read_bytes() == before

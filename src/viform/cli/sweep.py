@@ -132,12 +132,13 @@ def sweep(scene, sensors, vary, require, objective, spike_image, duration_s, at,
                         spike_image=spike_image, scene_options=options, tracking=tracking)
     check_outputs(out_dir, json_file)
     check_json_file(json_file)
-    sw.check_device(device, plan.sensors)  # before the compile notice: an error is the only line
-    if any(compare_entry(k).family == "spike" for k in plan.sensors):
-        announce_preparation()
-    from viform.cli._common import announce_connection
+    try:  # before the compile notice: an error is the only line
+        sw.check_device(device, plan.sensors)
+        sw.check_context(Path(out_dir), plan.context)
+        if any(compare_entry(k).family == "spike" for k in plan.sensors):
+            announce_preparation()
+        from viform.cli._common import announce_connection
 
-    try:
         doc = run_sweep_report(plan, out_dir, workers=workers, scheduler=scheduler, memory_limit=worker_memory,
                                progress=not no_progress, device=device, connect_timeout_s=connect_timeout_s,
                                on_connect=announce_connection,
