@@ -211,7 +211,7 @@ _STAGES = (("front end (compiled: ingest + per-step evaluation)", "SpikeChangeDe
            ("grouping (foreground pixels, union-find)", "SpikeChangeDetector", "components"),
            ("association (Tracker.update, Python)", "Tracker", "update"),
            ("  of which regrouping", "Tracker", "_regroup"),
-           ("packed words from the stored bytes", None, "_words"))
+           ("packed words from the stored bytes (sources without read_packed_words)", None, "_words"))
 
 
 def profile(folder):
@@ -250,6 +250,9 @@ def profile(folder):
             reader = type(open_spikes(path))
             fn, wrapper = timed(reader, "read_packed", "reading the file (checked blocks)")
             reader.read_packed = wrapper
+            fn_words, wrapper_words = timed(reader, "read_packed_words",
+                                            "reading the file (checked blocks, into words)")
+            reader.read_packed_words = wrapper_words
             try:
                 for every in (40, 10):
                     track_spikes(open_spikes(path).slice_time(0, 4e-3), every)  # compiled outside the timing
@@ -263,7 +266,7 @@ def profile(folder):
                     for label, v in sorted(spent.items(), key=lambda kv: -kv[1]):
                         print(f"      {label:<52} {v:6.3f} CPU-s {100 * v / cpu:5.1f} %")
             finally:
-                reader.read_packed = fn
+                reader.read_packed, reader.read_packed_words = fn, fn_words
     finally:
         for obj, name, fn in saved:
             setattr(obj, name, fn)

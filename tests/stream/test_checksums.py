@@ -224,3 +224,29 @@ def _npy(array) -> bytes:
     buf = io.BytesIO()
     np.save(buf, array)
     return buf.getvalue()
+
+
+def test_dat_words_are_the_checked_bytes_padded_to_words(tmp_path, small_blocks):
+    """read_packed_words: read_packed's rows zero-padded to 64-bit words, copied once from the checked blocks
+    (13-byte ticks in 512-byte blocks: rows cross blocks); damage is found in the blocks a read uses."""
+    from viform.stream.sidecar import sidecar_path
+    from viform.vision.tracking import _words
+
+    s = SpikeStream(np.random.default_rng(5).random((T, 4, 26)) < 0.3, 40_000.0, 50.0)
+    path = save_spikes(tmp_path / "odd.dat", s)
+    source = open_spikes(path)
+    assert source.frame_bytes == 13
+    for a, b in [(0, 1), (0, T), (3, 4), (39, 40), (39, 79), (100, 357), (T - 1, T), (5, 5)]:
+        words = source.read_packed_words(a, b)
+        assert words.dtype == np.uint64 and words.shape == (b - a, 2) and words.flags.c_contiguous
+        np.testing.assert_array_equal(words, _words(source.read_packed(a, b)))
+    flip(path, 300 * 13)
+    source = open_spikes(path)
+    np.testing.assert_array_equal(source.read_packed_words(0, 50), _words(source.read_packed(0, 50)))
+    with pytest.raises(ViformError, match="damaged"):
+        source.read_packed_words(280, 320)
+    path = save_spikes(tmp_path / "plain.dat", s)
+    sidecar_path(path).unlink()  # no checksums: read as stored
+    source = open_spikes(path, height=4, width=26)
+    with pytest.warns(UserWarning):
+        np.testing.assert_array_equal(source.read_packed_words(7, 333), _words(source.read_packed(7, 333)))

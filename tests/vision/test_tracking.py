@@ -540,6 +540,10 @@ def test_a_file_is_read_and_its_front_end_run_ahead_in_threads_with_the_same_tra
             readers.append((start, threading.current_thread() is threading.main_thread()))
             return self._src.read_packed(start, stop)
 
+        def read_packed_words(self, start, stop):
+            readers.append((start, threading.current_thread() is threading.main_thread()))
+            return self._src.read_packed_words(start, stop)
+
     steps = {"ahead": [], "in turn": []}
 
     def noted(key):

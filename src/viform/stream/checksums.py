@@ -115,13 +115,27 @@ class BlockReader:
             return self._block(first)[start:start + count]
         out = bytearray(count)  # one copy of the checked blocks into the result
         filled = 0
+        for piece in self.pieces(offset, count):
+            out[filled:filled + len(piece)] = piece
+            filled += len(piece)
+        return out
+
+    def pieces(self, offset: int, count: int):
+        """``count`` bytes from ``offset`` as consecutive views of checked blocks (no copy), in order."""
+        if count <= 0:
+            return
+        if offset < 0 or offset + count > self.total_bytes:
+            raise ViformError(f"{self.where}: bytes {offset}–{offset + count - 1} lie outside the "
+                              f"{self.total_bytes} bytes its checksums cover")
+        size = self.block_bytes
+        first, last = offset // size, (offset + count - 1) // size
+        start, done = offset - first * size, 0
         for i in range(first, last + 1):
             block = memoryview(self._block(i))
             a = start if i == first else 0
-            b = min(len(block), a + count - filled)
-            out[filled:filled + b - a] = block[a:b]
-            filled += b - a
-        return out
+            b = min(len(block), a + count - done)
+            yield block[a:b]
+            done += b - a
 
     def _block(self, index: int) -> bytes:
         if index in self._cache:

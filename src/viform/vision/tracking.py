@@ -1290,7 +1290,10 @@ def _packed_blocks(source, block_ticks: int, stop: int, layout):
         return
 
     def read(first):
-        return _words(source.read_packed(first, min(first + block_ticks, stop)))
+        last = min(first + block_ticks, stop)
+        if callable(getattr(source, "read_packed_words", None)):  # the checked bytes copied once, into words
+            return source.read_packed_words(first, last)
+        return _words(source.read_packed(first, last))
 
     firsts = range(0, stop, block_ticks)
     if not PREFETCH_BLOCKS or len(firsts) < 2:
