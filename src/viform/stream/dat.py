@@ -272,6 +272,16 @@ class DatFile(SpikeSource):
             return 416
         return self.width
 
+    def _before_reading(self, n_bytes: int) -> None:
+        """What every read of ``n_bytes`` > 0 stored bytes does first: warn when the file has no
+        checksums, and check a version-1 sidecar's whole-file checksum (it has no block checksums)."""
+        if not n_bytes:
+            return
+        if not self.checked:
+            self._say_unverified(self._unverified_reason())
+        if self._check_whole:
+            self.verify()
+
     def read_packed(self, start: int, stop: int) -> np.ndarray:
         """The stored bytes of ticks [start, stop) as they are in the file: (T, frame bytes) uint8.
 
@@ -283,10 +293,7 @@ class DatFile(SpikeSource):
         # positioned reads rather than a memory map: the resident memory stays one block whatever
         # the file size (mapped pages of a long file count against the process)
         want = (stop - start) * self.frame_bytes if stop > start else 0
-        if not self.checked and want:
-            self._say_unverified(self._unverified_reason())
-        if self._check_whole and want:
-            self.verify()  # version 1 sidecar: no block checksums, the whole file first
+        self._before_reading(want)
         if self._reader is not None:  # the blocks holding these ticks, each checked before use
             data = self._reader.read(start * self.frame_bytes, want)
         else:
@@ -307,10 +314,7 @@ class DatFile(SpikeSource):
         out = np.empty((t, n_words * 8), np.uint8)
         out[:, self.frame_bytes:] = 0
         want = t * self.frame_bytes
-        if not self.checked and want:
-            self._say_unverified(self._unverified_reason())
-        if self._check_whole and want:
-            self.verify()  # version 1 sidecar: no block checksums, the whole file first
+        self._before_reading(want)
         if self._reader is not None:  # the blocks holding these ticks, each checked before use
             pieces = self._reader.pieces(start * self.frame_bytes, want)
         else:
