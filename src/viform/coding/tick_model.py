@@ -268,8 +268,7 @@ def _dmag(rc, data, probs, ba, bb, bc, wset):
 
 # ---------------------------------------------------------------------------- predictor
 
-@njit(cache=True, inline="always")
-def _sbucket(mad):
+def _sbucket_loop(mad):
     # mean |residual| in ticks: < 1/16, 1/8, 1/4, 1/2, 1, 2, ≥ 2
     b = 0
     lim = _ONE >> 4
@@ -277,6 +276,28 @@ def _sbucket(mad):
         b += 1
         lim <<= 1
     return b
+
+
+#: _sbucket_loop(mad) for mad >> (_FB - 4) = 0 … 31 (from 32 on: the top bucket), one load per spike
+_SBT = np.array([_sbucket_loop(x << (_FB - 4)) for x in range(32)], np.int64)
+
+
+@njit(cache=True, inline="always")
+def _sbucket(mad):
+    """The noise bucket of mean |residual| ``mad`` (fixed point): < 1/16, 1/8, 1/4, 1/2, 1, 2, ≥ 2 ticks."""
+    x = mad >> (_FB - 4)
+    return 0 if x <= 0 else (_NS - 1 if x >= 32 else _SBT[x])
+
+
+def _shift_loop(n):
+    sh = 1
+    while sh < _SHMAX - 1 and (2 << sh) <= n + 1:
+        sh += 1
+    return sh
+
+
+#: the phase-lock gain's shift after n intervals (n = 0 … _NMASK): 1 while n < 3, then one more per doubling
+_SHT = np.array([_shift_loop(n) for n in range(_NMASK + 1)], np.int64)
 
 
 @njit(cache=True, inline="always")
@@ -299,9 +320,7 @@ def _update(s, iv, p):
     hi = lo + _ONE - 1
     xn = lo + _INSET if x < lo else (hi - _INSET if x > hi else x)
     err = xn - x
-    sh = 1
-    while sh < _SHMAX - 1 and (2 << sh) <= n + 1:
-        sh += 1
+    sh = _SHT[n]
     sgn = 0 if r == 0 else (1 if r > 0 else 2)
     if sgn != 0 and sgn == last and ar >= 2:
         sh = max(sh - 2, 1)
