@@ -96,8 +96,9 @@ _W0 = int(0.4 * 65536)
 _LR = 6
 
 # logistic domain, 12-bit probabilities: stretch(p) = ln(p / (1 − p)) and its inverse, ×256
-_ST = np.clip(np.array([round(256 * np.log((p + 0.5) / (4095.5 - p))) for p in range(4096)], np.int64), -2047, 2047)
-_SQ = np.array([min(4095, max(1, round(4096 / (1 + np.exp(-x / 256))))) for x in range(-2047, 2048)], np.int64)
+_ST = np.clip(np.array([round(256 * np.log((p + 0.5) / (4095.5 - p))) for p in range(4096)], np.int64), -2047,
+              2047).astype(np.int32)  # int32: the two tables stay in L1 (products are taken in int64)
+_SQ = np.array([min(4095, max(1, round(4096 / (1 + np.exp(-x / 256))))) for x in range(-2047, 2048)], np.int32)
 
 ERRORS = {1: "value out of range", 2: "more spikes than the segment states", 3: "a spike outside the segment",
           4: "stream is cut short", 5: "spike count differs from the header"}
