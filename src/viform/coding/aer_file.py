@@ -172,7 +172,14 @@ class CodedWriter:
         self.bytes_written = len(MAGIC) + 10 + len(head)
         self._crcs = 0
 
-    def push(self, block) -> None:
+    def push(self, block, final: bool = False) -> None:
+        """Code a block of ticks (bool-like (T, H, W) or (T, H·W)).
+
+        ``final``: no block follows (``close`` comes next), so a last partial segment that this block
+        holds whole is coded straight from it. A strict banded writer codes every segment that a
+        block holds whole straight from the block (no copy); only a segment spread over blocks is
+        gathered into the writer's buffer.
+        """
         if not self.banded:
             for seg in self.encoder.push(block):
                 self._write(seg)
@@ -183,11 +190,17 @@ class CodedWriter:
                               f"{size_text(self.height, self.width, 'pixels')} per tick")
         block = block.reshape(block.shape[0], self.height, self.width)
         seg_ticks = self.params.segment_ticks
-        if self._dense is None:
-            self._dense = np.zeros((seg_ticks, self.height, self.width), np.bool_)
+        direct = block.dtype == np.bool_ and block.flags.c_contiguous  # segments coded from the block itself
         pos = 0
         while pos < block.shape[0]:
             take = min(block.shape[0] - pos, seg_ticks - self._fill)
+            if direct and self._fill == 0 and (take == seg_ticks or final):
+                self._next_tick += take
+                self._write_banded(block[pos:pos + take])
+                pos += take
+                continue
+            if self._dense is None:
+                self._dense = np.zeros((seg_ticks, self.height, self.width), np.bool_)
             self._dense[self._fill:self._fill + take] = block[pos:pos + take]
             self._fill += take
             self._next_tick += take
@@ -195,9 +208,11 @@ class CodedWriter:
             if self._fill == seg_ticks:
                 self._write_banded()
 
-    def _write_banded(self) -> None:
-        dense = self._dense[:self._fill]
-        start = self._next_tick - self._fill
+    def _write_banded(self, dense=None) -> None:
+        """Code the segment ``dense`` (its last tick is the last one pushed; default: the gathered ticks)."""
+        if dense is None:
+            dense = self._dense[:self._fill]
+        start = self._next_tick - dense.shape[0]
         if self.bands6 is not None:
             payload, n_spikes = vfc_v6.encode_payload(dense, start, self.bands6)
         elif self.bands5 is not None:
@@ -323,8 +338,8 @@ def encode_source(source: SpikeSource, path, mode: str = "strict", *, k: float |
 
         bar = tqdm(total=source.n_ticks, unit="tick", desc="encode", leave=False, unit_scale=True)
     try:
-        for _, block in source.iter_blocks(block_ticks):
-            writer.push(block)
+        for first, block in source.iter_blocks(block_ticks):
+            writer.push(block, final=first + block.shape[0] >= source.n_ticks)
             if bar is not None:
                 bar.update(block.shape[0])
         writer.close()

@@ -221,7 +221,7 @@ def _dbucket(d, have):
     return 4
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _nb_width(n, q, rec_start, counts, rec_s, rec_o, ref0, ptr, slot):
     """Width of neighbour pixel n's interval holding tick q (−1 unknown); ptr[slot] walks forward.
 
@@ -242,7 +242,7 @@ def _nb_width(n, q, rec_start, counts, rec_s, rec_o, ref0, ptr, slot):
     return np.int64(-1)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _nb_mean(p, width, q, rec_start, counts, rec_s, rec_o, ref0, ptr):
     """Mean width (×4, rounded) of the decoded neighbours left, up, up-right at tick q; −1 if none."""
     row = p // width

@@ -96,8 +96,9 @@ _W0 = int(0.4 * 65536)
 _LR = 6
 
 # logistic domain, 12-bit probabilities: stretch(p) = ln(p / (1 − p)) and its inverse, ×256
-_ST = np.clip(np.array([round(256 * np.log((p + 0.5) / (4095.5 - p))) for p in range(4096)], np.int64), -2047, 2047)
-_SQ = np.array([min(4095, max(1, round(4096 / (1 + np.exp(-x / 256))))) for x in range(-2047, 2048)], np.int64)
+_ST = np.clip(np.array([round(256 * np.log((p + 0.5) / (4095.5 - p))) for p in range(4096)], np.int64), -2047,
+              2047).astype(np.int32)  # int32: the two tables stay in L1 (products are taken in int64)
+_SQ = np.array([min(4095, max(1, round(4096 / (1 + np.exp(-x / 256))))) for x in range(-2047, 2048)], np.int32)
 
 ERRORS = {1: "value out of range", 2: "more spikes than the segment states", 3: "a spike outside the segment",
           4: "stream is cut short", 5: "spike count differs from the header"}
@@ -268,8 +269,7 @@ def _dmag(rc, data, probs, ba, bb, bc, wset):
 
 # ---------------------------------------------------------------------------- predictor
 
-@njit(cache=True, inline="always")
-def _sbucket(mad):
+def _sbucket_loop(mad):
     # mean |residual| in ticks: < 1/16, 1/8, 1/4, 1/2, 1, 2, ≥ 2
     b = 0
     lim = _ONE >> 4
@@ -277,6 +277,28 @@ def _sbucket(mad):
         b += 1
         lim <<= 1
     return b
+
+
+#: _sbucket_loop(mad) for mad >> (_FB - 4) = 0 … 31 (from 32 on: the top bucket), one load per spike
+_SBT = np.array([_sbucket_loop(x << (_FB - 4)) for x in range(32)], np.int64)
+
+
+@njit(cache=True, inline="always")
+def _sbucket(mad):
+    """The noise bucket of mean |residual| ``mad`` (fixed point): < 1/16, 1/8, 1/4, 1/2, 1, 2, ≥ 2 ticks."""
+    x = mad >> (_FB - 4)
+    return 0 if x <= 0 else (_NS - 1 if x >= 32 else _SBT[x])
+
+
+def _shift_loop(n):
+    sh = 1
+    while sh < _SHMAX - 1 and (2 << sh) <= n + 1:
+        sh += 1
+    return sh
+
+
+#: the phase-lock gain's shift after n intervals (n = 0 … _NMASK): 1 while n < 3, then one more per doubling
+_SHT = np.array([_shift_loop(n) for n in range(_NMASK + 1)], np.int64)
 
 
 @njit(cache=True, inline="always")
@@ -299,9 +321,7 @@ def _update(s, iv, p):
     hi = lo + _ONE - 1
     xn = lo + _INSET if x < lo else (hi - _INSET if x > hi else x)
     err = xn - x
-    sh = 1
-    while sh < _SHMAX - 1 and (2 << sh) <= n + 1:
-        sh += 1
+    sh = _SHT[n]
     sgn = 0 if r == 0 else (1 if r > 0 else 2)
     if sgn != 0 and sgn == last and ar >= 2:
         sh = max(sh - 2, 1)
@@ -316,14 +336,17 @@ def _clip(x, lo, hi):
 
 
 @njit(cache=True, inline="always")
-def _at(row, tau, seg_start, n_ticks):
-    """The interval in progress at tick tau in a row buffer (−1: not known)."""
-    return row[min(max(tau - seg_start, 0), n_ticks - 1)]
+def _at(buf, b, col, tau, seg_start, n_ticks):
+    """The interval in progress at tick tau of column col of row buffer b (−1: not known).
+
+    The buffers are indexed whole (no per-spike array views: numba counts each view's references).
+    """
+    return buf[b, col, min(max(tau - seg_start, 0), n_ticks - 1)]
 
 
 @njit(cache=True, inline="always")
-def _fill(row, ticks, r, c, prev0, seg_start, n_ticks):
-    """Write into ``row`` (one per tick of the segment) the pixel's interval in progress at each tick.
+def _fill(buf, b, col, ticks, r, c, prev0, seg_start, n_ticks):
+    """Write into ``buf[b, col]`` (one per tick of the segment) the pixel's interval in progress at each tick.
 
     At tick τ it is the interval that ends at the pixel's first spike after τ (−1 when that spike is
     not in the segment, or when the pixel never fired before it). Returns the first full interval
@@ -340,11 +363,11 @@ def _fill(row, ticks, r, c, prev0, seg_start, n_ticks):
             first = v
         e = nxt - seg_start
         for t in range(pos, e):
-            row[t] = v
+            buf[b, col, t] = v
         pos = e
         prev = nxt
     for t in range(pos, n_ticks):
-        row[t] = -1
+        buf[b, col, t] = -1
     return first
 
 
@@ -399,7 +422,7 @@ def _nb_mu(st, q, width, npix):
 
 
 @njit(cache=True, inline="always")
-def _contexts(s, lo, rem, a, cur, prv, col, has_left, has_up, seg_start, n_ticks):
+def _contexts(s, lo, rem, a, buf, cur, prv, col, has_left, has_up, seg_start, n_ticks):
     """Prediction and contexts of a locked pixel's next spike.
 
     Returns p (the predicted interval), the stop context, the zero context (large), the zero
@@ -419,12 +442,12 @@ def _contexts(s, lo, rem, a, cur, prv, col, has_left, has_up, seg_start, n_ticks
     dev = np.int64(0)
     have = 0
     if has_left:
-        now = _at(cur[col - 1], tp, seg_start, n_ticks)
+        now = _at(buf, cur, col - 1, tp, seg_start, n_ticks)
         if now > 0:
             dev += now - p
             have += 1
     if has_up:
-        now = _at(prv[col], tp, seg_start, n_ticks)
+        now = _at(buf, prv, col, tp, seg_start, n_ticks)
         if now > 0:
             dev += now - p
             have += 1
@@ -468,8 +491,8 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
         a = last0[q]
         row = q // width
         col = q - row * width
-        cur = buf[row & 1]
-        prv = buf[(row - 1) & 1]
+        cur = row & 1
+        prv = (row - 1) & 1
         has_left = col > 0
         has_up = row > 0
         s = (st[q, 0], st[q, 1], st[q, 2], st[q, 3], st[q, 4], st[q, 5], st[q, 6])
@@ -478,7 +501,7 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
             lf = 1 if (has_left and counts[q - 1] > 0) else 0
             rc = _ebit(rc, out, probs, _P_NEW + lf, 1 if c > 0 else 0)
             if c == 0:
-                _fill(cur[col], ticks, r, 0, a, seg_start, n_ticks)
+                _fill(buf, cur, col, ticks, r, 0, a, seg_start, n_ticks)
                 continue
             phase = ticks[r] - (seg_start - 1)
             nb = _first_width(firstw, q, width, has_left, has_up)
@@ -519,7 +542,7 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
                 rc = _euint(rc, out, probs, np.int64(_P_COLDV), iv - lo)
                 s = _update(s, iv, iv)
             else:
-                p, f, stop, zc, sb, h1, tr, rl, dev, have = _contexts(s, lo, rem, a, cur, prv, col, has_left,
+                p, f, stop, zc, sb, h1, tr, rl, dev, have = _contexts(s, lo, rem, a, buf, cur, prv, col, has_left,
                                                                       has_up, seg_start, n_ticks)
                 rc = _ebit(rc, out, probs, stop, 1 if more else 0)
                 if not more:
@@ -546,7 +569,7 @@ def encode_band(counts, ticks, last0, st, probs, seg_start, seg_end, width, out)
             k += 1
         for j in range(STATE_ROWS):
             st[q, j] = s[j]
-        firstw[q] = _fill(cur[col], ticks, r, c, last0[q], seg_start, n_ticks)
+        firstw[q] = _fill(buf, cur, col, ticks, r, c, last0[q], seg_start, n_ticks)
         r += c
     return encoder_flush(rc, out)
 
@@ -573,8 +596,8 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
             return 1, r
         row = q // width
         col = q - row * width
-        cur = buf[row & 1]
-        prv = buf[(row - 1) & 1]
+        cur = row & 1
+        prv = (row - 1) & 1
         has_left = col > 0
         has_up = row > 0
         s = (st[q, 0], st[q, 1], st[q, 2], st[q, 3], st[q, 4], st[q, 5], st[q, 6])
@@ -583,7 +606,7 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
             lf = 1 if (has_left and counts[q - 1] > 0) else 0
             fires, rc = _dbit(rc, data, probs, _P_NEW + lf)
             if fires == 0:
-                _fill(cur[col], ticks, r, 0, a, seg_start, n_ticks)
+                _fill(buf, cur, col, ticks, r, 0, a, seg_start, n_ticks)
                 if rc[2] > data.size + 8:
                     return 4, r
                 continue
@@ -642,7 +665,7 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
                     return 3, r + c
                 s = _update(s, iv, iv)
             else:
-                p, f, stop, zc, sb, h1, tr, rl, dev, have = _contexts(s, lo, rem, a, cur, prv, col, has_left,
+                p, f, stop, zc, sb, h1, tr, rl, dev, have = _contexts(s, lo, rem, a, buf, cur, prv, col, has_left,
                                                                       has_up, seg_start, n_ticks)
                 more, rc = _dbit(rc, data, probs, stop)
                 if more == 0:
@@ -680,7 +703,7 @@ def decode_band(data, npix, last0, st, probs, seg_start, seg_end, width, n_spike
         for j in range(STATE_ROWS):
             st[q, j] = s[j]
         counts[q] = c
-        firstw[q] = _fill(cur[col], ticks, r, c, last0[q], seg_start, n_ticks)
+        firstw[q] = _fill(buf, cur, col, ticks, r, c, last0[q], seg_start, n_ticks)
         r += c
         if rc[2] > data.size + 8:
             return 4, r

@@ -252,7 +252,11 @@ def _decode_intervals(data, counts, st, probs, last, start, end, width, sp, pred
     return (interval_model.ERRORS[err] if err else ""), ticks[:sp]
 
 
-def _decode_records(data, counts, last, ref, start, end, width, sp, n_rec):
+def _decode_records(data, counts, last, ref, start, end, width, sp, n_rec, out=None):
+    """A records band's spike ticks (``counts`` filled): ``(why, ticks)``, ``why`` empty unless damaged.
+
+    ``out`` (optional, ``sp`` int64) receives the ticks (else a new array does).
+    """
     npix = counts.size
     tail_m, tail_g = np.empty(npix, np.int64), np.empty(npix, np.int64)
     rec_counts = np.empty(npix, np.int64)
@@ -272,10 +276,11 @@ def _decode_records(data, counts, last, ref, start, end, width, sp, n_rec):
                                ref.copy(), start, end)
     if err or n_sp != sp:
         return f"its records give {n_sp} spikes, the band table says {sp}" if not err else "inconsistent records", None
-    ticks = np.empty(sp + 1, np.int64)
+    # _check_segment found exactly sp spikes in the records: that many ticks are written
+    ticks = np.empty(sp, np.int64) if out is None else out
     interval_model.ticks_from_records(rec_counts, rec_m, rec_g, rec_o, tail_m, tail_g, last, ref, start, counts,
                                       ticks)
-    return "", ticks[:sp]
+    return "", ticks
 
 
 def decode_payload(payload: bytes, state: BandState, expected_start: int, segment_ticks: int) -> TickSegment:

@@ -185,23 +185,30 @@ def decode_payload(payload: bytes, state: BandState, expected_start: int, segmen
     _check_band_totals(payload, pos, total, spikes)
     buf = np.frombuffer(payload, np.uint8)
     end = start + n_ticks
+    # the tick arrays grow with the spikes actually decoded, never to the stated count up front; where
+    # every tick-model band may hold its stated count, the bands decode into one array (no copy after)
+    caps = [sp if model == MODEL_RECORDS else min(sp, 64 * nbytes + 4096) for model, nbytes, sp, _ in spans]
+    whole = None
+    if all(cap == sp for cap, (_, _, sp, _) in zip(caps, spans, strict=True)):
+        whole = np.empty(total, np.int64)
+        firsts = np.cumsum([0] + [sp for _, _, sp, _ in spans])
+    counts_all = np.empty(height * width, np.int64)
 
     def one(b):
         r0, r1 = bands[b]
         p0, p1 = r0 * width, r1 * width
         model, nbytes, sp, recs = spans[b]
         data = buf[offsets[b]:offsets[b] + nbytes]
-        counts = np.empty(p1 - p0, np.int64)
+        counts = counts_all[p0:p1]
         if model == MODEL_RECORDS:
             why, ticks = vfc_v5._decode_records(data, counts, state.last[p0:p1], state.ref[p0:p1], start, end, width,
-                                                sp, recs)
+                                                sp, recs, None if whole is None else whole[firsts[b]:firsts[b + 1]])
             return why, counts, ticks
         st, probs = state.ivstate[p0:p1], state.ivprobs[b]
         st0, probs0 = st.copy(), probs.copy()
-        # the tick array grows with the spikes actually decoded, never to the stated count up front
-        cap = min(sp, 64 * nbytes + 4096)
+        cap = caps[b]
         while True:
-            ticks = np.empty(cap, np.int64)
+            ticks = whole[firsts[b]:firsts[b + 1]] if whole is not None else np.empty(cap, np.int64)
             err, _ = tick_model.decode_band(data, p1 - p0, state.last[p0:p1], st, probs, start, end, width, sp,
                                             counts, ticks)
             if err != 2 or cap >= sp:
@@ -217,4 +224,5 @@ def decode_payload(payload: bytes, state: BandState, expected_start: int, segmen
             raise ViformError(f"segment at tick {start}, band {b} is damaged ({why})")
     for (r0, r1), (_, counts, ticks), (model, _, _, _) in zip(bands, parts, spans, strict=True):
         vfc_v5._advance(state, r0 * width, r1 * width, model, counts, ticks)
-    return TickSegment(start, n_ticks, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]))
+    ticks = whole if whole is not None else np.concatenate([p[2] for p in parts])
+    return TickSegment(start, n_ticks, counts_all, ticks)
