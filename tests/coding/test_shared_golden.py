@@ -1,8 +1,7 @@
 """The default ``.vfc`` encoder's bytes on the shared recordings stay those of the reference encoder.
 
-The SHA-256 of each file was recorded with the encoder of ``main`` at commit b971c1f (before the
-speed work of issue 38, item 4): a faster coder must write the very same bytes, and read them back
-to the very same spikes.
+The SHA-256 of each file was recorded with the reference encoder (``main`` at commit b971c1f): a
+faster coder must write the very same bytes, and read them back to the very same spikes.
 """
 
 from __future__ import annotations
