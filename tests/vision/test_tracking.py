@@ -489,7 +489,8 @@ def test_start_up_kernels_are_the_numpy_and_scipy_operations_exactly():
 
 def test_the_priming_passes_are_the_numpy_expressions_they_replace_exactly():
     # the start-up check's fused passes keep the tracks: the block sums equal NumPy's sum of the padded blocks
-    # bit for bit (its pairwise order), the masks the NumPy booleans, and the values read from the stored
+    # bit for bit (its pairwise order), the bilinear blend NumPy's (no fused multiply-add), the masks the
+    # NumPy booleans, and the values read from the stored
     # layout those of the upright views, on every image shape (edges, flipped and wider stored rows)
     from viform.vision import _spike_front as front
     from viform.vision.tracking import _block_counts, _blocks
@@ -503,6 +504,11 @@ def test_the_priming_passes_are_the_numpy_expressions_they_replace_exactly():
         np.testing.assert_array_equal(total, _blocks(np.where(clear, v, 0.0), 0.0).sum(axis=2))
         np.testing.assert_array_equal(n, _block_counts(clear))
         np.testing.assert_array_equal(n_also, _block_counts(clear & also))
+        rows, fx = rng.normal(size=(h, 7)) * 1e3, rng.random(w)  # products that round
+        x0 = rng.integers(0, 7, w)
+        x1 = np.minimum(x0 + 1, 6)
+        np.testing.assert_array_equal(front.blend_columns(rows, x0, x1, 1 - fx, fx),
+                                      rows[:, x0] * (1 - fx)[None, :] + rows[:, x1] * fx[None, :])
         measured, mixed, mm, known, back = (rng.random((h, w)) < 0.5 for _ in range(5))
         upper, lower, median, log_bg, log_v, around = (np.round(rng.normal(size=(h, w)), 1) for _ in range(6))
         thr = 0.7  # ties at the thresholds: the rounded values hit median ± thr

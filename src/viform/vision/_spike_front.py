@@ -663,12 +663,15 @@ def prime_values_stored(spk, n_win, s_win, height, width, stored_width, flip, t,
     value = np.empty((H, W))
     upper = np.empty((H, W))
     lower = np.empty((H, W))
+    last = np.empty(W, np.int64)
     for y in range(H):
         row = (H - 1 - y if flip else y) * stored_width
+        for x in range(W):  # the row's last spikes gathered first: the loop below then vectorizes
+            last[x] = spk[row + x, LAST]
+        nw, sw = n_win[row:row + W], s_win[row:row + W]
         for x in range(W):
-            i = row + x
             (measured[y, x], bound[y, x], value[y, x], upper[y, x],
-             lower[y, x]) = _prime_value(spk[i, LAST], n_win[i], s_win[i], t, k_hi)
+             lower[y, x]) = _prime_value(last[x], nw[x], sw[x], t, k_hi)
     return measured, bound, value, upper, lower
 
 
@@ -713,10 +716,11 @@ def prime_candidates(measured, mixed, upper_log, lower_log, median, median_measu
             lo = median[y, x] - thr
             hi = median[y, x] + thr
             mm = median_measured[y, x]
-            bright[y, x] = measured[y, x] and not mixed[y, x] and upper_log[y, x] < lo
-            dark[y, x] = mm and lower_log[y, x] > hi
+            # (bitwise, not short-circuit: no branches, the loop vectorizes)
+            bright[y, x] = measured[y, x] & (not mixed[y, x]) & (upper_log[y, x] < lo)
+            dark[y, x] = mm & (lower_log[y, x] > hi)
             lb = log_bg[y, x]
-            stale[y, x] = known[y, x] and not back[y, x] and (lb < lo or (mm and lb > hi))
+            stale[y, x] = known[y, x] & (not back[y, x]) & ((lb < lo) | (mm & (lb > hi)))
     return bright, dark, stale
 
 
@@ -735,13 +739,13 @@ def prime_unsure_later(measured, primed, back, around_measured, weight, log_v, a
     later = np.empty((H, W), np.bool_)
     for y in range(H):
         for x in range(W):
-            free = not primed[y, x] and not back[y, x] and around_measured[y, x]
+            free = (not primed[y, x]) & (not back[y, x]) & around_measured[y, x]  # (bitwise: no branches)
             m = measured[y, x]
             if with_unsure:
                 a = around[y, x]
-                unsure[y, x] = free and ((m and abs(log_v[y, x] - a) > unsure_log)
-                                         or (known[y, x] and abs(log_bg[y, x] - a) > unsure_log))
-            later[y, x] = free and not m and weight[y, x] > 0.5
+                unsure[y, x] = free & ((m & (abs(log_v[y, x] - a) > unsure_log))
+                                       | (known[y, x] & (abs(log_bg[y, x] - a) > unsure_log)))
+            later[y, x] = free & (not m) & (weight[y, x] > 0.5)
     return unsure, later
 
 
@@ -780,3 +784,15 @@ def clear_block_sums(values, clear, also):  # pragma: no cover - compiled
             n[by, bx] = c
             n_also[by, bx] = ca
     return total, n, n_also
+
+
+@njit(cache=True)
+def blend_columns(rows, x0, x1, w0, w1):  # pragma: no cover - compiled
+    """``rows[:, x0] * w0 + rows[:, x1] * w1`` (H, W) for rows (H, n) float64 and per-column indices and weights
+    (W,): each product and the sum rounded once, in that order, as NumPy's (no fused multiply–add)."""
+    H, W = rows.shape[0], x0.size
+    out = np.empty((H, W))
+    for y in range(H):
+        for x in range(W):
+            out[y, x] = rows[y, x0[x]] * w0[x] + rows[y, x1[x]] * w1[x]
+    return out

@@ -759,7 +759,8 @@ def _upsample(blocks: np.ndarray, H: int, W: int) -> np.ndarray:
     y0, y1, fy = axis(H, blocks.shape[0])
     x0, x1, fx = axis(W, blocks.shape[1])
     rows = blocks[y0] * (1 - fy)[:, None] + blocks[y1] * fy[:, None]
-    return rows[:, x0] * (1 - fx)[None, :] + rows[:, x1] * fx[None, :]
+    # the full-size blend in one compiled pass (the same two products and sum per pixel, exactly)
+    return _front.blend_columns(np.ascontiguousarray(rows, np.float64), x0, x1, 1 - fx, fx)
 
 
 def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int) -> np.ndarray:
