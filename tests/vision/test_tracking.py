@@ -487,6 +487,59 @@ def test_start_up_kernels_are_the_numpy_and_scipy_operations_exactly():
         np.testing.assert_array_equal(a.ravel(), b)
 
 
+def test_the_priming_passes_are_the_numpy_expressions_they_replace_exactly():
+    # the start-up check's fused passes keep the tracks: the block sums equal NumPy's sum of the padded blocks
+    # bit for bit (its pairwise order), the bilinear blend NumPy's (no fused multiply-add), the masks the
+    # NumPy booleans, and the values read from the stored
+    # layout those of the upright views, on every image shape (edges, flipped and wider stored rows)
+    from viform.vision import _spike_front as front
+    from viform.vision.tracking import _block_counts, _blocks
+
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        h, w = (int(v) for v in rng.integers(1, 40, 2))
+        v = rng.normal(size=(h, w)) * np.exp(rng.uniform(-8, 8, (h, w)))  # sums that round, in any order
+        clear, also = rng.random((h, w)) < rng.random(), rng.random((h, w)) < rng.random()
+        total, n, n_also = front.clear_block_sums(v, clear, also)
+        np.testing.assert_array_equal(total, _blocks(np.where(clear, v, 0.0), 0.0).sum(axis=2))
+        np.testing.assert_array_equal(n, _block_counts(clear))
+        np.testing.assert_array_equal(n_also, _block_counts(clear & also))
+        rows, fx = rng.normal(size=(h, 7)) * 1e3, rng.random(w)  # products that round
+        x0 = rng.integers(0, 7, w)
+        x1 = np.minimum(x0 + 1, 6)
+        np.testing.assert_array_equal(front.blend_columns(rows, x0, x1, 1 - fx, fx),
+                                      rows[:, x0] * (1 - fx)[None, :] + rows[:, x1] * fx[None, :])
+        measured, mixed, mm, known, back = (rng.random((h, w)) < 0.5 for _ in range(5))
+        upper, lower, median, log_bg, log_v, around = (np.round(rng.normal(size=(h, w)), 1) for _ in range(6))
+        thr = 0.7  # ties at the thresholds: the rounded values hit median ± thr
+        got = front.prime_candidates(measured, mixed, upper, lower, median, mm, known, log_bg, back, thr)
+        want = (measured & ~mixed & (upper < median - thr), mm & (lower > median + thr),
+                known & ~back & ((log_bg < median - thr) | (mm & (log_bg > median + thr))))
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+        primed, around_measured = rng.random((h, w)) < 0.3, rng.random((h, w)) < 0.7
+        weight = np.round(rng.random((h, w)), 1)
+        for with_unsure in (True, False):
+            unsure, later = front.prime_unsure_later(measured, primed, back, around_measured, weight, log_v, around,
+                                                     known, log_bg, 0.4, with_unsure)
+            free = ~primed & ~back & around_measured
+            far = (measured & (np.abs(log_v - around) > 0.4)) | (known & (np.abs(log_bg - around) > 0.4))
+            np.testing.assert_array_equal(unsure, free & far & with_unsure)
+            np.testing.assert_array_equal(later, free & ~measured & (weight > 0.5))
+        stored_width, flip = w + int(rng.integers(0, 3)), bool(rng.integers(0, 2))
+        size = h * stored_width + int(rng.integers(0, 64))
+        spk = rng.integers(-1, 500, (size, 4))
+        n_win = np.where(rng.random(size) < 0.3, 0, rng.integers(1, 9, size))
+        s_win = n_win * rng.integers(0, 60, size)
+
+        grids = [a[: h * stored_width].reshape(h, stored_width)[:, :w] for a in (spk[:, front.LAST], n_win, s_win)]
+        ups = [np.ascontiguousarray(g[::-1] if flip else g) for g in grids]
+        got = front.prime_values_stored(spk, n_win, s_win, h, w, stored_width, flip, 520, math.exp(0.4))
+        want = front.prime_values(*ups, 520, math.exp(0.4))
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize("every", [7, 40, 100])
 def test_pixel_by_pixel_and_spike_by_spike_ingest_leave_the_same_state(stream, every):
     # words are ingested spike by spike or, when dense, pixel by pixel (a 64 × T bit transpose): every word

@@ -617,6 +617,18 @@ def opened_closed(mask):  # pragma: no cover - compiled
     return mask & dilate_square(erode_square(closed, one), one)
 
 
+@njit(cache=True, inline="always")
+def _prime_value(lt, n, s, t, k_hi):  # pragma: no cover - compiled
+    """One pixel's :func:`prime_values`: measured, bound, value, upper, lower."""
+    nn = float(max(n, 1))
+    tau = s / nn if n > 0 else 0.0
+    silence = t - lt
+    m = n > 0 and silence <= tau * k_hi + 1.0
+    b = t + 1.0 if lt < 0 else max(lt + 1.0, float(silence))
+    v = tau if m else max(b, tau)
+    return m, b, max(v, 1e-3), (s + 1.0) / nn, max((s - 1.0) / nn if m else b, 1e-3)
+
+
 @njit(cache=True)
 def prime_values(last, n_win, s_win, t, k_hi):  # pragma: no cover - compiled
     """Per pixel at tick ``t``, from its last spike and its window (``s_win`` ticks over ``n_win`` intervals):
@@ -634,20 +646,32 @@ def prime_values(last, n_win, s_win, t, k_hi):  # pragma: no cover - compiled
     lower = np.empty((H, W))
     for y in range(H):
         for x in range(W):
-            n = n_win[y, x]
-            s = s_win[y, x]
-            lt = last[y, x]
-            nn = float(max(n, 1))
-            tau = s / nn if n > 0 else 0.0
-            silence = t - lt
-            m = n > 0 and silence <= tau * k_hi + 1.0
-            b = t + 1.0 if lt < 0 else max(lt + 1.0, float(silence))
-            measured[y, x] = m
-            bound[y, x] = b
-            v = tau if m else max(b, tau)
-            value[y, x] = max(v, 1e-3)
-            upper[y, x] = (s + 1.0) / nn
-            lower[y, x] = max((s - 1.0) / nn if m else b, 1e-3)
+            (measured[y, x], bound[y, x], value[y, x], upper[y, x],
+             lower[y, x]) = _prime_value(last[y, x], n_win[y, x], s_win[y, x], t, k_hi)
+    return measured, bound, value, upper, lower
+
+
+@njit(cache=True)
+def prime_values_stored(spk, n_win, s_win, height, width, stored_width, flip, t,
+                        k_hi):  # pragma: no cover - compiled
+    """:func:`prime_values` read straight from the detector's stored layout (no upright copies first):
+    ``spk`` (n, 4) per-spike state (its :data:`LAST` column), ``n_win`` and ``s_win`` (n,) per stored
+    pixel, rows stored ``stored_width`` apart and bottom-up with ``flip``; returns upright (H, W) arrays."""
+    H, W = height, width
+    measured = np.empty((H, W), np.bool_)
+    bound = np.empty((H, W))
+    value = np.empty((H, W))
+    upper = np.empty((H, W))
+    lower = np.empty((H, W))
+    last = np.empty(W, np.int64)
+    for y in range(H):
+        row = (H - 1 - y if flip else y) * stored_width
+        for x in range(W):  # the row's last spikes gathered first: the loop below then vectorizes
+            last[x] = spk[row + x, LAST]
+        nw, sw = n_win[row:row + W], s_win[row:row + W]
+        for x in range(W):
+            (measured[y, x], bound[y, x], value[y, x], upper[y, x],
+             lower[y, x]) = _prime_value(last[x], nw[x], sw[x], t, k_hi)
     return measured, bound, value, upper, lower
 
 
@@ -671,3 +695,104 @@ def block_medians(a, block):  # pragma: no cover - compiled
             out[by, bx] = np.median(buf)
     return out
 
+
+
+@njit(cache=True)
+def prime_candidates(measured, mixed, upper_log, lower_log, median, median_measured, known, log_bg, back,
+                     thr):  # pragma: no cover - compiled
+    """The start-up check's pixels before their opening, in one pass (H, W each): brighter (measured, not a
+    falling transition, longest interval under ``median - thr``), darker (shortest interval over
+    ``median + thr`` where the median is measured) and stale (a learned background beyond those bounds).
+
+    The same IEEE comparisons of the same differences as the NumPy expressions of
+    :meth:`~viform.vision.tracking.SpikeChangeDetector._prime` they replace (exact).
+    """
+    H, W = measured.shape
+    bright = np.empty((H, W), np.bool_)
+    dark = np.empty((H, W), np.bool_)
+    stale = np.empty((H, W), np.bool_)
+    for y in range(H):
+        for x in range(W):
+            lo = median[y, x] - thr
+            hi = median[y, x] + thr
+            mm = median_measured[y, x]
+            # (bitwise, not short-circuit: no branches, the loop vectorizes)
+            bright[y, x] = measured[y, x] & (not mixed[y, x]) & (upper_log[y, x] < lo)
+            dark[y, x] = mm & (lower_log[y, x] > hi)
+            lb = log_bg[y, x]
+            stale[y, x] = known[y, x] & (not back[y, x]) & ((lb < lo) | (mm & (lb > hi)))
+    return bright, dark, stale
+
+
+@njit(cache=True)
+def prime_unsure_later(measured, primed, back, around_measured, weight, log_v, around, known, log_bg,
+                       unsure_log, with_unsure):  # pragma: no cover - compiled
+    """The start-up check's pixels not primed whose state is only set aside (H, W each): *unsure* (with
+    ``with_unsure``: measured, or with a learned background, more than ``unsure_log`` from the level
+    around) and *later* (no interval yet, with a measured level around of weight over 0.5).
+
+    The same IEEE operations as the NumPy expressions of
+    :meth:`~viform.vision.tracking.SpikeChangeDetector._prime` they replace (exact).
+    """
+    H, W = measured.shape
+    unsure = np.zeros((H, W), np.bool_)
+    later = np.empty((H, W), np.bool_)
+    for y in range(H):
+        for x in range(W):
+            free = (not primed[y, x]) & (not back[y, x]) & around_measured[y, x]  # (bitwise: no branches)
+            m = measured[y, x]
+            if with_unsure:
+                a = around[y, x]
+                unsure[y, x] = free & ((m & (abs(log_v[y, x] - a) > unsure_log))
+                                       | (known[y, x] & (abs(log_bg[y, x] - a) > unsure_log)))
+            later[y, x] = free & (not m) & (weight[y, x] > 0.5)
+    return unsure, later
+
+
+@njit(cache=True)
+def clear_block_sums(values, clear, also):  # pragma: no cover - compiled
+    """Per 8 × 8 block of (H, W) images (⌈H/8⌉, ⌈W/8⌉): the sum of ``values`` over the ``clear`` pixels, the
+    count of clear pixels and the count of those also ``also``, in one pass (no padded or transposed copies).
+
+    The sum takes the block's 64 values (0 where not clear or outside the image) in row-major order as
+    NumPy's pairwise sum of 64 contiguous float64 does (eight running sums, element j into sum j mod 8,
+    combined as ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7))), so it equals
+    ``_blocks(np.where(clear, values, 0.0), 0.0).sum(axis=2)`` exactly; the counts are whole numbers.
+    """
+    H, W = values.shape
+    hb, wb = -(-H // 8), -(-W // 8)
+    total = np.empty((hb, wb))
+    n = np.empty((hb, wb))
+    n_also = np.empty((hb, wb))
+    r = np.empty(8)
+    for by in range(hb):
+        for bx in range(wb):
+            r[:] = 0.0
+            c = 0
+            ca = 0
+            for dy in range(8):
+                y = by * 8 + dy
+                for dx in range(8):
+                    x = bx * 8 + dx
+                    v = 0.0
+                    if y < H and x < W and clear[y, x]:
+                        v = values[y, x]
+                        c += 1
+                        ca += also[y, x]
+                    r[dx] = v if dy == 0 else r[dx] + v
+            total[by, bx] = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+            n[by, bx] = c
+            n_also[by, bx] = ca
+    return total, n, n_also
+
+
+@njit(cache=True)
+def blend_columns(rows, x0, x1, w0, w1):  # pragma: no cover - compiled
+    """``rows[:, x0] * w0 + rows[:, x1] * w1`` (H, W) for rows (H, n) float64 and per-column indices and weights
+    (W,): each product and the sum rounded once, in that order, as NumPy's (no fused multiply–add)."""
+    H, W = rows.shape[0], x0.size
+    out = np.empty((H, W))
+    for y in range(H):
+        for x in range(W):
+            out[y, x] = rows[y, x0[x]] * w0[x] + rows[y, x1[x]] * w1[x]
+    return out

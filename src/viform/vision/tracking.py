@@ -245,6 +245,7 @@ class SpikeChangeDetector:
         # interval bounds in ticks, priming tick); pixels given back (static: never primed again)
         self._groups = []
         self._given_back = np.zeros(n, np.bool_)
+        self._prime_stored = self._prime_index = None  # made at the first priming
 
     def upright(self, flat: np.ndarray) -> np.ndarray:
         """A per-pixel state array (stored order) as an upright (H, W) view."""
@@ -355,10 +356,10 @@ class SpikeChangeDetector:
         bg, censored, prev, flag_since = up(self.bg), up(self.censored), up(self.prev), up(self.flag_since)
         # per pixel, in one compiled pass: measured or not, the bound an unmeasured interval is longer than,
         # the interval (or that bound), and the longest and shortest the measured interval can be
-        # (contiguous copies: the kernel is compiled once, for C arrays, whatever the views' layouts)
-        measured, bound, value, upper, lower = _front.prime_values(
-            np.ascontiguousarray(up(self.spk[:, _front.LAST])), np.ascontiguousarray(up(self.win_n)),
-            np.ascontiguousarray(up(self.win_span)), t, math.exp(p.threshold_log))
+        # (read from the stored layout, upright arrays out: no copies of the upright views first)
+        measured, bound, value, upper, lower = _front.prime_values_stored(
+            self.spk, self.win_n, self.win_span, self.height, self.width, self.stored_width, self.flip, t,
+            math.exp(p.threshold_log))
         log_v = np.log(value)
         H, W = log_v.shape
         # the robust median around, and whether it is measured: bounds above the median do not move it
@@ -370,16 +371,18 @@ class SpikeChangeDetector:
         low_frac = median_filter(_blocks(~measured & (log_v < median), block=b).mean(axis=2), size=size,
                                  mode="nearest")
         median_measured = _nearest(low_frac, H, W, b) < 0.1
-        thr = p.prime_threshold_log
+        thr = float(p.prime_threshold_log)
         upper, lower = np.log(upper), np.log(lower)
         # objects are at least 3 px across (an opening removes thin lines of static texture)
-        back = up(self._given_back)  # static, given back: not an object
-        bright = _opened(measured & ~up(self.mixed) & (upper < median - thr)) & ~back  # not a falling transition
-        dark = _opened(median_measured & (lower > median + thr)) & ~back
+        back = np.ascontiguousarray(up(self._given_back))  # static, given back: not an object
         # a background learned from an object that has since moved on (its current light may agree)
         known = ~censored & (bg > 0)
         log_bg = np.log(np.where(known, bg, 1.0))
-        stale = known & ~back & ((log_bg < median - thr) | (median_measured & (log_bg > median + thr)))
+        # in one compiled pass (exact): brighter (not a falling transition), darker, and stale, before opening
+        bright, dark, stale = _front.prime_candidates(measured, np.ascontiguousarray(up(self.mixed)), upper, lower,
+                                                      median, median_measured, known, log_bg, back, thr)
+        bright = _opened(bright) & ~back
+        dark = _opened(dark) & ~back
         # ... kept where wide enough to be an object, or at the edge of where one stood (anti-aliased edges)
         if self._primed_ever is None:
             self._primed_ever = np.zeros(stale.shape, bool)
@@ -398,11 +401,12 @@ class SpikeChangeDetector:
         flag_since[primed] = -1
         silent = dark & ~measured  # no interval yet: darker once silent for longer than the level around allows
         prev[silent] = level[silent]
+        # in one compiled pass (exact): pixels more than threshold_log from the level around (with prime_unsure),
+        # and pixels with no interval yet whose level around is measured
+        unsure, later = _front.prime_unsure_later(measured, primed, back, around_measured, weight, log_v, around,
+                                                  known, log_bg, float(p.threshold_log), bool(p.prime_unsure))
         if p.prime_unsure:
-            unsure = ~primed & ~back & around_measured & ((measured & (np.abs(log_v - around) > p.threshold_log))
-                                                  | (known & (np.abs(log_bg - around) > p.threshold_log)))
             prev[unsure] = level[unsure]
-        later = ~measured & ~primed & ~back & around_measured & (weight > 0.5)
         prev[later] = level[later]
         self._new_groups(bright, dark | later, np.exp(upper), np.exp(lower), level, t)
         self.word_due[:] = -np.inf  # every pixel evaluated at the next step, against its new background
@@ -418,7 +422,10 @@ class SpikeChangeDetector:
         change can be measured sooner; it falls at the end of an output step.
         """
         p = self.parameters
-        stored = self.upright(np.arange(self.spk.shape[0]))
+        if self._prime_stored is None:  # each upright pixel's stored index, and a scratch image: made once
+            self._prime_stored = self.upright(np.arange(self.spk.shape[0]))
+            self._prime_index = np.full((self.height, self.width), -1, np.int64)
+        stored = self._prime_stored
         pending = np.zeros(self.spk.shape[0], np.bool_)
         for g in self._groups:
             pending[g[1]] = True
@@ -426,10 +433,16 @@ class SpikeChangeDetector:
             part = part & ~self.upright(pending)
             if not part.any():
                 continue
-            ys, xs = np.nonzero(part)
-            _, _, label = _components_of_mask(part, p.merge_px, 1)  # as detections group them
-            for k in range(int(label.max()) + 1):
-                sel = label == k
+            ys, xs = np.nonzero(part)  # scan order
+            ys, xs = ys.astype(np.int64, copy=False), xs.astype(np.int64, copy=False)
+            # as detections group them (the priming's own scratch image: detections are grouped meanwhile)
+            _, _, label = _front.components_of_pixels(ys, xs, self.height, self.width, 2 * int(p.merge_px) + 1, 1,
+                                                      self._prime_index)
+            # each group's pixels in scan order, from one stable sort (not one comparison per group)
+            order = np.argsort(label, kind="stable")
+            cuts = np.searchsorted(label[order], np.arange(int(label.max()) + 2))
+            for k in range(cuts.size - 1):
+                sel = order[cuts[k]:cuts[k + 1]]
                 y, x = ys[sel], xs[sel]
                 wait = max(float(p.prime_confirm_ticks), 2.0 * float(np.median(typical[y, x])))
                 self._groups.append((self._step_end(t + 1 + wait), stored[y, x].copy(), sign,
@@ -746,7 +759,8 @@ def _upsample(blocks: np.ndarray, H: int, W: int) -> np.ndarray:
     y0, y1, fy = axis(H, blocks.shape[0])
     x0, x1, fx = axis(W, blocks.shape[1])
     rows = blocks[y0] * (1 - fy)[:, None] + blocks[y1] * fy[:, None]
-    return rows[:, x0] * (1 - fx)[None, :] + rows[:, x1] * fx[None, :]
+    # the full-size blend in one compiled pass (the same two products and sum per pixel, exactly)
+    return _front.blend_columns(np.ascontiguousarray(rows, np.float64), x0, x1, 1 - fx, fx)
 
 
 def _robust_background(log_light: np.ndarray, valid: np.ndarray, window_px: int) -> np.ndarray:
@@ -770,8 +784,11 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
     of its pixels around each pixel (per block).
     """
     H, W = values.shape
-    n = _block_counts(clear)
-    total = _blocks(np.where(clear, values, 0.0), 0.0).sum(axis=2)
+    # per 8×8 block, in one compiled pass: the sum over the clear pixels (as NumPy's sum of the padded blocks,
+    # exactly), the clear pixels, and those also ``also``
+    total, n, n_also = _front.clear_block_sums(np.ascontiguousarray(values, np.float64),
+                                               np.ascontiguousarray(clear, np.bool_),
+                                               np.ascontiguousarray(clear if also is None else also, np.bool_))
     sigma = max(window_px / 8.0 / _PRIME_BLOCK_PX, 0.5)
     weight = gaussian_filter(n, sigma, mode="nearest")
     smooth = gaussian_filter(total, sigma, mode="nearest")
@@ -782,7 +799,7 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
         level = np.zeros_like(level)
     out = (_upsample(level, H, W), _nearest(weight / _PRIME_BLOCK_PX ** 2, H, W))
     if also is not None:
-        part = gaussian_filter(_block_counts(clear & also), sigma, mode="nearest")
+        part = gaussian_filter(n_also, sigma, mode="nearest")
         out += (_nearest(part / np.maximum(weight, 1e-9), H, W),)
     return out
 
