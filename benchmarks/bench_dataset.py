@@ -13,8 +13,17 @@ clips' wall times / the run's: 2 when two workers really overlap, whatever the l
 workers' peak resident memory, the load average, and checks
 that all runs wrote identical bits.
 
+With ``--command``: the whole ``viform dataset`` command as a user waits for it (a fresh process,
+its cluster's start-up included), 2 workers, with the workers forked from the fork server that has
+imported a clip's modules (``viform._parallel.WORKER_START = "forkserver"``, the command's way)
+and, as the plain reference, spawned as fresh interpreters (dask's default), alternated. It
+prints the wall seconds to the command's exit (what a terminal waits for) and to its output
+closed (the fork server outlives the command by a moment), the machine's CPU-seconds over each
+run and one second after (``/proc/stat``: a forked worker's CPU does not reach the command's own
+count; run it on an otherwise quiet machine), and checks that both wrote identical bits.
+
 Run:  python benchmarks/bench_dataset.py [--clips 8] [--frames 10] [--height 125] [--width 200]
-                                          [--repeats 3] [--json out.json]
+                                          [--repeats 3] [--json out.json] [--command]
 """
 
 from __future__ import annotations
@@ -65,6 +74,58 @@ def start_cluster(n_workers: int, warm_src: Path, out: Path, settings, block_tic
     return cluster, client, time.perf_counter() - t0
 
 
+def _machine_busy_s() -> float:
+    """CPU-seconds all this machine's cores have spent busy since boot (Linux ``/proc/stat``)."""
+    with open("/proc/stat") as f:
+        fields = f.readline().split()[1:]
+    user, nice, system, _idle, _iowait, irq, softirq = map(int, fields[:7])
+    return (user + nice + system + irq + softirq) / os.sysconf("SC_CLK_TCK")
+
+
+def command(args) -> None:
+    """The whole ``viform dataset`` command in fresh processes, workers forked or spawned, alternated."""
+    import hashlib
+    import subprocess
+    import sys
+
+    code = ("import sys\nimport viform._parallel as p\np.WORKER_START = sys.argv[1]\n"
+            "from viform.cli import main\nsys.exit(main(sys.argv[2:]))")
+    with tempfile.TemporaryDirectory(prefix="bench-dataset-command-") as tmp:
+        tmp = Path(tmp)
+        src = make_clips(tmp / "src", args.clips, args.frames, args.height, args.width)
+        runs: dict[str, list] = {"forkserver": [], "spawn": []}
+        digests = set()
+        for r in range(args.repeats + 1):  # the first round loads (or compiles) the kernels: not counted
+            for how in runs:
+                out = tmp / f"{how}{r}"
+                cmd = [sys.executable, "-c", code, how, "dataset", str(src), "--out", str(out), "--workers", "2",
+                       "--frame-rate-hz", "1000", "--height", str(args.height), "--width", str(args.width),
+                       "--no-progress"]
+                b0, t0 = _machine_busy_s(), time.perf_counter()
+                proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                proc.wait()  # the command's exit: what a terminal waits for
+                wall = time.perf_counter() - t0
+                _, err = proc.communicate()  # its output closed: the fork server exits after the command
+                closed = time.perf_counter() - t0
+                time.sleep(1.0)  # what the command left running finishes, and its CPU is counted
+                busy = _machine_busy_s() - b0
+                if proc.returncode:
+                    raise SystemExit(f"viform dataset failed: {err.decode()[-2000:]}")
+                if r:
+                    runs[how].append((wall, closed, busy))
+                digests.add(hashlib.sha256(b"".join(p.read_bytes() for p in sorted((out / "spike").glob("*.dat"))))
+                            .hexdigest())
+    print(f"\nThe whole `viform dataset` command, {args.clips} clips of {args.frames} frames at {args.width}×"
+          f"{args.height}, 2 workers, {args.repeats} alternated runs each; load average {os.getloadavg()[0]:.2f}")
+    for how, label in (("forkserver", "forked from the fork server (the command's way)"),
+                       ("spawn", "spawned as fresh interpreters (plain reference)")):
+        walls, closed, busy = zip(*runs[how], strict=True)
+        print(f"  workers {label}: wall to the command's exit {min(walls):.2f}–{max(walls):.2f} s (to its output "
+              f"closed {min(closed):.2f}–{max(closed):.2f} s), machine CPU {min(busy):.2f}–{max(busy):.2f} s")
+    fork, spawn = (min(w for w, _, _ in runs[h]) for h in ("forkserver", "spawn"))
+    print(f"  best wall, forked ÷ spawned: {fork / spawn:.2f}×; identical bits in all runs: {len(digests) == 1}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--clips", type=int, default=8)
@@ -74,7 +135,12 @@ def main() -> None:
     parser.add_argument("--block-ticks", type=int, default=4096)
     parser.add_argument("--repeats", type=int, default=3, help="interleaved repeats; the best of each is shown")
     parser.add_argument("--json", dest="json_path", default=None)
+    parser.add_argument("--command", action="store_true",
+                        help="time the whole viform dataset command, workers forked vs spawned")
     args = parser.parse_args()
+    if args.command:
+        command(args)
+        return
 
     from viform.datasets import convert_serially, make_settings
 

@@ -43,7 +43,7 @@ def load() -> str:
 
 def stop_forkserver() -> None:
     """Stop multiprocessing's fork server (the sweep's workers are forked from it,
-    :data:`viform.measure.sweep.run.WORKER_START`) and wait for it: its CPU and its children's then count
+    :data:`viform._parallel.WORKER_START`) and wait for it: its CPU and its children's then count
     in this process's RUSAGE_CHILDREN, and the next run starts a fresh one, as a command does."""
     import multiprocessing.forkserver
 

@@ -3,7 +3,7 @@ no module imports one from a higher layer, and no modules import each other in a
 
 Layers, lowest first (README, docs/CONTRIBUTING.md)::
 
-    _validate, _lazy → _io, _parallel → light → stream → sensors → coding, imaging, isp, display
+    _validate, _lazy → _io, _parallel, _worker_preload → light → stream → sensors → coding, imaging, isp, display
     → vision → datasets → measure → report → cli
 
 Modules of one layer may import each other (a module of ``imaging`` one of ``coding``), as
@@ -23,7 +23,7 @@ PACKAGE = SRC / "viform"
 #: Groups of the package (first part of the module name below ``viform``), lowest layer first.
 LAYERS = (
     ("_validate", "_lazy"),
-    ("_io", "_parallel"),
+    ("_io", "_parallel", "_worker_preload"),
     ("light",),
     ("stream",),
     ("sensors",),

@@ -69,10 +69,40 @@ def check_connect_timeout(timeout_s) -> float:
     return float(timeout_s)
 
 
+#: dask settings of the local clusters viform starts (sweeps, datasets). No statistical profiler in the
+#: workers: it samples the running task's stack every 10 ms, and with dask's ``MALLOC_TRIM_THRESHOLD_`` its
+#: frees trim the heap that a task's arrays then grow again — 12–15 % more CPU per sweep point than in this
+#: process, measured point by point alternately (0.95–0.99× without). The workers' environment keeps dask's
+#: one-thread BLAS/OpenMP settings but not ``MALLOC_TRIM_THRESHOLD_`` (setting it also switches off glibc's
+#: adaptive mmap threshold, so every large temporary array is mapped and unmapped anew: 5× the page faults;
+#: the workers live for one command). No work stealing: the tasks are independent and queued at the
+#: scheduler, which hands each to the next free worker. The event loops' latency tick every 1 s (not
+#: 20 ms) and the system monitor every 5 s (not 0.5 s): an idle 2-worker cluster then costs 0.75 CPU-s per
+#: 20 s instead of 2.8 (this process and its children, measured), CPU taken from the tasks on a 2-core
+#: machine. The workers' memory monitor (which enforces the memory limit) keeps its own interval.
+LOCAL_CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.work-stealing": False,
+                        "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
+                                                                "OPENBLAS_NUM_THREADS": 1},
+                        "distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s"}
+
+#: How a local cluster's workers start: "forkserver" forks them from one server process that has imported
+#: distributed, the caller's task modules (``preload`` of :func:`open_client`) and numba's CPU target
+#: registries once (:mod:`viform._worker_preload`; nothing that starts a thread, numba's kernels are loaded
+#: by each worker); "spawn" (dask's default) starts each as a fresh interpreter that imports them all again
+#: (≈ 1.1 CPU-s a worker, taken from the tasks on a 2-core machine). Measured on the 32-point benchmark
+#: sweep, 2 workers, one sweep per fresh process, alternately: CPU beyond the points' own 2.3 CPU-s
+#: against 3.7–4.5 with "spawn". The server lives as long as this process and is started, with the
+#: workers' environment of ``distributed.nanny.pre-spawn-environ``, by the first local cluster: a later
+#: cluster forks from it at once, and its workers import what the server did not.
+WORKER_START = "forkserver"
+
+
 def open_client(workers: int, scheduler: str | None, memory_limit,
-                connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S):
+                connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S, preload: tuple[str, ...] = ()):
     """(client, cluster): a client of the scheduler at ``scheduler`` (cluster None), or of a new
-    LocalCluster of ``workers`` processes with one thread each and ``memory_limit`` per worker.
+    LocalCluster of ``workers`` processes with one thread each and ``memory_limit`` per worker, with
+    :data:`LOCAL_CLUSTER_CONFIG`, its workers started as :data:`WORKER_START` says (``preload``: the
+    modules their tasks need, imported once by the fork server).
 
     ``connect_timeout_s`` bounds the wait for the scheduler, at the start and after a lost
     connection (then :func:`completed` stops the run). The client's own log lines, and the local
@@ -91,9 +121,19 @@ def open_client(workers: int, scheduler: str | None, memory_limit,
         except (OSError, TimeoutError) as exc:
             raise ViformError(f"scheduler = {scheduler!r}: could not connect within connect_timeout_s = "
                               f"{connect_timeout_s:g} s ({one_line(exc)}); nothing was written") from None
+    import dask
+
+    config = dict(LOCAL_CLUSTER_CONFIG, **{"distributed.worker.multiprocessing-method": WORKER_START})
     try:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                               dashboard_address=":0", silence_logs=logging.CRITICAL)
+        with dask.config.set(config):
+            if WORKER_START == "forkserver":
+                from distributed.utils import get_mp_context
+
+                # read when the server starts (by the first local cluster of this process)
+                get_mp_context().set_forkserver_preload(["distributed", "viform._worker_preload", *preload])
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   memory_limit=memory_limit, dashboard_address=":0",
+                                   silence_logs=logging.CRITICAL)
     except Exception as exc:  # a worker process that died while starting (killed, out of memory)
         raise ViformError(f"could not start {workers} local dask worker process(es) ({one_line(exc)}); nothing "
                           "was written: run the command again") from None

@@ -99,7 +99,7 @@ class Cluster:
 
 def worker_processes(pid: int) -> list:
     """The dask worker processes below ``pid`` (spawned by their nannies, or forked by multiprocessing's fork
-    server: a sweep's workers, :data:`viform.measure.sweep.run.WORKER_START`)."""
+    server: viform's own local clusters, :data:`viform._parallel.WORKER_START`)."""
     try:
         kids = psutil.Process(pid).children(recursive=True)
     except psutil.NoSuchProcess:
@@ -267,7 +267,7 @@ def reference_run(kind: str, work: Path) -> tuple[str, float]:
     if kind == "dataset" and hasattr(build, "open_client"):  # (an older viform: a local cluster of one process)
         real = build.open_client
 
-        def in_process(workers, scheduler, memory_limit, connect_timeout_s=20.0):
+        def in_process(workers, scheduler, memory_limit, connect_timeout_s=20.0, preload=()):
             import logging
 
             from distributed import Client, LocalCluster

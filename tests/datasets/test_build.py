@@ -161,3 +161,44 @@ def test_loader_reads_the_built_dataset(reference):
     events, size = ds.events(0)
     assert size == (W, H, 1) and events.size == int(sample["spike"].sum())
     assert np.all(np.diff(events["t"]) >= 0) and set(np.unique(events["p"])) <= {0}
+
+
+def test_own_local_cluster_forks_its_workers_with_the_clip_modules_imported(source_clips, settings, tmp_path,
+                                                                             monkeypatch):
+    """``build_dataset`` starts its own LocalCluster with the shared settings, its workers forked from a fork
+    server that has imported a clip's modules once (:data:`viform._parallel.WORKER_START`): it asks for them,
+    a worker of such a cluster finds them imported, and has the one-thread settings of the workers'
+    environment; dask's settings of the process are left as they were."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from viform._validate import ViformError
+    from viform.datasets import build
+
+    asked = {}
+
+    def stop(*args, **kwargs):
+        asked.update(kwargs)
+        raise ViformError("stopped before the cluster")
+
+    monkeypatch.setattr(build, "open_client", stop)
+    with pytest.raises(ViformError, match="stopped"):
+        build_dataset(source_clips, tmp_path / "out", settings, workers=1)
+    assert asked["preload"] == build.WORKER_MODULES
+    code = ("import dask, json\nfrom viform._parallel import open_client\nfrom viform.datasets import build\n"
+            "def seen():\n"
+            "    import os, sys\n"
+            "    return [all(m in sys.modules for m in build.WORKER_MODULES),\n"
+            "            'viform._worker_preload' in sys.modules, os.environ.get('OMP_NUM_THREADS')]\n"
+            "client, cluster = open_client(1, None, 'auto', preload=build.WORKER_MODULES)\n"
+            "try:\n"
+            "    print(json.dumps([list(client.run(seen).values()),\n"
+            "                      dask.config.get('distributed.scheduler.work-stealing')]))\n"
+            "finally:\n"
+            "    client.close()\n"
+            "    cluster.close()\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
+                         env={**__import__("os").environ, "PYTHONPATH": str(Path(build.__file__).parents[2])})
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert json.loads(run.stdout.strip().splitlines()[-1]) == [[[True, True, "1"]], True]

@@ -53,7 +53,7 @@ def test_a_failing_clip_is_reported_not_raised_on_the_worker(tmp_path, settings)
 
 
 def test_an_unreachable_scheduler_leaves_no_dataset(tmp_path, settings, monkeypatch):
-    def refuse(*args):
+    def refuse(*args, **kwargs):
         raise ViformError("--scheduler 'tcp://127.0.0.1:1': could not connect")
 
     monkeypatch.setattr(build, "open_client", refuse)

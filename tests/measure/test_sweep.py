@@ -292,13 +292,13 @@ def test_own_local_cluster_gives_the_same_points(serial, tmp_path):
 
 def test_own_local_cluster_forks_its_workers_with_the_modules_imported():
     """The sweep's own LocalCluster forks its workers from a fork server that has imported a point's modules
-    and numba's registries once (:data:`viform.measure.sweep.run.WORKER_START`): a worker finds them imported,
+    and numba's registries once (:data:`viform._parallel.WORKER_START`): a worker finds them imported,
     and has the one-thread settings of the workers' environment."""
     code = ("import json\nfrom viform.measure.sweep import run\n"
             "def seen():\n"
             "    import os, sys\n"
             "    from numba.core.registry import cpu_target\n"
-            "    return ['viform.measure.sweep._preload' in sys.modules, 'viform.measure.sweep.run' in sys.modules,\n"
+            "    return ['viform._worker_preload' in sys.modules, 'viform.measure.sweep.run' in sys.modules,\n"
             "            len(cpu_target.target_context._registries) > 0, os.environ.get('OMP_NUM_THREADS')]\n"
             "client, cluster = run._open(1, None, 'auto')\n"
             "try:\n"

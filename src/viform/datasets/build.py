@@ -558,6 +558,12 @@ def _check_existing_config(out: Path, config: dict) -> None:
                       "use a new --out folder, or the same options to resume it")
 
 
+#: The modules a clip's task imports, imported once by the fork server a local cluster's workers are
+#: forked from (:data:`viform._parallel.WORKER_START`), not again by each worker.
+WORKER_MODULES = ("viform.datasets.build", "viform.datasets.scene_clips", "viform.sensors.spike",
+                  "viform.light.scenes", "viform.stream.dat", "viform.stream.sidecar")
+
+
 def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,
                   client=None, memory_limit="auto", block_ticks: int = 4096, progress: bool = True,
                   crash: tuple[str, int] | None = None, device: str = "cpu",
@@ -629,7 +635,7 @@ def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = 
     if own_client:
         if scheduler is not None and on_connect is not None:
             on_connect(scheduler, connect_timeout_s)
-        client, own_cluster = open_client(workers, scheduler, memory_limit, connect_timeout_s)
+        client, own_cluster = open_client(workers, scheduler, memory_limit, connect_timeout_s, preload=WORKER_MODULES)
     try:
         (out / SPIKE_DIR).mkdir(parents=True, exist_ok=True)
         (out / GT_DIR).mkdir(parents=True, exist_ok=True)

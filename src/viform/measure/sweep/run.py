@@ -178,47 +178,9 @@ def tracking_scores(scene, duration_s: float, shot) -> dict:
             "tracking_objects_missed": float(len(r["never_found"]))}
 
 
-#: dask settings of the local cluster a sweep starts. No statistical profiler in the workers: it samples
-#: the running task's stack every 10 ms, and with dask's ``MALLOC_TRIM_THRESHOLD_`` its frees trim the
-#: heap that the point's arrays then grow again — 12–15 % more CPU per point than in this process,
-#: measured point by point alternately (0.95–0.99× without). The workers' environment keeps dask's
-#: one-thread BLAS/OpenMP settings but not ``MALLOC_TRIM_THRESHOLD_`` (setting it also switches off
-#: glibc's adaptive mmap threshold, so every large temporary array is mapped and unmapped anew: 5×
-#: the page faults; a sweep's workers live for one sweep). No work stealing: the tasks are
-#: independent and queued at the scheduler, which hands each to the next free worker. The event
-#: loops' latency tick every 1 s (not 20 ms) and the system monitor every 5 s (not 0.5 s): an idle
-#: 2-worker cluster then costs 0.75 CPU-s per 20 s instead of 2.8 (this process and its children,
-#: measured), CPU taken from the points on a 2-core machine. The workers' memory monitor (which
-#: enforces the memory limit) keeps its own interval.
-CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.work-stealing": False,
-                  "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
-                                                          "OPENBLAS_NUM_THREADS": 1},
-                  "distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s"}
-
-
-#: How a local cluster's workers start: "forkserver" forks them from one server process that has imported
-#: distributed, a point's modules and numba's CPU target registries once (:mod:`viform.measure.sweep._preload`;
-#: nothing that starts a thread, numba's kernels are loaded by each worker); "spawn" (dask's default) starts
-#: each as a fresh interpreter that imports them all again (≈ 1.1 CPU-s a worker, taken from the points on
-#: a 2-core machine). Measured on the 32-point benchmark sweep, 2 workers, one sweep per fresh process,
-#: alternately: CPU beyond the points' own 2.3 CPU-s against 3.7–4.5 with "spawn". The server lives as
-#: long as this process (a second sweep forks from it at once) and has the workers' environment of
-#: ``distributed.nanny.pre-spawn-environ`` (it starts with the first worker).
-WORKER_START = "forkserver"
-
-
 def _open(workers, scheduler, memory_limit, connect_timeout_s=DEFAULT_CONNECT_TIMEOUT_S):
-    import dask
-    import distributed  # noqa: F401 -- its defaults join dask's config first (set() would drop them on exit)
-
-    config = dict(CLUSTER_CONFIG, **{"distributed.worker.multiprocessing-method": WORKER_START})
-    if scheduler is None and WORKER_START == "forkserver":
-        from distributed.utils import get_mp_context
-
-        with dask.config.set(config):
-            get_mp_context().set_forkserver_preload(["distributed", "viform.measure.sweep._preload"])
-    with dask.config.set(config if scheduler is None else {}):
-        return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"), connect_timeout_s)
+    return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"), connect_timeout_s,
+                       preload=("viform.measure.sweep.run",))
 
 
 #: Each task takes this fraction of the points not yet dealt, per worker (guided self-scheduling): the
