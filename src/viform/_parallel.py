@@ -123,25 +123,25 @@ def open_client(workers: int, scheduler: str | None, memory_limit,
                               f"{connect_timeout_s:g} s ({one_line(exc)}); nothing was written") from None
     import dask
 
-    config = dict(LOCAL_CLUSTER_CONFIG, **{"distributed.worker.multiprocessing-method": WORKER_START})
-    try:
-        with dask.config.set(config):
-            if WORKER_START == "forkserver":
-                from distributed.utils import get_mp_context
+    # the settings hold while the cluster and its client start; this process's own are left as they were
+    with dask.config.set(dict(LOCAL_CLUSTER_CONFIG, **{"distributed.worker.multiprocessing-method": WORKER_START})):
+        if WORKER_START == "forkserver":
+            from distributed.utils import get_mp_context
 
-                # read when the server starts (by the first local cluster of this process)
-                get_mp_context().set_forkserver_preload(["distributed", "viform._worker_preload", *preload])
+            # read when the server starts (by the first local cluster of this process)
+            get_mp_context().set_forkserver_preload(["distributed", "viform._worker_preload", *preload])
+        try:
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    memory_limit=memory_limit, dashboard_address=":0",
                                    silence_logs=logging.CRITICAL)
-    except Exception as exc:  # a worker process that died while starting (killed, out of memory)
-        raise ViformError(f"could not start {workers} local dask worker process(es) ({one_line(exc)}); nothing "
-                          "was written: run the command again") from None
-    try:
-        return Client(cluster, timeout=connect_timeout_s), cluster
-    except BaseException:
-        cluster.close()
-        raise
+        except Exception as exc:  # a worker process that died while starting (killed, out of memory)
+            raise ViformError(f"could not start {workers} local dask worker process(es) ({one_line(exc)}); "
+                              "nothing was written: run the command again") from None
+        try:
+            return Client(cluster, timeout=connect_timeout_s), cluster
+        except BaseException:
+            cluster.close()
+            raise
 
 
 def _lost(client, exc: BaseException | None = None) -> bool:
