@@ -244,3 +244,28 @@ def test_version_6_codes_records_where_smaller(tmp_path, monkeypatch):
     encode_source(s, tmp_path / "one.vfc", segment_ticks=100, version=6)
     assert (tmp_path / "one.vfc").read_bytes() == data
     _assert_damage_is_refused_or_harmless(tmp_path, data, step=53, seed=6, flips=150)
+
+
+def test_forged_records_band_count_is_not_allocated_up_front():
+    """A version-6 segment of a few bytes whose one records band claims every pixel-tick of the largest
+    segment (2^28 spikes: 2 GiB of ticks) is refused as damaged with memory of the order of its per-pixel
+    state, not of the stated count: the decoder never sizes its tick array by a count its bytes cannot hold."""
+    import tracemalloc
+
+    from viform.coding import vfc_v6
+    from viform.coding.vfc_v5 import _varint
+
+    height = width = 256
+    n_ticks = 4096  # 2^28 pixel-ticks: the most a segment's header may state
+    spikes = n_ticks * height * width
+    data = b"\x00" * 16
+    payload = (bytes([vfc_v6._FLAG_BANDS6]) + _varint(0) + _varint(n_ticks) + _varint(spikes) + _varint(len(data))
+               + _varint(spikes * 4 + vfc_v6.MODEL_RECORDS) + _varint(1) + data)
+    tracemalloc.start()
+    try:
+        with pytest.raises(ViformError, match="damaged"):
+            vfc_v6.decode_payload(payload, vfc_v6.BandState(height, width, height), 0, n_ticks)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 256 << 20  # the stated count alone would be 2,048 MiB

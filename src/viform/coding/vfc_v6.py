@@ -186,10 +186,12 @@ def decode_payload(payload: bytes, state: BandState, expected_start: int, segmen
     buf = np.frombuffer(payload, np.uint8)
     end = start + n_ticks
     # the tick arrays grow with the spikes actually decoded, never to the stated count up front; where
-    # every tick-model band may hold its stated count, the bands decode into one array (no copy after)
+    # every tick-model band may hold its stated count and the segment's count is within what its bytes
+    # can hold as tick-model data (a records band's stated count is not bounded by its bytes: a forged
+    # one must not allocate it), the bands decode into one array (no copy after)
     caps = [sp if model == MODEL_RECORDS else min(sp, 64 * nbytes + 4096) for model, nbytes, sp, _ in spans]
     whole = None
-    if all(cap == sp for cap, (_, _, sp, _) in zip(caps, spans, strict=True)):
+    if total <= 64 * len(payload) + 4096 and all(cap == sp for cap, (_, _, sp, _) in zip(caps, spans, strict=True)):
         whole = np.empty(total, np.int64)
         firsts = np.cumsum([0] + [sp for _, _, sp, _ in spans])
     counts_all = np.empty(height * width, np.int64)
