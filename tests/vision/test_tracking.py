@@ -615,3 +615,46 @@ def test_a_file_is_read_and_its_front_end_run_ahead_in_threads_with_the_same_tra
     np.testing.assert_array_equal(ahead.spike_counts, in_turn.spike_counts)
     assert ahead.detections == in_turn.detections
     assert steps["ahead"] == steps["in turn"] and len(steps["ahead"]) == stream.n_ticks // 10
+
+
+def test_the_threads_end_with_a_failed_call_and_run_with_the_callers_numba_threads(stream, tmp_path, monkeypatch):
+    """An error in the association (here ``on_step``) ends ``track_spikes`` with no thread of its own left
+    running, even while the caller holds the error; the front end's thread runs with the numba thread count
+    the caller set (numba's count is per thread)."""
+    import threading
+
+    import numba
+
+    from viform.stream.io import open_spikes, save_spikes
+    from viform.vision import tracking
+
+    path = save_spikes(tmp_path / "square.dat", stream)
+
+    class Stop(Exception):
+        pass
+
+    def stop(frame, t_s, mask, reported):
+        if frame == 3:
+            raise Stop
+
+    with pytest.raises(Stop) as caught:
+        track_spikes(open_spikes(path), 10, PARAMS, block_ticks=20, on_step=stop)
+    assert caught.value.__traceback__ is not None  # the error (and its frames) still held here
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("viform-")]
+
+    seen = []
+    feed = tracking.SpikeChangeDetector.feed_words
+
+    def noted(self, words):
+        seen.append((threading.current_thread().name, numba.get_num_threads()))
+        return feed(self, words)
+
+    monkeypatch.setattr(tracking.SpikeChangeDetector, "feed_words", noted)
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        track_spikes(open_spikes(path), 10, PARAMS, block_ticks=20)
+    finally:
+        numba.set_num_threads(before)
+    assert any(name.startswith("viform-front") for name, _ in seen)
+    assert {n for _, n in seen} == {1}

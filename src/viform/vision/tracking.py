@@ -42,6 +42,7 @@ Both return MOTChallenge-style rows (:mod:`viform.vision.motchallenge`).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -1260,8 +1261,16 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
             if on_step is not None:
                 on_step(frame, t_s, detector.mask(bits), reported)
 
-    blocks = _packed_blocks(source, block, n_usable, layout)
-    if not (PIPELINE_FRONT_END and callable(getattr(source, "read_packed", None))):
+    # closed on the way out, an error included: its read-ahead thread and block do not outlive the call
+    with contextlib.closing(_packed_blocks(source, block, n_usable, layout)) as blocks:
+        _run_pipeline(detector, blocks, associate, callable(getattr(source, "read_packed", None)))
+    return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det,
+                          detector.upright(detector.total).copy())
+
+
+def _run_pipeline(detector, blocks, associate, from_file: bool) -> None:
+    """Feed ``blocks`` to ``detector`` and ``associate`` the steps of each, in turn or pipelined."""
+    if not (PIPELINE_FRONT_END and from_file):
         for words in blocks:
             associate(detector.feed_words(words))
     else:
@@ -1269,9 +1278,14 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
         # while this block's steps are grouped and associated here; nothing flows back from the association
         # to the front end, so the steps are the same. (A source that simulates or converts its spikes may
         # run parallel kernels of its own: it is read in turn.)
+        # numba's thread count is per thread: the front end's thread runs with the caller's
         from concurrent.futures import ThreadPoolExecutor
 
-        with ThreadPoolExecutor(1, thread_name_prefix="viform-front") as pool:
+        from numba import get_num_threads
+
+        threads = get_num_threads()
+        with ThreadPoolExecutor(1, thread_name_prefix="viform-front",
+                                initializer=_set_numba_threads, initargs=(threads,)) as pool:
             done = None
             for words in blocks:
                 running = pool.submit(detector.feed_words, words)
@@ -1280,8 +1294,12 @@ def track_spikes(source, step_ticks: int, parameters: TrackerParameters | None =
                 done = running.result()
             if done is not None:
                 associate(done)
-    return TrackingResult(np.array(rows, np.float64).reshape(-1, 7), np.array(times), step_ticks, n_det,
-                          detector.upright(detector.total).copy())
+
+
+def _set_numba_threads(n: int) -> None:
+    from numba import set_num_threads
+
+    set_num_threads(n)
 
 
 def _packed_layout(source) -> tuple[int, bool]:
