@@ -227,3 +227,17 @@ def test_a_folder_of_another_sweep_is_refused_before_the_compile_notice(swept, c
     assert code == 2 and len(err.splitlines()) == 1, err
     assert f"--out {str(out)!r} holds a sweep made with other options" in err
     assert (out / "sweep.json").read_bytes() == before
+
+
+@pytest.mark.parametrize("text", ["[]", '{"context": 5}', "not json"])
+def test_a_sweep_json_that_is_not_a_sweep_is_refused_and_kept(tmp_path, capsys, text):
+    """--out holding a sweep.json viform cannot read as a sweep (another document, a damaged one) is refused
+    in one line, exit 2, and the file is left as it was (never written over)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "sweep.json").write_text(text)
+    code = main([*ARGS, "--workers", "0", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert f"--out = {str(out)!r} holds a sweep.json viform cannot read as a sweep" in err
+    assert (out / "sweep.json").read_text() == text and sorted(p.name for p in out.iterdir()) == ["sweep.json"]

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from viform._io import atomic_path, write_json
-from viform._validate import ViformError
+from viform._validate import ViformError, one_line
 from viform.measure import comparison as cmp
 from viform.measure.sweep.specs import METRIC_DIRECTIONS
 
@@ -158,14 +158,19 @@ class ContextMismatch(ViformError):
 
 def check_context(out: Path, context) -> None:
     """Refuse a folder ``out`` that holds a sweep of another scene, size, duration, instants or seed
-    (:class:`ContextMismatch`)."""
+    (:class:`ContextMismatch`), or a ``sweep.json`` that is not a sweep's (it is never written over)."""
     path = Path(out) / "sweep.json"
     if not path.is_file():
         return
     try:
-        old = json.loads(path.read_text()).get("context", {})
-    except (OSError, ValueError):
-        return
+        doc = json.loads(path.read_text())
+        why = None if isinstance(doc, dict) and isinstance(doc.get("context", {}), dict) else "not a sweep's record"
+    except (OSError, ValueError) as exc:
+        why = one_line(exc)
+    if why is not None:
+        raise ViformError(f"out = {str(out)!r} holds a sweep.json viform cannot read as a sweep ({why}); give "
+                          "another folder, or move that file away") from None
+    old = doc.get("context", {})
     new = context.describe()
     if old == json.loads(json.dumps(new)):
         return
