@@ -87,6 +87,7 @@ def command(args) -> None:
     import hashlib
     import subprocess
     import sys
+    import threading
 
     code = ("import sys\nimport viform._parallel as p\np.WORKER_START = sys.argv[1]\n"
             "from viform.cli import main\nsys.exit(main(sys.argv[2:]))")
@@ -103,10 +104,17 @@ def command(args) -> None:
                        "--no-progress"]
                 b0, t0 = _machine_busy_s(), time.perf_counter()
                 proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-                proc.wait()  # the command's exit: what a terminal waits for
+                # the output is read in a thread (a full pipe would block the command) until it closes: the
+                # fork server exits after the command
+                output = []
+                reader = threading.Thread(target=lambda p=proc, o=output: o.extend(p.communicate()))
+                reader.start()
+                while proc.poll() is None:  # the command's exit: what a terminal waits for
+                    time.sleep(0.002)
                 wall = time.perf_counter() - t0
-                _, err = proc.communicate()  # its output closed: the fork server exits after the command
+                reader.join()
                 closed = time.perf_counter() - t0
+                err = output[1]
                 time.sleep(1.0)  # what the command left running finishes, and its CPU is counted
                 busy = _machine_busy_s() - b0
                 if proc.returncode:
