@@ -93,7 +93,9 @@ LOCAL_CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distribute
 #: sweep, 2 workers, one sweep per fresh process, alternately: CPU beyond the points' own 2.3 CPU-s
 #: against 3.7–4.5 with "spawn". The server lives as long as this process and is started, with the
 #: workers' environment of ``distributed.nanny.pre-spawn-environ``, by the first local cluster: a later
-#: cluster forks from it at once, and its workers import what the server did not.
+#: cluster forks from it at once, and its workers import what the server did not. Its workers also get
+#: the server's environment variables, those of this process when the first local cluster started: a
+#: variable changed later in the same process (a notebook, a test) reaches them only through a new process.
 WORKER_START = "forkserver"
 
 

@@ -492,3 +492,34 @@ def test_a_renamed_camera_keeps_its_points_noise():
     expected = int.from_bytes(hashlib.sha256(f"7/{old_key}".encode()).digest()[:8], "little") & ((1 << 63) - 1)
     assert sw.point_seed(7, point) == expected
     assert sw.point_seed(7, sw.Point("cmos", ())) != sw.point_seed(7, sw.Point("cmos-short", ()))
+
+
+def test_a_failed_close_never_hides_the_callers_own_error():
+    """The threads closing a sweep's cluster are all joined; what closing raised reaches the caller only
+    when the caller itself did not fail (its own error, say a full disk while storing, is the one shown)."""
+    from viform.measure.sweep import run
+
+    class Part:
+        def __init__(self, fails):
+            self.fails, self.closed = fails, False
+
+        def close(self):
+            self.closed = True
+            if self.fails:
+                raise OSError("close failed")
+
+    def closing(*fails):
+        parts = [Part(f) for f in fails]
+        threads = [run._Closing([p]) for p in parts]
+        for t in threads:
+            t.start()
+        return threads, parts
+
+    threads, parts = closing(True, False)
+    run.join_closing(threads, failed=True)  # the caller's own error goes on; the close error is not raised
+    assert all(p.closed for p in parts)
+    threads, parts = closing(False, True)
+    with pytest.raises(OSError, match="close failed"):
+        run.join_closing(threads, failed=False)
+    assert all(p.closed for p in parts) and not any(t.is_alive() for t in threads)
+    run.join_closing(closing(False, False)[0], failed=False)

@@ -21,6 +21,7 @@ from viform._io import atomic_open, save_figure
 from viform._validate import size_text
 from viform.measure import comparison as cmp
 from viform.measure import sweep as sw
+from viform.measure.sweep.run import join_closing
 from viform.report.compare_report import (
     _CSS,
     LUX_CMAP,
@@ -450,14 +451,15 @@ def run_sweep_report(plan, out, *, workers=None, scheduler=None, client=None, me
     cluster of the sweep's own is closed while the report is written (its workers' shut-down is waiting)."""
     started = time.perf_counter() if started_s is None else started_s
     closing: list = []
+    failed = True
     try:
         doc = sw.sweep(plan, out, workers=workers, scheduler=scheduler, client=client, memory_limit=memory_limit,
                        progress=progress, crash_after_points=crash_after_points, device=device,
                        close_later=closing, **run_options)
         write_sweep_report(doc, plan.context.make_scene(), out, command, started, demand_notes,
                            scenes=plan.context.make_scene)
+        failed = False
     finally:
-        for thread in closing:
-            thread.join()
+        join_closing(closing, failed)
     doc["report"] = str(Path(out) / "report.html")
     return doc

@@ -73,6 +73,19 @@ class _Closing(threading.Thread):
             raise error
 
 
+def join_closing(closing: list, failed: bool) -> None:
+    """Wait for every :class:`_Closing` thread of ``closing``; what closing raised is raised only when the
+    caller has not ``failed`` (its own error, not the cluster's shut-down, is the one the user sees)."""
+    errors = []
+    for thread in closing:
+        try:
+            thread.join()
+        except BaseException as exc:  # noqa: BLE001 -- raised below, once every thread is joined
+            errors.append(exc)
+    if errors and not failed:
+        raise errors[0]
+
+
 def run_point(context: SweepContext, point: Point, scene=None, device: str = "cpu") -> dict:
     """Shoot and score one point (runs on a worker); returns its record and its images.
 
@@ -427,16 +440,18 @@ def sweep(plan: SweepPlan, out, *, workers: int | None = None, scheduler: str | 
     device = check_device(device, plan.sensors)
     check_context(out, plan.context)
     closing = [] if close_later is None else close_later
+    failed = True
     try:
         run = run_sweep(plan.context, plan.points, out, workers=workers, scheduler=scheduler, client=client,
                         memory_limit=memory_limit, progress=progress, crash_after_points=crash_after_points,
                         device=device, connect_timeout_s=connect_timeout_s, on_connect=on_connect,
                         close_later=closing)
-        return _write_results(plan, out, run, device)
+        doc = _write_results(plan, out, run, device)
+        failed = False
+        return doc
     finally:
         if close_later is None:
-            for thread in closing:
-                thread.join()
+            join_closing(closing, failed)
 
 
 def _write_results(plan: SweepPlan, out: Path, run: dict, device: str) -> dict:
