@@ -640,7 +640,7 @@ def test_the_threads_end_with_a_failed_call_and_run_with_the_callers_numba_threa
     with pytest.raises(Stop) as caught:
         track_spikes(open_spikes(path), 10, PARAMS, block_ticks=20, on_step=stop)
     assert caught.value.__traceback__ is not None  # the error (and its frames) still held here
-    assert not [t.name for t in threading.enumerate() if t.name.startswith("viform-")]
+    assert not [t.name for t in threading.enumerate() if t.name.startswith(("viform-read", "viform-front"))]
 
     seen = []
     feed = tracking.SpikeChangeDetector.feed_words
