@@ -191,9 +191,14 @@ def tracking_scores(scene, duration_s: float, shot) -> dict:
             "tracking_objects_missed": float(len(r["never_found"]))}
 
 
+#: The modules a point's task imports (this one imports them all), imported once by the fork server a
+#: local cluster's workers are forked from (:data:`viform._parallel.WORKER_START`), not again by each worker.
+WORKER_MODULES = ("viform.measure.sweep.run",)
+
+
 def _open(workers, scheduler, memory_limit, connect_timeout_s=DEFAULT_CONNECT_TIMEOUT_S):
     return open_client(workers, scheduler, parse_memory(memory_limit, "memory_limit"), connect_timeout_s,
-                       preload=("viform.measure.sweep.run",))
+                       preload=WORKER_MODULES)
 
 
 #: Each task takes this fraction of the points not yet dealt, per worker (guided self-scheduling): the
