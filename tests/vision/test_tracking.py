@@ -540,6 +540,70 @@ def test_the_priming_passes_are_the_numpy_expressions_they_replace_exactly():
             np.testing.assert_array_equal(a, b)
 
 
+def test_the_association_passes_are_the_numpy_expressions_they_replace_exactly():
+    # the association's compiled tables keep the tracks: the regroup tables (coverage of the grown predictions,
+    # with each prediction held by its best-fitting detection only; shares inside the predictions; components
+    # holding two or more), the pieces' owners and the assignment cost equal the NumPy expressions they
+    # replaced, bit for bit, with ties (boxes on a 0.5-px grid touch, nest and repeat) and empty tables
+    from viform.vision import _spike_front as front
+    from viform.vision.tracking import _intersection, iou_matrix
+
+    rng = np.random.default_rng(2)
+
+    def boxes(k):
+        return np.column_stack([np.round(rng.uniform(-5, 40, (k, 2)) * 2) / 2,
+                                np.round(rng.uniform(0.5, 15, (k, 2)) * 2) / 2])
+
+    seen = {"multi": 0, "owned": 0, "held": 0, "far": 0}
+    for _ in range(300):
+        n, m = (int(v) for v in rng.integers(1, 9, 2))  # (_regroup returns early without either)
+        b, predicted = boxes(n), boxes(m + 2)
+        b[rng.random(n) < 0.2, 2:] = 0.0  # empty boxes: the 1e-9 guards
+        counts = rng.integers(1, 30, n).astype(np.float64)
+        live = np.sort(rng.choice(m + 2, size=m, replace=False)).astype(np.int64)
+        grow, min_pixels = float(rng.integers(0, 3)), 8.0
+        for with_multi in (True, False):
+            cover, inside, multi = front.regroup_tables(b, counts, predicted, live, grow, min_pixels, with_multi)
+            # the NumPy form of the tables
+            big = counts >= min_pixels
+            pred = predicted[live].copy()
+            pred[:, :2] -= grow
+            pred[:, 2:] += 2 * grow
+            want = _intersection(b, pred) / np.maximum(pred[:, 2] * pred[:, 3], 1e-9)[None, :]
+            fit = iou_matrix(b[big], predicted[live]) if big.any() else np.zeros((0, live.size))
+            best = np.full(live.size, -1, np.int64)
+            if fit.shape[0]:
+                best = np.where(fit.max(axis=0) > 0, np.nonzero(big)[0][np.argmax(fit, axis=0)], -1)
+            want = np.where((best[None, :] < 0) | (best[None, :] == np.arange(n)[:, None]), want, 0.0)
+            np.testing.assert_array_equal(cover, want)
+            np.testing.assert_array_equal(
+                inside, _intersection(b, predicted[live]) / np.maximum(b[:, 2] * b[:, 3], 1e-9)[:, None])
+            want_multi = np.nonzero((want >= 0.5).sum(axis=1) >= 2)[0] if with_multi else np.zeros(0, np.int64)
+            np.testing.assert_array_equal(multi, want_multi)
+            seen["multi"] += multi.size
+            seen["held"] += int((best >= 0).sum())
+        used = rng.random(n) < 0.2
+        owner = front.regroup_owner(inside, used, counts, min_pixels)
+        mostly = inside >= 0.6
+        want_owner = np.where(~used & (mostly.sum(axis=1) == 1), np.argmax(mostly, axis=1), -1)
+        pieces = np.bincount(want_owner[want_owner >= 0], minlength=live.size)
+        want_owner[(want_owner >= 0) & (pieces[np.maximum(want_owner, 0)] == 1) & (counts >= min_pixels)] = -1
+        np.testing.assert_array_equal(owner, want_owner)
+        seen["owned"] += int((owner >= 0).sum())
+        # the assignment cost of predictions to detections
+        pr, bx, gate = predicted[: max(m, 1)], b, float(rng.integers(0, 6))
+        cost = front.assignment_cost(pr, bx, gate)
+        iou = iou_matrix(pr, bx)
+        pc, bc = pr[:, :2] + pr[:, 2:] / 2, bx[:, :2] + bx[:, 2:] / 2
+        dist = np.hypot(pc[:, None, 0] - bc[None, :, 0], pc[:, None, 1] - bc[None, :, 1])
+        reach = (np.hypot(pr[:, 2], pr[:, 3])[:, None] + np.hypot(bx[:, 2], bx[:, 3])[None, :]) / 2 + gate
+        with np.errstate(divide="ignore", invalid="ignore"):
+            want_cost = np.where(dist <= reach, np.where(iou > 0, 1.0 - iou, 1.0 + dist / reach), 1e6)
+        np.testing.assert_array_equal(cost, want_cost)
+        seen["far"] += int((cost == 1e6).sum())
+    assert min(seen.values()) > 0, seen  # every branch was taken
+
+
 @pytest.mark.parametrize("every", [7, 40, 100])
 def test_pixel_by_pixel_and_spike_by_spike_ingest_leave_the_same_state(stream, every):
     # words are ingested spike by spike or, when dense, pixel by pixel (a 64 × T bit transpose): every word

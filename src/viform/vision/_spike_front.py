@@ -526,6 +526,114 @@ def box_overlaps(a, b, iou):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def regroup_tables(boxes, counts, predicted, live, grow, min_pixels, with_multi):  # pragma: no cover - compiled
+    """The tables of :meth:`~viform.vision.tracking.Tracker._regroup` for detections ``boxes`` (N, 4) with pixel
+    ``counts`` (N,) and the predicted boxes (M, 4) of the tracks ``live`` (L,), in one pass:
+
+    * ``cover`` (N, L): the share of each live prediction, grown by ``grow`` px on every side, that each
+      detection's box covers; 0 where another detection larger than ``min_pixels`` pixels fits that
+      prediction best (highest IoU, the first of equals; kept where no such detection overlaps it);
+    * ``inside`` (N, L): the share of each detection's box inside each live prediction (not grown);
+    * ``multi``: with ``with_multi``, the detections covering at least half of two or more grown predictions.
+
+    The same IEEE operations in the same order as the NumPy expressions they replace (exact)."""
+    n, m = boxes.shape[0], live.size
+    pred = np.empty((m, 4))
+    fitted = np.empty((m, 4))
+    for j in range(m):
+        for c in range(4):
+            fitted[j, c] = predicted[live[j], c]
+        pred[j, 0] = fitted[j, 0] - grow
+        pred[j, 1] = fitted[j, 1] - grow
+        pred[j, 2] = fitted[j, 2] + 2 * grow
+        pred[j, 3] = fitted[j, 3] + 2 * grow
+    cover = box_overlaps(boxes, pred, False)
+    for j in range(m):
+        area = max(pred[j, 2] * pred[j, 3], 1e-9)
+        for i in range(n):
+            cover[i, j] = cover[i, j] / area
+    fit = box_overlaps(boxes, fitted, True)
+    for j in range(m):  # the detection (over min_pixels) that fits each prediction best, if any overlaps it
+        best = -1
+        top = 0.0
+        for i in range(n):
+            if counts[i] >= min_pixels and (best < 0 or fit[i, j] > top):
+                best, top = i, fit[i, j]
+        if best >= 0 and top > 0:
+            for i in range(n):
+                if i != best:
+                    cover[i, j] = 0.0
+    inside = box_overlaps(boxes, fitted, False)
+    for i in range(n):
+        area = max(boxes[i, 2] * boxes[i, 3], 1e-9)
+        for j in range(m):
+            inside[i, j] = inside[i, j] / area
+    multi = np.zeros(n if with_multi else 0, np.int64)
+    k = 0
+    if with_multi:
+        for i in range(n):
+            held = 0
+            for j in range(m):
+                held += cover[i, j] >= 0.5
+            if held >= 2:
+                multi[k] = i
+                k += 1
+    return cover, inside, multi[:k]
+
+
+@njit(cache=True)
+def regroup_owner(inside, used, counts, min_pixels):  # pragma: no cover - compiled
+    """Per detection of :meth:`~viform.vision.tracking.Tracker._regroup`, the live prediction it lies mostly
+    (≥ 60 % of its box) inside of, when that is the only one and the detection is not ``used``; −1 otherwise,
+    and −1 too for a detection of at least ``min_pixels`` pixels that is the only such piece of its prediction
+    (an ordinary detection). The same comparisons as the NumPy expressions it replaces (exact)."""
+    n, m = inside.shape
+    owner = np.full(n, -1, np.int64)
+    pieces = np.zeros(m, np.int64)
+    for i in range(n):
+        if used[i]:
+            continue
+        first = -1
+        held = 0
+        for j in range(m):
+            if inside[i, j] >= 0.6:
+                held += 1
+                if first < 0:
+                    first = j
+        if held == 1:
+            owner[i] = first
+            pieces[first] += 1
+    for i in range(n):
+        if owner[i] >= 0 and pieces[owner[i]] == 1 and counts[i] >= min_pixels:
+            owner[i] = -1
+    return owner
+
+
+@njit(cache=True)
+def assignment_cost(pr, bx, gate_px):  # pragma: no cover - compiled
+    """The cost of assigning detections ``bx`` (N, 4) to predictions ``pr`` (M, 4) in
+    :meth:`~viform.vision.tracking.Tracker.update`, (M, N): 1 − IoU where they overlap, else 1 + the centre
+    distance over the reach (the mean of the two diagonals, plus ``gate_px``); 1e6 (never) past the reach.
+    The same IEEE operations in the same order as the NumPy expressions it replaces (exact)."""
+    iou = box_overlaps(pr, bx, True)
+    m, n = pr.shape[0], bx.shape[0]
+    cost = np.empty((m, n))
+    for a in range(m):
+        pcx, pcy = pr[a, 0] + pr[a, 2] / 2, pr[a, 1] + pr[a, 3] / 2
+        pd = np.hypot(pr[a, 2], pr[a, 3])
+        for b in range(n):
+            dist = np.hypot(pcx - (bx[b, 0] + bx[b, 2] / 2), pcy - (bx[b, 1] + bx[b, 3] / 2))
+            reach = (pd + np.hypot(bx[b, 2], bx[b, 3])) / 2 + gate_px
+            if not dist <= reach:
+                cost[a, b] = 1e6
+            elif iou[a, b] > 0:
+                cost[a, b] = 1.0 - iou[a, b]
+            else:
+                cost[a, b] = 1.0 + dist / reach
+    return cost
+
+
+@njit(cache=True)
 def theil_sen(ts, xs, ys):  # pragma: no cover - compiled
     """Velocity (vx, vy) of points (ts, xs, ys): the median over pairs of (Δx/Δt, Δy/Δt) (Theil–Sen)."""
     n = ts.size

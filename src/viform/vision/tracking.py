@@ -950,9 +950,13 @@ class _Track:
     n_trail: int = 0
 
     def box_at(self, t_s: float) -> np.ndarray:
+        return np.array(self.box_tuple(t_s))
+
+    def box_tuple(self, t_s: float) -> tuple[float, float, float, float]:
+        """The predicted box (x, y, w, h) at ``t_s``: the last centre moved at the fitted velocity."""
         dt = t_s - self.last_t
         cx, cy = self.cx + self.vx * dt, self.cy + self.vy * dt
-        return np.array([cx - self.w / 2, cy - self.h / 2, self.w, self.h])
+        return cx - self.w / 2, cy - self.h / 2, self.w, self.h
 
     def add(self, t_s: float, cx: float, cy: float, spacing_s: float = 0.0) -> None:
         """Keep a measured centre; one closer than ``spacing_s`` to the one before replaces it (the trail
@@ -1008,21 +1012,17 @@ class Tracker:
         p = self.parameters
         boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
         counts = boxes[:, 2] * boxes[:, 3] if counts is None else np.asarray(counts, np.float64).ravel()
-        predicted = np.array([tr.box_at(t_s) for tr in self.tracks]).reshape(-1, 4)
+        predicted = np.array([tr.box_tuple(t_s) for tr in self.tracks], np.float64).reshape(-1, 4)
         boxes, counts, forced, merged = self._regroup(boxes, counts, pixels, predicted, t_s)
         matches = list(forced.items())
         unmatched = set(range(len(boxes))) - set(forced.values())
         free_tracks = [i for i in range(len(self.tracks)) if i not in forced and i not in merged]
         free_boxes = sorted(unmatched)
         if free_tracks and free_boxes:
-            pr, bx = predicted[free_tracks], boxes[free_boxes]
-            iou = iou_matrix(pr, bx)
-            pc = pr[:, :2] + pr[:, 2:] / 2
-            bc = bx[:, :2] + bx[:, 2:] / 2
-            dist = np.hypot(pc[:, None, 0] - bc[None, :, 0], pc[:, None, 1] - bc[None, :, 1])
-            reach = (np.hypot(pr[:, 2], pr[:, 3])[:, None] + np.hypot(bx[:, 2], bx[:, 3])[None, :]) / 2 + p.gate_px
-            cost = np.where(iou > 0, 1.0 - iou, 1.0 + dist / reach)
-            cost = np.where(dist <= reach, cost, 1e6)
+            # 1 − IoU where a prediction and a detection overlap, else 1 + their centre distance over the reach
+            # (the mean of their diagonals plus gate_px); never past the reach (compiled, exact)
+            cost = _front.assignment_cost(np.ascontiguousarray(predicted[free_tracks]),
+                                          np.ascontiguousarray(boxes[free_boxes]), float(p.gate_px))
             rows, cols = linear_sum_assignment(cost)
             for a, b in zip(rows, cols, strict=True):
                 if cost[a, b] < 1e6:
@@ -1097,23 +1097,20 @@ class Tracker:
             return boxes[big], counts[big], {}, set()
         n_comp = len(boxes)
         grow = float(p.merge_px)
-        pred = predicted[live].copy()
-        pred[:, :2] -= grow
-        pred[:, 2:] += 2 * grow
-        cover = _intersection(boxes, pred) / np.maximum(pred[:, 2] * pred[:, 3], 1e-9)[None, :]
-        # a track is held only by the component that matches its prediction best: a large sparse component
-        # whose box spans a track that has a detection of its own does not swallow it
-        fit = iou_matrix(boxes[big], predicted[live]) if big.any() else np.zeros((0, live.size))
-        best = np.full(live.size, -1, np.int64)
-        if fit.shape[0]:
-            best = np.where(fit.max(axis=0) > 0, np.nonzero(big)[0][np.argmax(fit, axis=0)], -1)
-        cover = np.where((best[None, :] < 0) | (best[None, :] == np.arange(n_comp)[:, None]), cover, 0.0)
-        inside = _intersection(boxes, predicted[live]) / np.maximum(boxes[:, 2] * boxes[:, 3], 1e-9)[:, None]
+        # in one compiled pass (exact): how much of each live prediction (grown by merge_px) each component covers,
+        # with a track held only by the component that matches its prediction best (a large sparse component
+        # whose box spans a track that has a detection of its own does not swallow it); how much of each
+        # component lies inside each prediction; and the components holding two or more predictions
+        cover, inside, multi = _front.regroup_tables(np.ascontiguousarray(boxes), np.ascontiguousarray(counts),
+                                                     np.ascontiguousarray(predicted), live, grow,
+                                                     float(p.min_pixels), pixels is not None)
         out_boxes, out_counts, forced, merged = [], [], {}, set()
         used = np.zeros(n_comp, bool)
         taken = set()
-        multi = np.nonzero((cover >= 0.5).sum(axis=1) >= 2)[0] if pixels is not None else np.zeros(0, np.int64)
         if multi.size:
+            pred = predicted[live]  # the grown predictions
+            pred[:, :2] -= grow
+            pred[:, 2:] += 2 * grow
             ys, xs, comp = pixels
         for j in multi:
             holders = [h for h in np.nonzero(cover[j] >= 0.5)[0] if live[h] not in taken]
@@ -1136,14 +1133,11 @@ class Tracker:
                 forced[int(live[holders[primary]])] = len(out_boxes)
                 out_boxes.append((x0, y0, px[own].max() + 0.5 - x0, py[own].max() + 0.5 - y0))
                 out_counts.append(float(own.sum()))
-        # pieces inside one track's prediction only
-        mostly = inside >= 0.6
-        single = ~used & (mostly.sum(axis=1) == 1)
-        owner = np.where(single, np.argmax(mostly, axis=1), -1)
-        # one piece alone in a prediction, large enough: an ordinary detection
-        pieces = np.bincount(owner[owner >= 0], minlength=live.size)
-        owner[(owner >= 0) & (pieces[np.maximum(owner, 0)] == 1) & (counts >= p.min_pixels)] = -1
-        for h in np.unique(owner[owner >= 0]):
+        # pieces inside one track's prediction only (compiled, exact); one piece alone in a prediction, large
+        # enough, is an ordinary detection (-1)
+        owner = _front.regroup_owner(inside, used, np.ascontiguousarray(counts), float(p.min_pixels))
+        owned = owner[owner >= 0]
+        for h in np.unique(owned) if owned.size else ():
             if int(live[h]) in taken:
                 owner[owner == h] = -1
                 continue
