@@ -240,6 +240,16 @@ def test_dat_words_are_the_checked_bytes_padded_to_words(tmp_path, small_blocks)
         words = source.read_packed_words(a, b)
         assert words.dtype == np.uint64 and words.shape == (b - a, 2) and words.flags.c_contiguous
         np.testing.assert_array_equal(words, _words(source.read_packed(a, b)))
+    # into a buffer of the caller's (a reused one: stale bits and padding overwritten), its first rows returned
+    out = np.full((400, 2), np.uint64(0xFFFFFFFFFFFFFFFF))
+    for a, b in [(0, 400), (3, 4), (100, 357), (5, 5)]:
+        words = source.read_packed_words(a, b, out=out)
+        assert words.shape == (b - a, 2) and (a == b or np.shares_memory(words, out))
+        np.testing.assert_array_equal(words, _words(source.read_packed(a, b)))
+    for bad in (np.zeros((10, 2), np.uint64), np.zeros((400, 3), np.uint64), np.zeros((400, 2), np.int64),
+                np.zeros((2, 400), np.uint64).T):
+        with pytest.raises(ViformError, match="out must be"):
+            source.read_packed_words(0, 20, out=bad)
     flip(path, 300 * 13)
     source = open_spikes(path)
     np.testing.assert_array_equal(source.read_packed_words(0, 50), _words(source.read_packed(0, 50)))

@@ -657,9 +657,9 @@ def test_a_file_is_read_and_its_front_end_run_ahead_in_threads_with_the_same_tra
             readers.append((start, threading.current_thread() is threading.main_thread()))
             return self._src.read_packed(start, stop)
 
-        def read_packed_words(self, start, stop):
+        def read_packed_words(self, start, stop, out=None):
             readers.append((start, threading.current_thread() is threading.main_thread()))
-            return self._src.read_packed_words(start, stop)
+            return self._src.read_packed_words(start, stop, out=out)
 
     steps = {"ahead": [], "in turn": []}
 

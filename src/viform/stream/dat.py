@@ -302,16 +302,26 @@ class DatFile(SpikeSource):
             raise ViformError(f"{str(self.path)!r} was cut while being read (ticks {start}–{stop - 1})")
         return np.frombuffer(data, np.uint8).reshape(-1, self.frame_bytes)
 
-    def read_packed_words(self, start: int, stop: int) -> np.ndarray:
+    def read_packed_words(self, start: int, stop: int, out: np.ndarray | None = None) -> np.ndarray:
         """The stored bits of ticks [start, stop) as little-endian words: (T, ⌈frame bytes / 8⌉) uint64.
 
         Row t holds :meth:`read_packed`'s row t, zero-padded to whole words. The checked
         blocks are copied into the rows once (no intermediate copy of the stored bytes).
+        ``out``: a C-contiguous uint64 array of at least T rows of that width to fill and return
+        (its first T rows), so that a reader of many blocks reuses its memory: fresh pages can cost
+        more than the copy into them.
         """
         start, stop = max(0, start), min(stop, self.n_ticks)
         t = max(stop - start, 0)
         n_words = -(-self.frame_bytes // 8)
-        out = np.empty((t, n_words * 8), np.uint8)
+        if out is None:
+            out = np.empty((t, n_words * 8), np.uint8)
+        else:
+            if (not isinstance(out, np.ndarray) or out.dtype != np.uint64 or out.ndim != 2 or out.shape[0] < t
+                    or out.shape[1] != n_words or not out.flags.c_contiguous or not out.flags.writeable):
+                raise ViformError(f"out must be a writable C-contiguous uint64 array of at least ({t}, {n_words}); "
+                                  f"got {getattr(out, 'dtype', type(out).__name__)} {getattr(out, 'shape', '')}")
+            out = out[:t].view(np.uint8)
         out[:, self.frame_bytes:] = 0
         want = t * self.frame_bytes
         self._before_reading(want)

@@ -1318,10 +1318,19 @@ def _packed_blocks(source, block_ticks: int, stop: int, layout):
             yield pack_spikes(source.read_ticks(first, min(first + block_ticks, stop)))
         return
 
+    # two buffers of words in turn: a block is read into the one the block before last used, whose front end
+    # is done by then (the front end takes block k before block k + 2 is read, whether read ahead or not), so
+    # a long stream reuses the same memory (fresh pages cost more than the copy into them here)
+    buffers: list = []
+
     def read(first):
         last = min(first + block_ticks, stop)
         if callable(getattr(source, "read_packed_words", None)):  # the checked bytes copied once, into words
-            return source.read_packed_words(first, last)
+            if len(buffers) < 2:
+                buffers.append(np.empty((min(block_ticks, stop), -(-source.height * layout[0] // 64)), np.uint64))
+            else:
+                buffers.append(buffers.pop(0))
+            return source.read_packed_words(first, last, out=buffers[-1])
         return _words(source.read_packed(first, last))
 
     firsts = range(0, stop, block_ticks)
