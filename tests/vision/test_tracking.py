@@ -602,6 +602,9 @@ def test_the_association_passes_are_the_numpy_expressions_they_replace_exactly()
         np.testing.assert_array_equal(cost, want_cost)
         seen["far"] += int((cost == 1e6).sum())
     assert min(seen.values()) > 0, seen  # every branch was taken
+    # a zero reach (no gate, empty boxes at one centre) divides as NumPy does: NaN, not an exception
+    empty = np.array([[3.0, 4.0, 0.0, 0.0]])
+    assert np.isnan(front.assignment_cost(empty, empty, 0.0)).all()
 
 
 @pytest.mark.parametrize("every", [7, 40, 100])

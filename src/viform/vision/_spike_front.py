@@ -609,7 +609,7 @@ def regroup_owner(inside, used, counts, min_pixels):  # pragma: no cover - compi
     return owner
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # (a zero reach divides as NumPy does: NaN or inf, no exception)
 def assignment_cost(pr, bx, gate_px):  # pragma: no cover - compiled
     """The cost of assigning detections ``bx`` (N, 4) to predictions ``pr`` (M, 4) in
     :meth:`~viform.vision.tracking.Tracker.update`, (M, N): 1 − IoU where they overlap, else 1 + the centre
