@@ -531,7 +531,7 @@ def regroup_tables(boxes, counts, predicted, live, grow, min_pixels, with_multi)
     ``counts`` (N,) and the predicted boxes (M, 4) of the tracks ``live`` (L,), in one pass:
 
     * ``cover`` (N, L): the share of each live prediction, grown by ``grow`` px on every side, that each
-      detection's box covers; 0 where another detection larger than ``min_pixels`` pixels fits that
+      detection's box covers; 0 where another detection of at least ``min_pixels`` pixels fits that
       prediction best (highest IoU, the first of equals; kept where no such detection overlaps it);
     * ``inside`` (N, L): the share of each detection's box inside each live prediction (not grown);
     * ``multi``: with ``with_multi``, the detections covering at least half of two or more grown predictions.
@@ -559,7 +559,7 @@ def regroup_tables(boxes, counts, predicted, live, grow, min_pixels, with_multi)
         for i in range(n):
             if counts[i] >= min_pixels and (best < 0 or fit[i, j] > top):
                 best, top = i, fit[i, j]
-        if best >= 0 and top > 0:
+        if top > 0:
             for i in range(n):
                 if i != best:
                     cover[i, j] = 0.0

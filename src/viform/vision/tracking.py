@@ -1327,7 +1327,7 @@ def _packed_blocks(source, block_ticks: int, stop: int, layout):
         last = min(first + block_ticks, stop)
         if callable(getattr(source, "read_packed_words", None)):  # the checked bytes copied once, into words
             if len(buffers) < 2:
-                buffers.append(np.empty((min(block_ticks, stop), -(-source.height * layout[0] // 64)), np.uint64))
+                buffers.append(np.empty((min(block_ticks, stop), -(-source.frame_bytes // 8)), np.uint64))
             else:
                 buffers.append(buffers.pop(0))
             return source.read_packed_words(first, last, out=buffers[-1])
