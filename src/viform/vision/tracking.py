@@ -246,7 +246,7 @@ class SpikeChangeDetector:
         # interval bounds in ticks, priming tick); pixels given back (static: never primed again)
         self._groups = []
         self._given_back = np.zeros(n, np.bool_)
-        self._prime_stored = self._prime_index = None  # made at the first priming
+        self._prime_index = None  # the priming's scratch image, made at its first group
 
     def upright(self, flat: np.ndarray) -> np.ndarray:
         """A per-pixel state array (stored order) as an upright (H, W) view."""
@@ -423,10 +423,6 @@ class SpikeChangeDetector:
         change can be measured sooner; it falls at the end of an output step.
         """
         p = self.parameters
-        if self._prime_stored is None:  # each upright pixel's stored index, and a scratch image: made once
-            self._prime_stored = self.upright(np.arange(self.spk.shape[0]))
-            self._prime_index = np.full((self.height, self.width), -1, np.int64)
-        stored = self._prime_stored
         pending = np.zeros(self.spk.shape[0], np.bool_)
         for g in self._groups:
             pending[g[1]] = True
@@ -436,6 +432,9 @@ class SpikeChangeDetector:
                 continue
             ys, xs = np.nonzero(part)  # scan order
             ys, xs = ys.astype(np.int64, copy=False), xs.astype(np.int64, copy=False)
+            stored = ((self.height - 1 - ys) if self.flip else ys) * self.stored_width + xs  # (as upright's layout)
+            if self._prime_index is None:
+                self._prime_index = np.full((self.height, self.width), -1, np.int64)
             # as detections group them (the priming's own scratch image: detections are grouped meanwhile)
             _, _, label = _front.components_of_pixels(ys, xs, self.height, self.width, 2 * int(p.merge_px) + 1, 1,
                                                       self._prime_index)
@@ -446,7 +445,7 @@ class SpikeChangeDetector:
                 sel = order[cuts[k]:cuts[k + 1]]
                 y, x = ys[sel], xs[sel]
                 wait = max(float(p.prime_confirm_ticks), 2.0 * float(np.median(typical[y, x])))
-                self._groups.append((self._step_end(t + 1 + wait), stored[y, x].copy(), sign,
+                self._groups.append((self._step_end(t + 1 + wait), stored[sel], sign,
                                      lower[y, x].copy(), upper[y, x].copy(), t))
 
     def _touching(self, s: np.ndarray, px: int, sign: int) -> int:
