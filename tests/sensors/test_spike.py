@@ -224,7 +224,8 @@ def test_vectorized_noise_free_kernel_matches_the_general_lanes(reset):
         module._run_block(words.view(np.uint8), rates, seg_end, first, state.charge, state.target, state.counter,
                           q, index, *tables, *module.fixed_point_tables(tables[0]), state.keys, False,
                           reset == "readout", 0.0, module.MODE_GENERAL,
-                          bounds, state.pending_ticks, state.pending_rate, module.SPARSE_FIRING)
+                          bounds, state.pending_ticks, state.pending_rate, module.SPARSE_FIRING,
+                          module.VECTOR_MIN_SPIKES)
         bits = np.unpackbits(words.view(np.uint8), axis=1, count=1000, bitorder="little")
         blocks.append(bits.reshape(-1, 20, 50).astype(bool))
     assert np.array_equal(vectorized, np.concatenate(blocks))

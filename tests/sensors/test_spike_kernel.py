@@ -247,7 +247,7 @@ def test_saturated_pixels_are_only_counted_in_the_kernel():
     module._run_block(words.view(np.uint8), rates, np.array([500], np.int64), 0, state.charge, state.target,
                       state.counter, q, index, *tables, *module.fixed_point_tables(tables[0]), state.keys, True,
                       False, 0.0, module.MODE_GENERAL, bounds, state.pending_ticks, state.pending_rate,
-                      module.SPARSE_FIRING)
+                      module.SPARSE_FIRING, module.VECTOR_MIN_SPIKES)
     above = rates[0] >= bounds
     assert above.sum() > 30 and (~above).sum() > 30
     assert np.all(state.pending_ticks[above] == 500) and not state.pending_ticks[~above].any()
@@ -338,7 +338,7 @@ def test_dim_words_run_crossing_by_crossing_give_the_tick_by_tick_bits(make_sens
                               state.keys, p.photon_noise,
                               p.reset == "readout", p.dead_time_s * p.clock_hz, mode,
                               sensor._saturation_bounds(height, width), state.pending_ticks, state.pending_rate,
-                              sparse_firing)
+                              sparse_firing, module.VECTOR_MIN_SPIKES)
         module._settle_all(state.charge, state.target, state.counter, q, index, *tables, state.keys,
                            state.pending_ticks, state.pending_rate)
         results.append((words, state))
@@ -350,6 +350,131 @@ def test_dim_words_run_crossing_by_crossing_give_the_tick_by_tick_bits(make_sens
     assert bits[190:].mean(axis=0).max() > 0.3  # bright pixels (saturated, or at the dead-time limit)
     firing = bits.mean(axis=0)
     assert ((firing > 0) & (firing < 0.05)).any()  # and dim ones that do fire
+
+
+@pytest.mark.parametrize("make_sensor", [
+    lambda: SpikeSensor(),
+    lambda: SpikeSensor(threshold_electrons=1),
+    lambda: SpikeSensor(threshold_electrons=2e4),
+    lambda: _MapSensor(),
+], ids=["q100", "q1", "q2e4", "threshold-map"])
+def test_busy_words_fired_eight_lanes_at_a_time_give_the_lane_by_lane_bits(make_sensor):
+    """Busy words take their fired lanes' first crossing eight lanes at a time (``vector_min``); sending
+    every tick-by-tick word that way, or none, gives the same bits and state from dark to saturated
+    light (second crossings in a tick, lanes too far past their target for the eight-lane path,
+    saturated lanes left to the lazy count), over several runs and a block boundary."""
+    from viform.sensors import _spike_kernels as module
+
+    sensor = make_sensor()
+    height, width = 6, 64
+    lux = _texture(height, width, 0.002, 2e5, seed=11)
+    runs = np.stack([lux, lux * 0.01, lux[::-1], lux * 4.0, lux * 0.2]).reshape(5, -1)
+    rates = sensor._fixed_point_rates(runs, height, width)
+    seg_end = np.array([40, 41, 150, 230, 320], dtype=np.int64)
+    q, _, index, tables = sensor._pixel_tables(height, width)
+    p = sensor.parameters
+    results = []
+    for vector_min in (0.0, np.inf):
+        state = sensor.initial_state(height, width, 6)
+        words = np.empty((320, 6), dtype=np.uint64)
+        for first, last in ((0, 90), (90, 320)):
+            module._run_block(words[first:last].view(np.uint8), rates, seg_end, first, state.charge, state.target,
+                              state.counter, q, index, *tables, *sensor._fixed_point_tables(height, width),
+                              state.keys, p.photon_noise, False, 0.0, module.MODE_GENERAL,
+                              sensor._saturation_bounds(height, width), state.pending_ticks, state.pending_rate,
+                              0.0, vector_min)
+        module._settle_all(state.charge, state.target, state.counter, q, index, *tables, state.keys,
+                           state.pending_ticks, state.pending_rate)
+        results.append((words, state))
+    (vector, vector_state), (lanes, lane_state) = results
+    assert np.array_equal(vector, lanes)
+    for name in ("charge", "target", "counter"):
+        assert np.array_equal(getattr(vector_state, name), getattr(lane_state, name)), name
+    bits = np.unpackbits(lanes.view(np.uint8), axis=1, count=height * width, bitorder="little")
+    firing = bits.mean(axis=0)
+    assert (firing > 0.3).sum() > 20 and ((firing > 0) & (firing < 0.05)).any()  # busy lanes and dim ones
+
+
+def _eight_lane_cases(n_groups, seed):
+    """Random lanes for :func:`_fire8_fast`: four Gamma tables (Q = 1, 2, 100, 2500 e⁻), targets near
+    their Q, and charges past them by a little, by about one more target, or too far."""
+    from viform.sensors import _spike_kernels as module
+    from viform.sensors._gamma import TABLE_SIZE, build_tables
+
+    rng = np.random.default_rng(seed)
+    shapes = np.array([1.0, 2.0, 100.0, 2500.0])
+    (bins,) = build_tables(shapes)
+    scaled, accept = module.fixed_point_tables(bins)
+    n = 8 * n_groups
+    table = rng.integers(0, shapes.size, n)
+    qe = shapes[table]
+    fixed = float(1 << 32)
+    target = ((0.5 + rng.random(n)) * qe * fixed).astype(np.int64) + 1
+    one_by_one = (np.minimum(48.0 * qe, 8.0 * qe * qe) * fixed).astype(np.int64)
+    kind = rng.integers(0, 4, n)
+    past = np.where(kind == 0, rng.random(n) * 0.2 * qe, np.where(kind == 1, (0.8 + 0.8 * rng.random(n)) * qe,
+                                                                  np.where(kind == 2, 0.0, 60.0 * qe)))
+    charge = target + np.minimum(past * fixed, 2.0 ** 62).astype(np.int64)
+    keys = rng.integers(0, 2 ** 63, n, dtype=np.uint64) * np.uint64(2) + rng.integers(0, 2, n, dtype=np.uint64)
+    drawn = rng.integers(0, 10 ** 6, n)
+    fired = rng.integers(0, 256, n_groups).astype(np.uint64)
+    fired[::17] = 0
+    return (charge, target, drawn, keys, (table * TABLE_SIZE).astype(np.int64), one_by_one, scaled,
+            np.ascontiguousarray(accept), fired)
+
+
+def test_eight_lane_first_crossing_is_the_lane_loops_to_the_bit():
+    """:func:`_fire8_fast` leaves each lane as the lane loop's first step does (``_target_fast``'s draw,
+    its counter, c − t), leaves lanes not fired or too far past their target untouched, and flags the
+    lanes the loop must finish; every outcome occurs (an accepted draw, a rejected one, a second
+    crossing, a lane too far past its target, a lane not fired)."""
+    from numba import njit
+
+    from viform.sensors import _spike_kernels as module
+
+    fire8, target_fast = module._fire8_fast, module._target_fast
+
+    @njit
+    def eight(c, t, drawn, key, row0, one_by_one, scaled, accept, fired):
+        out = np.empty(fired.size, np.uint64)
+        for g in range(fired.size):
+            out[g] = fire8(c, t, drawn, key, row0, one_by_one, scaled, accept, 8 * g, fired[g])
+        return out
+
+    @njit
+    def lane_by_lane(c, t, drawn, key, row0, one_by_one, scaled, accept, fired):
+        out = np.zeros(fired.size, np.uint64)
+        outcomes = np.zeros(5, np.int64)  # accepted, rejected, second crossing, too far, not fired
+        for g in range(fired.size):
+            for j in range(8):
+                i = 8 * g + j
+                if not (fired[g] >> np.uint64(j)) & np.uint64(1):
+                    outcomes[4] += 1
+                    continue
+                over = c[i] - t[i]
+                if over >= one_by_one[i]:
+                    out[g] |= np.uint64(1) << np.uint64(j)
+                    outcomes[3] += 1
+                    continue
+                new = target_fast(row0[i], scaled, accept, key[i], drawn[i])
+                c[i] = over
+                t[i] = new
+                if new != 0:
+                    drawn[i] += 1
+                if new == 0 or over >= new:
+                    out[g] |= np.uint64(1) << np.uint64(8 + j)
+                outcomes[0 if new != 0 and over < new else (1 if new == 0 else 2)] += 1
+        return out, outcomes
+
+    case = _eight_lane_cases(4000, seed=5)
+    mine = [a.copy() for a in case[:3]]
+    theirs = [a.copy() for a in case[:3]]
+    flags = eight(*mine, *case[3:])
+    expected, outcomes = lane_by_lane(*theirs, *case[3:])
+    assert np.array_equal(flags, expected)
+    for a, b, name in zip(mine, theirs, ("charge", "target", "counter"), strict=True):
+        assert np.array_equal(a, b), name
+    assert (outcomes > 50).all(), outcomes
 
 
 @pytest.mark.parametrize("reset", ["self", "readout"])
@@ -380,7 +505,7 @@ def test_noise_free_chunks_write_the_dat_frame_bits_of_the_general_lanes(reset):
             module._run_block(out[first:last], rates, seg_end, first, state.charge, state.target, state.counter,
                               q, index, *tables, *sensor._fixed_point_tables(height, width), state.keys, False,
                               reset == "readout", 0.0, kernel_mode, sensor._saturation_bounds(height, width),
-                              state.pending_ticks, state.pending_rate, 0.0)
+                              state.pending_ticks, state.pending_rate, 0.0, module.VECTOR_MIN_SPIKES)
         results.append((out, state))
     (chunks, chunk_state), (general, general_state) = results
     assert np.array_equal(chunks, general[:, :33])

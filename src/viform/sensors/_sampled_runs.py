@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from viform.light.sampled import lux_to_rates, rects_to_words, word_ranges
+from viform.sensors import _spike_kernels
 from viform.sensors._spike_kernels import _LANES, SPARSE_FIRING, _run_block
 
 #: Ticks per stretch whose dirty words are found together (rounded to whole light samples).
@@ -138,13 +139,14 @@ class SampledRuns:
             _run_block(words.view(np.uint8), rates, seg_end, first, state.charge, state.target, state.counter,
                        plan.q, plan.index, *plan.tables, *self.fixed_tables, state.keys, p.photon_noise,
                        plan.reset_readout, plan.dead_ticks, plan.mode, bounds, state.pending_ticks,
-                       state.pending_rate, SPARSE_FIRING)
+                       state.pending_rate, SPARSE_FIRING, _spike_kernels.VECTOR_MIN_SPIKES)
             return
         pix = group["pix"]
         charge, target, counter = state.charge[pix], state.target[pix], state.counter[pix]
         keys, pending_ticks, pending_rate = state.keys[pix], state.pending_ticks[pix], state.pending_rate[pix]
         _run_block(words.view(np.uint8), rates, seg_end, first, charge, target, counter, group["q"],
                    group["index"], *plan.tables, *self.fixed_tables, keys, p.photon_noise, plan.reset_readout,
-                   plan.dead_ticks, plan.mode, bounds, pending_ticks, pending_rate, SPARSE_FIRING)
+                   plan.dead_ticks, plan.mode, bounds, pending_ticks, pending_rate, SPARSE_FIRING,
+                   _spike_kernels.VECTOR_MIN_SPIKES)
         state.charge[pix], state.target[pix], state.counter[pix] = charge, target, counter
         state.pending_ticks[pix], state.pending_rate[pix] = pending_ticks, pending_rate

@@ -58,6 +58,7 @@ from viform._validate import (
 )
 from viform.light.radiometry import PixelOptics
 from viform.light.scenes import Scene
+from viform.sensors import _spike_kernels
 from viform.sensors._gamma import build_tables, stream_keys
 from viform.sensors._spike_kernels import (
     _FAST_ROUND_LIMIT,
@@ -626,7 +627,7 @@ class SpikeSensor(Sensor):
                     _run_block(out, rates, seg_end, first, state.charge, state.target,
                                state.counter, q, index, *tables, *fixed_tables, state.keys, p.photon_noise,
                                reset_readout, dead_ticks, mode, bounds, state.pending_ticks, state.pending_rate,
-                               SPARSE_FIRING)
+                               SPARSE_FIRING, _spike_kernels.VECTOR_MIN_SPIKES)
                     if caller_state:  # the caller reads the state between blocks: no tick left pending
                         _settle_all(state.charge, state.target, state.counter, q, index, *tables, state.keys,
                                     state.pending_ticks, state.pending_rate)
