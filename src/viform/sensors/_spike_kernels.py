@@ -387,11 +387,11 @@ def _fire(c, t, e, dead_ticks, p, q, index, bins, keys, noise, reset_readout, co
 # the 64 lanes vectorized as well but built the word from the comparison bits with one
 # masked OR per bit. The fired lanes of a word are then visited with ``tzcnt`` (count
 # trailing zeros), so a tick without spikes costs no branch per pixel, and the per-spike
-# Gamma draw stays off the common path. In a busy word (at least :data:`VECTOR_MIN_SPIKES`
-# lanes fired in the tick) the constant-light kernel takes the fired lanes' first crossing
-# eight lanes at a time instead (:func:`_fire8_fast`: the draw's hash, its table row and the
-# new target as vectors): the draws are pure functions of (seed, pixel, counter), so the
-# bits and state are those of the lane-by-lane loop.
+# Gamma draw stays off the common path. In a busy word (its lanes expect at least
+# :data:`VECTOR_MIN_SPIKES` crossings per tick) the constant-light kernel takes the fired
+# lanes' first crossing eight lanes at a time instead (:func:`_fire8_fast`: the draw's hash,
+# its table row and the new target as vectors): the draws are pure functions of (seed,
+# pixel, counter), so the bits and state are those of the lane-by-lane loop.
 _LANES = 64
 _TILE_WORDS = 8  # words (× 64 pixels) per work item of the constant-light kernel: one cache line of bits a tick
 _TICK_CHUNK = 64  # ticks a tile's busy words run before the next word: the chunk's bits stay in L1
