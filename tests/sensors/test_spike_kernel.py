@@ -423,11 +423,8 @@ def _eight_lane_cases(n_groups, seed):
             np.ascontiguousarray(accept), fired)
 
 
-def test_eight_lane_first_crossing_is_the_lane_loops_to_the_bit():
-    """:func:`_fire8_fast` leaves each lane as the lane loop's first step does (``_target_fast``'s draw,
-    its counter, c − t), leaves lanes not fired or too far past their target untouched, and flags the
-    lanes the loop must finish; every outcome occurs (an accepted draw, a rejected one, a second
-    crossing, a lane too far past its target, a lane not fired)."""
+def _eight_lane_kernels():
+    """(the eight-lane step over groups, the lane loop's first step over the same lanes), compiled."""
     from numba import njit
 
     from viform.sensors import _spike_kernels as module
@@ -466,7 +463,12 @@ def test_eight_lane_first_crossing_is_the_lane_loops_to_the_bit():
                 outcomes[0 if new != 0 and over < new else (1 if new == 0 else 2)] += 1
         return out, outcomes
 
-    case = _eight_lane_cases(4000, seed=5)
+    return eight, lane_by_lane
+
+
+def _compare_eight_lanes(case):
+    """Run both on copies of ``case``; assert the same flags and state; the lane loop's outcome counts."""
+    eight, lane_by_lane = _eight_lane_kernels()
     mine = [a.copy() for a in case[:3]]
     theirs = [a.copy() for a in case[:3]]
     flags = eight(*mine, *case[3:])
@@ -474,7 +476,86 @@ def test_eight_lane_first_crossing_is_the_lane_loops_to_the_bit():
     assert np.array_equal(flags, expected)
     for a, b, name in zip(mine, theirs, ("charge", "target", "counter"), strict=True):
         assert np.array_equal(a, b), name
+    return mine, outcomes
+
+
+def test_eight_lane_first_crossing_is_the_lane_loops_to_the_bit():
+    """:func:`_fire8_fast` leaves each lane as the lane loop's first step does (``_target_fast``'s draw,
+    its counter, c − t), leaves lanes not fired or too far past their target untouched, and flags the
+    lanes the loop must finish; every outcome occurs (an accepted draw, a rejected one, a second
+    crossing, a lane too far past its target, a lane not fired)."""
+    _, outcomes = _compare_eight_lanes(_eight_lane_cases(4000, seed=5))
     assert (outcomes > 50).all(), outcomes
+
+
+_GOLDEN_GAMMA = 0x9E3779B97F4A7C15
+_MASK64 = (1 << 64) - 1
+
+
+def _undo_xorshift(y, shift):
+    x = y
+    for _ in range(64 // shift + 1):
+        x = y ^ (x >> shift)
+    return x
+
+
+def _stream_key_for(h, counter):
+    """The stream key whose draw ``counter`` hashes to ``h`` (SplitMix64 is a bijection: each step undone)."""
+    x = _undo_xorshift(h, 31)
+    x = (x * pow(0x94D049BB133111EB, -1, 1 << 64)) & _MASK64
+    x = _undo_xorshift(x, 27)
+    x = (x * pow(0xBF58476D1CE4E5B9, -1, 1 << 64)) & _MASK64
+    x = _undo_xorshift(x, 30)
+    return (x - _GOLDEN_GAMMA - counter * _GOLDEN_GAMMA) & _MASK64
+
+
+def test_eight_lane_first_crossing_at_its_exact_edges():
+    """The eight-lane step at the edges random lanes never reach, against the lane loop: a charge exactly at,
+    one below and one above the limit past the target; a squeeze uniform exactly at and one below its bin's
+    bound (and the open last bin, never accepted); a charge exactly at, below and above the new target; a
+    table target that rounds below 1 (kept at 1); counters near 2^63 and keys with the top bit set."""
+    from numba import njit
+
+    from viform.sensors import _spike_kernels as module
+    from viform.sensors._gamma import TABLE_SIZE, build_tables, splitmix64
+
+    @njit
+    def hashed(key, counter):
+        return splitmix64(key + np.uint64(counter) * np.uint64(_GOLDEN_GAMMA))
+
+    shapes = np.array([1.0, 3.0, 100.0, 2e4])
+    (bins,) = build_tables(shapes)
+    scaled, accept = module.fixed_point_tables(bins)
+    fixed = float(1 << 32)
+    lanes = []  # (charge, target, counter, key, row0, one_by_one)
+    for table, qe in enumerate(shapes):
+        row0 = table * TABLE_SIZE
+        one_by_one = int(min(48.0 * qe, 8.0 * qe * qe) * fixed)
+        target = int(qe * fixed)
+        for counter in (0, 7, 2 ** 62 + 3, 2 ** 63 - 2):
+            for b in (0, 1, TABLE_SIZE // 2, TABLE_SIZE - 2, TABLE_SIZE - 1):
+                row = row0 + b
+                bound = int(accept[row])
+                for low in sorted({0, max(bound - 1, 0), bound}):
+                    for mid in (0, 5, (1 << 26) - 1):
+                        key = _stream_key_for((b << 54) | (mid << 26) | low, counter)
+                        assert int(hashed(np.uint64(key), counter)) == (b << 54) | (mid << 26) | low
+                        new = int(module._target_fast(np.int64(row0), scaled, accept, np.uint64(key),
+                                                      np.int64(counter)))
+                        overs = {0, 1, one_by_one - 1, one_by_one, one_by_one + 1}
+                        overs |= {new - 1, new, new + 1} if new > 0 else set()
+                        for over in sorted(o for o in overs if o >= 0):
+                            lanes.append((target + over, target, counter, key, row0, one_by_one))
+    while len(lanes) % 8:
+        lanes.append((0, int(np.iinfo(np.int64).max), 0, 0, 0, 0))  # padding: never fires
+    columns = list(zip(*lanes, strict=True))
+    case = (np.array(columns[0], np.int64), np.array(columns[1], np.int64), np.array(columns[2], np.int64),
+            np.array(columns[3], np.uint64), np.array(columns[4], np.int64), np.array(columns[5], np.int64),
+            scaled, np.ascontiguousarray(accept), np.full(len(lanes) // 8, 0xFF, np.uint64))
+    (_, target_after, _), outcomes = _compare_eight_lanes(case)
+    assert (outcomes[:4] > 100).all(), outcomes  # accepted, rejected, second crossing, too far: all at the edges
+    clamped = (case[1] != target_after) & (target_after == 1)
+    assert clamped.any()  # a drawn target that rounds below one fixed-point unit is kept at 1
 
 
 @pytest.mark.parametrize("reset", ["self", "readout"])
