@@ -503,6 +503,10 @@ def _fire8_fast(typingctx, c, t, drawn, key, row0, one_by_one, scaled, accept, b
     the counter advances when the squeeze accepted. A rejected draw leaves target 0 and the
     counter unchanged (the general sampler then draws it). Other lanes are left as they are.
 
+    The six lane arrays must hold lanes ``base`` … ``base`` + 7 (the kernel's tiles are whole
+    64-lane words; nothing is checked here), and ``scaled`` and ``accept`` are
+    :func:`fixed_point_tables` (C order, rows of two float64 and int64).
+
     Returns, as a uint64: in bits 0–7 the fired lanes too far past their target for this path
     (:func:`_fire_general` takes them, state untouched), in bits 8–15 those it did take whose
     charge is still at or above the new target, or whose draw was rejected (the lane loop
