@@ -1078,47 +1078,7 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                                         words[kk, 8 * (w0 + w) + b] |= np.uint8((always[w] >> np.uint64(8 * b))
                                                                                 & np.uint64(0xFF))
                             continue
-                        if (busy >> np.uint64(w)) & np.uint64(1):
-                            # a busy word (photon noise, self-reset, no dead time): each tick, the first crossing of
-                            # its fired lanes eight at a time, then one by one the lanes that need more (a rejected
-                            # draw, a second crossing) and those too far past their target for that path
-                            for kk in range(k0, k1):
-                                word = _lanes_add_compare(c, e, t, base)
-                                todo = word & ~lazy_mask[w]
-                                general = np.uint64(0)
-                                more = np.uint64(0)
-                                for g in range(_LANES // 8):
-                                    byte = (todo >> np.uint64(8 * g)) & np.uint64(0xFF)
-                                    if byte != 0:
-                                        r = _fire8_fast(c, t, drawn, key, row0, one_by_one, scaled, accept,
-                                                        base + 8 * g, byte)
-                                        general |= (r & np.uint64(0xFF)) << np.uint64(8 * g)
-                                        more |= (r >> np.uint64(8)) << np.uint64(8 * g)
-                                while more != 0:
-                                    i = base + np.int64(trailing_zeros(more))
-                                    more &= more - np.uint64(1)
-                                    ci = c[i]
-                                    ti = t[i]
-                                    if ti == 0:  # the table draw was rejected: the general sampler, same counter
-                                        ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
-                                        drawn[i] += 1
-                                    while ci >= ti:
-                                        ci -= ti
-                                        ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
-                                        if ti == 0:
-                                            ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
-                                        drawn[i] += 1
-                                    c[i] = ci
-                                    t[i] = ti
-                                while general != 0:
-                                    i = base + np.int64(trailing_zeros(general))
-                                    general &= general - np.uint64(1)
-                                    counter[p0 + i] = drawn[i]
-                                    c[i], t[i] = _fire_general(c[i], t[i], e[i], dead_ticks, p0 + i, q, index, bins,
-                                                               keys, noise, reset_readout, counter)
-                                    drawn[i] = counter[p0 + i]
-                                _put_word(words, kk, w0 + w, word)
-                            continue
+                        busy_word = (busy >> np.uint64(w)) & np.uint64(1) != np.uint64(0)
                         for kk in range(k0, k1):
                             if mode == MODE_NOISE_FREE_SELF:
                                 word, over = _lanes_noise_free_self(c, e, t, base)
@@ -1132,6 +1092,20 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
                             else:
                                 word = _lanes_add_compare(c, e, t, base)
                                 todo = word & ~lazy_mask[w]
+                                if busy_word and todo != 0:
+                                    # a busy word (photon noise, self-reset, no dead time): the first crossing of
+                                    # its fired lanes eight at a time; the loop below finishes the lanes that need
+                                    # more (a rejected draw left target 0: the same counter is drawn again, rejected
+                                    # again, and the general sampler takes it; a second crossing) and takes those
+                                    # too far past their target, untouched here
+                                    rest = np.uint64(0)
+                                    for g in range(_LANES // 8):
+                                        byte = (todo >> np.uint64(8 * g)) & np.uint64(0xFF)
+                                        if byte != 0:
+                                            r = _fire8_fast(c, t, drawn, key, row0, one_by_one, scaled, accept,
+                                                            base + 8 * g, byte)
+                                            rest |= ((r | (r >> np.uint64(8))) & np.uint64(0xFF)) << np.uint64(8 * g)
+                                    todo = rest
                                 while todo != 0:
                                     i = base + np.int64(trailing_zeros(todo))
                                     todo &= todo - np.uint64(1)
