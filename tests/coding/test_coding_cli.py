@@ -105,12 +105,12 @@ def test_compile_notice_is_said_once_and_only_for_a_coding_compile(monkeypatch):
     from numba.core import event
 
     from viform.coding import _compile_cache, interval_model
-    from viform.sensors import spike
+    from viform.sensors import _spike_kernels
 
     monkeypatch.setattr(_compile_cache, "_ANNOUNCED", False)
     said = []
     _compile_cache.announce_compiles(lambda: said.append(1))
-    other = next(v for v in vars(spike).values() if hasattr(v, "py_func") and hasattr(v, "stats"))
+    other = next(v for v in vars(_spike_kernels).values() if hasattr(v, "py_func") and hasattr(v, "stats"))
     with event.trigger_event("numba:compile", data={"dispatcher": other}):
         pass
     assert said == []

@@ -159,7 +159,7 @@ def outcome(name: str, block_ticks: int | None = None, seed: int = 11) -> str:
     import contextlib
     from unittest import mock
 
-    import viform.sensors.spike as spike_module
+    from viform.sensors import _spike_kernels
 
     make_sensor, make_scene, n_ticks, options, twin = CASES[name]
     options = {"light_sample_ticks": 1, **options}  # recorded with light at every tick ("auto" holds moving light)
@@ -168,7 +168,7 @@ def outcome(name: str, block_ticks: int | None = None, seed: int = 11) -> str:
     digest = hashlib.blake2b(digest_size=12)
     # dead-time cases: the kernel alone, from the twin's state (the stationary start with dead time,
     # issue 29, is tested in test_spike.py)
-    keep = mock.patch.object(spike_module, "_dead_time_stationary_state", lambda *args: None) if twin else \
+    keep = mock.patch.object(_spike_kernels, "_dead_time_stationary_state", lambda *args: None) if twin else \
         contextlib.nullcontext()
     with keep:
         for _, block in sensor.simulate(scene, n_ticks / sensor.parameters.clock_hz, seed=seed, state=state,

@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 from viform.light.sampled import PaintedSampler
+from viform.light.truth import interval_overlap
 
 
 def _paint_plan(scene, times_s: np.ndarray) -> dict:
@@ -59,14 +60,10 @@ def _paint_plan(scene, times_s: np.ndarray) -> dict:
     ry0, ry1 = np.repeat(y0, nrow), np.repeat(y1, nrow)
     return {
         "sample": sample, "r0": r0, "r1": r1, "c0": c0, "c1": c1, "lux": lux, "roff": roff, "coff": coff,
-        "alpha_rows": _overlap_1d(rows, rows + 1, ry0, ry1), "alpha_cols": _overlap_1d(cols, cols + 1, cx0, cx1),
+        "alpha_rows": interval_overlap(rows, rows + 1, ry0, ry1),
+        "alpha_cols": interval_overlap(cols, cols + 1, cx0, cx1),
         "sin_rows": np.sin(2 * np.pi * (rows + 0.5 - ry0) / p), "sin_cols": np.sin(2 * np.pi * (cols + 0.5 - cx0) / p),
     }
-
-
-def _overlap_1d(lo, hi, edges_lo, edges_hi):
-    """Length of [lo, hi) ∩ [edges_lo, edges_hi), elementwise."""
-    return np.clip(np.minimum(hi, edges_hi) - np.maximum(lo, edges_lo), 0.0, None)
 
 
 @njit(cache=True)

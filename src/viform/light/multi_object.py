@@ -46,9 +46,8 @@ from itertools import combinations
 import numpy as np
 
 from viform._validate import ViformError, check_choice, check_int, check_positive
-from viform.light._objects_paint import ObjectsSampler, _overlap_1d
 from viform.light.scenes import Scene, texture
-from viform.light.truth import FlowTruth, ObjectTruth
+from viform.light.truth import FlowTruth, ObjectTruth, interval_overlap
 
 #: Reference size the object table is written for (width, height), px.
 REFERENCE_SIZE_PX = (400, 250)
@@ -213,7 +212,7 @@ class MultiObjectScene(Scene):
                 continue
             boxes.append((r0, r1, c0, c1))
             cols, rows = self._cols[c0:c1], self._rows[r0:r1]
-            alpha = np.outer(_overlap_1d(rows, rows + 1, y0, y1), _overlap_1d(cols, cols + 1, x0, x1))
+            alpha = np.outer(interval_overlap(rows, rows + 1, y0, y1), interval_overlap(cols, cols + 1, x0, x1))
             u = 2 * np.pi * (cols + 0.5 - x0) / p
             v = 2 * np.pi * (rows + 0.5 - y0) / p
             light = self.object_lux(spec) * (1.0 + 0.5 * np.outer(np.sin(v), np.sin(u)))
@@ -257,6 +256,7 @@ class MultiObjectScene(Scene):
         if not self._own_light(MultiObjectScene):
             return None
         if getattr(self, "_compiled", None) is None:
+            from viform.light._objects_paint import ObjectsSampler  # numba: imported only when light is compiled
             from viform.light.compiled import CompiledLight
 
             # an object's texture peaks at 1.5 times its level; "over" compositing stays below the largest

@@ -169,6 +169,13 @@ def translate_by(dx: float, dy: float):
     return lambda x, y: (x + dx, y + dy)
 
 
+def interval_overlap(lo, hi, edges_lo, edges_hi):
+    """Length of [lo, hi) ∩ [edges_lo, edges_hi), elementwise (0 where they do not meet): with
+    ``lo`` = column ``c``, ``hi`` = ``c + 1``, the share of that pixel column an object spanning
+    [edges_lo, edges_hi) covers."""
+    return np.clip(np.minimum(hi, edges_hi) - np.maximum(lo, edges_lo), 0.0, None)
+
+
 def disc_fraction_inside(cx: float, cy: float, radius: float, x_lo: float, x_hi: float,
                          y_lo: float, y_hi: float) -> float:
     """Share of the disc's area inside the rectangle [x_lo, x_hi] × [y_lo, y_hi] (exact for one cut per axis side).

@@ -46,6 +46,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -58,39 +59,27 @@ from viform._validate import (
 )
 from viform.light.radiometry import PixelOptics
 from viform.light.scenes import Scene
-from viform.sensors import _spike_kernels
-from viform.sensors._gamma import build_tables, stream_keys
-from viform.sensors._spike_kernels import (
-    _FAST_ROUND_LIMIT,
-    _LANES,
-    FIXED_POINT_SCALE,
-    MAX_RATE_FIXED_POINT,
-    MODE_GENERAL,
-    MODE_NOISE_FREE_READOUT,
-    MODE_NOISE_FREE_SELF,
-    SPARSE_FIRING,
-    SpikeSimulationState,
-    _band_rows,
-    _dead_time_stationary_state,
-    _initial_targets,
-    _run_block,
-    _run_block_ticks,
-    _RunPlan,
-    _Segments,
-    _settle_all,
-    _ticks_per_run,
-    _unpack_bits,
-    fixed_point_tables,
-    saturation_bound_fixed,
-    simulation_threads,
-)
 from viform.sensors.base import Sensor
-from viform.sensors.spike_cuda import device_description, packed_blocks_cuda, resolve_device
 from viform.stream.container import SpikeSource, SpikeStream
+
+if TYPE_CHECKING:  # at run time these load with the kernels, on first use (see __getattr__)
+    from viform.sensors._spike_kernels import FIXED_POINT_SCALE, SpikeSimulationState, _RunPlan, simulation_threads
 
 __all__ = ["BLOCK_BYTES", "CHIP_THRESHOLD_LEVELS_ELECTRONS", "CLOCK_20KHZ", "CLOCK_40KHZ", "FIXED_POINT_SCALE",
            "MAX_THRESHOLD_ELECTRONS", "SimulatedSpikes", "SpikeSensor", "SpikeSensorParameters",
            "SpikeSimulationState", "simulation_threads"]
+
+
+def __getattr__(name: str):
+    """``FIXED_POINT_SCALE``, ``SpikeSimulationState`` and ``simulation_threads`` live with the compiled
+    kernels (:mod:`viform.sensors._spike_kernels`, numba); they are imported on first use, so that a
+    command that only lists or checks sensors does not load numba (PEP 562)."""
+    if name in ("FIXED_POINT_SCALE", "SpikeSimulationState", "simulation_threads"):
+        from viform.sensors import _spike_kernels
+
+        return getattr(_spike_kernels, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: The chip's 16 selectable threshold levels, e⁻. Seed 000 §6 says the threshold "supports
 #: 16 levels of adjustment" without listing them; viform assumes a linear threshold DAC,
@@ -305,6 +294,7 @@ class SpikeSensor(Sensor):
 
     def _pixel_light(self, height: int, width: int):
         """(a, b) per pixel: charge per tick in fixed point is rint(a·lux + b)."""
+        from viform.sensors._spike_kernels import FIXED_POINT_SCALE
         key = ("light", height, width)
         if key not in self._tables:
             p = self.parameters
@@ -315,6 +305,7 @@ class SpikeSensor(Sensor):
         return self._tables[key]
 
     def _pixel_tables(self, height: int, width: int):
+        from viform.sensors._gamma import build_tables
         key = (height, width)
         if key not in self._tables:
             q = self.threshold_map_electrons(height, width).ravel()
@@ -326,6 +317,7 @@ class SpikeSensor(Sensor):
 
     def _fixed_point_tables(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
         """The Gamma tables rescaled for the kernels' common case (:func:`fixed_point_tables`)."""
+        from viform.sensors._spike_kernels import fixed_point_tables
         key = ("fixed", height, width)
         if key not in self._tables:
             self._tables[key] = fixed_point_tables(self._pixel_tables(height, width)[3][0])
@@ -334,6 +326,7 @@ class SpikeSensor(Sensor):
     def _saturation_bounds(self, height: int, width: int) -> np.ndarray:
         """Per pixel, the charge per tick (fixed point) from which it fires every tick whatever its
         state (:func:`saturation_bound_fixed`; photon noise only)."""
+        from viform.sensors._spike_kernels import saturation_bound_fixed
         key = ("saturation", height, width)
         if key not in self._tables:
             q, shapes, index, tables = self._pixel_tables(height, width)
@@ -354,6 +347,7 @@ class SpikeSensor(Sensor):
         """Charge per tick of each pixel (``lux`` shape (N, H·W)) in the kernels' fixed point
         (2^-32 e⁻): rint(a·lux + b) with the per-pixel gain and dark current; refuses light
         that overflows it."""
+        from viform.sensors._spike_kernels import MAX_RATE_FIXED_POINT
         a, b = self._pixel_light(height, width)
         rates = lux * a
         rates += b
@@ -362,6 +356,7 @@ class SpikeSensor(Sensor):
         return np.rint(rates, out=rates).astype(np.int64)  # half to even, as the compiled light
 
     def _too_bright(self, lux_max: float) -> ViformError:
+        from viform.sensors._spike_kernels import FIXED_POINT_SCALE, MAX_RATE_FIXED_POINT
         p = self.parameters
         limit = p.optics.lux_from_electrons_per_s(MAX_RATE_FIXED_POINT / FIXED_POINT_SCALE * p.clock_hz)
         limit = float(limit) / (1 + 5 * p.gain_spread_fraction)
@@ -382,6 +377,14 @@ class SpikeSensor(Sensor):
         """Everything a simulation run fixes before its first tick, the same for every device: sizes, the
         compiled light (None for kinds in ``drop_light_kinds``: the NumPy light, same bits), block size,
         per-pixel tables and light factors, the start state and the kernel mode."""
+        from viform.sensors._spike_kernels import (
+            _LANES,
+            MAX_RATE_FIXED_POINT,
+            MODE_GENERAL,
+            MODE_NOISE_FREE_READOUT,
+            MODE_NOISE_FREE_SELF,
+            _RunPlan,
+        )
         check_positive("duration_s", duration_s)
         p = self.parameters
         n_ticks = max(1, int(round(duration_s * p.clock_hz)))
@@ -421,6 +424,7 @@ class SpikeSensor(Sensor):
         start, replaced by the stationary state with dead time, which depends on the light
         of the first tick (see :func:`_dead_time_stationary_state`).
         """
+        from viform.sensors._spike_kernels import _dead_time_stationary_state
         if state is None:
             state = self.initial_state(height, width, seed)
         elif state.next_tick != 0:
@@ -436,6 +440,8 @@ class SpikeSensor(Sensor):
 
     def initial_state(self, height: int, width: int, seed: int) -> SpikeSimulationState:
         """State at t = 0: first targets and (optionally) a random initial charge."""
+        from viform.sensors._gamma import stream_keys
+        from viform.sensors._spike_kernels import SpikeSimulationState, _initial_targets
         q, shapes, index, tables = self._pixel_tables(height, width)
         n = q.size
         counter = np.zeros(n, dtype=np.int64)
@@ -496,6 +502,7 @@ class SpikeSensor(Sensor):
             (:mod:`viform.sensors.spike_cuda`: the same algorithm and draws), or a GPU when
             numba-cuda finds one, else the CPU.
         """
+        from viform.sensors._spike_kernels import _unpack_bits
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
         buffer = None
@@ -544,6 +551,17 @@ class SpikeSensor(Sensor):
         the kernels' own output. ``reuse_buffer``: one buffer for every block (True or "copied": the caller
         copies each block), a fresh one per block (False), or "padded": reused only where the rows are
         padded past the frame's ⌈H·W/8⌉ bytes (the caller then copies the frame out)."""
+        from viform.sensors._spike_kernels import (
+            _FAST_ROUND_LIMIT,
+            SPARSE_FIRING,
+            VECTOR_MIN_SPIKES,
+            _band_rows,
+            _run_block,
+            _run_block_ticks,
+            _Segments,
+            _settle_all,
+        )
+        from viform.sensors.spike_cuda import packed_blocks_cuda, resolve_device
         light_sample_ticks = self.light_sample_ticks_for(scene, light_sample_ticks, duration_s)
         if resolve_device(device) == "cuda":
             if block_ticks is None:
@@ -627,7 +645,7 @@ class SpikeSensor(Sensor):
                     _run_block(out, rates, seg_end, first, state.charge, state.target,
                                state.counter, q, index, *tables, *fixed_tables, state.keys, p.photon_noise,
                                reset_readout, dead_ticks, mode, bounds, state.pending_ticks, state.pending_rate,
-                               SPARSE_FIRING, _spike_kernels.VECTOR_MIN_SPIKES)
+                               SPARSE_FIRING, VECTOR_MIN_SPIKES)
                     if caller_state:  # the caller reads the state between blocks: no tick left pending
                         _settle_all(state.charge, state.target, state.counter, q, index, *tables, state.keys,
                                     state.pending_ticks, state.pending_rate)
@@ -654,6 +672,7 @@ class SpikeSensor(Sensor):
         light: a few per-tick scalars, or one int64 rate row per run of constant light;
         otherwise float64 light and int64 charge rates, plus the scene's own temporaries, per
         light sample)."""
+        from viform.sensors._spike_kernels import _ticks_per_run
         height, width = self.check_scene(scene, self.height, self.width)
         pixels = height * width
         budget = BLOCK_BYTES if budget_bytes is None else budget_bytes
@@ -673,6 +692,7 @@ class SpikeSensor(Sensor):
     def capture(self, scene: Scene, duration_s: float, *, seed: int = 0, block_ticks: int | None = None,
                 light_sample_ticks: int | str = "auto", progress: bool = False, device: str = "cpu") -> SpikeStream:
         """Simulate into memory and return the :class:`SpikeStream` (``device`` as in :meth:`simulate`)."""
+        from viform.sensors.spike_cuda import resolve_device
         device = resolve_device(device)
         light_sample_ticks = self.light_sample_ticks_for(scene, light_sample_ticks, duration_s)
         blocks = [b for _, b in self.simulate(scene, duration_s, seed=seed, block_ticks=block_ticks,
@@ -693,6 +713,7 @@ class SpikeSensor(Sensor):
 
     def capture_metadata(self, scene: Scene, seed: int, light_sample_ticks: int, device: str = "cpu") -> dict:
         """Provenance of a simulated stream; ``device`` ("cpu" or "cuda") names the machine that ran it."""
+        from viform.sensors.spike_cuda import device_description
         meta = {"sensor": self.describe(), "scene": scene.describe(), "seed": seed,
                 "light_sample_ticks": light_sample_ticks}
         if device == "cuda":
@@ -719,6 +740,7 @@ class SimulatedSpikes(SpikeSource):
     def __init__(self, sensor: SpikeSensor, scene: Scene, duration_s: float, seed: int,
                  light_sample_ticks: int | str = "auto", progress: bool = False, reuse_buffer: bool = False,
                  device: str = "cpu"):
+        from viform.sensors.spike_cuda import resolve_device
         self.device = resolve_device(device)
         p = sensor.parameters
         self.sensor, self.scene, self.seed = sensor, scene, seed

@@ -39,8 +39,6 @@ from types import FunctionType
 import numpy as np
 
 from viform._validate import ViformError
-from viform.sensors import _gamma, _spike_kernels
-from viform.sensors._spike_kernels import _Segments
 
 #: Threads per CUDA block (a multiple of the warp size, 32).
 THREADS_PER_BLOCK = 256
@@ -259,6 +257,7 @@ def kernels():
     from numba import cuda as numba_cuda
 
     from viform.light import compiled as light_module
+    from viform.sensors import _gamma, _spike_kernels
 
     device_jit = numba_cuda.jit(device=True)
     simulated = simulator_enabled()
@@ -287,6 +286,8 @@ def packed_blocks_cuda(sensor, scene, duration_s, seed, block_ticks, light_sampl
                        compiled_light):
     """As :meth:`SpikeSensor._packed_blocks`, on the GPU: (first tick, packed bits uint8 (T, 8·⌈H·W/64⌉))."""
     from numba import cuda
+
+    from viform.sensors._spike_kernels import _Segments
 
     # pixel_lux does not draw the sampled kind: the scene's light per sample, which gives the same bits
     plan = sensor.run_plan(scene, duration_s, seed, block_ticks, light_sample_ticks, state, compiled_light, True,
