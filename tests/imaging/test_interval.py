@@ -53,6 +53,34 @@ def test_every_length_is_exact_whatever_the_chunking():
         assert np.all(censored[:, never]) and not censored[2, 0, 0]
 
 
+@pytest.mark.parametrize("shape", [(70, 80), (33, 37)], ids=["whole-words", "partial-word"])
+def test_search_exact_across_slabs_words_and_a_subset(shape):
+    """The compiled search (8 pixels a word, 4,096 a slab, a list of words still to find) against
+    brute force: several slabs, a last partial word, pixels that fire every tick or never, and
+    only the listed pixels touched."""
+    from viform.imaging.interval import _first_spikes
+
+    rng = np.random.default_rng(3)
+    n, pixels = 400, shape[0] * shape[1]
+    rate = rng.choice([0.0, 1e-3, 0.01, 0.2, 1.0], size=pixels)
+    spikes = rng.random((n, pixels)) < rate
+    ticks = np.arange(n)[:, None]
+    first = np.where(spikes.any(axis=0), np.where(spikes, ticks, n).min(axis=0), -5)
+    last = np.where(spikes.any(axis=0), np.where(spikes, ticks, -1).max(axis=0), -5)
+    todo0 = rng.random(pixels) < 0.7
+    for backward, expected in ((False, first), (True, last)):
+        todo, out = todo0.copy(), np.full(pixels, -5, np.int64)
+        _first_spikes(spikes.view(np.uint8), 1000, backward, todo, out)
+        want = np.where(todo0 & (expected >= 0), expected + 1000, -5)
+        assert np.array_equal(out, want), backward
+        assert np.array_equal(todo, todo0 & (expected < 0))
+    stream = SpikeStream(spikes.reshape(n, *shape), 1000.0)
+    reference = _reference_tau(stream.spikes)
+    for look in (1, 37, None):
+        tau, _ = interval_ticks(stream, [0, 199, 399], look)
+        assert np.array_equal(tau, reference[[0, 199, 399]]), look
+
+
 @pytest.fixture(scope="module")
 def flat_stream():
     """Columns of flat light, one mean interval each, 24 independent pixels per column."""

@@ -42,24 +42,84 @@ def _chunk_limit(pixels: int) -> int:
     return max(1, MAX_CHUNK_BYTES // max(1, pixels))
 
 
+@njit(cache=True, parallel=True)
+def _first_spikes_words(words, pixels, start, backward, todo, out):  # pragma: no cover - compiled
+    """:func:`_first_spikes` on rows read as 64-bit words (8 pixels a word, one byte each, little-endian)."""
+    n, n_words = words.shape
+    slab = 512  # words (4,096 pixels) per work item
+    full = np.uint64(0xFF)
+    for c in prange((n_words + slab - 1) // slab):
+        w0 = c * slab
+        w1 = min(w0 + slab, n_words)
+        # the slab's words with pixels still to find, and those pixels' bytes (0xFF) in each
+        index = np.empty(w1 - w0, dtype=np.int64)
+        mask = np.empty(w1 - w0, dtype=np.uint64)
+        m = 0
+        for w in range(w0, w1):
+            mk = np.uint64(0)
+            for b in range(8):
+                j = w * 8 + b
+                if j < pixels and todo[j]:
+                    mk |= full << np.uint64(8 * b)
+            if mk:
+                index[m] = w
+                mask[m] = mk
+                m += 1
+        i = 0
+        while m > 0 and i < n:
+            r = n - 1 - i if backward else i
+            k = 0
+            while k < m:
+                hit = words[r, index[k]] & mask[k]
+                if hit:
+                    for b in range(8):
+                        byte = full << np.uint64(8 * b)
+                        if hit & byte:
+                            j = index[k] * 8 + b
+                            todo[j] = False
+                            out[j] = start + r
+                            mask[k] &= ~byte
+                    if not mask[k]:  # the word's pixels are all found: off the list (its order does not matter)
+                        m -= 1
+                        index[k] = index[m]
+                        mask[k] = mask[m]
+                        continue
+                k += 1
+            i += 1
+
+
+def _first_spikes(bits, start, backward, todo, out):
+    """For each pixel j with ``todo[j]``, its first spike in ``bits`` (uint8 rows: ticks ``start``, ``start`` + 1,
+    …), scanning from the last row when ``backward``: ``out[j]`` = that tick and ``todo[j]`` cleared.
+
+    Each row reads only the words that hold a pixel still to find (a list that shrinks as they are
+    found), eight pixels a word, so the work follows the distance each pixel is searched.
+    """
+    n, pixels = bits.shape
+    if pixels % 8 or not bits.flags.c_contiguous:
+        padded = np.zeros((n, -(-pixels // 8) * 8), dtype=np.uint8)
+        padded[:, :pixels] = bits
+        bits = padded
+    _first_spikes_words(bits.view(np.uint64), pixels, start, backward, todo, out)
+
+
 def _search_forward(source: SpikeSource, start: int, pixels_left: np.ndarray, nxt: np.ndarray,
                     chunk: int) -> None:
     """Set ``nxt[j]`` to the first spike at tick ≥ ``start`` for each pixel j in ``pixels_left``.
 
     Reads chunks of growing length until every such pixel has spiked or the stream ends
-    (pixels that never spike again keep ``nxt`` = T). Memory: one chunk of the listed pixels.
+    (pixels that never spike again keep ``nxt`` = T). Memory: one chunk of spikes.
     """
     n_total = source.n_ticks
     pixels = source.height * source.width
+    todo = np.zeros(pixels, dtype=np.bool_)
+    todo[pixels_left] = True
+    nxt[pixels_left] = n_total
     pos = start
-    left = pixels_left
-    nxt[left] = n_total
-    while left.size and pos < n_total:
+    while pos < n_total and todo.any():
         stop = min(n_total, pos + chunk)
-        block = source.read_ticks(pos, stop).reshape(stop - pos, pixels)[:, left]
-        hit = block.any(axis=0)
-        nxt[left[hit]] = pos + block[:, hit].argmax(axis=0)
-        left = left[~hit]
+        block = source.read_ticks(pos, stop).reshape(stop - pos, pixels).view(np.uint8)
+        _first_spikes(block, pos, False, todo, nxt)
         pos = stop
         chunk = min(2 * chunk, _chunk_limit(pixels))
 
@@ -68,15 +128,14 @@ def _search_backward(source: SpikeSource, stop: int, pixels_left: np.ndarray, pr
                      chunk: int) -> None:
     """Set ``prev[j]`` to the last spike at tick < ``stop`` for each listed pixel (−1 if none)."""
     pixels = source.height * source.width
+    todo = np.zeros(pixels, dtype=np.bool_)
+    todo[pixels_left] = True
+    prev[pixels_left] = -1
     pos = stop
-    left = pixels_left
-    prev[left] = -1
-    while left.size and pos > 0:
+    while pos > 0 and todo.any():
         start = max(0, pos - chunk)
-        block = source.read_ticks(start, pos).reshape(pos - start, pixels)[::-1][:, left]
-        hit = block.any(axis=0)
-        prev[left[hit]] = pos - 1 - block[:, hit].argmax(axis=0)
-        left = left[~hit]
+        block = source.read_ticks(start, pos).reshape(pos - start, pixels).view(np.uint8)
+        _first_spikes(block, start, True, todo, prev)
         pos = start
         chunk = min(2 * chunk, _chunk_limit(pixels))
 
