@@ -9,7 +9,8 @@ numba's compiler target (every numba program pays it once). A 4-tick simulation 
 start-up: what it costs above the floor is viform's own start-up.
 
 It also lists the heavy optional libraries each command imports (``-X importtime``): none of
-dask, zarr, matplotlib, OpenCV, TrackEval or scipy.special should load before the first tick.
+dask, zarr, matplotlib, OpenCV, TrackEval or scipy.special should load before the first tick,
+and help and the catalogues should not load numba either.
 
 Bytecode: with ``PYTHONDONTWRITEBYTECODE`` set (as on some shared machines), no ``.pyc`` is written for an
 editable install's sources, so a start compiles every viform module that has none from source (≈ 0.13 CPU-s
@@ -45,11 +46,11 @@ def cpu_seconds(command: list[str], repeats: int, env: dict | None = None) -> tu
     return times[0], times[len(times) // 2]
 
 
-def heavy_imports(command: list[str], env: dict | None = None) -> list[str]:
-    """The modules of :data:`HEAVY` that ``command`` (a ``python -m ...`` command) imports."""
+def heavy_imports(command: list[str], env: dict | None = None, heavy=HEAVY) -> list[str]:
+    """The modules of ``heavy`` (:data:`HEAVY`) that ``command`` (a ``python -m ...`` command) imports."""
     result = subprocess.run([command[0], "-X", "importtime", *command[1:]], capture_output=True, text=True, env=env)
     names = {line.rsplit("|", 1)[-1].strip() for line in result.stderr.splitlines() if line.startswith("import time:")}
-    return [h for h in HEAVY if h in names]
+    return [h for h in heavy if h in names]
 
 
 def main(argv=None):
@@ -72,6 +73,8 @@ def main(argv=None):
             ("numba ready (import, first cached kernel)",
              [py, "-c", "from viform.sensors._gamma import stream_keys; stream_keys(1, 1)"]),
             ("viform --help", [py, "-m", "viform", "--help"]),
+            ("viform simulate --help", [py, "-m", "viform", "simulate", "--help"]),
+            ("viform sensors (the catalogue)", [py, "-m", "viform", "sensors"]),
             ("viform simulate, 4 ticks, exact", simulate),
             ("viform simulate, 4 ticks, noise-free", [*simulate, "--no-noise"]),
         ]
@@ -85,9 +88,10 @@ def main(argv=None):
             floors[name] = least
             extra = ""
             if command[1:3] == ["-m", "viform"]:
-                # --help needs no kernel: its floor is NumPy; a simulation's is numba ready
-                floor = "import numpy" if "--help" in command else "numba ready (import, first cached kernel)"
-                heavy = heavy_imports(command, env)
+                # help and listings need no kernel (nor numba): their floor is NumPy; a simulation's is numba ready
+                no_kernel = "--help" in command or "sensors" in command
+                floor = "import numpy" if no_kernel else "numba ready (import, first cached kernel)"
+                heavy = heavy_imports(command, env, HEAVY + ("numba",) if no_kernel else HEAVY)
                 extra = (f"  above {floor.split(' (')[0]} {least - floors[floor]:+.3f}; "
                          f"heavy imports: {', '.join(heavy) or 'none'}")
             print(f"  {name:44s} {least:6.3f} ({median:.3f}){extra}", flush=True)
