@@ -109,3 +109,33 @@ def test_moving_edge_interval_stays_sharp_where_long_accumulation_blurs():
 
     assert edge_width_px(interval) <= 3
     assert edge_width_px(accumulation) >= 8
+
+
+class _WideSource(SpikeStream):
+    """A third-party source that hands out 0/1 as a wider dtype than the documented bool."""
+
+    def __init__(self, spikes, dtype):
+        super().__init__(spikes, 1000.0)
+        self.dtype = dtype
+
+    def read_ticks(self, start, stop):
+        return super().read_ticks(start, stop).astype(self.dtype)
+
+
+@pytest.mark.parametrize("dtype", [np.int64, np.float32, np.int8])
+def test_a_source_of_wider_integers_gives_the_bool_results(dtype):
+    """Compiled readers take one byte per pixel-tick: a source handing out int64 or float spikes is
+    compared with 0 first, never read past its rows (it once wrote past the search's arrays)."""
+    from viform.imaging.multi_interval import spike_ticks_around
+
+    rng = np.random.default_rng(4)
+    spikes = rng.random((300, 6, 10)) < rng.choice([0.0, 0.003, 0.05, 1.0], (6, 10))
+    plain, wide = SpikeStream(spikes, 1000.0), _WideSource(spikes, dtype)
+    for a, b in zip(interval_ticks(plain, [0, 150, 299], 7), interval_ticks(wide, [0, 150, 299], 7), strict=True):
+        assert np.array_equal(a, b)
+    for (_, a), (_, b) in zip(interval_frames(plain, 64, 5), interval_frames(wide, 64, 5), strict=True):
+        assert np.array_equal(a, b)
+    for (_, a), (_, b) in zip(sliding_accumulation(plain, 9, 50), sliding_accumulation(wide, 9, 50), strict=True):
+        assert np.array_equal(a, b)
+    for a, b in zip(spike_ticks_around(plain, 150, 3, 3, 5), spike_ticks_around(wide, 150, 3, 3, 5), strict=True):
+        assert np.array_equal(a, b)

@@ -559,9 +559,10 @@ def _check_existing_config(out: Path, config: dict) -> None:
 
 
 #: The modules a clip's task imports, imported once by the fork server a local cluster's workers are
-#: forked from (:data:`viform._parallel.WORKER_START`), not again by each worker.
+#: forked from (:data:`viform._parallel.WORKER_START`), not again by each worker (the spike sensor
+#: imports its compiled kernels only when it simulates: they are listed too).
 WORKER_MODULES = ("viform.datasets.build", "viform.datasets.scene_clips", "viform.sensors.spike",
-                  "viform.light.scenes", "viform.stream.dat", "viform.stream.sidecar")
+                  "viform.sensors._spike_kernels", "viform.light.scenes", "viform.stream.dat", "viform.stream.sidecar")
 
 
 def build_dataset(src, out, settings: DatasetSettings, *, workers: int | None = None, scheduler: str | None = None,

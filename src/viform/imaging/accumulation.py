@@ -21,7 +21,7 @@ from numba import njit, prange
 
 from viform._validate import ViformError, check_choice, check_int, check_positive
 from viform.imaging.units import LightImage, light_from_rate
-from viform.stream.container import SpikeSource
+from viform.stream.container import SpikeSource, spike_bytes
 
 #: Window alignments: the window is centred on the instant's tick, ends with it, or starts with it.
 ALIGNMENTS = ("centre", "end", "start")
@@ -127,7 +127,7 @@ def sliding_accumulation(source: SpikeSource, window_ticks: int, block_ticks: in
     pixels = source.height * source.width
     carry = np.zeros((window, pixels), dtype=np.uint8)
     for first, block in source.iter_blocks(block_ticks):
-        flat = block.reshape(block.shape[0], pixels).view(np.uint8)
+        flat = spike_bytes(block.reshape(block.shape[0], pixels))
         out = np.empty(flat.shape, dtype=np.int32)
         _sliding_counts(flat, carry, window, out)
         if flat.shape[0] >= window:

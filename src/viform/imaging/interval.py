@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from viform._validate import ViformError, check_int
 from viform.imaging.units import LightImage, light_from_rate
-from viform.stream.container import SpikeSource
+from viform.stream.container import SpikeSource, spike_bytes
 
 #: Ticks read per search step around an instant (the first step; later ones double, up to
 #: :data:`MAX_CHUNK_BYTES`). Only speed and memory depend on it, never the result.
@@ -118,7 +118,7 @@ def _search_forward(source: SpikeSource, start: int, pixels_left: np.ndarray, nx
     pos = start
     while pos < n_total and todo.any():
         stop = min(n_total, pos + chunk)
-        block = source.read_ticks(pos, stop).reshape(stop - pos, pixels).view(np.uint8)
+        block = spike_bytes(source.read_ticks(pos, stop).reshape(stop - pos, pixels))
         _first_spikes(block, pos, False, todo, nxt)
         pos = stop
         chunk = min(2 * chunk, _chunk_limit(pixels))
@@ -134,7 +134,7 @@ def _search_backward(source: SpikeSource, stop: int, pixels_left: np.ndarray, pr
     pos = stop
     while pos > 0 and todo.any():
         start = max(0, pos - chunk)
-        block = source.read_ticks(start, pos).reshape(pos - start, pixels).view(np.uint8)
+        block = spike_bytes(source.read_ticks(start, pos).reshape(pos - start, pixels))
         _first_spikes(block, start, True, todo, prev)
         pos = start
         chunk = min(2 * chunk, _chunk_limit(pixels))
@@ -279,7 +279,7 @@ def interval_frames(source: SpikeSource, block_ticks: int = 1024,
         last = min(first + block_ticks, n_total)
         need = min(n_total, last + look)
         if need > buffer_end:
-            fresh = source.read_ticks(buffer_end, need).reshape(need - buffer_end, pixels).view(np.uint8)
+            fresh = spike_bytes(source.read_ticks(buffer_end, need).reshape(need - buffer_end, pixels))
             buffer = np.concatenate([buffer, fresh]) if buffer.size else np.ascontiguousarray(fresh)
             buffer_end = need
         _next_after_block(buffer, last - first, ahead, buffer_end, next_after)

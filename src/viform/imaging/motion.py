@@ -37,7 +37,7 @@ from numba import njit, prange
 
 from viform._validate import ViformError, check_choice, check_int, check_positive, check_range, size_text
 from viform.imaging.units import LightImage, light_from_rate, sensor_parameters_of
-from viform.stream.container import SpikeSource
+from viform.stream.container import SpikeSource, spike_bytes
 
 FLOW_METHODS = ("ilk", "tvl1")
 #: K of the multi-interval estimate blended in (and used for dim pixels).
@@ -250,7 +250,7 @@ def motion_compensated_image(source: SpikeSource, t_s: float, *, half_span_ticks
         raise ViformError(f"flow_downscale = {down} is too large for a {size_text(source.height, source.width)} stream")
     k = source.tick_of(t_s)
     a, b = max(0, k - span), min(source.n_ticks, k + span + 1)
-    bits = source.read_ticks(a, b).view(np.uint8)
+    bits = spike_bytes(source.read_ticks(a, b))
     rate, reach, used = motion_compensated_rate(bits, k - a, flow_window_ticks=fw, anchor_step_ticks=step,
                                                 flow=flow, flow_downscale=down, tolerance=tolerance)
     dim = rate * used < min_spikes

@@ -64,7 +64,7 @@ from numba import njit, prange
 from viform._validate import ViformError, check_int, check_positive
 from viform.imaging.interval import _chunk_limit
 from viform.imaging.units import LightImage, light_from_rate
-from viform.stream.container import SpikeSource
+from viform.stream.container import SpikeSource, spike_bytes
 
 #: First chunk read on each side of the instant (later chunks double); speed only.
 FIRST_CHUNK_TICKS = 64
@@ -127,7 +127,7 @@ def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
         chunk = min(look, limit)
         while left.size and (pos < n_total if forward else pos > 0):
             a, b = (pos, min(n_total, pos + chunk)) if forward else (max(0, pos - chunk), pos)
-            block = source.read_ticks(a, b).reshape(b - a, pixels).view(np.uint8)
+            block = spike_bytes(source.read_ticks(a, b).reshape(b - a, pixels))
             if forward:
                 _collect(block, False, a, left, found, count, wanted)
             else:
@@ -375,7 +375,7 @@ def multi_interval_frames(source: SpikeSource, ticks, spikes_per_side: int = DEF
         stop = int(np.searchsorted(ticks, ticks[start] + group))
         lo_tick = max(0, int(ticks[start]) - margin)
         hi_tick = min(n_total, int(ticks[stop - 1]) + 1 + margin)
-        bits = source.read_ticks(lo_tick, hi_tick).reshape(hi_tick - lo_tick, pixels).view(np.uint8)
+        bits = spike_bytes(source.read_ticks(lo_tick, hi_tick).reshape(hi_tick - lo_tick, pixels))
         offsets, spike_ticks = _spike_lists(bits, lo_tick)
         del bits
         position = offsets[:-1].copy()

@@ -70,15 +70,22 @@ __all__ = ["BLOCK_BYTES", "CHIP_THRESHOLD_LEVELS_ELECTRONS", "CLOCK_20KHZ", "CLO
            "SpikeSimulationState", "simulation_threads"]
 
 
+_FROM_KERNELS = ("FIXED_POINT_SCALE", "SpikeSimulationState", "simulation_threads")
+
+
 def __getattr__(name: str):
     """``FIXED_POINT_SCALE``, ``SpikeSimulationState`` and ``simulation_threads`` live with the compiled
     kernels (:mod:`viform.sensors._spike_kernels`, numba); they are imported on first use, so that a
     command that only lists or checks sensors does not load numba (PEP 562)."""
-    if name in ("FIXED_POINT_SCALE", "SpikeSimulationState", "simulation_threads"):
+    if name in _FROM_KERNELS:
         from viform.sensors import _spike_kernels
 
         return getattr(_spike_kernels, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_FROM_KERNELS])
 
 
 #: The chip's 16 selectable threshold levels, e⁻. Seed 000 §6 says the threshold "supports

@@ -32,6 +32,19 @@ def block_ticks_for(height: int, width: int, block_ticks: int | None = None,
     return cap if block_ticks is None else max(1, min(int(block_ticks), cap))
 
 
+def spike_bytes(spikes: np.ndarray) -> np.ndarray:
+    """``spikes`` (a ``read_ticks`` result, any shape) as one uint8 per pixel-tick, nonzero where a pixel fired.
+
+    A bool (or other one-byte) array is viewed, not copied; a wider one — a source that hands out
+    0/1 as integers or floats instead of bool — is compared with 0, so that compiled readers of
+    the bytes never read past a row.
+    """
+    a = np.asarray(spikes)
+    if a.dtype.itemsize != 1:
+        a = a != 0
+    return a.view(np.uint8)
+
+
 #: dtype of the events view (the neuromorphic x, y, t, p convention; t in microseconds).
 EVENT_DTYPE = np.dtype([("x", np.int16), ("y", np.int16), ("t", np.int64), ("p", np.int8)])
 

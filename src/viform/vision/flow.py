@@ -69,6 +69,7 @@ import numpy as np
 from viform._io import atomic_open
 from viform._validate import ViformError, check_choice, check_int, check_positive
 from viform.light.truth import FlowTruth
+from viform.stream.container import spike_bytes
 
 FLO_MAGIC = 202021.25
 #: Values above this mean "unknown flow" in a .flo file (Middlebury's UNKNOWN_FLOW_THRESH).
@@ -388,7 +389,7 @@ def _byte_words(block, pixels: int) -> np.ndarray:
     """Ticks (n, …) of spikes as (n, ⌈P/8⌉) uint64: each word 8 pixels' bytes (0 or 1), the last
     padded with zeros; a view of the block where its layout allows, else an aligned copy."""
     n = block.shape[0]
-    flat = np.ascontiguousarray(block).reshape(n, pixels).view(np.uint8)
+    flat = spike_bytes(np.ascontiguousarray(block).reshape(n, pixels))
     if pixels % 8 or flat.ctypes.data % 8:
         padded = np.zeros((n, -(-pixels // 8) * 8), np.uint8)
         padded[:, :pixels] = flat
