@@ -56,8 +56,8 @@ def test_every_length_is_exact_whatever_the_chunking():
 @pytest.mark.parametrize("shape", [(70, 80), (33, 37)], ids=["whole-words", "partial-word"])
 def test_search_exact_across_slabs_words_and_a_subset(shape):
     """The compiled search (8 pixels a word, 4,096 a slab, a list of words still to find) against
-    brute force: several slabs, a last partial word, pixels that fire every tick or never, and
-    only the listed pixels touched."""
+    brute force: several slabs, a last partial word, pixels that fire every tick or never, spikes
+    as any nonzero byte, and only the listed pixels touched."""
     from viform.imaging.interval import _first_spikes
 
     rng = np.random.default_rng(3)
@@ -68,9 +68,11 @@ def test_search_exact_across_slabs_words_and_a_subset(shape):
     first = np.where(spikes.any(axis=0), np.where(spikes, ticks, n).min(axis=0), -5)
     last = np.where(spikes.any(axis=0), np.where(spikes, ticks, -1).max(axis=0), -5)
     todo0 = rng.random(pixels) < 0.7
+    # a spike is any nonzero byte (a bool array can hold 2…255)
+    spike_bytes = (spikes * rng.integers(1, 256, spikes.shape)).astype(np.uint8)
     for backward, expected in ((False, first), (True, last)):
         todo, out = todo0.copy(), np.full(pixels, -5, np.int64)
-        _first_spikes(spikes.view(np.uint8), 1000, backward, todo, out)
+        _first_spikes(spike_bytes, 1000, backward, todo, out)
         want = np.where(todo0 & (expected >= 0), expected + 1000, -5)
         assert np.array_equal(out, want), backward
         assert np.array_equal(todo, todo0 & (expected < 0))
