@@ -18,6 +18,28 @@ def test_spikes_around_an_instant_nearest_first_and_end_markers():
     assert prev[:, 1].tolist() == [-1, -1, -1] and nxt[:, 1].tolist() == [30, 30, 30]
 
 
+@pytest.mark.parametrize("shape", [(70, 80), (9, 13)], ids=["whole-words", "partial-word"])
+def test_spikes_around_equal_brute_force_across_slabs_and_a_subset(shape):
+    """The compiled collection (8 pixels a word, 4,096 a slab) against brute force: K spikes a side,
+    nearest first, end markers, any chunking, and only the wanted pixels searched."""
+    rng = np.random.default_rng(7)
+    n, pixels = 300, shape[0] * shape[1]
+    spikes = rng.random((n, pixels)) < rng.choice([0.0, 2e-3, 0.02, 0.3, 1.0], size=pixels)
+    stream = SpikeStream(spikes.reshape(n, *shape), 1000.0)
+    wanted = np.flatnonzero(rng.random(pixels) < 0.6)
+    for tick, before, after, look in [(0, 1, 4, 1), (150, 4, 4, None), (299, 3, 2, 7), (77, 2, 5, 300)]:
+        prev, nxt = spike_ticks_around(stream, tick, before, after, look, pixels_wanted=wanted)
+        for j in range(pixels):
+            if j not in wanted:
+                assert (prev[:, j] == -1).all() and (nxt[:, j] == n).all()
+                continue
+            ticks = np.flatnonzero(spikes[:, j])
+            p = ticks[ticks <= tick][::-1][:before]
+            q = ticks[ticks > tick][:after]
+            assert prev[:, j].tolist() == p.tolist() + [-1] * (before - p.size), (tick, j)
+            assert nxt[:, j].tolist() == q.tolist() + [n] * (after - q.size), (tick, j)
+
+
 @pytest.mark.parametrize("q, rate_per_tick", [(1.0, 0.02), (100.0, 0.05), (10_000.0, 0.3)])
 def test_unbiased_for_steady_light_from_q_1_to_10_thousand(q, rate_per_tick):
     """n·Q/X with X the span of n = 2K − 1 intervals holding the instant: X ~ Gamma(nQ + 1, λ), E = λ.

@@ -43,15 +43,15 @@ def _chunk_limit(pixels: int) -> int:
 
 
 @njit(cache=True, parallel=True)
-def _first_spikes_words(words, pixels, start, backward, todo, out):  # pragma: no cover - compiled
-    """:func:`_first_spikes` on rows read as 64-bit words (8 pixels a word, one byte each, little-endian)."""
+def _spikes_in_words(words, pixels, start, backward, todo, found, count, wanted):  # pragma: no cover - compiled
+    """:func:`_collect_spikes` on rows read as 64-bit words (8 pixels a word, one byte each, little-endian)."""
     n, n_words = words.shape
     slab = 512  # words (4,096 pixels) per work item
     full = np.uint64(0xFF)
     for c in prange((n_words + slab - 1) // slab):
         w0 = c * slab
         w1 = min(w0 + slab, n_words)
-        # the slab's words with pixels still to find, and those pixels' bytes (0xFF) in each
+        # the slab's words with pixels still short of spikes, and those pixels' bytes (0xFF) in each
         index = np.empty(w1 - w0, dtype=np.int64)
         mask = np.empty(w1 - w0, dtype=np.uint64)
         m = 0
@@ -76,10 +76,12 @@ def _first_spikes_words(words, pixels, start, backward, todo, out):  # pragma: n
                         byte = full << np.uint64(8 * b)
                         if hit & byte:
                             j = index[k] * 8 + b
-                            todo[j] = False
-                            out[j] = start + r
-                            mask[k] &= ~byte
-                    if not mask[k]:  # the word's pixels are all found: off the list (its order does not matter)
+                            found[count[j], j] = start + r
+                            count[j] += 1
+                            if count[j] == wanted:
+                                todo[j] = False
+                                mask[k] &= ~byte
+                    if not mask[k]:  # the word's pixels are all done: off the list (its order does not matter)
                         m -= 1
                         index[k] = index[m]
                         mask[k] = mask[m]
@@ -88,19 +90,28 @@ def _first_spikes_words(words, pixels, start, backward, todo, out):  # pragma: n
             i += 1
 
 
-def _first_spikes(bits, start, backward, todo, out):
-    """For each pixel j with ``todo[j]``, its first spike in ``bits`` (uint8 rows: ticks ``start``, ``start`` + 1,
-    …), scanning from the last row when ``backward``: ``out[j]`` = that tick and ``todo[j]`` cleared.
+def _collect_spikes(bits, start, backward, todo, found, count, wanted):
+    """Record the spikes of the pixels still to search, in reading order, up to ``wanted`` each.
 
-    Each row reads only the words that hold a pixel still to find (a list that shrinks as they are
-    found), eight pixels a word, so the work follows the distance each pixel is searched.
+    ``bits`` (n, P) uint8, one row per tick from ``start`` (nonzero: a spike), read from the last
+    row when ``backward``. For each pixel j with ``todo[j]``, each spike met sets
+    ``found[count[j], j]`` to its tick and increments ``count[j]``; ``todo[j]`` is cleared when
+    ``count[j]`` reaches ``wanted`` (so a search that continues in the next chunk resumes where it
+    stopped). Each row reads only the words (8 pixels) that hold a pixel still to search — a list
+    that shrinks as they finish — so the work follows the distance each pixel is searched.
     """
     n, pixels = bits.shape
     if pixels % 8 or not bits.flags.c_contiguous:
         padded = np.zeros((n, -(-pixels // 8) * 8), dtype=np.uint8)
         padded[:, :pixels] = bits
         bits = padded
-    _first_spikes_words(bits.view(np.uint64), pixels, start, backward, todo, out)
+    _spikes_in_words(bits.view(np.uint64), pixels, start, backward, todo, found, count, wanted)
+
+
+def _first_spikes(bits, start, backward, todo, out):
+    """:func:`_collect_spikes` for one spike a pixel: ``out[j]`` = the tick of pixel j's first spike met
+    (``todo[j]`` then cleared)."""
+    _collect_spikes(bits, start, backward, todo, out.reshape(1, -1), np.zeros(bits.shape[1], np.int64), 1)
 
 
 def _search_forward(source: SpikeSource, start: int, pixels_left: np.ndarray, nxt: np.ndarray,

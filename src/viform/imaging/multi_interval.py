@@ -62,7 +62,7 @@ import numpy as np
 from numba import njit, prange
 
 from viform._validate import ViformError, check_int, check_positive
-from viform.imaging.interval import _chunk_limit
+from viform.imaging.interval import _chunk_limit, _collect_spikes
 from viform.imaging.units import LightImage, light_from_rate
 from viform.stream.container import SpikeSource, spike_bytes
 
@@ -74,31 +74,6 @@ DEFAULT_SPIKES_PER_SIDE = 4
 #: Q assumed for the adaptive test's noise when the stream does not say (real recordings
 #: show an effective Q of order 10⁴ e⁻; rounding then dominates the interval spread).
 DEFAULT_NOISE_THRESHOLD_ELECTRONS = 1.0e4
-
-
-@njit(cache=True, parallel=True)
-def _collect(block, rows_descending, first, left, found, count, wanted):
-    """Record up to ``wanted`` spike ticks per listed pixel, in reading order.
-
-    ``block`` (n, P), C-contiguous, one row per tick from its first; when ``rows_descending`` the
-    rows are read last first and the last row is tick ``first`` (row n − 1 − i is tick first − i),
-    so a backward search passes the block as read, not a reversed view (one compiled form).
-    Pixels are split in chunks across threads; rows outer so reads stay contiguous.
-    """
-    n = block.shape[0]
-    m = left.size
-    chunk = 2048
-    for c in prange((m + chunk - 1) // chunk):
-        j0 = c * chunk
-        j1 = min(j0 + chunk, m)
-        for i in range(n):
-            tick = first - i if rows_descending else first + i
-            row = n - 1 - i if rows_descending else i
-            for jj in range(j0, j1):
-                j = left[jj]
-                if count[j] < wanted and block[row, j]:
-                    found[count[j], j] = tick
-                    count[j] += 1
 
 
 def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
@@ -122,17 +97,14 @@ def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
     nxt = np.full((after, pixels), n_total, dtype=np.int64)
     for found, wanted, forward in ((prev, before, False), (nxt, after, True)):
         count = np.zeros(pixels, dtype=np.int64)
-        left = np.arange(pixels) if pixels_wanted is None else np.asarray(pixels_wanted, dtype=np.int64)
+        todo = np.zeros(pixels, dtype=np.bool_)
+        todo[slice(None) if pixels_wanted is None else np.asarray(pixels_wanted, dtype=np.int64)] = True
         pos = tick + 1
         chunk = min(look, limit)
-        while left.size and (pos < n_total if forward else pos > 0):
+        while (pos < n_total if forward else pos > 0) and todo.any():
             a, b = (pos, min(n_total, pos + chunk)) if forward else (max(0, pos - chunk), pos)
-            block = spike_bytes(source.read_ticks(a, b).reshape(b - a, pixels))
-            if forward:
-                _collect(block, False, a, left, found, count, wanted)
-            else:
-                _collect(block, True, b - 1, left, found, count, wanted)
-            left = left[count[left] < wanted]
+            _collect_spikes(spike_bytes(source.read_ticks(a, b).reshape(b - a, pixels)), a, not forward, todo, found,
+                           count, wanted)
             pos = b if forward else a
             chunk = min(2 * chunk, limit)
     return prev, nxt
