@@ -58,7 +58,7 @@ def test_search_exact_across_slabs_words_and_a_subset(shape):
     """The compiled search (8 pixels a word, 4,096 a slab, a list of words still to find) against
     brute force: several slabs, a last partial word, pixels that fire every tick or never, spikes
     as any nonzero byte, and only the listed pixels touched."""
-    from viform.imaging.interval import _first_spikes
+    from viform.imaging.interval import _collect_spikes
 
     rng = np.random.default_rng(3)
     n, pixels = 400, shape[0] * shape[1]
@@ -72,7 +72,7 @@ def test_search_exact_across_slabs_words_and_a_subset(shape):
     spike_bytes = (spikes * rng.integers(1, 256, spikes.shape)).astype(np.uint8)
     for backward, expected in ((False, first), (True, last)):
         todo, out = todo0.copy(), np.full(pixels, -5, np.int64)
-        _first_spikes(spike_bytes, 1000, backward, todo, out)
+        _collect_spikes(spike_bytes, 1000, backward, todo, out[None], np.zeros(pixels, np.int64), 1)
         want = np.where(todo0 & (expected >= 0), expected + 1000, -5)
         assert np.array_equal(out, want), backward
         assert np.array_equal(todo, todo0 & (expected < 0))

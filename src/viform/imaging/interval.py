@@ -108,47 +108,32 @@ def _collect_spikes(bits, start, backward, todo, found, count, wanted):
     _spikes_in_words(bits.view(np.uint64), pixels, start, backward, todo, found, count, wanted)
 
 
-def _first_spikes(bits, start, backward, todo, out):
-    """:func:`_collect_spikes` for one spike a pixel: ``out[j]`` = the tick of pixel j's first spike met
-    (``todo[j]`` then cleared)."""
-    _collect_spikes(bits, start, backward, todo, out.reshape(1, -1), np.zeros(bits.shape[1], np.int64), 1)
-
-
-def _search_forward(source: SpikeSource, start: int, pixels_left: np.ndarray, nxt: np.ndarray,
-                    chunk: int) -> None:
-    """Set ``nxt[j]`` to the first spike at tick ≥ ``start`` for each pixel j in ``pixels_left``.
-
-    Reads chunks of growing length until every such pixel has spiked or the stream ends
-    (pixels that never spike again keep ``nxt`` = T). Memory: one chunk of spikes.
-    """
+def _search_spikes(source: SpikeSource, tick: int, forward: bool, todo: np.ndarray, found: np.ndarray,
+                   count: np.ndarray, wanted: int, chunk_ticks: int) -> None:
+    """:func:`_collect_spikes` from ``tick`` on (``forward``) or backward from just before it, in chunks
+    of ``chunk_ticks`` that double (up to :data:`MAX_CHUNK_BYTES` of spikes), until every pixel in
+    ``todo`` has ``wanted`` spikes or the stream ends: one chunk of spikes held at a time."""
     n_total = source.n_ticks
     pixels = source.height * source.width
-    todo = np.zeros(pixels, dtype=np.bool_)
-    todo[pixels_left] = True
-    nxt[pixels_left] = n_total
-    pos = start
-    while pos < n_total and todo.any():
-        stop = min(n_total, pos + chunk)
-        block = spike_bytes(source.read_ticks(pos, stop).reshape(stop - pos, pixels))
-        _first_spikes(block, pos, False, todo, nxt)
-        pos = stop
+    pos = tick
+    chunk = min(chunk_ticks, _chunk_limit(pixels))
+    while (pos < n_total if forward else pos > 0) and todo.any():
+        a, b = (pos, min(n_total, pos + chunk)) if forward else (max(0, pos - chunk), pos)
+        _collect_spikes(spike_bytes(source.read_ticks(a, b).reshape(b - a, pixels)), a, not forward, todo, found,
+                        count, wanted)
+        pos = b if forward else a
         chunk = min(2 * chunk, _chunk_limit(pixels))
 
 
-def _search_backward(source: SpikeSource, stop: int, pixels_left: np.ndarray, prev: np.ndarray,
-                     chunk: int) -> None:
-    """Set ``prev[j]`` to the last spike at tick < ``stop`` for each listed pixel (−1 if none)."""
+def _nearest_spike(source: SpikeSource, tick: int, forward: bool, pixels_left, chunk_ticks: int) -> np.ndarray:
+    """Per pixel, the first spike at or after ``tick`` (``forward``; T if none) or the last before it
+    (−1 if none), for the pixels ``pixels_left`` (an index or mask; the others keep those markers)."""
     pixels = source.height * source.width
+    nearest = np.full(pixels, source.n_ticks if forward else -1, dtype=np.int64)
     todo = np.zeros(pixels, dtype=np.bool_)
     todo[pixels_left] = True
-    prev[pixels_left] = -1
-    pos = stop
-    while pos > 0 and todo.any():
-        start = max(0, pos - chunk)
-        block = spike_bytes(source.read_ticks(start, pos).reshape(pos - start, pixels))
-        _first_spikes(block, start, True, todo, prev)
-        pos = start
-        chunk = min(2 * chunk, _chunk_limit(pixels))
+    _search_spikes(source, tick, forward, todo, nearest[None], np.zeros(pixels, np.int64), 1, chunk_ticks)
+    return nearest
 
 
 def interval_ticks(source: SpikeSource, ticks, lookahead_ticks: int | None = None):
@@ -171,13 +156,9 @@ def interval_ticks(source: SpikeSource, ticks, lookahead_ticks: int | None = Non
     n_total = source.n_ticks
     tau = np.empty((ticks.size, pixels), dtype=np.int64)
     censored = np.empty((ticks.size, pixels), dtype=bool)
-    every = np.arange(pixels)
     for m, k in enumerate(ticks):
-        k = int(k)
-        prev = np.empty(pixels, np.int64)
-        nxt = np.empty(pixels, np.int64)
-        _search_backward(source, k + 1, every, prev, look)  # last spike at or before k
-        _search_forward(source, k + 1, every, nxt, look)  # first spike after k
+        prev = _nearest_spike(source, int(k) + 1, False, slice(None), look)  # last spike at or before k
+        nxt = _nearest_spike(source, int(k) + 1, True, slice(None), look)  # first spike after k
         tau[m] = nxt - prev
         censored[m] = (prev < 0) | (nxt >= n_total)
     shape = (ticks.size, source.height, source.width)
@@ -296,8 +277,7 @@ def interval_frames(source: SpikeSource, block_ticks: int = 1024,
         _next_after_block(buffer, last - first, ahead, buffer_end, next_after)
         far = np.flatnonzero(next_after < 0)
         if far.size:  # next spike beyond the buffer: search on (or the stream ends)
-            found = np.empty(pixels, dtype=np.int64)
-            _search_forward(source, buffer_end, far, found, max(look, block_ticks))
+            found = _nearest_spike(source, buffer_end, True, far, max(look, block_ticks))
             next_after[far] = found[far]
             ahead[far] = found[far]
         out = np.empty((last - first, pixels), dtype=np.int64)

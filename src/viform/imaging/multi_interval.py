@@ -62,7 +62,7 @@ import numpy as np
 from numba import njit, prange
 
 from viform._validate import ViformError, check_int, check_positive
-from viform.imaging.interval import _chunk_limit, _collect_spikes
+from viform.imaging.interval import _search_spikes
 from viform.imaging.units import LightImage, light_from_rate
 from viform.stream.container import SpikeSource, spike_bytes
 
@@ -92,21 +92,13 @@ def spike_ticks_around(source: SpikeSource, tick: int, before: int, after: int,
     n_total = source.n_ticks
     pixels = source.height * source.width
     look = FIRST_CHUNK_TICKS if lookahead_ticks is None else check_int("lookahead_ticks", lookahead_ticks, 1)
-    limit = _chunk_limit(pixels)
     prev = np.full((before, pixels), -1, dtype=np.int64)
     nxt = np.full((after, pixels), n_total, dtype=np.int64)
     for found, wanted, forward in ((prev, before, False), (nxt, after, True)):
         count = np.zeros(pixels, dtype=np.int64)
         todo = np.zeros(pixels, dtype=np.bool_)
         todo[slice(None) if pixels_wanted is None else np.asarray(pixels_wanted, dtype=np.int64)] = True
-        pos = tick + 1
-        chunk = min(look, limit)
-        while (pos < n_total if forward else pos > 0) and todo.any():
-            a, b = (pos, min(n_total, pos + chunk)) if forward else (max(0, pos - chunk), pos)
-            _collect_spikes(spike_bytes(source.read_ticks(a, b).reshape(b - a, pixels)), a, not forward, todo, found,
-                           count, wanted)
-            pos = b if forward else a
-            chunk = min(2 * chunk, limit)
+        _search_spikes(source, tick + 1, forward, todo, found, count, wanted, look)
     return prev, nxt
 
 
