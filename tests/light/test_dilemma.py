@@ -114,3 +114,32 @@ def test_every_dark_strip_is_labelled_and_the_small_object_is_pointed_at(t_s):
     assert len(obj) == 4  # its label stands apart, with an arrow to it
     assert truth[int(round(obj[1])), int(round(obj[0]) % scene.width)] > 1.5 * truth[int(round(obj[1])), 0]
     assert abs(obj[3] - obj[1]) >= 0.05 * scene.height  # the text is off the object's row
+
+
+@pytest.mark.parametrize("speed", [1.0, 0.0, 3.0])
+@pytest.mark.parametrize("shape", [(64, 96), (33, 50)])
+def test_rolling_rows_drawn_alone_equal_the_frames_rows(shape, speed):
+    """A rolling shutter's rows (each its own window), drawn one row at a time, equal row r of the
+    whole frame's mean over that row's window, bit for bit: short windows (8 samples), long ones (the
+    cached grid), a zero exposure, row offsets from 0 to past the exposure; and a scene whose light a
+    subclass changed takes the frame's path."""
+    from viform.light.scenes import Scene
+
+    rng = np.random.default_rng(5)
+    for exposure_s in (0.0, 2e-5, 1e-4, 5e-3):
+        for row_offset_s in (0.0, 1e-6, 1.3e-4):
+            scene = DilemmaScene(*shape, speed=speed)
+            t0 = float(rng.uniform(0, 0.04))
+            framed = Scene.rolling_mean_illuminance_lux(scene, t0, exposure_s, row_offset_s)
+            assert np.array_equal(scene.rolling_mean_illuminance_lux(t0, exposure_s, row_offset_s), framed)
+
+    class Brighter(DilemmaScene):
+        def illuminance_lux(self, t_s):
+            return 2 * super().illuminance_lux(t_s)
+
+        def mean_illuminance_lux(self, t0_s, t1_s, samples=None):
+            return 2 * super().mean_illuminance_lux(t0_s, t1_s, samples)
+
+    brighter = Brighter(*shape, speed=speed)
+    assert np.array_equal(brighter.rolling_mean_illuminance_lux(0.01, 1e-4, 1e-6),
+                          2 * DilemmaScene(*shape, speed=speed).rolling_mean_illuminance_lux(0.01, 1e-4, 1e-6))

@@ -167,24 +167,32 @@ class DilemmaScene(Scene):
         phase = (t_s * self.led_frequency_hz) % 1.0
         return phase < self.led_duty
 
-    def _moving(self, t_s: float, lux: np.ndarray) -> np.ndarray:
+    def _moving(self, t_s: float, lux: np.ndarray, r0: int = 0) -> np.ndarray:
+        """Draw the moving parts at ``t_s`` over ``lux``, which holds rows ``r0`` … ``r0`` + len(lux) − 1
+        of the frame (all of it by default): each pixel the same value whatever rows are drawn."""
+        r1 = r0 + lux.shape[0]
         # Vehicle (opaque box; its front edge is the sharp step the blur metric uses).
         front = self.vehicle_front_px(t_s)
         v0, v1 = self.vehicle_rows
         cols = (self._x[0] <= front) & (self._x[0] > front - self.vehicle_length_px)
-        lux[v0:v1, cols] = self.vehicle_lux
-        # Propeller blades: |angle to nearest blade| < 14°.
-        phase = self._disc_theta - self.prop_omega_rad_per_s * t_s
-        blade = self._disc_index[np.cos(3.0 * phase) > math.cos(3.0 * math.radians(14.0))]
-        lux.ravel()[blade] = self.prop_lux
+        a, b = max(v0, r0), min(v1, r1)
+        if a < b:
+            lux[a - r0:b - r0, cols] = self.vehicle_lux
+        # Propeller blades: |angle to nearest blade| < 14° (the disc's pixels in these rows).
+        lo, hi = np.searchsorted(self._disc_index, [r0 * self.width, r1 * self.width])
+        phase = self._disc_theta[lo:hi] - self.prop_omega_rad_per_s * t_s
+        blade = self._disc_index[lo:hi][np.cos(3.0 * phase) > math.cos(3.0 * math.radians(14.0))]
+        lux.ravel()[blade - r0 * self.width] = self.prop_lux
         # Small dim object: an additive Gaussian blob (evaluated within 5 σ, where it is > 4e-6).
         ox = (self.object_x0_px + self.object_speed_px_per_s * t_s) % self.width
         reach = 5 * self.object_sigma_px
         c0, c1 = max(0, int(ox - reach)), min(self.width, int(ox + reach) + 2)
         y0, y1 = max(0, int(self.object_row_px - reach)), min(self.height, int(self.object_row_px + reach) + 2)
-        lux[y0:y1, c0:c1] += self.object_lux * np.exp(
-            -((self._x[y0:y1, c0:c1] - ox) ** 2 + (self._y[y0:y1, c0:c1] - self.object_row_px) ** 2)
-            / (2 * self.object_sigma_px ** 2))
+        a, b = max(y0, r0), min(y1, r1)
+        if a < b:
+            lux[a - r0:b - r0, c0:c1] += self.object_lux * np.exp(
+                -((self._x[a:b, c0:c1] - ox) ** 2 + (self._y[a:b, c0:c1] - self.object_row_px) ** 2)
+                / (2 * self.object_sigma_px ** 2))
         return lux
 
     def illuminance_lux(self, t_s: float) -> np.ndarray:
@@ -252,29 +260,44 @@ class DilemmaScene(Scene):
     def mean_illuminance_lux(self, t0_s: float, t1_s: float, samples: int | None = None) -> np.ndarray:
         """Mean light over [t0_s, t1_s]: moving parts by the midpoint rule with samples every ≤ 0.5 px
         of motion (so blur is resolved), the PWM LED exactly (its on-time in the window)."""
+        return self._window_mean(t0_s, t1_s, 0, self.height)
+
+    def rolling_mean_illuminance_lux(self, t0_s: float, exposure_s: float, row_offset_s: float) -> np.ndarray:
+        """As :meth:`Scene.rolling_mean_illuminance_lux <viform.light.scenes.Scene.rolling_mean_illuminance_lux>`,
+        drawing each row's window in that row only: the same values as row r of :meth:`mean_illuminance_lux`."""
+        if type(self).mean_illuminance_lux is not DilemmaScene.mean_illuminance_lux \
+                or not self._own_light(DilemmaScene):
+            return super().rolling_mean_illuminance_lux(t0_s, exposure_s, row_offset_s)
+        out = np.empty(self.shape)
+        for r in range(self.height):
+            start = t0_s + r * row_offset_s
+            out[r] = self._window_mean(start, start + exposure_s, r, r + 1)[0]
+        return out
+
+    def _window_mean(self, t0_s: float, t1_s: float, r0: int, r1: int) -> np.ndarray:
+        """Rows ``r0`` … ``r1`` − 1 of :meth:`mean_illuminance_lux`."""
         if not t1_s >= t0_s:
             raise ViformError(f"window end t1_s={t1_s!r} must be ≥ start t0_s={t0_s!r}")
         if t1_s == t0_s:
-            return self.illuminance_lux(t0_s)
+            return self.illuminance_lux(t0_s)[r0:r1]
         speed = self.max_speed_px_per_s()
         step = 0.5 / speed if speed > 0 else (t1_s - t0_s)
+        acc = np.zeros((r1 - r0, self.width))
         if (t1_s - t0_s) < 8 * step:
             n = 8
-            acc = np.zeros(self.shape)
             for k in range(n):
-                acc += self._moving(t0_s + (k + 0.5) * (t1_s - t0_s) / n, self._background.copy())
+                acc += self._moving(t0_s + (k + 0.5) * (t1_s - t0_s) / n, self._background[r0:r1].copy(), r0)
             acc /= n
         else:
             # Samples on one global time grid (every 0.5 px of the fastest motion), cached, so
             # overlapping windows (rolling rows, segments) share the work.
             k0, k1 = math.ceil(t0_s / step - 0.5), math.floor(t1_s / step - 0.5)
-            acc = np.zeros(self.shape)
             for k in range(k0, k1 + 1):
-                acc += self._grid_frame(k, step)
+                acc += self._grid_frame(k, step)[r0:r1]
             acc /= k1 - k0 + 1
         on = (pwm_on_time_s(t1_s, self.led_frequency_hz, self.led_duty)
               - pwm_on_time_s(t0_s, self.led_frequency_hz, self.led_duty)) / (t1_s - t0_s)
-        acc[self.led] = self.led_off_lux + (self.led_on_lux - self.led_off_lux) * on
+        acc[self.led[r0:r1]] = self.led_off_lux + (self.led_on_lux - self.led_off_lux) * on
         return acc
 
     def _grid_frame(self, k: int, step: float) -> np.ndarray:

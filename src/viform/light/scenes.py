@@ -88,6 +88,19 @@ class Scene(ABC):
             acc += self.illuminance_lux(float(t))
         return acc / samples
 
+    def rolling_mean_illuminance_lux(self, t0_s: float, exposure_s: float, row_offset_s: float) -> np.ndarray:
+        """Mean light of each row over its own window, as a rolling shutter exposes it (lux, (H, W)):
+        row r over [t0_s + r·row_offset_s, t0_s + r·row_offset_s + exposure_s].
+
+        Row r of :meth:`mean_illuminance_lux` over that window; scenes that can draw one row
+        alone override this with the same values.
+        """
+        rows = []
+        for r in range(self.height):
+            start = t0_s + r * row_offset_s
+            rows.append(self.mean_illuminance_lux(start, start + exposure_s)[r])
+        return np.stack(rows)
+
     def compiled_light(self):
         """A :class:`~viform.light.compiled.CompiledLight` the simulator evaluates in compiled
         code, or None (the default: the simulator calls :meth:`illuminance_lux_many`).

@@ -558,11 +558,7 @@ class OverflowSensor(FrameSensor):
     def _window_lux(scene: Scene, t0: float, t: float, row_offset_s: float, static: bool):
         if static:
             return scene.mean_illuminance_lux(t0, t0 + t)
-        rows = [
-            scene.mean_illuminance_lux(t0 + r * row_offset_s, t0 + r * row_offset_s + t)[r]
-            for r in range(scene.height)
-        ]
-        return np.stack(rows)
+        return scene.rolling_mean_illuminance_lux(t0, t, row_offset_s)
 
     # ------------------------------------------------------------------ reset noise
     @property
