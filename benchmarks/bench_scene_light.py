@@ -26,6 +26,12 @@ Each row also prints the largest relative difference between the light the simul
 scene's NumPy reference at a few instants (an independent computation: the goal is ≤ 1e-6), and
 peak NumPy memory of the end-to-end run (tracemalloc). Load average before and after.
 Run: ``python benchmarks/bench_scene_light.py [--ticks 2000] [--reference-ticks 200]``.
+
+``--rolling``: a rolling shutter's exposure instead (each row over its own window, what the seed 003
+overflow pixel integrates): ``rolling_mean_illuminance_lux`` of every scene above and of the packaged
+scene descriptions, against the plain way in the same process — row r of the whole frame's mean over
+row r's window, for ``--rolling-reference-rows`` rows spread over the field (its cost per row times the
+height; those rows are checked equal to the bit). CPU-s per exposure, the ratio, peak NumPy memory.
 """
 
 from __future__ import annotations
@@ -124,6 +130,49 @@ def light_error(scene, times) -> float:
     return worst
 
 
+def rolling(scenes: str, reference_rows: int, t0_s: float = 0.004, exposure_s: float = 1e-3,
+            row_offset_s: float = 1.3e-4) -> list:
+    """``--rolling``: each scene's rolling exposure against the plain way (see the module notes)."""
+    from pathlib import Path
+
+    import viform.light as light_package
+    from viform.light.catalog import described_scene
+
+    def plain(scene, rows):  # row r of the whole frame's mean over row r's window
+        return np.stack([scene.mean_illuminance_lux(t0_s + r * row_offset_s, t0_s + r * row_offset_s + exposure_s)[r]
+                         for r in rows])
+
+    entries = []
+    for name in scenes.split(","):
+        if name == "four-images":
+            entries.append((name, DescribedScene(load_description(four_images_description()))))
+        else:
+            entries.append((name, builtin_scene(name, HEIGHT, WIDTH)))
+    for path in sorted((Path(light_package.__file__).parent / "descriptions").glob("*.yaml")):
+        entries.append((path.name, described_scene(str(path), HEIGHT, WIDTH)))
+    print(f"rolling exposure, {HEIGHT}x{WIDTH} px: rows over [{t0_s:g} s + r·{row_offset_s:g} s, + {exposure_s:g} s]; "
+          f"the plain way timed on {reference_rows} rows and scaled to {HEIGHT}; load average {load()}")
+    print(f"{'scene':>20} {'viform CPU-s':>13} {'plain CPU-s':>12} {'ratio':>7} {'peak MB':>8}  same bits")
+    rows_out = []
+    rows = np.linspace(0, HEIGHT - 1, min(reference_rows, HEIGHT)).round().astype(int)
+    for name, scene in entries:
+        scene.rolling_mean_illuminance_lux(t0_s, exposure_s, row_offset_s)  # compile, and one-off set-up
+        tracemalloc.start()
+        got = scene.rolling_mean_illuminance_lux(t0_s, exposure_s, row_offset_s)
+        peak = tracemalloc.get_traced_memory()[1] / 1e6
+        tracemalloc.stop()
+        fast = best(lambda s=scene: s.rolling_mean_illuminance_lux(t0_s, exposure_s, row_offset_s), 2)
+        start = time.process_time()
+        want = plain(scene, rows)
+        slow = (time.process_time() - start) * HEIGHT / rows.size
+        same = bool(np.array_equal(got[rows], want))
+        rows_out.append({"scene": name, "cpu_s": fast, "plain_cpu_s": slow, "same": same, "peak_mb": peak})
+        print(f"{name:>20} {fast:>13.3f} {slow:>12.3f} {slow / fast:>7.1f} {peak:>8.1f}  {'yes' if same else 'NO'}",
+              flush=True)
+    print(f"load average after: {load()}")
+    return rows_out
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ticks", type=int, default=2000, help="ticks simulated end to end")
@@ -134,7 +183,13 @@ def main(argv=None):
     parser.add_argument("--noise-free", action="store_true",
                         help="simulate without photon noise (the reference's model): the light's cost alone, "
                              "without the exact model's Gamma draw per crossing")
+    parser.add_argument("--rolling", action="store_true",
+                        help="a rolling shutter's exposure per scene against the plain way, instead")
+    parser.add_argument("--rolling-reference-rows", type=int, default=25,
+                        help="rows the plain way is timed and checked on (--rolling)")
     args = parser.parse_args(argv)
+    if args.rolling:
+        return rolling(args.scenes, args.rolling_reference_rows)
     sensor = SpikeSensor(threshold_electrons=Q, clock_hz=CLOCK_HZ, photon_noise=not args.noise_free)
     pixels = HEIGHT * WIDTH
     model = "noise-free" if args.noise_free else "exact"

@@ -107,3 +107,48 @@ def test_sampled_driver_gives_the_numpy_path_bits(tmp_path, sample_ticks):
                                                                compiled_light=False)])
     assert 0.01 < fast.mean() < 0.9
     assert np.array_equal(fast, numpy_path)
+
+
+def _rows_of_window_means(scene, t0_s, exposure_s, row_offset_s):
+    """Row r of the whole field's mean over row r's own window: what a rolling shutter's rows are."""
+    return np.stack([scene.mean_illuminance_lux(t0_s + r * row_offset_s, t0_s + r * row_offset_s + exposure_s)[r]
+                     for r in range(scene.height)])
+
+
+def test_rolling_rows_rendered_each_at_its_instant_are_the_fields_rows(tmp_path):
+    """A rolling shutter's rows, every row rendered once per sample at its own instant, equal row r of the
+    whole field's mean over row r's window, bit for bit, on every path of the renderer (moving, growing,
+    rotating and flickering layers): zero, short and long exposures, row offsets from 0 to past the exposure,
+    one and two threads."""
+    from numba import get_num_threads, set_num_threads
+
+    scene = _scene(tmp_path)
+    rng = np.random.default_rng(11)
+    threads = get_num_threads()
+    try:
+        for n_threads in sorted({1, threads}):
+            set_num_threads(n_threads)
+            for exposure_s in (0.0, 3e-5, 1e-3, 8e-3):
+                for row_offset_s in (0.0, 1e-6, 1.7e-4):
+                    t0 = float(rng.uniform(0.0, 0.02))
+                    rows = scene.rolling_mean_illuminance_lux(t0, exposure_s, row_offset_s)
+                    assert np.array_equal(rows, _rows_of_window_means(scene, t0, exposure_s, row_offset_s))
+    finally:
+        set_num_threads(threads)
+    times = np.linspace(0.001, 0.004, HEIGHT)
+    assert np.array_equal(scene.illuminance_lux_row_times(times),
+                          np.stack([scene.illuminance_lux(t)[r] for r, t in enumerate(times)]))
+
+
+def test_rolling_rows_of_a_described_scene_whose_light_a_subclass_changed(tmp_path):
+    """A subclass that changes the light gets the frame-by-frame rows (its own light), not the renderer's."""
+    base = _scene(tmp_path)
+
+    class Brighter(DescribedScene):
+        def illuminance_lux(self, t_s):
+            return 2.0 * super().illuminance_lux(t_s)
+
+    brighter = Brighter(base.description)
+    rows = brighter.rolling_mean_illuminance_lux(0.003, 1e-3, 1e-4)
+    assert np.array_equal(rows, _rows_of_window_means(brighter, 0.003, 1e-3, 1e-4))
+    assert np.allclose(rows, 2.0 * base.rolling_mean_illuminance_lux(0.003, 1e-3, 1e-4), rtol=1e-12)

@@ -165,3 +165,52 @@ def test_scenes_that_change_their_light_fall_back_to_numpy():
     assert Brighter(np.ones((2, 2))).compiled_light() is None
     assert Wobbly(4, 4).compiled_light() is None
     assert StillScene(np.ones((2, 2))).compiled_light() is not None
+
+
+def _rows_of_window_means(scene, t0_s, exposure_s, row_offset_s):
+    """Row r of the whole frame's mean over row r's own window: what a rolling shutter's rows are."""
+    return np.stack([scene.mean_illuminance_lux(t0_s + r * row_offset_s, t0_s + r * row_offset_s + exposure_s)[r]
+                     for r in range(scene.height)])
+
+
+@pytest.mark.parametrize("shape", [(33, 50), (7, 129)])
+@pytest.mark.parametrize("make", [
+    lambda h, w: TranslatingScene(h, w, velocity_px_per_s=(2300.0, -700.0)),
+    lambda h, w: TranslatingScene(h, w, pattern="edge"),
+    lambda h, w: TranslatingScene(h, w, pattern="bars", velocity_px_per_s=(0.0, 900.0), origin_px=(3.3, 1.1)),
+    lambda h, w: RotatingScene(h, w, angular_speed_rad_per_s=-70.0),
+], ids=["texture", "edge", "bars", "rotating"])
+def test_rolling_rows_drawn_at_once_equal_each_rows_window_mean(make, shape):
+    """A rolling shutter's rows, each sample drawn for every row at once at the row's own instant, equal row r
+    of the whole frame's mean over row r's window, bit for bit: zero, short and long exposures, row offsets
+    from 0 to past the exposure, windows starting anywhere."""
+    scene = make(*shape)
+    rng = np.random.default_rng(3)
+    for exposure_s in (0.0, 2e-5, 1e-4, 5e-3):
+        for row_offset_s in (0.0, 1e-6, 1.3e-4):
+            t0 = float(rng.uniform(0.0, 0.04))
+            rows = scene.rolling_mean_illuminance_lux(t0, exposure_s, row_offset_s)
+            assert np.array_equal(rows, _rows_of_window_means(scene, t0, exposure_s, row_offset_s))
+    times = rng.uniform(0.0, 0.04, shape[0])
+    assert np.array_equal(scene.illuminance_lux_row_times(times),
+                          np.stack([scene.illuminance_lux(float(t))[r] for r, t in enumerate(times)]))
+
+
+def test_rolling_rows_of_a_scene_whose_light_a_subclass_changed_and_bad_windows():
+    """A subclass that changes the light gets its own light's rows (drawn frame by frame); a window that ends
+    before it starts is refused, naming it; a row-times array of the wrong length is refused."""
+    class Brighter(TranslatingScene):
+        def illuminance_lux(self, t_s):
+            return 2.0 * super().illuminance_lux(t_s)
+
+    brighter = Brighter(21, 30)
+    rows = brighter.rolling_mean_illuminance_lux(0.004, 3e-4, 2e-5)
+    assert np.array_equal(rows, _rows_of_window_means(brighter, 0.004, 3e-4, 2e-5))
+    assert np.allclose(rows, 2.0 * TranslatingScene(21, 30).rolling_mean_illuminance_lux(0.004, 3e-4, 2e-5),
+                       rtol=1e-12)
+    for exposure_s in (-1e-4, float("nan")):
+        with pytest.raises(ViformError, match="window end t1_s="):
+            TranslatingScene(8, 8).rolling_mean_illuminance_lux(0.001, exposure_s, 1e-5)
+    for scene in (TranslatingScene(8, 8), Brighter(8, 8)):
+        with pytest.raises(ViformError, match="8 are needed, one per row"):
+            scene.illuminance_lux_row_times(np.zeros(7))

@@ -842,6 +842,14 @@ class DescribedScene(Scene):
     def illuminance_lux_many(self, times_s) -> np.ndarray:
         return self.sampler().frames(np.asarray(times_s, dtype=np.float64).ravel())
 
+    def illuminance_lux_row_times(self, times_s) -> np.ndarray:
+        """Row r of :meth:`illuminance_lux` at ``times_s[r]``, every row rendered once at its own instant (a
+        rolling shutter's rows: :meth:`~viform.light.scenes.Scene.rolling_mean_illuminance_lux`)."""
+        times = np.asarray(times_s, dtype=np.float64).ravel()
+        if type(self).illuminance_lux is not DescribedScene.illuminance_lux or times.size != self.height:
+            return super().illuminance_lux_row_times(times)
+        return self.sampler().row_frames(times)
+
     def sampler(self):
         """The :class:`~viform.light.layered_render.LayeredSampler` that renders this scene (made once)."""
         if getattr(self, "_sampler", None) is None:

@@ -440,6 +440,18 @@ def _render_serial(samp, bbox, ints, fp, qx, qy, store, base, first, active, wid
                     c1s, offs, a, b, lux_out, rates_out, want_rates)
 
 
+@njit(cache=True, parallel=True)
+def _render_rows(samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s, c1s, offs, a, b,
+                 lux_out, rates_out, per):
+    """Row ``rows[i]`` (span i) at sample i only, into ``lux_out[i]``: each row of the field at its own instant
+    (the spans' offsets are 0). Work items: ``per`` rows."""
+    n = rows.size
+    for job in prange((n + per - 1) // per):
+        for i in range(job * per, min(n, job * per + per)):
+            _render_job(i, i, i + 1, samp, bbox, ints, fp, qx, qy, store, base, first, active, width, rows, c0s,
+                        c1s, offs, a, b, lux_out, rates_out, False)
+
+
 #: Pixel-samples below which a render runs on one thread (waking the others costs more).
 PARALLEL_WORK = 1 << 15
 
@@ -607,6 +619,22 @@ class LayeredSampler(LightSampler):
         base, _ = self._static_parts()
         times = np.ascontiguousarray(times_s, dtype=np.float64).ravel()
         self._run(times, starts, stops, a, b, out, self.first, base, self._active)
+
+    def row_frames(self, times_s) -> np.ndarray:
+        """The light with row r at instant ``times_s[r]`` (H, W), lux: row r of :meth:`frames` at that instant."""
+        times = np.ascontiguousarray(times_s, dtype=np.float64).ravel()
+        if times.size != self.height:
+            raise ValueError(f"{times.size} instants for {self.height} rows")
+        base, _ = self._static_parts()
+        samp, qx, qy, bbox = self._prepared(times)
+        rows = np.arange(self.height, dtype=np.int64)
+        zeros = np.zeros(self.height, np.int64)
+        out = np.empty((self.height, self.width))
+        one = np.ones(self.width)
+        _render_rows(samp, bbox, self.ints, self.fp, qx, qy, self.store, base, self.first, self._active, self.width,
+                     rows, zeros, np.full(self.height, self.width, np.int64), zeros, one, one, out,
+                     np.zeros((1, 1), np.int64), max(1, self.height // (4 * get_num_threads())))
+        return out
 
     def rates_static(self, a, b) -> np.ndarray:
         """The static light's charge per tick, rint(a·lux + b), for every pixel."""

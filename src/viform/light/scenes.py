@@ -92,14 +92,51 @@ class Scene(ABC):
         """Mean light of each row over its own window, as a rolling shutter exposes it (lux, (H, W)):
         row r over [t0_s + r·row_offset_s, t0_s + r·row_offset_s + exposure_s].
 
-        Row r of :meth:`mean_illuminance_lux` over that window; scenes that can draw one row
-        alone override this with the same values.
+        Row r of :meth:`mean_illuminance_lux` over that window. With the default midpoint rule each
+        sample is drawn for every row at once, each row at its own instant
+        (:meth:`illuminance_lux_row_times`); scenes with their own mean (or a faster way to draw a
+        row's window) give the rows one by one, or override this with the same values.
         """
-        rows = []
-        for r in range(self.height):
-            start = t0_s + r * row_offset_s
-            rows.append(self.mean_illuminance_lux(start, start + exposure_s)[r])
-        return np.stack(rows)
+        if type(self).mean_illuminance_lux is not Scene.mean_illuminance_lux:
+            out = np.empty(self.shape)  # (row by row: one frame held at a time)
+            for r in range(self.height):
+                start = t0_s + r * row_offset_s
+                out[r] = self.mean_illuminance_lux(start, start + exposure_s)[r]
+            return out
+        # the midpoint rule of mean_illuminance_lux, row by row: the same instants, sums and order
+        samples = 32
+        start = t0_s + np.arange(self.height) * row_offset_s
+        end = start + exposure_s
+        bad = np.flatnonzero(~(end >= start))
+        if bad.size:
+            r = int(bad[0])
+            raise ViformError(f"window end t1_s={float(end[r])!r} must be ≥ start t0_s={float(start[r])!r}")
+        acc = np.zeros(self.shape)
+        for k in range(samples):
+            acc += self.illuminance_lux_row_times(start + (k + 0.5) * (end - start) / samples)
+        out = acc / samples
+        still = end == start  # a window of no length: the light at its instant
+        if still.any():
+            out[still] = self.illuminance_lux_row_times(start)[still]
+        return out
+
+    def illuminance_lux_row_times(self, times_s) -> np.ndarray:
+        """The light with each row at its own instant (lux, (H, W)): row r of
+        :meth:`illuminance_lux` at ``times_s[r]``.
+
+        The default draws a frame per distinct instant; scenes whose light is a function of the
+        pixel and the instant (the pattern and described scenes) draw every row at once, with the
+        same values.
+        """
+        times = np.asarray(times_s, dtype=np.float64).ravel()
+        if times.size != self.height:
+            raise ViformError(f"times_s has {times.size} instants; {self.height} are needed, one per row")
+        out = np.empty(self.shape)
+        distinct, which = np.unique(times, return_inverse=True)
+        for k, t in enumerate(distinct):
+            rows = which == k
+            out[rows] = self.illuminance_lux(float(t))[rows]
+        return out
 
     def compiled_light(self):
         """A :class:`~viform.light.compiled.CompiledLight` the simulator evaluates in compiled
@@ -405,6 +442,13 @@ class _PatternScene(Scene):
         value = PATTERNS[self.pattern](u, v, self.period_px)
         return self.min_lux + (self.max_lux - self.min_lux) * value
 
+    def _row_times(self, times_s) -> np.ndarray:
+        """One instant per row, (H, 1) (for :meth:`illuminance_lux_row_times`)."""
+        t = np.asarray(times_s, dtype=np.float64).ravel()
+        if t.size != self.height:
+            raise ViformError(f"times_s has {t.size} instants; {self.height} are needed, one per row")
+        return t[:, None]
+
     @abstractmethod
     def _motion(self) -> tuple:
         """The pattern's motion for the compiled kernel; each moving subclass (translating, rotating) defines it."""
@@ -478,6 +522,13 @@ class TranslatingScene(_PatternScene):
         vx, vy = self.velocity_px_per_s
         return self._lux(self._x - self.origin_px[0] - vx * t_s, self._y - self.origin_px[1] - vy * t_s)
 
+    def illuminance_lux_row_times(self, times_s) -> np.ndarray:
+        if not self._own_light(TranslatingScene):
+            return super().illuminance_lux_row_times(times_s)
+        t = self._row_times(times_s)
+        vx, vy = self.velocity_px_per_s  # (illuminance_lux's arithmetic, each row at its instant)
+        return self._lux(self._x - self.origin_px[0] - vx * t, self._y - self.origin_px[1] - vy * t)
+
     def _motion(self) -> tuple:
         return ("translate", *self.origin_px, *self.velocity_px_per_s)
 
@@ -510,6 +561,16 @@ class RotatingScene(_PatternScene):
         u = math.cos(a) * dx - math.sin(a) * dy
         v = math.sin(a) * dx + math.cos(a) * dy
         return self._lux(u, v)
+
+    def illuminance_lux_row_times(self, times_s) -> np.ndarray:
+        if not self._own_light(RotatingScene):
+            return super().illuminance_lux_row_times(times_s)
+        # illuminance_lux's arithmetic, each row at its instant (its cosine and sine from math, as there)
+        a = [-self.angular_speed_rad_per_s * float(t) for t in self._row_times(times_s)[:, 0]]
+        cos = np.array([math.cos(x) for x in a])[:, None]
+        sin = np.array([math.sin(x) for x in a])[:, None]
+        dx, dy = self._x - self._cx, self._y - self._cy
+        return self._lux(cos * dx - sin * dy, sin * dx + cos * dy)
 
     def _motion(self) -> tuple:
         return ("rotate", self._cx, self._cy, self.angular_speed_rad_per_s)
