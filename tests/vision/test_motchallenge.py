@@ -99,3 +99,31 @@ def test_bad_input(tmp_path):
         mot.read_gt(tmp_path / "bad.txt")
     with pytest.raises(ViformError, match="step_ticks"):
         mot.step_times_s(3, 0, 40_000.0)
+
+
+def test_class_ids_by_first_appearance_and_one_objects_call_per_instant():
+    """Without class ids, gt_rows numbers the classes as class_ids_of does (by first appearance, objects in id
+    order), from the same objects it writes: one objects() call per instant, not two."""
+    from viform.light.truth import ObjectTruth
+
+    class Appearing(StillScene):
+        calls = 0
+
+        def truth_kinds(self):
+            return ("objects",)
+
+        def objects(self, t_s):
+            Appearing.calls += 1
+            found = [ObjectTruth(5, "vehicle", 1.0, 1.0, 3.0, 2.0, 1.0, (0.0, 0.0))]
+            if t_s > 0.002:  # a lower id with a new class appears later: ids follow appearance, not object ids
+                found.append(ObjectTruth(2, "person", 4.0, 4.0, 2.0, 2.0, 0.5, (0.0, 0.0)))
+            return found[::-1]
+
+    scene = Appearing(np.ones((16, 16)))
+    times = [0.001, 0.002, 0.003]
+    assert mot.class_ids_of(scene, times) == {"vehicle": 1, "person": 2}
+    Appearing.calls = 0
+    rows = mot.gt_rows(scene, times)
+    assert Appearing.calls == len(times)
+    assert np.array_equal(rows, mot.gt_rows(scene, times, mot.class_ids_of(scene, times)))
+    assert rows[:, 7].tolist() == [1, 1, 2, 1]  # frame 3: the person (object 2) first, then the vehicle

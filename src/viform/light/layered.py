@@ -407,36 +407,19 @@ def is_convex(px, py) -> bool:
 
 
 def clip_convex(subject, clip):
-    """Sutherland–Hodgman: the part of polygon ``subject`` (x, y arrays) inside the convex ``clip``."""
-    sx, sy = list(subject[0]), list(subject[1])
+    """Sutherland–Hodgman: the part of polygon ``subject`` (x, y arrays) inside the convex ``clip``.
+
+    Per edge (a → b) of the clip, counter-clockwise, each vertex q of the polygon so far, with p the one
+    before it, on the side s(v) = (b − a) × (v − a): where s(p) and s(q) differ in sign (s ≥ 0 is inside),
+    the crossing p + w·(q − p), w = s(p) / (s(p) − s(q)); then q where s(q) ≥ 0. Compiled
+    (:func:`viform.light._polygon.clip_convex_ccw`).
+    """
+    from viform.light._polygon import clip_convex_ccw
+
     cx, cy = _ccw(np.asarray(clip[0]), np.asarray(clip[1]))
-    n = len(cx)
-    for k in range(n):
-        ax, ay, bx, by = cx[k], cy[k], cx[(k + 1) % n], cy[(k + 1) % n]
-        if not sx:
-            break
-
-        def side(x, y, ax=ax, ay=ay, bx=bx, by=by):
-            return (bx - ax) * (y - ay) - (by - ay) * (x - ax)
-
-        ox, oy = [], []
-        m = len(sx)
-        for i in range(m):
-            px_, py_, qx, qy = sx[i - 1], sy[i - 1], sx[i], sy[i]
-            sp, sq = side(px_, py_), side(qx, qy)
-            if sq >= 0:
-                if sp < 0:
-                    w = sp / (sp - sq)
-                    ox.append(px_ + w * (qx - px_))
-                    oy.append(py_ + w * (qy - py_))
-                ox.append(qx)
-                oy.append(qy)
-            elif sp >= 0:
-                w = sp / (sp - sq)
-                ox.append(px_ + w * (qx - px_))
-                oy.append(py_ + w * (qy - py_))
-        sx, sy = ox, oy
-    return np.asarray(sx, dtype=np.float64), np.asarray(sy, dtype=np.float64)
+    return clip_convex_ccw(np.ascontiguousarray(subject[0], dtype=np.float64),
+                           np.ascontiguousarray(subject[1], dtype=np.float64),
+                           np.ascontiguousarray(cx, dtype=np.float64), np.ascontiguousarray(cy, dtype=np.float64))
 
 
 def _area_or_zero(poly) -> float:
@@ -1069,6 +1052,10 @@ class DescribedScene(Scene):
             out[layer.index] = area
         return out
 
+    @cached_property
+    def _outline_centroid_local(self) -> dict:
+        return {layer.index: polygon_centroid(*layer.polygon) for layer in self.layers if layer.polygon is not None}
+
     def objects(self, t_s: float) -> list[ObjectTruth]:
         """Every layer with an object: the tight box of its projected outline, its velocity (its outline's
         centroid, differentiated in time) and its visible fraction — exact for convex outlines hidden by
@@ -1078,11 +1065,23 @@ class DescribedScene(Scene):
         maps = {layer.index: self.layer_map(layer, t) for layer in self.layers}
         field = (np.array([0.0, self.width, self.width, 0.0]), np.array([0.0, 0.0, self.height, self.height]))
         grid = None
+        outlines, convex = {}, {}  # each layer's projected outline, and whether it is convex: once per instant
+
+        def outline(o):
+            if o.index not in outlines:
+                outlines[o.index] = apply(maps[o.index], *o.polygon)
+            return outlines[o.index]
+
+        def is_convex_here(o):
+            if o.index not in convex:
+                convex[o.index] = o.mask is None and is_convex(*outline(o))
+            return convex[o.index]
+
         for layer in self.layers:
             if not layer.object or layer.polygon is None:
                 continue
             a = maps[layer.index]
-            x, y = apply(a, *layer.polygon)
+            x, y = outline(layer)
             if x.max() <= 0 or y.max() <= 0 or x.min() >= self.width or y.min() >= self.height:
                 continue
             area = self._outline_area_local[layer.index] * abs(np.linalg.det(a[:, :2]))
@@ -1090,15 +1089,14 @@ class DescribedScene(Scene):
                       and self.rank[o.index] < self.rank[layer.index]]
             if nearer and any(o.full_field for o in nearer):
                 visible_area = 0.0
-            elif layer.mask is None and is_convex(x, y) and all(
-                    o.mask is None and is_convex(*apply(maps[o.index], *o.polygon)) for o in nearer):
-                visible_area = visible_area_exact((x, y), [apply(maps[o.index], *o.polygon) for o in nearer], field)
+            elif is_convex_here(layer) and all(is_convex_here(o) for o in nearer):
+                visible_area = visible_area_exact((x, y), [outline(o) for o in nearer], field)
             else:
                 if grid is None:
                     grid = self._visible_on_grid(t)
                 visible_area = grid.get(layer.index, 0.0)
             visible = min(1.0, max(0.0, visible_area / area)) if area > 0 else 0.0
-            cx, cy = polygon_centroid(*layer.polygon)
+            cx, cy = self._outline_centroid_local[layer.index]
             h = 1e-7
             x1, y1 = apply(self.layer_map(layer, t + h), cx, cy)
             x0, y0 = apply(self.layer_map(layer, t - h), cx, cy)

@@ -97,11 +97,16 @@ def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, detectab
         of the whole object; ``detectability`` −1 where unknown. Sorted by frame, id.
     """
     times = np.asarray(times_s, dtype=np.float64).ravel()
+    # each instant's objects once (the class ids come from the same objects, in order of first appearance)
+    objects = [sorted(scene.objects(float(t)), key=lambda o: o.object_id) for t in times]
     if class_ids is None:
-        class_ids = class_ids_of(scene, times)
+        class_ids = {}
+        for found in objects:
+            for obj in found:
+                class_ids.setdefault(obj.class_name, len(class_ids) + 1)
     rows, since = [], {}
-    for k, t in enumerate(times, start=1):
-        for obj in sorted(scene.objects(float(t)), key=lambda o: o.object_id):
+    for k, (t, found) in enumerate(zip(times, objects, strict=True), start=1):
+        for obj in found:
             x0, y0, w, h = obj.box_xywh
             x1, y1 = min(x0 + w, scene.width), min(y0 + h, scene.height)
             x0, y0 = max(x0, 0.0), max(y0, 0.0)
