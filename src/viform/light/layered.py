@@ -828,10 +828,9 @@ class DescribedScene(Scene):
     def illuminance_lux_row_times(self, times_s) -> np.ndarray:
         """Row r of :meth:`illuminance_lux` at ``times_s[r]``, every row rendered once at its own instant (a
         rolling shutter's rows: :meth:`~viform.light.scenes.Scene.rolling_mean_illuminance_lux`)."""
-        times = np.asarray(times_s, dtype=np.float64).ravel()
-        if type(self).illuminance_lux is not DescribedScene.illuminance_lux or times.size != self.height:
-            return super().illuminance_lux_row_times(times)
-        return self.sampler().row_frames(times)
+        if type(self).illuminance_lux is not DescribedScene.illuminance_lux:
+            return super().illuminance_lux_row_times(times_s)
+        return self.sampler().row_frames(self._row_times(times_s))
 
     def sampler(self):
         """The :class:`~viform.light.layered_render.LayeredSampler` that renders this scene (made once)."""

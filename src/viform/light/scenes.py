@@ -128,15 +128,19 @@ class Scene(ABC):
         pixel and the instant (the pattern and described scenes) draw every row at once, with the
         same values.
         """
-        times = np.asarray(times_s, dtype=np.float64).ravel()
-        if times.size != self.height:
-            raise ViformError(f"times_s has {times.size} instants; {self.height} are needed, one per row")
         out = np.empty(self.shape)
-        distinct, which = np.unique(times, return_inverse=True)
+        distinct, which = np.unique(self._row_times(times_s), return_inverse=True)
         for k, t in enumerate(distinct):
             rows = which == k
             out[rows] = self.illuminance_lux(float(t))[rows]
         return out
+
+    def _row_times(self, times_s) -> np.ndarray:
+        """``times_s`` as one instant per row, (H,) float64 (for :meth:`illuminance_lux_row_times`)."""
+        times = np.asarray(times_s, dtype=np.float64).ravel()
+        if times.size != self.height:
+            raise ViformError(f"times_s has {times.size} instants; {self.height} are needed, one per row")
+        return times
 
     def compiled_light(self):
         """A :class:`~viform.light.compiled.CompiledLight` the simulator evaluates in compiled
@@ -442,13 +446,6 @@ class _PatternScene(Scene):
         value = PATTERNS[self.pattern](u, v, self.period_px)
         return self.min_lux + (self.max_lux - self.min_lux) * value
 
-    def _row_times(self, times_s) -> np.ndarray:
-        """One instant per row, (H, 1) (for :meth:`illuminance_lux_row_times`)."""
-        t = np.asarray(times_s, dtype=np.float64).ravel()
-        if t.size != self.height:
-            raise ViformError(f"times_s has {t.size} instants; {self.height} are needed, one per row")
-        return t[:, None]
-
     @abstractmethod
     def _motion(self) -> tuple:
         """The pattern's motion for the compiled kernel; each moving subclass (translating, rotating) defines it."""
@@ -525,7 +522,7 @@ class TranslatingScene(_PatternScene):
     def illuminance_lux_row_times(self, times_s) -> np.ndarray:
         if not self._own_light(TranslatingScene):
             return super().illuminance_lux_row_times(times_s)
-        t = self._row_times(times_s)
+        t = self._row_times(times_s)[:, None]
         vx, vy = self.velocity_px_per_s  # (illuminance_lux's arithmetic, each row at its instant)
         return self._lux(self._x - self.origin_px[0] - vx * t, self._y - self.origin_px[1] - vy * t)
 
@@ -566,7 +563,7 @@ class RotatingScene(_PatternScene):
         if not self._own_light(RotatingScene):
             return super().illuminance_lux_row_times(times_s)
         # illuminance_lux's arithmetic, each row at its instant (its cosine and sine from math, as there)
-        a = [-self.angular_speed_rad_per_s * float(t) for t in self._row_times(times_s)[:, 0]]
+        a = [-self.angular_speed_rad_per_s * float(t) for t in self._row_times(times_s)]
         cos = np.array([math.cos(x) for x in a])[:, None]
         sin = np.array([math.sin(x) for x in a])[:, None]
         dx, dy = self._x - self._cx, self._y - self._cy

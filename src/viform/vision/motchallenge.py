@@ -60,9 +60,18 @@ def step_times_s(n_steps: int, step_ticks: int, clock_hz: float, start_time_s: f
 
 def class_ids_of(scene, times_s) -> dict[str, int]:
     """Class name → integer id (from 1, in order of first appearance by object id over ``times_s``)."""
+    return _class_ids(_objects_by_id(scene, np.asarray(times_s, dtype=np.float64).ravel()))
+
+
+def _objects_by_id(scene, times) -> list:
+    """Each instant's objects, in object-id order."""
+    return [sorted(scene.objects(float(t)), key=lambda o: o.object_id) for t in times]
+
+
+def _class_ids(objects_by_instant) -> dict[str, int]:
     ids: dict[str, int] = {}
-    for t in np.asarray(times_s, dtype=np.float64).ravel():
-        for obj in sorted(scene.objects(float(t)), key=lambda o: o.object_id):
+    for found in objects_by_instant:
+        for obj in found:
             ids.setdefault(obj.class_name, len(ids) + 1)
     return ids
 
@@ -97,13 +106,9 @@ def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, detectab
         of the whole object; ``detectability`` −1 where unknown. Sorted by frame, id.
     """
     times = np.asarray(times_s, dtype=np.float64).ravel()
-    # each instant's objects once (the class ids come from the same objects, in order of first appearance)
-    objects = [sorted(scene.objects(float(t)), key=lambda o: o.object_id) for t in times]
+    objects = _objects_by_id(scene, times)  # each instant's once (the default class ids come from them too)
     if class_ids is None:
-        class_ids = {}
-        for found in objects:
-            for obj in found:
-                class_ids.setdefault(obj.class_name, len(class_ids) + 1)
+        class_ids = _class_ids(objects)
     rows, since = [], {}
     for k, (t, found) in enumerate(zip(times, objects, strict=True), start=1):
         for obj in found:
