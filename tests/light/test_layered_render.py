@@ -152,3 +152,35 @@ def test_rolling_rows_of_a_described_scene_whose_light_a_subclass_changed(tmp_pa
     rows = brighter.rolling_mean_illuminance_lux(0.003, 1e-3, 1e-4)
     assert np.array_equal(rows, _rows_of_window_means(brighter, 0.003, 1e-3, 1e-4))
     assert np.allclose(rows, 2.0 * base.rolling_mean_illuminance_lux(0.003, 1e-3, 1e-4), rtol=1e-12)
+
+
+@pytest.mark.parametrize("batch_pixels", [1 << 22, 3 * HEIGHT * WIDTH])
+def test_window_means_rendered_in_batches_are_the_midpoint_rule_frame_by_frame(tmp_path, monkeypatch, batch_pixels):
+    """A described scene's window mean asks the renderer for its midpoint instants in batches (one batch, or
+    batches of three frames): the same values, to the bit, as the midpoint rule one frame at a time; a subclass
+    that changes the light gets its own light's mean."""
+    import viform.light.scenes as scenes
+
+    monkeypatch.setattr(scenes, "MEAN_BATCH_PIXELS", batch_pixels)
+    scene = _scene(tmp_path)
+
+    def frame_by_frame(s, t0, t1, samples):
+        times = t0 + (np.arange(samples) + 0.5) * (t1 - t0) / samples
+        acc = np.zeros(s.shape)
+        for t in times:
+            acc += s.illuminance_lux(float(t))
+        return acc / samples
+
+    rng = np.random.default_rng(4)
+    for exposure_s in (1e-5, 1e-3, 8e-3):
+        for samples in (1, 7, 32):
+            t0 = float(rng.uniform(0.0, 0.02))
+            assert np.array_equal(scene.mean_illuminance_lux(t0, t0 + exposure_s, samples),
+                                  frame_by_frame(scene, t0, t0 + exposure_s, samples))
+
+    class Brighter(DescribedScene):
+        def illuminance_lux(self, t_s):
+            return 2.0 * super().illuminance_lux(t_s)
+
+    brighter = Brighter(scene.description)
+    assert np.array_equal(brighter.mean_illuminance_lux(0.004, 0.005), frame_by_frame(brighter, 0.004, 0.005, 32))

@@ -41,6 +41,9 @@ from viform.light.truth import (
     translate_by,
 )
 
+#: Pixels of the frames :meth:`Scene.mean_illuminance_lux` asks for at once (scenes that draw many instants at once).
+MEAN_BATCH_PIXELS = 1 << 22
+
 
 class Scene(ABC):
     """Light per pixel over time.
@@ -75,7 +78,10 @@ class Scene(ABC):
     def mean_illuminance_lux(self, t0_s: float, t1_s: float, samples: int = 32) -> np.ndarray:
         """Mean illuminance over [t0_s, t1_s] (lux), by the midpoint rule with ``samples`` points.
 
-        Subclasses with an analytic integral override this.
+        Subclasses with an analytic integral override this. A scene whose own
+        :meth:`illuminance_lux_many` draws several instants at once (a described scene's renderer)
+        is asked for them in batches of :data:`MEAN_BATCH_PIXELS` (32 MiB of frames); the sum runs in the
+        same order.
         """
         if not t1_s >= t0_s:
             raise ViformError(f"window end t1_s={t1_s!r} must be ≥ start t0_s={t0_s!r}")
@@ -84,9 +90,22 @@ class Scene(ABC):
         samples = check_int("samples", samples, 1)
         times = t0_s + (np.arange(samples) + 0.5) * (t1_s - t0_s) / samples
         acc = np.zeros(self.shape)
-        for t in times:
-            acc += self.illuminance_lux(float(t))
+        if self._draws_many_at_once():
+            batch = max(1, MEAN_BATCH_PIXELS // (self.height * self.width))
+            for i in range(0, samples, batch):
+                for frame in self.illuminance_lux_many(times[i:i + batch]):
+                    acc += frame
+        else:
+            for t in times:
+                acc += self.illuminance_lux(float(t))
         return acc / samples
+
+    def _draws_many_at_once(self) -> bool:
+        """Whether :meth:`illuminance_lux_many` is the scene's own, beside its :meth:`illuminance_lux` (so the
+        same light), rather than the default loop over instants."""
+        mro = type(self).__mro__
+        many = next(c for c in mro if "illuminance_lux_many" in c.__dict__)
+        return many is not Scene and many is next(c for c in mro if "illuminance_lux" in c.__dict__)
 
     def rolling_mean_illuminance_lux(self, t0_s: float, exposure_s: float, row_offset_s: float) -> np.ndarray:
         """Mean light of each row over its own window, as a rolling shutter exposes it (lux, (H, W)):
