@@ -179,12 +179,14 @@ def _rows_of_window_means(scene, t0_s, exposure_s, row_offset_s):
     lambda h, w: TranslatingScene(h, w, pattern="edge"),
     lambda h, w: TranslatingScene(h, w, pattern="bars", velocity_px_per_s=(0.0, 900.0), origin_px=(3.3, 1.1)),
     lambda h, w: RotatingScene(h, w, angular_speed_rad_per_s=-70.0),
-], ids=["texture", "edge", "bars", "rotating"])
+    lambda h, w: builtin_scene("waving-hand", max(h, 16), max(w, 16), wave_hz=40.0),
+], ids=["texture", "edge", "bars", "rotating", "waving-hand"])
 def test_rolling_rows_drawn_at_once_equal_each_rows_window_mean(make, shape):
     """A rolling shutter's rows, each sample drawn for every row at once at the row's own instant, equal row r
     of the whole frame's mean over row r's window, bit for bit: zero, short and long exposures, row offsets
     from 0 to past the exposure, windows starting anywhere."""
     scene = make(*shape)
+    shape = scene.shape
     rng = np.random.default_rng(3)
     for exposure_s in (0.0, 2e-5, 1e-4, 5e-3):
         for row_offset_s in (0.0, 1e-6, 1.3e-4):

@@ -218,12 +218,23 @@ class WavingHandScene(Scene):
         r1, c1 = int(min(self.height, pts[:, 0].max() + pad + 1)), int(min(self.width, pts[:, 1].max() + pad + 1))
         return sh, el, wr, (hy, hx), (r0, r1, c0, c1)
 
-    def _paint(self, t_s: float, img: np.ndarray) -> list:
-        """Draw the arm at ``t_s`` over ``img`` (which holds the still body and wall); return the box written
-        (see :class:`~viform.light.sampled.PaintedSampler`)."""
+    def illuminance_lux_row_times(self, times_s) -> np.ndarray:
+        """Row r of :meth:`illuminance_lux` at ``times_s[r]``: the arm drawn in each row alone, at its instant."""
+        if not self._own_light(WavingHandScene):
+            return super().illuminance_lux_row_times(times_s)
+        img = self._static.copy()
+        for r, t in enumerate(self._row_times(times_s).tolist()):
+            self._paint(t, img, r)
+        return img
+
+    def _paint(self, t_s: float, img: np.ndarray, row: int | None = None) -> list:
+        """Draw the arm at ``t_s`` over ``img`` (which holds the still body and wall), or only its part in
+        ``row``; return the box written (see :class:`~viform.light.sampled.PaintedSampler`)."""
         s = self.s
         # only the arm's bounding box changes with time: evaluate the capsules there
         sh, el, wr, tip, (r0, r1, c0, c1) = self._arm_box(t_s)
+        if row is not None:
+            r0, r1 = max(r0, row), min(r1, row + 1)
         if r1 <= r0 or c1 <= c0:
             return []
         yy, xx = self._yy[r0:r1, c0:c1], self._xx[r0:r1, c0:c1]
