@@ -193,6 +193,9 @@ def test_rolling_rows_drawn_at_once_equal_each_rows_window_mean(make, shape):
             t0 = float(rng.uniform(0.0, 0.04))
             rows = scene.rolling_mean_illuminance_lux(t0, exposure_s, row_offset_s)
             assert np.array_equal(rows, _rows_of_window_means(scene, t0, exposure_s, row_offset_s))
+    # a window that has length in row 0 only (1e-19 s vanishes beside 1 ms): rows of both kinds in one exposure
+    rows = scene.rolling_mean_illuminance_lux(0.0, 1e-19, 1e-3)
+    assert np.array_equal(rows, _rows_of_window_means(scene, 0.0, 1e-19, 1e-3))
     times = rng.uniform(0.0, 0.04, shape[0])
     assert np.array_equal(scene.illuminance_lux_row_times(times),
                           np.stack([scene.illuminance_lux(float(t))[r] for r, t in enumerate(times)]))

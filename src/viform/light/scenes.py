@@ -130,11 +130,13 @@ class Scene(ABC):
         if bad.size:
             r = int(bad[0])
             raise ViformError(f"window end t1_s={float(end[r])!r} must be ≥ start t0_s={float(start[r])!r}")
+        still = end == start  # a window of no length: the light at its instant
+        if still.all():
+            return self.illuminance_lux_row_times(start)
         acc = np.zeros(self.shape)
         for k in range(samples):
             acc += self.illuminance_lux_row_times(start + (k + 0.5) * (end - start) / samples)
         out = acc / samples
-        still = end == start  # a window of no length: the light at its instant
         if still.any():
             out[still] = self.illuminance_lux_row_times(start)[still]
         return out
