@@ -163,6 +163,10 @@ def test_clip_convex_is_the_textbook_clip_and_its_areas_are_right():
         got, want = clip_convex(subject, clip), _clip_textbook(subject, clip)
         assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
     square = (np.array([0.0, 1.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0, 1.0]))
+    for bad in (np.nan, np.inf):  # a vertex that is not finite: the same points as the textbook's tests give
+        subject = (np.array([0.2, 0.8, bad, 0.2]), np.array([0.2, 0.2, 0.5, 0.8]))
+        got, want = clip_convex(subject, square), _clip_textbook(subject, square)
+        assert np.array_equal(got[0], want[0], equal_nan=True) and np.array_equal(got[1], want[1], equal_nan=True)
     assert polygon_area(*clip_convex(square, (square[0] + 0.5, square[1] + 0.25))) == pytest.approx(0.375)
     inner = (0.25 + 0.5 * square[0], 0.25 + 0.5 * square[1])
     assert polygon_area(*clip_convex(inner, square)) == pytest.approx(0.25)

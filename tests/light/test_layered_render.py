@@ -184,3 +184,12 @@ def test_window_means_rendered_in_batches_are_the_midpoint_rule_frame_by_frame(t
 
     brighter = Brighter(scene.description)
     assert np.array_equal(brighter.mean_illuminance_lux(0.004, 0.005), frame_by_frame(brighter, 0.004, 0.005, 32))
+
+
+def test_a_described_scenes_light_patched_on_the_scene_is_what_its_exposures_see(tmp_path):
+    """A described scene whose light is replaced on the scene itself: its means and rolling rows use that light,
+    not the renderer's."""
+    scene = _scene(tmp_path)
+    scene.illuminance_lux = lambda t_s: np.full((HEIGHT, WIDTH), 7.0)
+    assert np.array_equal(scene.mean_illuminance_lux(0.001, 0.003), np.full((HEIGHT, WIDTH), 7.0))
+    assert np.array_equal(scene.rolling_mean_illuminance_lux(0.001, 1e-3, 1e-4), np.full((HEIGHT, WIDTH), 7.0))

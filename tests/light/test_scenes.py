@@ -189,7 +189,7 @@ def test_rolling_rows_drawn_at_once_equal_each_rows_window_mean(make, shape):
     shape = scene.shape
     rng = np.random.default_rng(3)
     for exposure_s in (0.0, 2e-5, 1e-4, 5e-3):
-        for row_offset_s in (0.0, 1e-6, 1.3e-4):
+        for row_offset_s in (0.0, 1e-6, 1.3e-4, -7e-5):
             t0 = float(rng.uniform(0.0, 0.04))
             rows = scene.rolling_mean_illuminance_lux(t0, exposure_s, row_offset_s)
             assert np.array_equal(rows, _rows_of_window_means(scene, t0, exposure_s, row_offset_s))
@@ -219,3 +219,18 @@ def test_rolling_rows_of_a_scene_whose_light_a_subclass_changed_and_bad_windows(
     for scene in (TranslatingScene(8, 8), Brighter(8, 8)):
         with pytest.raises(ViformError, match="8 are needed, one per row"):
             scene.illuminance_lux_row_times(np.zeros(7))
+
+
+def test_light_patched_on_one_scene_is_what_its_exposures_see():
+    """A scene whose light (or mean) is replaced on the scene itself, not its class, integrates that light:
+    its window means and rolling rows are the frame-by-frame ones of the patched light, and it is not
+    compiled."""
+    patched = TranslatingScene(12, 20)
+    patched.illuminance_lux = lambda t_s: np.full((12, 20), 3.0 + 1000.0 * t_s)
+    assert patched.compiled_light() is None
+    rows = patched.rolling_mean_illuminance_lux(0.002, 1e-3, 1e-4)
+    assert np.array_equal(rows, _rows_of_window_means(patched, 0.002, 1e-3, 1e-4))
+    assert np.allclose(rows[:, 0], 3.0 + 1000.0 * (0.002 + np.arange(12) * 1e-4 + 0.5e-3))
+    meaned = TranslatingScene(12, 20)
+    meaned.mean_illuminance_lux = lambda t0_s, t1_s, samples=32: np.full((12, 20), t0_s)
+    assert np.array_equal(meaned.rolling_mean_illuminance_lux(0.002, 1e-3, 1e-4)[:, 0], 0.002 + np.arange(12) * 1e-4)

@@ -27,14 +27,19 @@ def clip_convex_ccw(sx, sy, cx, cy):  # pragma: no cover - compiled
             px_, py_, qx, qy = x[p], y[p], x[i], y[i]
             sp = (bx - ax) * (py_ - ay) - (by - ay) * (px_ - ax)
             sq = (bx - ax) * (qy - ay) - (by - ay) * (qx - ax)
-            if (sq >= 0) != (sp >= 0):
+            if sq >= 0:  # (the tests in this order: the same points where a side is NaN)
+                if sp < 0:
+                    w = sp / (sp - sq)
+                    ox[j] = px_ + w * (qx - px_)
+                    oy[j] = py_ + w * (qy - py_)
+                    j += 1
+                ox[j] = qx
+                oy[j] = qy
+                j += 1
+            elif sp >= 0:
                 w = sp / (sp - sq)
                 ox[j] = px_ + w * (qx - px_)
                 oy[j] = py_ + w * (qy - py_)
-                j += 1
-            if sq >= 0:
-                ox[j] = qx
-                oy[j] = qy
                 j += 1
         x, y = ox[:j].copy(), oy[:j].copy()
     return x, y

@@ -828,7 +828,7 @@ class DescribedScene(Scene):
     def illuminance_lux_row_times(self, times_s) -> np.ndarray:
         """Row r of :meth:`illuminance_lux` at ``times_s[r]``, every row rendered once at its own instant (a
         rolling shutter's rows: :meth:`~viform.light.scenes.Scene.rolling_mean_illuminance_lux`)."""
-        if type(self).illuminance_lux is not DescribedScene.illuminance_lux:
+        if type(self).illuminance_lux is not DescribedScene.illuminance_lux or self._light_patched():
             return super().illuminance_lux_row_times(times_s)
         return self.sampler().row_frames(self._row_times(times_s))
 

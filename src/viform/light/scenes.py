@@ -45,6 +45,13 @@ from viform.light.truth import (
 MEAN_BATCH_PIXELS = 1 << 22
 
 
+def _midpoints(t0_s, t1_s, samples: int) -> np.ndarray:
+    """The midpoint rule's ``samples`` instants of [t0_s, t1_s], (samples,) — or (samples, N) for N windows."""
+    t0, t1 = np.asarray(t0_s), np.asarray(t1_s)
+    k = (np.arange(samples) + 0.5).reshape((samples,) + (1,) * t0.ndim)
+    return t0 + k * (t1 - t0) / samples
+
+
 class Scene(ABC):
     """Light per pixel over time.
 
@@ -88,7 +95,7 @@ class Scene(ABC):
         if t1_s == t0_s:
             return self.illuminance_lux(t0_s)
         samples = check_int("samples", samples, 1)
-        times = t0_s + (np.arange(samples) + 0.5) * (t1_s - t0_s) / samples
+        times = _midpoints(t0_s, t1_s, samples)
         acc = np.zeros(self.shape)
         if self._draws_many_at_once():
             batch = max(1, MEAN_BATCH_PIXELS // (self.height * self.width))
@@ -105,7 +112,7 @@ class Scene(ABC):
         same light), rather than the default loop over instants."""
         mro = type(self).__mro__
         many = next(c for c in mro if "illuminance_lux_many" in c.__dict__)
-        return many is not Scene and many is next(c for c in mro if "illuminance_lux" in c.__dict__)
+        return many is next(c for c in mro if "illuminance_lux" in c.__dict__) and not self._light_patched()
 
     def rolling_mean_illuminance_lux(self, t0_s: float, exposure_s: float, row_offset_s: float) -> np.ndarray:
         """Mean light of each row over its own window, as a rolling shutter exposes it (lux, (H, W)):
@@ -116,7 +123,7 @@ class Scene(ABC):
         (:meth:`illuminance_lux_row_times`); scenes with their own mean (or a faster way to draw a
         row's window) give the rows one by one, or override this with the same values.
         """
-        if type(self).mean_illuminance_lux is not Scene.mean_illuminance_lux:
+        if type(self).mean_illuminance_lux is not Scene.mean_illuminance_lux or "mean_illuminance_lux" in vars(self):
             out = np.empty(self.shape)  # (row by row: one frame held at a time)
             for r in range(self.height):
                 start = t0_s + r * row_offset_s
@@ -134,8 +141,8 @@ class Scene(ABC):
         if still.all():
             return self.illuminance_lux_row_times(start)
         acc = np.zeros(self.shape)
-        for k in range(samples):
-            acc += self.illuminance_lux_row_times(start + (k + 0.5) * (end - start) / samples)
+        for times in _midpoints(start, end, samples):  # (samples, H): each row's instants, as mean_illuminance_lux's
+            acc += self.illuminance_lux_row_times(times)
         out = acc / samples
         if still.any():
             out[still] = self.illuminance_lux_row_times(start)[still]
@@ -177,9 +184,14 @@ class Scene(ABC):
         return 1
 
     def _own_light(self, cls) -> bool:
-        """True when ``illuminance_lux`` is ``cls``'s own (a subclass may have changed the light)."""
+        """True when ``illuminance_lux`` is ``cls``'s own (a subclass, or a patch on this scene, may have
+        changed the light)."""
         return type(self).illuminance_lux is cls.illuminance_lux and \
-            type(self).illuminance_lux_many is Scene.illuminance_lux_many
+            type(self).illuminance_lux_many is Scene.illuminance_lux_many and not self._light_patched()
+
+    def _light_patched(self) -> bool:
+        """True when this scene's light functions were replaced on the scene itself (not its class)."""
+        return "illuminance_lux" in vars(self) or "illuminance_lux_many" in vars(self)
 
     def describe(self) -> dict:
         """Metadata saved with captures (with ``builtin``: how to remake a built-in scene, see
