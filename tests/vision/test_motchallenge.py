@@ -127,3 +127,16 @@ def test_class_ids_by_first_appearance_and_one_objects_call_per_instant():
     assert Appearing.calls == len(times)
     assert np.array_equal(rows, mot.gt_rows(scene, times, mot.class_ids_of(scene, times)))
     assert rows[:, 7].tolist() == [1, 1, 2, 1]  # frame 3: the person (object 2) first, then the vehicle
+
+
+def test_rows_and_their_class_ids_from_one_pass():
+    """return_class_ids gives class_ids_of's ids beside the same rows, with one objects() call per instant."""
+    scene = builtin_scene("multi-object", height=64, width=96)
+    times = mot.step_times_s(30, 40, 40_000.0)
+    calls = []
+    objects = scene.objects
+    scene.objects = lambda t_s: calls.append(t_s) or objects(t_s)
+    rows, classes = mot.gt_rows(scene, times, return_class_ids=True)
+    assert len(calls) == len(times)
+    assert classes == mot.class_ids_of(scene, times) and len(classes) >= 2
+    assert np.array_equal(rows, mot.gt_rows(scene, times, classes))

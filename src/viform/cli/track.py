@@ -113,7 +113,7 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
     n_frames = source.n_ticks // every
     times = mot.step_times_s(n_frames, every, source.clock_hz, source.start_time_s)
     scene = None
-    gt = None
+    gt = classes = None
     per = 1  # result frames per truth frame
     notes = []
     if truth_path is not None:
@@ -133,8 +133,8 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
     if scene is not None:
         from viform.vision.detectability import spike_detectability_of
 
-        gt = mot.gt_rows(scene, times, detectability=spike_detectability_of(source),
-                         start_time_s=source.start_time_s)
+        gt, classes = mot.gt_rows(scene, times, detectability=spike_detectability_of(source),
+                                  start_time_s=source.start_time_s, return_class_ids=True)
     if gt is not None and not len(gt):
         if scores:
             raise ViformError(f"--scores: the truth ({truth_from}) holds no object in view during the stream: "
@@ -173,7 +173,7 @@ def track(file, every, out_dir, truth_path, scores, height, width, clock_hz, no_
                  mot.write_seqinfo(out / "seqinfo.ini", name=Path(file).stem, n_frames=n_frames, step_ticks=every,
                                    clock_hz=source.clock_hz, width=source.width, height=source.height,
                                    start_time_s=source.start_time_s,
-                                   classes=mot.class_ids_of(scene, times) if scene is not None else None)]
+                                   classes=classes)]
         if gt is not None and truth_path is None:
             files.append(mot.write_gt(out / "gt.txt", gt))
         _overlay(out / "overlay.png", mean_rate, result, gt if per == 1 else None,

@@ -212,11 +212,11 @@ def write_truth(out, clip: str, scene, n_ticks: int, step_ticks: int, clock_hz: 
         frames.append(record)
     mot = None
     if "objects" in kinds and len(times):
-        from viform.vision.motchallenge import class_ids_of, gt_rows, write_gt, write_seqinfo
+        from viform.vision.motchallenge import gt_rows, write_gt, write_seqinfo
 
-        classes = class_ids_of(scene, times)
+        rows, classes = gt_rows(scene, times, detectability=detectability, return_class_ids=True)
         folder = out / MOT_DIR / clip
-        write_gt(folder / "gt" / "gt.txt", gt_rows(scene, times, classes, detectability=detectability))
+        write_gt(folder / "gt" / "gt.txt", rows)
         write_seqinfo(folder / "seqinfo.ini", name=clip, n_frames=len(times), step_ticks=step_ticks,
                       clock_hz=clock_hz, width=scene.width, height=scene.height, classes=classes)
         digest = hashlib.sha256()

@@ -77,7 +77,7 @@ def _class_ids(objects_by_instant) -> dict[str, int]:
 
 
 def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, detectability=None,
-            start_time_s: float = 0.0) -> np.ndarray:
+            start_time_s: float = 0.0, return_class_ids: bool = False):
     """Ground-truth rows from any scene's :meth:`~viform.light.scenes.Scene.objects`.
 
     Parameters
@@ -96,6 +96,9 @@ def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, detectab
         view in frame 1; else since the frame before the first that shows it). None: −1 (unknown).
     start_time_s : float
         The start of the recording, s.
+    return_class_ids : bool
+        Also return the class ids used (for :func:`write_seqinfo`): each instant's objects are asked
+        for once, not once more by :func:`class_ids_of`.
 
     Returns
     -------
@@ -104,6 +107,8 @@ def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, detectab
         report; rows of objects wholly outside it are left out); ``conf`` is 1 where any part of
         the object is visible, 0 where it is entirely hidden; ``visibility`` the visible fraction
         of the whole object; ``detectability`` −1 where unknown. Sorted by frame, id.
+    dict
+        Class name → id, only with ``return_class_ids``.
     """
     times = np.asarray(times_s, dtype=np.float64).ravel()
     objects = _objects_by_id(scene, times)  # each instant's once (the default class ids come from them too)
@@ -127,7 +132,8 @@ def gt_rows(scene, times_s, class_ids: dict[str, int] | None = None, *, detectab
                 d = -1.0 if math.isnan(d) else d
             rows.append((k, obj.object_id, x0, y0, w, h, 1.0 if obj.visible_fraction > 0 else 0.0,
                          class_ids[obj.class_name], obj.visible_fraction, d))
-    return np.array(rows, dtype=np.float64).reshape(-1, len(GT_COLUMNS))
+    rows = np.array(rows, dtype=np.float64).reshape(-1, len(GT_COLUMNS))
+    return (rows, class_ids) if return_class_ids else rows
 
 
 def _format(value: float, digits: int = 4) -> str:
