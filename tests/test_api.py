@@ -151,3 +151,33 @@ def test_exported_functions_carry_numpydoc_parameters_and_returns(name):
             missing = set(parameters) - _documented(section)
             assert not missing, f"{where}: parameters {sorted(missing)} not in its Parameters section"
         assert _section(doc, "Returns") or _section(doc, "Yields"), f"{where}: no Returns (or Yields) section"
+
+
+#: A process that imports viform, then runs its first numba parallel kernel (which loads the OpenMP runtime).
+_FIRST_PARALLEL_KERNEL = (
+    "import os, numba, numpy as np, viform\n"
+    "@numba.njit(parallel=True)\n"
+    "def total(a):\n"
+    "    s = 0.0\n"
+    "    for i in numba.prange(a.size):\n"
+    "        s += a[i]\n"
+    "    return s\n"
+    "assert total(np.ones(64)) == 64.0\n"
+    "print(os.environ['OMP_WAIT_POLICY'], numba.threading_layer())\n"
+)
+
+
+@pytest.mark.parametrize("chosen", [None, "ACTIVE"])
+def test_openmp_threads_wait_passively_unless_the_user_chose(chosen):
+    """Importing viform makes numba's OpenMP threads sleep between parallel regions (not spin); a wait
+    policy the user set is kept. GNU libgomp says what it read (OMP_DISPLAY_ENV): no spinning at all."""
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    env["OMP_DISPLAY_ENV"] = "VERBOSE"
+    if chosen is not None:
+        env["OMP_WAIT_POLICY"] = chosen
+    run = subprocess.run([sys.executable, "-c", _FIRST_PARALLEL_KERNEL], capture_output=True, text=True,
+                         check=True, env=env)
+    policy, layer = run.stdout.split()
+    assert policy == (chosen or "PASSIVE")
+    if layer == "omp" and "GOMP_SPINCOUNT" in run.stderr:  # the runtime read it when it loaded
+        assert ("GOMP_SPINCOUNT = '0'" in run.stderr) == (chosen is None), run.stderr
