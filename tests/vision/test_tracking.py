@@ -493,7 +493,7 @@ def test_the_priming_passes_are_the_numpy_expressions_they_replace_exactly():
     # NumPy booleans, and the values read from the stored
     # layout those of the upright views, on every image shape (edges, flipped and wider stored rows)
     from viform.vision import _spike_front as front
-    from viform.vision.tracking import _block_counts, _blocks
+    from viform.vision.tracking import _block_counts, _blocks, _nearest
 
     rng = np.random.default_rng(1)
     for _ in range(100):
@@ -509,23 +509,56 @@ def test_the_priming_passes_are_the_numpy_expressions_they_replace_exactly():
         x1 = np.minimum(x0 + 1, 6)
         np.testing.assert_array_equal(front.blend_columns(rows, x0, x1, 1 - fx, fx),
                                       rows[:, x0] * (1 - fx)[None, :] + rows[:, x1] * fx[None, :])
-        measured, mixed, mm, known, back = (rng.random((h, w)) < 0.5 for _ in range(5))
-        upper, lower, median, log_bg, log_v, around = (np.round(rng.normal(size=(h, w)), 1) for _ in range(6))
+        measured, mixed, known, back = (rng.random((h, w)) < 0.5 for _ in range(4))
+        upper, lower, log_bg, log_v, around = (np.round(rng.normal(size=(h, w)), 1) for _ in range(5))
+        # per block: the median (and whether it is measured), repeated to pixels
+        blk = int(rng.integers(1, 17))
+        med_b = np.round(rng.normal(size=(-(-h // blk), -(-w // blk))), 1)
+        mm_b = rng.random(med_b.shape) < 0.5
+        median, mm = _nearest(med_b, h, w, blk), _nearest(mm_b, h, w, blk)
+        np.testing.assert_array_equal(front.block_low_fractions(measured, log_v, med_b, blk),
+                                      _blocks(~measured & (log_v < median), block=blk).mean(axis=2))
         thr = 0.7  # ties at the thresholds: the rounded values hit median ± thr
-        got = front.prime_candidates(measured, mixed, upper, lower, median, mm, known, log_bg, back, thr)
+        got = front.prime_candidates(measured, mixed, upper, lower, med_b, mm_b, blk, known, log_bg, back, thr)
         want = (measured & ~mixed & (upper < median - thr), mm & (lower > median + thr),
                 known & ~back & ((log_bg < median - thr) | (mm & (log_bg > median + thr))))
         for a, b in zip(got, want, strict=True):
             np.testing.assert_array_equal(a, b)
-        primed, around_measured = rng.random((h, w)) < 0.3, rng.random((h, w)) < 0.7
-        weight = np.round(rng.random((h, w)), 1)
+        # the new state, in place (on bottom-up views, as the detector's upright ones), against the NumPy
+        # assignments in their order
+        bright, dark, stale = (rng.random((h, w)) < 0.2 for _ in range(3))
+        level = np.exp(around)
+        am_b = rng.random((-(-h // 8), -(-w // 8))) < 0.7
+        weight_b = np.round(rng.random(am_b.shape), 1)
+        am, weight = _nearest(am_b, h, w, 8), _nearest(weight_b, h, w, 8)
+        state = (rng.random((h, w)) * 50, rng.random((h, w)) < 0.5, rng.random((h, w)) * 50,
+                 rng.integers(-1, 500, (h, w)))
         for with_unsure in (True, False):
-            unsure, later = front.prime_unsure_later(measured, primed, back, around_measured, weight, log_v, around,
-                                                     known, log_bg, 0.4, with_unsure)
-            free = ~primed & ~back & around_measured
+            bg, censored, prev, flag_since = (a.copy() for a in state)
+            primed = bright | dark | stale
+            bg[primed] = level[primed]
+            censored[primed] = (~am | bright)[primed]
+            prev[primed] = 0.0
+            flag_since[primed] = -1
+            silent = dark & ~measured
+            prev[silent] = level[silent]
+            free = ~primed & ~back & am
             far = (measured & (np.abs(log_v - around) > 0.4)) | (known & (np.abs(log_bg - around) > 0.4))
-            np.testing.assert_array_equal(unsure, free & far & with_unsure)
-            np.testing.assert_array_equal(later, free & ~measured & (weight > 0.5))
+            unsure, later = free & far & with_unsure, free & ~measured & (weight > 0.5)
+            prev[unsure] = level[unsure]
+            prev[later] = level[later]
+            stored = [a[::-1].copy() for a in state]
+            got_later = front.prime_apply(bright, dark, stale, measured, back, log_v, around, level, am_b, weight_b,
+                                          8, known, log_bg, 0.4, with_unsure, *(a[::-1] for a in stored))
+            np.testing.assert_array_equal(got_later, later)
+            for a, b in zip(stored, (bg, censored, prev, flag_since), strict=True):
+                np.testing.assert_array_equal(a[::-1], b)
+        # the medians of groups of values (as np.median: the mean of the two middle values of an even count)
+        values = np.round(rng.normal(size=h * w), 1)
+        order = rng.permutation(h * w)
+        cuts = np.unique(np.r_[0, rng.integers(0, h * w, 4), h * w])
+        np.testing.assert_array_equal(front.group_medians(values, order, cuts),
+                                      [np.median(values[order[a:b]]) for a, b in zip(cuts[:-1], cuts[1:], strict=True)])
         stored_width, flip = w + int(rng.integers(0, 3)), bool(rng.integers(0, 2))
         size = h * stored_width + int(rng.integers(0, 64))
         spk = rng.integers(-1, 500, (size, 4))

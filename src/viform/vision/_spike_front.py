@@ -806,55 +806,109 @@ def block_medians(a, block):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def prime_candidates(measured, mixed, upper_log, lower_log, median, median_measured, known, log_bg, back,
+def block_low_fractions(measured, log_v, med_b, block):  # pragma: no cover - compiled
+    """Per ``block`` × ``block`` block of (H, W) images, the edges padded with the edge values (as
+    ``np.pad(mode="edge")``): the fraction of its pixels not ``measured`` whose ``log_v`` is under their
+    block's value of ``med_b`` (⌈H/b⌉, ⌈W/b⌉), a whole count over b², so it equals the NumPy expression
+    ``_blocks(~measured & (log_v < _nearest(med_b, H, W, b)), block=b).mean(axis=2)`` exactly."""
+    H, W = log_v.shape
+    hb, wb = med_b.shape
+    out = np.empty((hb, wb))
+    for by in range(hb):
+        for bx in range(wb):
+            m = med_b[by, bx]
+            c = 0
+            for y in range(by * block, (by + 1) * block):
+                yy = min(y, H - 1)
+                for x in range(bx * block, (bx + 1) * block):
+                    xx = min(x, W - 1)
+                    c += (not measured[yy, xx]) & (log_v[yy, xx] < m)
+            out[by, bx] = c / (block * block)
+    return out
+
+
+@njit(cache=True)
+def prime_candidates(measured, mixed, upper_log, lower_log, med_b, mm_b, block, known, log_bg, back,
                      thr):  # pragma: no cover - compiled
     """The start-up check's pixels before their opening, in one pass (H, W each): brighter (measured, not a
     falling transition, longest interval under ``median - thr``), darker (shortest interval over
     ``median + thr`` where the median is measured) and stale (a learned background beyond those bounds).
+    The median and whether it is measured are per ``block`` × ``block`` block (``med_b``, ``mm_b``).
 
     The same IEEE comparisons of the same differences as the NumPy expressions of
-    :meth:`~viform.vision.tracking.SpikeChangeDetector._prime` they replace (exact).
+    :meth:`~viform.vision.tracking.SpikeChangeDetector._prime` they replace, on the blocks' values
+    repeated to pixels (exact).
     """
     H, W = measured.shape
     bright = np.empty((H, W), np.bool_)
     dark = np.empty((H, W), np.bool_)
     stale = np.empty((H, W), np.bool_)
     for y in range(H):
-        for x in range(W):
-            lo = median[y, x] - thr
-            hi = median[y, x] + thr
-            mm = median_measured[y, x]
-            # (bitwise, not short-circuit: no branches, the loop vectorizes)
-            bright[y, x] = measured[y, x] & (not mixed[y, x]) & (upper_log[y, x] < lo)
-            dark[y, x] = mm & (lower_log[y, x] > hi)
-            lb = log_bg[y, x]
-            stale[y, x] = known[y, x] & (not back[y, x]) & ((lb < lo) | (mm & (lb > hi)))
+        by = y // block
+        for bx in range(med_b.shape[1]):
+            lo = med_b[by, bx] - thr
+            hi = med_b[by, bx] + thr
+            mm = mm_b[by, bx]
+            for x in range(bx * block, min((bx + 1) * block, W)):
+                # (bitwise, not short-circuit: no branches)
+                bright[y, x] = measured[y, x] & (not mixed[y, x]) & (upper_log[y, x] < lo)
+                dark[y, x] = mm & (lower_log[y, x] > hi)
+                lb = log_bg[y, x]
+                stale[y, x] = known[y, x] & (not back[y, x]) & ((lb < lo) | (mm & (lb > hi)))
     return bright, dark, stale
 
 
 @njit(cache=True)
-def prime_unsure_later(measured, primed, back, around_measured, weight, log_v, around, known, log_bg,
-                       unsure_log, with_unsure):  # pragma: no cover - compiled
-    """The start-up check's pixels not primed whose state is only set aside (H, W each): *unsure* (with
-    ``with_unsure``: measured, or with a learned background, more than ``unsure_log`` from the level
-    around) and *later* (no interval yet, with a measured level around of weight over 0.5).
+def prime_apply(bright, dark, stale, measured, back, log_v, around, level, around_measured_b, weight_b, block,
+                known, log_bg, unsure_log, with_unsure, bg, censored, prev, flag_since):  # pragma: no cover - compiled
+    """The start-up check's new state, in place, in one pass (H, W each; the state arrays may be views in
+    any layout); returns the pixels *later* (no interval yet, not primed, with a measured level around of
+    weight over 0.5 per ``block`` × ``block`` block: ``around_measured_b``, ``weight_b``).
 
-    The same IEEE operations as the NumPy expressions of
-    :meth:`~viform.vision.tracking.SpikeChangeDetector._prime` they replace (exact).
+    A primed pixel (``bright | dark | stale``) takes the ``level`` around as its background, a lower
+    bound (``censored``) unless that level is measured and the pixel is not brighter; its previous
+    background is cleared (``prev`` 0), or, darker with no interval yet, is that level (a silence
+    longer than it allows is darker); its flag is cleared. A pixel not primed and not given back
+    (``back``) whose level around is measured keeps that level as ``prev`` when it is *unsure* (with
+    ``with_unsure``: measured, or with a learned background, more than ``unsure_log`` from the level
+    around) or *later*. The same IEEE operations, and the same final state, as the NumPy assignments
+    of :meth:`~viform.vision.tracking.SpikeChangeDetector._prime` in their order (exact).
     """
     H, W = measured.shape
-    unsure = np.zeros((H, W), np.bool_)
     later = np.empty((H, W), np.bool_)
     for y in range(H):
+        by = y // block
         for x in range(W):
-            free = (not primed[y, x]) & (not back[y, x]) & around_measured[y, x]  # (bitwise: no branches)
+            bx = x // block
+            am = around_measured_b[by, bx]
+            b_, d_ = bright[y, x], dark[y, x]
+            primed = b_ | d_ | stale[y, x]
             m = measured[y, x]
-            if with_unsure:
-                a = around[y, x]
-                unsure[y, x] = free & ((m & (abs(log_v[y, x] - a) > unsure_log))
-                                       | (known[y, x] & (abs(log_bg[y, x] - a) > unsure_log)))
-            later[y, x] = free & (not m) & (weight[y, x] > 0.5)
-    return unsure, later
+            lv = level[y, x]
+            if primed:
+                bg[y, x] = lv
+                censored[y, x] = (not am) | b_
+                prev[y, x] = lv if d_ and not m else 0.0
+                flag_since[y, x] = -1
+            free = (not primed) and (not back[y, x]) and am
+            a = around[y, x]
+            unsure = with_unsure and free and ((m and abs(log_v[y, x] - a) > unsure_log)
+                                               or (known[y, x] and abs(log_bg[y, x] - a) > unsure_log))
+            lt = free and (not m) and weight_b[by, bx] > 0.5
+            later[y, x] = lt
+            if unsure or lt:
+                prev[y, x] = lv
+    return later
+
+
+@njit(cache=True)
+def group_medians(values, order, cuts):  # pragma: no cover - compiled
+    """The median of ``values[order[cuts[k]:cuts[k + 1]]]`` for each k (as ``np.median``: an even count's
+    is the mean of its two middle values)."""
+    out = np.empty(cuts.size - 1)
+    for k in range(cuts.size - 1):
+        out[k] = np.median(values[order[cuts[k]:cuts[k + 1]]])
+    return out
 
 
 @njit(cache=True)

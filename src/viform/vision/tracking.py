@@ -367,11 +367,10 @@ class SpikeChangeDetector:
         # (on 16-px blocks: the window is 96 px)
         b = 2 * _PRIME_BLOCK_PX
         size = max(1, p.prime_window_px // b) | 1
+        # (per block: a block's pixels share its median and whether it is measured)
         med_b = median_filter(_front.block_medians(log_v, b), size=size, mode="nearest")
-        median = _nearest(med_b, H, W, b)
-        low_frac = median_filter(_blocks(~measured & (log_v < median), block=b).mean(axis=2), size=size,
-                                 mode="nearest")
-        median_measured = _nearest(low_frac, H, W, b) < 0.1
+        low_frac = median_filter(_front.block_low_fractions(measured, log_v, med_b, b), size=size, mode="nearest")
+        median_measured = low_frac < 0.1
         thr = float(p.prime_threshold_log)
         upper, lower = np.log(upper), np.log(lower)
         # objects are at least 3 px across (an opening removes thin lines of static texture)
@@ -381,7 +380,7 @@ class SpikeChangeDetector:
         log_bg = np.log(np.where(known, bg, 1.0))
         # in one compiled pass (exact): brighter (not a falling transition), darker, and stale, before opening
         bright, dark, stale = _front.prime_candidates(measured, np.ascontiguousarray(up(self.mixed)), upper, lower,
-                                                      median, median_measured, known, log_bg, back, thr)
+                                                      med_b, median_measured, b, known, log_bg, back, thr)
         bright = _opened(bright) & ~back
         dark = _opened(dark) & ~back
         # ... kept where wide enough to be an object, or at the edge of where one stood (anti-aliased edges)
@@ -389,34 +388,25 @@ class SpikeChangeDetector:
             self._primed_ever = np.zeros(stale.shape, bool)
         self._primed_ever |= bright | dark
         stale &= _opened(stale) | _grown(self._primed_ever)
-        primed = bright | dark | stale
         clear = ~_grown(bright | dark | back) & ~stale  # (static regions that stand out are no background either)
-        around, weight, measured_around = _interpolate_clear(log_v, clear, p.prime_window_px, measured)
-        around_measured = measured_around > 0.9
+        around, weight_b, measured_around_b = _interpolate_clear_blocks(log_v, clear, p.prime_window_px, measured)
         level = np.exp(around)
-        bg[primed] = level[primed]
-        # a lower bound unless measured around (only "brighter" is tested against it until the pixel's first
-        # interval replaces it), and always under a brighter object: replaced by its first interval after
-        censored[primed] = (~around_measured | bright)[primed]
-        prev[primed] = 0.0
-        flag_since[primed] = -1
-        silent = dark & ~measured  # no interval yet: darker once silent for longer than the level around allows
-        prev[silent] = level[silent]
-        # in one compiled pass (exact): pixels more than threshold_log from the level around (with prime_unsure),
-        # and pixels with no interval yet whose level around is measured
-        unsure, later = _front.prime_unsure_later(measured, primed, back, around_measured, weight, log_v, around,
-                                                  known, log_bg, float(p.threshold_log), bool(p.prime_unsure))
-        if p.prime_unsure:
-            prev[unsure] = level[unsure]
-        prev[later] = level[later]
-        self._new_groups(bright, dark | later, np.exp(upper), np.exp(lower), level, t)
+        # in one compiled pass (exact), in place: primed pixels take the level around as background, a lower
+        # bound unless measured around (only "brighter" is tested against it until the pixel's first interval
+        # replaces it) and always under a brighter object; a darker one with no interval yet is darker once
+        # silent for longer than that level allows; pixels more than threshold_log from the level around
+        # (with prime_unsure) and those with no interval yet whose level around is measured (later) keep it
+        later = _front.prime_apply(bright, dark, stale, measured, back, log_v, around, level,
+                                   measured_around_b > 0.9, weight_b, _PRIME_BLOCK_PX, known, log_bg,
+                                   float(p.threshold_log), bool(p.prime_unsure), bg, censored, prev, flag_since)
+        self._new_groups(bright, dark | later, upper, lower, level, t)
         self.word_due[:] = -np.inf  # every pixel evaluated at the next step, against its new background
         if measured.mean() >= p.prime_measured_fraction:
             self.primed = True
 
-    def _new_groups(self, bright, dark, upper, lower, level, t):
+    def _new_groups(self, bright, dark, upper_log, lower_log, level, t):
         """Pixels primed at tick ``t`` as groups to confirm: grouped as detections are (``merge_px``), brighter
-        and darker apart.
+        and darker apart (``upper_log``, ``lower_log``: the logarithms of their longest and shortest intervals).
 
         A group's deadline is ``prime_confirm_ticks`` after priming, or two of its typical intervals
         (its own for a brighter group, the background's around for a darker one) when longer: no
@@ -426,11 +416,13 @@ class SpikeChangeDetector:
         pending = np.zeros(self.spk.shape[0], np.bool_)
         for g in self._groups:
             pending[g[1]] = True
-        for sign, part, typical in ((1, bright, upper), (-1, dark, level)):
+        for sign, part in ((1, bright), (-1, dark)):
             part = part & ~self.upright(pending)
             if not part.any():
                 continue
             ys, xs = np.nonzero(part)  # scan order
+            upper, lower = np.exp(upper_log[ys, xs]), np.exp(lower_log[ys, xs])  # (only the groups' pixels)
+            typical = upper if sign > 0 else level[ys, xs]
             ys, xs = ys.astype(np.int64, copy=False), xs.astype(np.int64, copy=False)
             stored = ((self.height - 1 - ys) if self.flip else ys) * self.stored_width + xs  # (as upright's layout)
             if self._prime_index is None:
@@ -441,12 +433,11 @@ class SpikeChangeDetector:
             # each group's pixels in scan order, from one stable sort (not one comparison per group)
             order = np.argsort(label, kind="stable")
             cuts = np.searchsorted(label[order], np.arange(int(label.max()) + 2))
+            medians = _front.group_medians(typical, order, cuts)
             for k in range(cuts.size - 1):
                 sel = order[cuts[k]:cuts[k + 1]]
-                y, x = ys[sel], xs[sel]
-                wait = max(float(p.prime_confirm_ticks), 2.0 * float(np.median(typical[y, x])))
-                self._groups.append((self._step_end(t + 1 + wait), stored[sel], sign,
-                                     lower[y, x].copy(), upper[y, x].copy(), t))
+                wait = max(float(p.prime_confirm_ticks), 2.0 * float(medians[k]))
+                self._groups.append((self._step_end(t + 1 + wait), stored[sel], sign, lower[sel], upper[sel], t))
 
     def _touching(self, s: np.ndarray, px: int, sign: int) -> int:
         """Pixels within ``px`` of the stored pixels ``s`` (not theirs) whose foreground state is ``sign``."""
@@ -784,6 +775,13 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
     of its pixels around each pixel (per block).
     """
     H, W = values.shape
+    return tuple(v if k == 0 else _nearest(v, H, W)
+                 for k, v in enumerate(_interpolate_clear_blocks(values, clear, window_px, also)))
+
+
+def _interpolate_clear_blocks(values: np.ndarray, clear: np.ndarray, window_px: int, also=None):
+    """:func:`_interpolate_clear` with the weight (and the fraction of ``also``) per 8×8 block, not per pixel."""
+    H, W = values.shape
     # per 8×8 block, in one compiled pass: the sum over the clear pixels (as NumPy's sum of the padded blocks,
     # exactly), the clear pixels, and those also ``also``
     total, n, n_also = _front.clear_block_sums(np.ascontiguousarray(values, np.float64),
@@ -797,10 +795,10 @@ def _interpolate_clear(values: np.ndarray, clear: np.ndarray, window_px: int, al
         level = np.where(np.isfinite(level), level, np.nanmedian(level))
     else:
         level = np.zeros_like(level)
-    out = (_upsample(level, H, W), _nearest(weight / _PRIME_BLOCK_PX ** 2, H, W))
+    out = (_upsample(level, H, W), weight / _PRIME_BLOCK_PX ** 2)
     if also is not None:
         part = gaussian_filter(n_also, sigma, mode="nearest")
-        out += (_nearest(part / np.maximum(weight, 1e-9), H, W),)
+        out += (part / np.maximum(weight, 1e-9),)
     return out
 
 
