@@ -209,7 +209,7 @@ def _rename(src: Path, dst: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(path, suffix: str | None = None, *, directory: bool = False):
+def atomic_path(path, suffix: str | None = None, *, directory: bool = False, output: bool = True):
     """Yield a temporary path in the target's folder; move it onto ``path`` on success.
 
     ``suffix`` defaults to the target's own suffix (libraries that pick a format from
@@ -218,7 +218,8 @@ def atomic_path(path, suffix: str | None = None, *, directory: bool = False):
     (e.g. a zarr store). On any exception (Ctrl-C and SIGTERM included) the temporary is
     removed and the target is untouched; an interrupt that arrives while the output is being
     renamed in waits until it is (the command line's handlers, :func:`interrupts_deferred`), so the
-    output is then whole under its name and listed by :func:`completed_outputs`.
+    output is then whole under its name and listed by :func:`completed_outputs` (unless
+    ``output=False``: a cache file the command keeps for later runs, not one of its outputs).
 
     A folder replaces an existing one in three steps: the old store is renamed aside, the
     new one renamed in, the old one deleted; a crash at any point leaves the old or the new
@@ -277,7 +278,8 @@ def atomic_path(path, suffix: str | None = None, *, directory: bool = False):
                     raise
             else:
                 _rename(tmp, path)
-            _completed.append(path)
+            if output:
+                _completed.append(path)
             if old is not None:
                 shutil.rmtree(old, ignore_errors=True)
     except BaseException:
@@ -286,9 +288,10 @@ def atomic_path(path, suffix: str | None = None, *, directory: bool = False):
 
 
 @contextlib.contextmanager
-def atomic_open(path, mode: str = "wb"):
-    """Open a temporary file for writing; it replaces ``path`` only when the block succeeds."""
-    with atomic_path(path) as tmp, open(tmp, mode) as f:
+def atomic_open(path, mode: str = "wb", *, output: bool = True):
+    """Open a temporary file for writing; it replaces ``path`` only when the block succeeds
+    (``output``: as for :func:`atomic_path`)."""
+    with atomic_path(path, output=output) as tmp, open(tmp, mode) as f:
         yield f
 
 

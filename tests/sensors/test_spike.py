@@ -67,15 +67,18 @@ def test_gamma_sampler_is_exact(shape):
 def test_gamma_tables_cached_on_disk_are_the_computed_ones(tmp_path, monkeypatch):
     """A new process loads the tables it would compute, bit for bit; a damaged file is recomputed,
     an unwritable folder only costs the computation, a SciPy build of its own gets tables of its own."""
+    from viform._io import begin_outputs, completed_outputs
     from viform.sensors import _gamma
 
     monkeypatch.setattr(_gamma, "table_cache_folder", lambda: tmp_path / "tables")
     monkeypatch.setattr(_gamma, "_TABLES", {})
     shapes = [7.0, 100.0]
     computed = np.stack([_gamma._table(a) for a in shapes])
+    begin_outputs()
     (first,) = _gamma.build_tables(shapes)
     files = list((tmp_path / "tables").iterdir())
     assert len(files) == 1 and first.tobytes() == computed.tobytes()
+    assert completed_outputs() == []  # a cache, not a command's output (an interrupted command lists its outputs)
     monkeypatch.setattr(_gamma, "_TABLES", {})  # as in a new process
     monkeypatch.setattr(_gamma, "_table", lambda a: pytest.fail("computed although cached"))
     assert _gamma.build_tables(shapes)[0].tobytes() == computed.tobytes()

@@ -72,14 +72,18 @@ def _on_sigint(signum, frame):
 
 
 def _install_sigterm() -> None:
-    """SIGTERM as Ctrl-C; both held while a library call that must not be cut runs (_io.interrupts_deferred)."""
+    """SIGTERM as Ctrl-C; both held while a library call that must not be cut runs (_io.interrupts_deferred),
+    numba's compiles included (_numba_cache.defer_interrupts_in_compiles)."""
     import signal
     import threading
 
     if threading.current_thread() is threading.main_thread():
+        from viform._numba_cache import defer_interrupts_in_compiles
+
         signal.signal(signal.SIGTERM, _on_sigterm)
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             signal.signal(signal.SIGINT, _on_sigint)
+        defer_interrupts_in_compiles()
 
 
 def _first_line(exc: BaseException) -> str:

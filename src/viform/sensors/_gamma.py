@@ -138,7 +138,7 @@ def _save_tables(key: str, tables: np.ndarray) -> None:
     from viform._validate import ViformError
 
     try:
-        with atomic_open(table_cache_folder() / f"{key}.npy") as f:
+        with atomic_open(table_cache_folder() / f"{key}.npy", output=False) as f:  # (a cache, not an output)
             np.save(f, tables, allow_pickle=False)
     except (OSError, ViformError):
         pass
