@@ -17,18 +17,12 @@ never wait on each other's file locks, and a kernel's lock is taken once per pro
 compile nests (a kernel inlines another's, which is compiled first). Locks follow the call graph
 (a kernel waits only for the kernels it calls), so two processes cannot deadlock; a process that dies
 releases its locks (``flock``). Where ``fcntl`` or numba's internals are missing, nothing changes.
-
-The command line also holds its Ctrl-C and SIGTERM while numba compiles in the main thread
-(:func:`defer_interrupts_in_compiles`): the command stops when that kernel is compiled, neither
-lost inside LLVM's callbacks nor with a half-made kernel.
 """
 
 from __future__ import annotations
 
 import functools
 import os
-import sys
-import threading
 
 #: Module prefixes whose kernels are locked.
 PACKAGES = ("viform.",)
@@ -92,64 +86,3 @@ def share_compiles() -> bool:
     numba_dispatcher.Dispatcher.compile = compile
     return True
 
-
-def defer_interrupts_in_compiles() -> None:
-    """Hold the command line's Ctrl-C and SIGTERM while numba compiles a kernel (or loads it from its
-    cache) in the main thread, and raise them when it returns (:func:`viform._io.interrupts_deferred`).
-
-    Raised in the middle of numba's compile, an interrupt can be lost: raised inside a callback that
-    LLVM calls through ctypes, which drops exceptions, so the command runs on as if never told to stop.
-    It can also leave a compiled library half made, so that the command fails with "no compiled object
-    yet" instead of stopping. numba is imported by the first command that needs a kernel, after the
-    handlers are in place: its dispatcher is patched as it is imported (an import hook, removed once
-    used), so a command that never compiles does not import numba for this. Idempotent.
-    """
-    module = sys.modules.get("numba.core.dispatcher")
-    if module is not None:
-        _defer_in(module)
-    elif not any(isinstance(finder, _PatchDispatcherOnImport) for finder in sys.meta_path):
-        sys.meta_path.insert(0, _PatchDispatcherOnImport())
-
-
-def _defer_in(module) -> None:
-    """Wrap ``module.Dispatcher.compile`` (numba's) in :func:`viform._io.interrupts_deferred` (main thread)."""
-    original = module.Dispatcher.compile
-    if getattr(original, "_viform_defers", False):
-        return
-
-    def compile(self, sig):  # noqa: A001 -- numba's method name
-        if threading.current_thread() is not threading.main_thread():
-            return original(self, sig)  # (signal handlers run in the main thread only)
-        from viform._io import interrupts_deferred
-
-        with interrupts_deferred():
-            return original(self, sig)
-
-    functools.update_wrapper(compile, original)  # (its doc, and the marks of other wrappers)
-    compile._viform_defers = True
-    module.Dispatcher.compile = compile
-
-
-class _PatchDispatcherOnImport:
-    """An import hook that finds numba's dispatcher module as the other finders do, and patches it
-    (:func:`_defer_in`) once it has run; it removes itself on first use."""
-
-    def find_spec(self, name, path, target=None):
-        if name != "numba.core.dispatcher":
-            return None
-        sys.meta_path.remove(self)
-        for finder in sys.meta_path:
-            find = getattr(finder, "find_spec", None)
-            spec = find(name, path, target) if find is not None else None
-            if spec is not None:
-                break
-        else:
-            return None
-        run = spec.loader.exec_module
-
-        def exec_module(module):
-            run(module)
-            _defer_in(module)
-
-        spec.loader.exec_module = exec_module
-        return spec

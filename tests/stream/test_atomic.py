@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 
 import numpy as np
@@ -384,3 +385,48 @@ def test_sigterm_during_simulate_cleans_up_at_once(tmp_path, moment):
         assert open_spikes(path).verify()["verified"]
     else:
         assert not path.exists() and "no output was left" in lines[0]
+
+
+#: A command's handlers (viform.cli), then a SIGTERM that arrives while numba compiles a kernel: sent by the
+#: kernel's own typing (an intrinsic), so the handler runs in the middle of the compile.
+SIGNAL_IN_COMPILE = textwrap.dedent('''
+    import os, signal, sys
+    if sys.argv[1] == "before":
+        import numba  # numba already imported when the handlers are installed
+    from viform.cli import _install_sigterm, _Terminated
+    _install_sigterm()
+    assert ("numba.core.dispatcher" in sys.modules) == (sys.argv[1] == "before")
+    import numba
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def signalled(typingctx, x):
+        os.kill(os.getpid(), signal.SIGTERM)
+        sum(range(10_000))  # the handler runs here, while the caller is being compiled
+
+        def codegen(context, builder, signature, args):
+            return args[0]
+        return x(x), codegen
+
+    @numba.njit
+    def kernel(x):
+        return signalled(x) + 1.0
+
+    try:
+        kernel(1.0)
+        print("not interrupted")
+    except _Terminated:
+        print("interrupted; compiled:", [str(s) for s in kernel.signatures], "then", kernel(2.0))
+''')
+
+
+def test_an_interrupt_during_a_compile_is_raised_when_the_compile_returns():
+    # the command's SIGTERM, arriving mid-compile, neither cuts numba's compile (a half-made library, or an
+    # exception dropped inside a ctypes callback from LLVM: the command runs on) nor is lost: it is raised
+    # once the kernel is compiled, whether numba was imported before the handlers or after (the import hook)
+    env = {k: v for k, v in os.environ.items() if k != "VIFORM_SHARE_COMPILES"}  # (which imports numba)
+    for numba_imported in ("before", "after"):
+        run = subprocess.run([sys.executable, "-c", SIGNAL_IN_COMPILE, numba_imported], capture_output=True,
+                             text=True, timeout=600, env=env)
+        assert run.returncode == 0, run.stderr
+        assert run.stdout.strip() == "interrupted; compiled: ['(float64,)'] then 3.0", (numba_imported, run.stdout)

@@ -73,12 +73,12 @@ def _on_sigint(signum, frame):
 
 def _install_sigterm() -> None:
     """SIGTERM as Ctrl-C; both held while a library call that must not be cut runs (_io.interrupts_deferred),
-    numba's compiles included (_numba_cache.defer_interrupts_in_compiles)."""
+    numba's compiles included (_io.defer_interrupts_in_compiles)."""
     import signal
     import threading
 
     if threading.current_thread() is threading.main_thread():
-        from viform._numba_cache import defer_interrupts_in_compiles
+        from viform._io import defer_interrupts_in_compiles
 
         signal.signal(signal.SIGTERM, _on_sigterm)
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
