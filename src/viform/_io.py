@@ -81,10 +81,16 @@ def defer_interrupts_in_compiles() -> None:
 
 
 def _defer_in(module) -> None:
-    """Wrap ``module.Dispatcher.compile`` (numba's) in :func:`viform._io.interrupts_deferred` (main thread)."""
-    original = module.Dispatcher.compile
-    if getattr(original, "_viform_defers", False):
+    """Wrap ``module.Dispatcher.compile`` (numba's) in :func:`interrupts_deferred` (main thread only).
+
+    The file lock of :func:`viform._numba_cache.share_compiles` stays outside the deferral, whichever was
+    installed first: waiting for another process's compile remains interruptible.
+    """
+    current = module.Dispatcher.compile
+    if getattr(current, "_viform_defers", False):
         return
+    shared = getattr(current, "_viform_shared", False)
+    original = current.__wrapped__ if shared else current  # numba's own: the lock is put back around it below
 
     def compile(self, sig):  # noqa: A001 -- numba's method name
         if threading.current_thread() is not threading.main_thread():
@@ -95,11 +101,34 @@ def _defer_in(module) -> None:
     functools.update_wrapper(compile, original)  # (its doc, and the marks of other wrappers)
     compile._viform_defers = True
     module.Dispatcher.compile = compile
+    if shared:
+        from viform._numba_cache import share_compiles
+
+        share_compiles()
+
+
+class _PatchAfterExec:
+    """The loader of numba's dispatcher module alone, which patches it (:func:`_defer_in`) once it has run;
+    everything else is the real loader's (which may serve other modules too)."""
+
+    def __init__(self, loader):
+        self._loader = loader
+
+    def __getattr__(self, name):
+        return getattr(self._loader, name)
+
+    def create_module(self, spec):
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module):
+        self._loader.exec_module(module)
+        _defer_in(module)
 
 
 class _PatchDispatcherOnImport:
     """An import hook that finds numba's dispatcher module as the other finders do, and patches it
-    (:func:`_defer_in`) once it has run; it removes itself on first use."""
+    (:func:`_defer_in`) once it has run; it removes itself on first use. A loader of the old protocol
+    (no ``exec_module``) is left as it is: the compiles are then not deferred."""
 
     def find_spec(self, name, path, target=None):
         if name != "numba.core.dispatcher":
@@ -112,13 +141,8 @@ class _PatchDispatcherOnImport:
                 break
         else:
             return None
-        run = spec.loader.exec_module
-
-        def exec_module(module):
-            run(module)
-            _defer_in(module)
-
-        spec.loader.exec_module = exec_module
+        if callable(getattr(spec.loader, "exec_module", None)):
+            spec.loader = _PatchAfterExec(spec.loader)
         return spec
 
 

@@ -430,3 +430,31 @@ def test_an_interrupt_during_a_compile_is_raised_when_the_compile_returns():
                              text=True, timeout=600, env=env)
         assert run.returncode == 0, run.stderr
         assert run.stdout.strip() == "interrupted; compiled: ['(float64,)'] then 3.0", (numba_imported, run.stdout)
+
+
+CHAIN = textwrap.dedent('''
+    import sys
+    import viform
+    from viform._numba_cache import share_compiles
+    from viform.cli import _install_sigterm
+    if sys.argv[1] == "lock first":
+        share_compiles()
+    _install_sigterm()
+    import numba.core.dispatcher as d
+    share_compiles()
+    f, chain = d.Dispatcher.compile, []
+    while f is not None:
+        chain.append(f.__code__.co_filename.replace("\\\\", "/").split("/")[-1])
+        f = getattr(f, "__wrapped__", None)
+    print(" ".join(chain))
+''')
+
+
+def test_the_compile_file_lock_stays_outside_the_deferral():
+    # waiting for another process's compile (VIFORM_SHARE_COMPILES) stays interruptible: the file lock wraps
+    # the deferred compile, whichever was installed first
+    env = {k: v for k, v in os.environ.items() if k != "VIFORM_SHARE_COMPILES"}
+    for order in ("lock first", "deferral first"):
+        out = subprocess.run([sys.executable, "-c", CHAIN, order], capture_output=True, text=True, check=True,
+                             env=env).stdout.split()
+        assert out == ["_numba_cache.py", "_io.py", "dispatcher.py"], (order, out)

@@ -445,7 +445,7 @@ def light_estimator(threshold_electrons: float, dead_time_ticks: float = 0.0, re
         from viform._io import atomic_open
 
         path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_open(path) as f:
+        with atomic_open(path, output=False) as f:  # (a cache, not an output)
             np.savez(f, **{name: np.asarray(part) for name, part in zip(_ESTIMATOR_FIELDS, estimator._parts,
                                                                           strict=True)})
     except (OSError, ViformError):
