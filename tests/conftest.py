@@ -34,6 +34,9 @@ def pytest_configure(config):
 
     share_compiles()
     os.environ["VIFORM_SHARE_COMPILES"] = "1"  # and so do the commands the tests start in subprocesses
+    from viform.cli import wait_passively
+
+    wait_passively()  # numba's OpenMP threads sleep between kernels, as the command line's (README)
 
 
 #: The real recordings (README, "Tests that read real recordings"): ``$VIFORM_SPIKE_DATA`` if set,

@@ -153,9 +153,14 @@ def test_exported_functions_carry_numpydoc_parameters_and_returns(name):
         assert _section(doc, "Returns") or _section(doc, "Yields"), f"{where}: no Returns (or Yields) section"
 
 
-#: A process that imports viform, then runs its first numba parallel kernel (which loads the OpenMP runtime).
+
+#: A process that imports viform (and with "cli", runs a command: ``viform --help``), then runs its first
+#: numba parallel kernel, which loads the OpenMP runtime.
 _FIRST_PARALLEL_KERNEL = (
-    "import os, numba, numpy as np, viform\n"
+    "import os, sys, numba, numpy as np, viform\n"
+    "if sys.argv[1] == 'cli':\n"
+    "    from viform.cli import main\n"
+    "    assert main(['--help']) == 0\n"
     "@numba.njit(parallel=True)\n"
     "def total(a):\n"
     "    s = 0.0\n"
@@ -163,21 +168,23 @@ _FIRST_PARALLEL_KERNEL = (
     "        s += a[i]\n"
     "    return s\n"
     "assert total(np.ones(64)) == 64.0\n"
-    "print(os.environ['OMP_WAIT_POLICY'], numba.threading_layer())\n"
+    "print(os.environ.get('OMP_WAIT_POLICY', '-'), numba.threading_layer(), file=sys.stderr)\n"
 )
 
 
-@pytest.mark.parametrize("chosen", [None, "ACTIVE"])
-def test_openmp_threads_wait_passively_unless_the_user_chose(chosen):
-    """Importing viform makes numba's OpenMP threads sleep between parallel regions (not spin); a wait
-    policy the user set is kept. GNU libgomp says what it read (OMP_DISPLAY_ENV): no spinning at all."""
+@pytest.mark.parametrize(("run", "chosen", "expected"), [("import", None, "-"), ("cli", None, "PASSIVE"),
+                                                        ("cli", "ACTIVE", "ACTIVE")])
+def test_the_command_line_lets_openmp_threads_wait_passively_unless_the_user_chose(run, chosen, expected):
+    """A command makes numba's OpenMP threads sleep between parallel regions (not spin), unless the user set a
+    wait policy; importing the library leaves the environment alone (other OpenMP users in the process, such
+    as PyTorch, keep their default). GNU libgomp says what it read (OMP_DISPLAY_ENV)."""
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
     env["OMP_DISPLAY_ENV"] = "VERBOSE"
     if chosen is not None:
         env["OMP_WAIT_POLICY"] = chosen
-    run = subprocess.run([sys.executable, "-c", _FIRST_PARALLEL_KERNEL], capture_output=True, text=True,
-                         check=True, env=env)
-    policy, layer = run.stdout.split()
-    assert policy == (chosen or "PASSIVE")
-    if layer == "omp" and "GOMP_SPINCOUNT" in run.stderr:  # the runtime read it when it loaded
-        assert ("GOMP_SPINCOUNT = '0'" in run.stderr) == (chosen is None), run.stderr
+    done = subprocess.run([sys.executable, "-c", _FIRST_PARALLEL_KERNEL, run], capture_output=True, text=True,
+                          check=True, env=env)
+    policy, layer = done.stderr.strip().splitlines()[-1].split()
+    assert policy == expected
+    if layer == "omp" and "GOMP_SPINCOUNT" in done.stderr:  # the runtime read it when it loaded
+        assert ("GOMP_SPINCOUNT = '0'" in done.stderr) == (expected == "PASSIVE"), done.stderr

@@ -71,6 +71,20 @@ def _on_sigint(signum, frame):
     raise_or_defer(KeyboardInterrupt())
 
 
+def wait_passively() -> None:
+    """Let numba's OpenMP threads sleep between parallel kernels (``OMP_WAIT_POLICY=PASSIVE``) unless the
+    user chose a policy; read when the OpenMP runtime loads, at the first parallel kernel.
+
+    numba runs its parallel kernels on an OpenMP team (its "omp" threading layer, the default on Linux),
+    whose threads by default spin after each parallel region before they sleep (300,000 polls in GNU
+    libgomp): CPU taken, on a machine with few cores, from the threads that work meanwhile (the
+    tracker's reader and association threads, a test run's other worker). Set by the command line and
+    the test suite, which own their processes, not by importing the library: the same variable slows
+    PyTorch's small operations in a process that also trains a network (15–40 % measured).
+    """
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
 def _install_sigterm() -> None:
     """SIGTERM as Ctrl-C; both held while a library call that must not be cut runs (_io.interrupts_deferred),
     numba's compiles included (_io.defer_interrupts_in_compiles)."""
@@ -123,6 +137,7 @@ def main(argv=None) -> int:
 
     from viform._io import begin_outputs
 
+    wait_passively()
     _install_sigterm()
     begin_outputs()
     with warnings.catch_warnings():
