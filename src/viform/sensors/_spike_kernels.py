@@ -1186,7 +1186,8 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
     tick's scalars (row k of ``scalars``, ``xtab``, ``ytab``); its charge that tick is
     int64(a[p]·lux + b[p] + 0.5) in fixed point (gain and dark current per pixel), added
     exactly; the pixel fires when the sum reaches its Gamma(Q) target (the crossing rules of
-    :func:`_fire`, its common case from ``scaled`` and ``accept`` as in :func:`_run_block`). Per
+    :func:`_fire`, its common case from ``scaled`` and ``accept`` as in :func:`_run_block`; the
+    noise-free models without dead time, whose target is fixed, in line as well). Per
     image row and tick: one vectorized pass for the light (:func:`~viform.light.compiled.row_lux`),
     one for the charge, one that adds, compares and packs 64 lanes per word, then only the lanes
     that fired. ``out`` (uint8,
@@ -1205,6 +1206,9 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
     aligned = width % 8 == 0
     n_bands = (height + band_rows - 1) // band_rows
     fast = noise and not reset_readout and dead_ticks == 0.0  # _fire's common case, inlined below
+    # the noise-free models without dead time, inlined too: _fire_general's arithmetic for them
+    plain_self = not noise and not reset_readout and dead_ticks == 0.0
+    plain_readout = not noise and reset_readout and dead_ticks == 0.0
     for band in prange(n_bands):
         y0 = band * band_rows
         y1 = min(y0 + band_rows, height)
@@ -1264,6 +1268,16 @@ def _run_block_ticks(out, kind, scalars, xtab, ytab, frames, params, a, b, xs, f
                                     if ti == 0:
                                         ti = _target_general(q[p], index[p], bins, keys[p], counter[p])
                                     counter[p] += 1
+                            elif plain_self:
+                                # a fixed target: the charge past it is kept, the tick's later crossings lost
+                                ci -= ti
+                                if ci >= ti:
+                                    ci -= ((ci - ti) // ti + 1) * ti
+                            elif plain_readout:
+                                # drained at the readout; the next (fixed) target counts as a draw
+                                ci = 0
+                                ti = max(np.int64(1), np.int64(q[p] * 4294967296.0 + 0.5))
+                                counter[p] += 1
                             else:
                                 ci, ti = _fire_general(ci, ti, rate[x], dead_ticks, p, q, index, bins, keys, noise,
                                                        reset_readout, counter)
