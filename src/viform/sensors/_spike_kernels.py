@@ -862,6 +862,258 @@ def _settle_all(charge, target, counter, q, index, bins, keys, pending_ticks, pe
             _settle(np.int64(p), charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
 
 
+@njit(cache=True)
+def _run_tile(tile, words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, scaled, accept, keys,
+              noise, reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate, sparse_firing,
+              vector_min):
+    """Tile ``tile`` (:data:`_TILE_WORDS` words of 64 pixels) of :func:`_run_block`, every tick of the
+    block: the work item of its parallel loop, compiled on its own (the parallel compiler's passes over
+    so large a loop body cost most of the kernel's compile time)."""
+    n_ticks = words.shape[0]
+    n_words = (words.shape[1] + 7) // 8
+    n_pixels = charge.size
+    lazy_ok = mode == MODE_GENERAL and noise and not reset_readout and dead_ticks == 0.0
+    fast = lazy_ok  # photon noise, self-reset, no dead time: the common case inlined below
+    w0 = tile * _TILE_WORDS
+    nw = min(w0 + _TILE_WORDS, n_words) - w0
+    p0 = w0 * _LANES
+    n = min(nw * _LANES, n_pixels - p0)
+    size = nw * _LANES
+    tile_byte0 = 8 * w0  # the tile's first and last byte in a frame
+    tile_byte1 = min(8 * (w0 + nw), words.shape[1]) - 1
+    c = np.zeros(size, dtype=np.int64)
+    t = np.full(size, _NO_TARGET)
+    e = np.zeros(size, dtype=np.int64)
+    lazy_from = np.full(size, -1, dtype=np.int64)  # tick of the block where a lane's lazy run began
+    lazy_mask = np.zeros(nw, dtype=np.uint64)
+    always = np.zeros(nw, dtype=np.uint64)  # noise-free self-reset: lanes that fire in every tick of the run
+    # per lane, what a spike's common case reads (kept beside the lane state, in L1): the charge
+    # past a crossing below which a crossing draws one target, the pixel's draw counter (the
+    # lane's copy is the pixel's counter while the tile runs), stream key and table row
+    one_by_one = np.zeros(size, dtype=np.int64)
+    drawn = np.zeros(size, dtype=np.int64)
+    key = np.zeros(size, dtype=np.uint64)
+    row0 = np.zeros(size, dtype=np.int64)
+    # charge per tick up to which a lane fires rarely (≤ 1 spike in 20 ticks on average): words whose
+    # lanes are all below it are run crossing by crossing (same bits, less work than tick by tick)
+    sparse_rate = np.zeros(size, dtype=np.int64)
+    per_threshold = np.zeros(size)  # 1 / the lane's threshold (fixed point): its crossings per unit of charge
+    # the tile's pixels through views indexed from 0: indices p0 + j, whose sign the compiler cannot
+    # prove, made the vectorized loops gather every element (microcoded, ≈ 2 ms a block at 400×250)
+    c[:n] = charge[p0:p0 + n]
+    t[:n] = target[p0:p0 + n]
+    drawn[:n] = counter[p0:p0 + n]
+    key[:n] = keys[p0:p0 + n]
+    tile_q = q[p0:p0 + n]
+    tile_index = index[p0:p0 + n]
+    share = 1.0 if mode == MODE_GENERAL else _NOISE_FREE_SPARSE
+    for j in range(n):
+        qj = tile_q[j]
+        one_by_one[j] = min(_fixed_charge(_JUMP_INTERVALS * qj), _fixed_charge(8.0 * qj * qj))
+        row0[j] = np.int64(tile_index[j]) * TABLE_SIZE
+        sparse_rate[j] = _fixed_charge(sparse_firing * share * qj)
+        per_threshold[j] = 1.0 / _fixed_charge(qj)
+    s = 0
+    while seg_end[s] <= first_tick:
+        s += 1
+    k = 0
+    while k < n_ticks:
+        end = min(seg_end[s] - first_tick, n_ticks)
+        if end <= k:  # an empty run
+            s += 1
+            continue
+        if not lazy_ok:
+            e[:n] = rates[s, p0:p0 + n]
+        else:
+            for j in range(n):
+                p = p0 + j
+                r = rates[s, p]
+                lazy = r >= lazy_bound[p]
+                bit = np.uint64(1) << np.uint64(j & 63)
+                if pending_ticks[p] > 0 and (not lazy or pending_rate[p] != r):
+                    # the saturated stretch ends (or its light changes): its draws first
+                    counter[p] = drawn[j]
+                    _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
+                    drawn[j] = counter[p]
+                    c[j] = charge[p]
+                    t[j] = target[p]
+                if lazy:
+                    if pending_ticks[p] == 0:  # a new stretch starts from the lane's state
+                        charge[p] = c[j]
+                        target[p] = t[j]
+                        pending_rate[p] = r
+                    lazy_from[j] = k
+                    c[j] = 0  # fires every tick and stays put
+                    t[j] = 0
+                    e[j] = 0
+                    lazy_mask[j >> 6] |= bit
+                else:
+                    if lazy_mask[j >> 6] & bit:  # left laziness above: its state is back
+                        lazy_mask[j >> 6] &= ~bit
+                    e[j] = r
+        if mode == MODE_NOISE_FREE_SELF:
+            # a lane whose charge per tick reaches its (constant) target fires in every tick, and its charge
+            # goes to (c + e) mod t: it runs with e mod t < t (so the 64-lane chunks can take its word) and
+            # its bit is set in every tick of the run (``always``)
+            for w in range(nw):
+                always[w] = np.uint64(0)
+            for j in range(n):
+                if e[j] >= t[j]:
+                    e[j] %= t[j]
+                    always[j >> 6] |= np.uint64(1) << np.uint64(j & 63)
+        dense = np.uint64(0)  # the words that run tick by tick
+        busy = np.uint64(0)  # ... and of those, the words whose crossings go eight lanes at a time
+        for w in range(nw):  # dim words: each lane's crossings through the run, then the next lane
+            base = w * _LANES
+            sparse = lazy_mask[w] == 0 and always[w] == 0
+            for i in range(base, base + _LANES):
+                sparse &= e[i] <= sparse_rate[i]
+            if not sparse:
+                dense |= np.uint64(1) << np.uint64(w)
+                if fast:
+                    expected = 0.0  # crossings per tick of the word's lanes (lazy lanes: none)
+                    for i in range(base, base + _LANES):
+                        expected += e[i] * per_threshold[i]
+                    if expected >= vector_min:
+                        busy |= np.uint64(1) << np.uint64(w)
+            else:
+                # every lane fires rarely in this run: visit each lane's crossings instead of each tick
+                for kk in range(k, end):
+                    _put_word(words, kk, w0 + w, np.uint64(0))
+                for i in range(base, base + min(_LANES, n - base)):
+                    ci = c[i]
+                    ti = t[i]
+                    ei = e[i]
+                    kk = k  # the lane has run up to the start of tick kk (ci < ti)
+                    while ei > 0:
+                        # the crossing's tick: the smallest m ≥ 1 with ci + m·ei ≥ ti
+                        need = ti - ci
+                        m = max(np.int64(1), np.int64(need / ei))
+                        while m * ei < need:
+                            m += 1
+                        while m > 1 and (m - 1) * ei >= need:
+                            m -= 1
+                        if m > end - kk:
+                            ci += (end - kk) * ei
+                            break
+                        kk += m
+                        ci += m * ei
+                        words[kk - 1, 8 * (w0 + w) + ((i - base) >> 3)] |= np.uint8(1 << ((i - base) & 7))
+                        if mode == MODE_NOISE_FREE_SELF:
+                            ci -= ti
+                            if ci >= ti:
+                                ci %= ti
+                        elif mode == MODE_NOISE_FREE_READOUT:
+                            ci = 0
+                        elif fast and ci - ti < one_by_one[i]:
+                            while ci >= ti:
+                                ci -= ti
+                                ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
+                                if ti == 0:
+                                    ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
+                                drawn[i] += 1
+                        else:
+                            counter[p0 + i] = drawn[i]
+                            ci, ti = _fire_general(ci, ti, ei, dead_ticks, p0 + i, q, index, bins, keys, noise,
+                                                   reset_readout, counter)
+                            drawn[i] = counter[p0 + i]
+                    c[i] = ci
+                    t[i] = ti
+        # busy words tick by tick, in chunks of ticks across the tile's words: each tick's bits of the
+        # tile are one cache line, written while it is in L1
+        if dense != 0:
+            for k0 in range(k, end, _TICK_CHUNK):
+                k1 = min(k0 + _TICK_CHUNK, end)
+                for w in range(nw):
+                    # the next chunk's rows of the tile's bytes (≤ 64: one or two cache lines a row), fetched
+                    # for writing while this chunk runs, a share of the rows per word: the rows are a frame
+                    # apart, so the hardware prefetchers do not see them coming and every first store to a
+                    # line would wait for its read (≈ 1.4× slower per tick at 400×250)
+                    for kk in range(k1 + (w * _TICK_CHUNK) // nw, min(k1 + ((w + 1) * _TICK_CHUNK) // nw, end)):
+                        _prefetch_for_write(words, kk, tile_byte0)
+                        _prefetch_for_write(words, kk, tile_byte1)
+                    if not (dense >> np.uint64(w)) & np.uint64(1):
+                        continue
+                    base = w * _LANES
+                    whole = 8 * (w0 + w) + 8 <= words.shape[1]  # the word's 8 bytes are in the row
+                    if whole and mode == MODE_NOISE_FREE_READOUT:
+                        _noise_free_readout_chunk(words, w0 + w, k0, k1, c, e, t, base)
+                        continue
+                    if whole and mode == MODE_NOISE_FREE_SELF and _noise_free_self_chunk(words, w0 + w, k0, k1,
+                                                                                         c, e, t, base):
+                        if always[w] != 0:
+                            for kk in range(k0, k1):
+                                for b in range(8):
+                                    words[kk, 8 * (w0 + w) + b] |= np.uint8((always[w] >> np.uint64(8 * b))
+                                                                            & np.uint64(0xFF))
+                        continue
+                    busy_word = (busy >> np.uint64(w)) & np.uint64(1) != np.uint64(0)
+                    for kk in range(k0, k1):
+                        if mode == MODE_NOISE_FREE_SELF:
+                            word, over = _lanes_noise_free_self(c, e, t, base)
+                            if over:  # crossings lost inside the tick: the charge modulo the target
+                                for i in range(base, base + _LANES):
+                                    if c[i] >= t[i]:
+                                        c[i] %= t[i]
+                            word |= always[w]
+                        elif mode == MODE_NOISE_FREE_READOUT:
+                            word = _lanes_noise_free_readout(c, e, t, base)
+                        else:
+                            word = _lanes_add_compare(c, e, t, base)
+                            todo = word & ~lazy_mask[w]
+                            if busy_word and todo != 0:
+                                # a busy word (photon noise, self-reset, no dead time): the first crossing of
+                                # its fired lanes eight at a time; the loop below finishes the lanes that need
+                                # more (a rejected draw left target 0: the same counter is drawn again, rejected
+                                # again, and the general sampler takes it; a second crossing) and takes those
+                                # too far past their target, untouched here
+                                rest = np.uint64(0)
+                                for g in range(_LANES // 8):
+                                    byte = (todo >> np.uint64(8 * g)) & np.uint64(0xFF)
+                                    if byte != 0:
+                                        r = _fire8_fast(c, t, drawn, key, row0, one_by_one, scaled, accept,
+                                                        base + 8 * g, byte)
+                                        rest |= ((r | (r >> np.uint64(8))) & np.uint64(0xFF)) << np.uint64(8 * g)
+                                todo = rest
+                            while todo != 0:
+                                i = base + np.int64(trailing_zeros(todo))
+                                todo &= todo - np.uint64(1)
+                                ci = c[i]
+                                ti = t[i]
+                                if fast and ci - ti < one_by_one[i]:
+                                    # _fire's common case: one Gamma target per crossing (draw `drawn[i]` of
+                                    # the pixel's stream), the later crossings of the tick lost
+                                    while ci >= ti:
+                                        ci -= ti
+                                        ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
+                                        if ti == 0:
+                                            ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
+                                        drawn[i] += 1
+                                    c[i] = ci
+                                    t[i] = ti
+                                else:
+                                    counter[p0 + i] = drawn[i]
+                                    c[i], t[i] = _fire_general(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins,
+                                                               keys, noise, reset_readout, counter)
+                                    drawn[i] = counter[p0 + i]
+                        _put_word(words, kk, w0 + w, word)
+        if lazy_ok:
+            for j in range(n):
+                if lazy_from[j] >= 0:
+                    pending_ticks[p0 + j] += end - lazy_from[j]
+                    lazy_from[j] = -1
+        k = end
+        s += 1
+    counter[p0:p0 + n] = drawn[:n]
+    tile_charge = charge[p0:p0 + n]
+    tile_target = target[p0:p0 + n]
+    for j in range(n):
+        if not lazy_mask[j >> 6] & (np.uint64(1) << np.uint64(j & 63)):
+            tile_charge[j] = c[j]
+            tile_target[j] = t[j]
+
+
+
 @njit(cache=True, parallel=True)
 def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, scaled, accept, keys,
                noise, reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate, sparse_firing,
@@ -898,250 +1150,13 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
     fired lanes' common case is taken eight lanes at a time (:func:`_fire8_fast`) and the rest
     lane by lane: the same bits and state for any ``vector_min``.
     """
-    n_ticks = words.shape[0]
     n_words = (words.shape[1] + 7) // 8
-    n_pixels = charge.size
-    lazy_ok = mode == MODE_GENERAL and noise and not reset_readout and dead_ticks == 0.0
-    fast = lazy_ok  # photon noise, self-reset, no dead time: the common case inlined below
     n_tiles = (n_words + _TILE_WORDS - 1) // _TILE_WORDS
     for tile in prange(n_tiles):
-        w0 = tile * _TILE_WORDS
-        nw = min(w0 + _TILE_WORDS, n_words) - w0
-        p0 = w0 * _LANES
-        n = min(nw * _LANES, n_pixels - p0)
-        size = nw * _LANES
-        tile_byte0 = 8 * w0  # the tile's first and last byte in a frame
-        tile_byte1 = min(8 * (w0 + nw), words.shape[1]) - 1
-        c = np.zeros(size, dtype=np.int64)
-        t = np.full(size, _NO_TARGET)
-        e = np.zeros(size, dtype=np.int64)
-        lazy_from = np.full(size, -1, dtype=np.int64)  # tick of the block where a lane's lazy run began
-        lazy_mask = np.zeros(nw, dtype=np.uint64)
-        always = np.zeros(nw, dtype=np.uint64)  # noise-free self-reset: lanes that fire in every tick of the run
-        # per lane, what a spike's common case reads (kept beside the lane state, in L1): the charge
-        # past a crossing below which a crossing draws one target, the pixel's draw counter (the
-        # lane's copy is the pixel's counter while the tile runs), stream key and table row
-        one_by_one = np.zeros(size, dtype=np.int64)
-        drawn = np.zeros(size, dtype=np.int64)
-        key = np.zeros(size, dtype=np.uint64)
-        row0 = np.zeros(size, dtype=np.int64)
-        # charge per tick up to which a lane fires rarely (≤ 1 spike in 20 ticks on average): words whose
-        # lanes are all below it are run crossing by crossing (same bits, less work than tick by tick)
-        sparse_rate = np.zeros(size, dtype=np.int64)
-        per_threshold = np.zeros(size)  # 1 / the lane's threshold (fixed point): its crossings per unit of charge
-        # the tile's pixels through views indexed from 0: indices p0 + j, whose sign the compiler cannot
-        # prove, made the vectorized loops gather every element (microcoded, ≈ 2 ms a block at 400×250)
-        c[:n] = charge[p0:p0 + n]
-        t[:n] = target[p0:p0 + n]
-        drawn[:n] = counter[p0:p0 + n]
-        key[:n] = keys[p0:p0 + n]
-        tile_q = q[p0:p0 + n]
-        tile_index = index[p0:p0 + n]
-        share = 1.0 if mode == MODE_GENERAL else _NOISE_FREE_SPARSE
-        for j in range(n):
-            qj = tile_q[j]
-            one_by_one[j] = min(_fixed_charge(_JUMP_INTERVALS * qj), _fixed_charge(8.0 * qj * qj))
-            row0[j] = np.int64(tile_index[j]) * TABLE_SIZE
-            sparse_rate[j] = _fixed_charge(sparse_firing * share * qj)
-            per_threshold[j] = 1.0 / _fixed_charge(qj)
-        s = 0
-        while seg_end[s] <= first_tick:
-            s += 1
-        k = 0
-        while k < n_ticks:
-            end = min(seg_end[s] - first_tick, n_ticks)
-            if end <= k:  # an empty run
-                s += 1
-                continue
-            if not lazy_ok:
-                e[:n] = rates[s, p0:p0 + n]
-            else:
-                for j in range(n):
-                    p = p0 + j
-                    r = rates[s, p]
-                    lazy = r >= lazy_bound[p]
-                    bit = np.uint64(1) << np.uint64(j & 63)
-                    if pending_ticks[p] > 0 and (not lazy or pending_rate[p] != r):
-                        # the saturated stretch ends (or its light changes): its draws first
-                        counter[p] = drawn[j]
-                        _settle(p, charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
-                        drawn[j] = counter[p]
-                        c[j] = charge[p]
-                        t[j] = target[p]
-                    if lazy:
-                        if pending_ticks[p] == 0:  # a new stretch starts from the lane's state
-                            charge[p] = c[j]
-                            target[p] = t[j]
-                            pending_rate[p] = r
-                        lazy_from[j] = k
-                        c[j] = 0  # fires every tick and stays put
-                        t[j] = 0
-                        e[j] = 0
-                        lazy_mask[j >> 6] |= bit
-                    else:
-                        if lazy_mask[j >> 6] & bit:  # left laziness above: its state is back
-                            lazy_mask[j >> 6] &= ~bit
-                        e[j] = r
-            if mode == MODE_NOISE_FREE_SELF:
-                # a lane whose charge per tick reaches its (constant) target fires in every tick, and its charge
-                # goes to (c + e) mod t: it runs with e mod t < t (so the 64-lane chunks can take its word) and
-                # its bit is set in every tick of the run (``always``)
-                for w in range(nw):
-                    always[w] = np.uint64(0)
-                for j in range(n):
-                    if e[j] >= t[j]:
-                        e[j] %= t[j]
-                        always[j >> 6] |= np.uint64(1) << np.uint64(j & 63)
-            dense = np.uint64(0)  # the words that run tick by tick
-            busy = np.uint64(0)  # ... and of those, the words whose crossings go eight lanes at a time
-            for w in range(nw):  # dim words: each lane's crossings through the run, then the next lane
-                base = w * _LANES
-                sparse = lazy_mask[w] == 0 and always[w] == 0
-                for i in range(base, base + _LANES):
-                    sparse &= e[i] <= sparse_rate[i]
-                if not sparse:
-                    dense |= np.uint64(1) << np.uint64(w)
-                    if fast:
-                        expected = 0.0  # crossings per tick of the word's lanes (lazy lanes: none)
-                        for i in range(base, base + _LANES):
-                            expected += e[i] * per_threshold[i]
-                        if expected >= vector_min:
-                            busy |= np.uint64(1) << np.uint64(w)
-                else:
-                    # every lane fires rarely in this run: visit each lane's crossings instead of each tick
-                    for kk in range(k, end):
-                        _put_word(words, kk, w0 + w, np.uint64(0))
-                    for i in range(base, base + min(_LANES, n - base)):
-                        ci = c[i]
-                        ti = t[i]
-                        ei = e[i]
-                        kk = k  # the lane has run up to the start of tick kk (ci < ti)
-                        while ei > 0:
-                            # the crossing's tick: the smallest m ≥ 1 with ci + m·ei ≥ ti
-                            need = ti - ci
-                            m = max(np.int64(1), np.int64(need / ei))
-                            while m * ei < need:
-                                m += 1
-                            while m > 1 and (m - 1) * ei >= need:
-                                m -= 1
-                            if m > end - kk:
-                                ci += (end - kk) * ei
-                                break
-                            kk += m
-                            ci += m * ei
-                            words[kk - 1, 8 * (w0 + w) + ((i - base) >> 3)] |= np.uint8(1 << ((i - base) & 7))
-                            if mode == MODE_NOISE_FREE_SELF:
-                                ci -= ti
-                                if ci >= ti:
-                                    ci %= ti
-                            elif mode == MODE_NOISE_FREE_READOUT:
-                                ci = 0
-                            elif fast and ci - ti < one_by_one[i]:
-                                while ci >= ti:
-                                    ci -= ti
-                                    ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
-                                    if ti == 0:
-                                        ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
-                                    drawn[i] += 1
-                            else:
-                                counter[p0 + i] = drawn[i]
-                                ci, ti = _fire_general(ci, ti, ei, dead_ticks, p0 + i, q, index, bins, keys, noise,
-                                                       reset_readout, counter)
-                                drawn[i] = counter[p0 + i]
-                        c[i] = ci
-                        t[i] = ti
-            # busy words tick by tick, in chunks of ticks across the tile's words: each tick's bits of the
-            # tile are one cache line, written while it is in L1
-            if dense != 0:
-                for k0 in range(k, end, _TICK_CHUNK):
-                    k1 = min(k0 + _TICK_CHUNK, end)
-                    for w in range(nw):
-                        # the next chunk's rows of the tile's bytes (≤ 64: one or two cache lines a row), fetched
-                        # for writing while this chunk runs, a share of the rows per word: the rows are a frame
-                        # apart, so the hardware prefetchers do not see them coming and every first store to a
-                        # line would wait for its read (≈ 1.4× slower per tick at 400×250)
-                        for kk in range(k1 + (w * _TICK_CHUNK) // nw, min(k1 + ((w + 1) * _TICK_CHUNK) // nw, end)):
-                            _prefetch_for_write(words, kk, tile_byte0)
-                            _prefetch_for_write(words, kk, tile_byte1)
-                        if not (dense >> np.uint64(w)) & np.uint64(1):
-                            continue
-                        base = w * _LANES
-                        whole = 8 * (w0 + w) + 8 <= words.shape[1]  # the word's 8 bytes are in the row
-                        if whole and mode == MODE_NOISE_FREE_READOUT:
-                            _noise_free_readout_chunk(words, w0 + w, k0, k1, c, e, t, base)
-                            continue
-                        if whole and mode == MODE_NOISE_FREE_SELF and _noise_free_self_chunk(words, w0 + w, k0, k1,
-                                                                                             c, e, t, base):
-                            if always[w] != 0:
-                                for kk in range(k0, k1):
-                                    for b in range(8):
-                                        words[kk, 8 * (w0 + w) + b] |= np.uint8((always[w] >> np.uint64(8 * b))
-                                                                                & np.uint64(0xFF))
-                            continue
-                        busy_word = (busy >> np.uint64(w)) & np.uint64(1) != np.uint64(0)
-                        for kk in range(k0, k1):
-                            if mode == MODE_NOISE_FREE_SELF:
-                                word, over = _lanes_noise_free_self(c, e, t, base)
-                                if over:  # crossings lost inside the tick: the charge modulo the target
-                                    for i in range(base, base + _LANES):
-                                        if c[i] >= t[i]:
-                                            c[i] %= t[i]
-                                word |= always[w]
-                            elif mode == MODE_NOISE_FREE_READOUT:
-                                word = _lanes_noise_free_readout(c, e, t, base)
-                            else:
-                                word = _lanes_add_compare(c, e, t, base)
-                                todo = word & ~lazy_mask[w]
-                                if busy_word and todo != 0:
-                                    # a busy word (photon noise, self-reset, no dead time): the first crossing of
-                                    # its fired lanes eight at a time; the loop below finishes the lanes that need
-                                    # more (a rejected draw left target 0: the same counter is drawn again, rejected
-                                    # again, and the general sampler takes it; a second crossing) and takes those
-                                    # too far past their target, untouched here
-                                    rest = np.uint64(0)
-                                    for g in range(_LANES // 8):
-                                        byte = (todo >> np.uint64(8 * g)) & np.uint64(0xFF)
-                                        if byte != 0:
-                                            r = _fire8_fast(c, t, drawn, key, row0, one_by_one, scaled, accept,
-                                                            base + 8 * g, byte)
-                                            rest |= ((r | (r >> np.uint64(8))) & np.uint64(0xFF)) << np.uint64(8 * g)
-                                    todo = rest
-                                while todo != 0:
-                                    i = base + np.int64(trailing_zeros(todo))
-                                    todo &= todo - np.uint64(1)
-                                    ci = c[i]
-                                    ti = t[i]
-                                    if fast and ci - ti < one_by_one[i]:
-                                        # _fire's common case: one Gamma target per crossing (draw `drawn[i]` of
-                                        # the pixel's stream), the later crossings of the tick lost
-                                        while ci >= ti:
-                                            ci -= ti
-                                            ti = _target_fast(row0[i], scaled, accept, key[i], drawn[i])
-                                            if ti == 0:
-                                                ti = _target_general(q[p0 + i], index[p0 + i], bins, key[i], drawn[i])
-                                            drawn[i] += 1
-                                        c[i] = ci
-                                        t[i] = ti
-                                    else:
-                                        counter[p0 + i] = drawn[i]
-                                        c[i], t[i] = _fire_general(ci, ti, e[i], dead_ticks, p0 + i, q, index, bins,
-                                                                   keys, noise, reset_readout, counter)
-                                        drawn[i] = counter[p0 + i]
-                            _put_word(words, kk, w0 + w, word)
-            if lazy_ok:
-                for j in range(n):
-                    if lazy_from[j] >= 0:
-                        pending_ticks[p0 + j] += end - lazy_from[j]
-                        lazy_from[j] = -1
-            k = end
-            s += 1
-        counter[p0:p0 + n] = drawn[:n]
-        tile_charge = charge[p0:p0 + n]
-        tile_target = target[p0:p0 + n]
-        for j in range(n):
-            if not lazy_mask[j >> 6] & (np.uint64(1) << np.uint64(j & 63)):
-                tile_charge[j] = c[j]
-                tile_target[j] = t[j]
+        # (a prange index may be unsigned: int64 keeps _run_tile to one signature, one compile)
+        _run_tile(np.int64(tile), words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, scaled, accept,
+                  keys, noise, reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate,
+                  sparse_firing, vector_min)
 
 
 _LIGHT_WINDOW = 16  # ticks per window of the per-tick kernel: the window's light tables stay in cache
