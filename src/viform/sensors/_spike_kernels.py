@@ -1154,8 +1154,8 @@ def _run_block(words, rates, seg_end, first_tick, charge, target, counter, q, in
     n_tiles = (n_words + _TILE_WORDS - 1) // _TILE_WORDS
     for tile in prange(n_tiles):
         # (a prange index may be unsigned: int64 keeps _run_tile to one signature, one compile)
-        _run_tile(np.int64(tile), words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, scaled, accept,
-                  keys, noise, reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate,
+        _run_tile(np.int64(tile), words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, scaled,
+                  accept, keys, noise, reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate,
                   sparse_firing, vector_min)
 
 

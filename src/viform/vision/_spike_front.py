@@ -547,12 +547,12 @@ def regroup_tables(boxes, counts, predicted, live, grow, min_pixels, with_multi)
         pred[j, 1] = fitted[j, 1] - grow
         pred[j, 2] = fitted[j, 2] + 2 * grow
         pred[j, 3] = fitted[j, 3] + 2 * grow
-    cover = box_overlaps(boxes, pred, False)
+    cover = box_overlaps(boxes, pred, np.bool_(False))  # (typed, not literal: one signature)
     for j in range(m):
         area = max(pred[j, 2] * pred[j, 3], 1e-9)
         for i in range(n):
             cover[i, j] = cover[i, j] / area
-    fit = box_overlaps(boxes, fitted, True)
+    fit = box_overlaps(boxes, fitted, np.bool_(True))
     for j in range(m):  # the detection (over min_pixels) that fits each prediction best, if any overlaps it
         best = -1
         top = 0.0
@@ -563,7 +563,7 @@ def regroup_tables(boxes, counts, predicted, live, grow, min_pixels, with_multi)
             for i in range(n):
                 if i != best:
                     cover[i, j] = 0.0
-    inside = box_overlaps(boxes, fitted, False)
+    inside = box_overlaps(boxes, fitted, np.bool_(False))
     for i in range(n):
         area = max(boxes[i, 2] * boxes[i, 3], 1e-9)
         for j in range(m):
@@ -615,7 +615,7 @@ def assignment_cost(pr, bx, gate_px):  # pragma: no cover - compiled
     :meth:`~viform.vision.tracking.Tracker.update`, (M, N): 1 − IoU where they overlap, else 1 + the centre
     distance over the reach (the mean of the two diagonals, plus ``gate_px``); 1e6 (never) past the reach.
     The same IEEE operations in the same order as the NumPy expressions it replaces (exact)."""
-    iou = box_overlaps(pr, bx, True)
+    iou = box_overlaps(pr, bx, np.bool_(True))  # (typed, not literal: one signature)
     m, n = pr.shape[0], bx.shape[0]
     cost = np.empty((m, n))
     for a in range(m):

@@ -423,7 +423,9 @@ class SpikeChangeDetector:
             ys, xs = np.nonzero(part)  # scan order
             upper, lower = np.exp(upper_log[ys, xs]), np.exp(lower_log[ys, xs])  # (only the groups' pixels)
             typical = upper if sign > 0 else level[ys, xs]
-            ys, xs = ys.astype(np.int64, copy=False), xs.astype(np.int64, copy=False)
+            # (contiguous: np.nonzero's columns are strided views, and the kernels take contiguous ones, one
+            # compiled signature)
+            ys, xs = np.ascontiguousarray(ys, dtype=np.int64), np.ascontiguousarray(xs, dtype=np.int64)
             stored = ((self.height - 1 - ys) if self.flip else ys) * self.stored_width + xs  # (as upright's layout)
             if self._prime_index is None:
                 self._prime_index = np.full((self.height, self.width), -1, np.int64)
