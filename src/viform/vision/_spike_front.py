@@ -284,6 +284,81 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
     return f
 
 
+# Without numba's reference counting (``_nrt=False``: it allocates nothing; the caller gives its scratch):
+# each inlined helper's array arguments would otherwise be counted in and out atomically at every spike
+# (4× slower), which the parallel loop's own body does not do.
+@njit(cache=True, nogil=True, _nrt=False)
+def _front_chunk(ch, bits, dense, count, words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi,
+                 group_words, dense_run_ticks, dense_spikes_per_tick, n_pixels,
+                 spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
+                 fg, flag_since, prev, due, out, k_lo, k_hi, k_prime, k_left, background_ticks,
+                 hold_ticks):  # pragma: no cover - compiled
+    """Chunk ``ch`` of :func:`spike_front_block` (its scratch ``bits`` (64,), ``dense`` and ``count``
+    (``group_words``,)): the work item of its parallel loop, compiled on its own (numba's parallel passes
+    over so large a loop body were most of the front end's first compile)."""
+    T = words.shape[0]
+    # pixels are independent: a group of ``group_words`` words is run through all the block's ticks
+    # before the next, so its pixels' state stays in cache; a run of ticks up to a step's end (64 at
+    # most) at a time: words that held many spikes in the last run pixel by pixel, the others spike
+    # by spike (the same state either way)
+    for g0 in range(chunk_lo[ch], chunk_hi[ch], group_words):
+        g1 = min(g0 + group_words, chunk_hi[ch])
+        dense[:] = False
+        step = 0
+        t = 0
+        while t < T:
+            t0 = first_tick + t
+            n = min(step_ticks - t0 % step_ticks, T - t, 64)
+            long_run = n >= dense_run_ticks
+            if long_run:
+                count[:] = 0
+            some_dense = False
+            for i in range(g1 - g0):
+                some_dense |= dense[i]
+            for k in range(n):  # spike by spike
+                for i in range(g0, g1):
+                    if some_dense and dense[i - g0]:
+                        continue
+                    w = words[t + k, i]
+                    if not w:
+                        continue
+                    fired[i] |= w
+                    if long_run:
+                        count[i - g0] += _ctpop(w)
+                    while w:
+                        s = i * 64 + _cttz(w)
+                        w &= w - np.uint64(1)
+                        _ingest_spike(s, t0 + k, spk, total, anchor, bg, censored)
+            for i in range(g0, g1):
+                if some_dense and dense[i - g0]:
+                    # pixel by pixel: bit k of bits[j] is pixel j's spike at tick t0 + k
+                    any_ = np.uint64(0)
+                    for k in range(n):
+                        w = words[t + k, i]
+                        bits[k] = w
+                        any_ |= w
+                    for k in range(n, 64):
+                        bits[k] = 0
+                    fired[i] |= any_
+                    _transpose64(bits)
+                    while any_:
+                        j = _cttz(any_)
+                        any_ &= any_ - np.uint64(1)
+                        m = bits[j]
+                        count[i - g0] += _ctpop(m)
+                        _ingest_pixel(i * 64 + j, t0, m, spk, total, anchor, bg, censored)
+                dense[i - g0] = long_run and count[i - g0] >= n * dense_spikes_per_tick
+            t += n
+            tick = first_tick + t - 1
+            if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T):
+                for i in range(g0, g1):
+                    _evaluate_word(i, tick, n_pixels, spk, fired, fg_bits, word_due, anchor, span1, n1,
+                                   win_span, win_n, mixed, bg, censored, fg, flag_since, prev, due, k_lo, k_hi,
+                                   k_prime, k_left, background_ticks, hold_ticks)
+                    out[step, i] = fg_bits[i]
+                step += 1
+
+
 @njit(parallel=True, cache=True, nogil=True)  # without the GIL: the next block is read meanwhile
 def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi, group_words,
                       dense_run_ticks, dense_spikes_per_tick, n_pixels,
@@ -300,71 +375,16 @@ def spike_front_block(words, first_tick, step_ticks, evaluate_at_end, chunk_lo, 
     does not end on a step: the state is then evaluated at the block's last tick, and that row is
     scratch).
     """
-    T = words.shape[0]
     for ch in prange(chunk_lo.size):
         bits = np.zeros(64, np.uint64)
         dense = np.zeros(group_words, np.bool_)
         count = np.zeros(group_words, np.int64)
-        # pixels are independent: a group of ``group_words`` words is run through all the block's ticks
-        # before the next, so its pixels' state stays in cache; a run of ticks up to a step's end (64 at
-        # most) at a time: words that held many spikes in the last run pixel by pixel, the others spike
-        # by spike (the same state either way)
-        for g0 in range(chunk_lo[ch], chunk_hi[ch], group_words):
-            g1 = min(g0 + group_words, chunk_hi[ch])
-            dense[:] = False
-            step = 0
-            t = 0
-            while t < T:
-                t0 = first_tick + t
-                n = min(step_ticks - t0 % step_ticks, T - t, 64)
-                long_run = n >= dense_run_ticks
-                if long_run:
-                    count[:] = 0
-                some_dense = False
-                for i in range(g1 - g0):
-                    some_dense |= dense[i]
-                for k in range(n):  # spike by spike
-                    for i in range(g0, g1):
-                        if some_dense and dense[i - g0]:
-                            continue
-                        w = words[t + k, i]
-                        if not w:
-                            continue
-                        fired[i] |= w
-                        if long_run:
-                            count[i - g0] += _ctpop(w)
-                        while w:
-                            s = i * 64 + _cttz(w)
-                            w &= w - np.uint64(1)
-                            _ingest_spike(s, t0 + k, spk, total, anchor, bg, censored)
-                for i in range(g0, g1):
-                    if some_dense and dense[i - g0]:
-                        # pixel by pixel: bit k of bits[j] is pixel j's spike at tick t0 + k
-                        any_ = np.uint64(0)
-                        for k in range(n):
-                            w = words[t + k, i]
-                            bits[k] = w
-                            any_ |= w
-                        for k in range(n, 64):
-                            bits[k] = 0
-                        fired[i] |= any_
-                        _transpose64(bits)
-                        while any_:
-                            j = _cttz(any_)
-                            any_ &= any_ - np.uint64(1)
-                            m = bits[j]
-                            count[i - g0] += _ctpop(m)
-                            _ingest_pixel(i * 64 + j, t0, m, spk, total, anchor, bg, censored)
-                    dense[i - g0] = long_run and count[i - g0] >= n * dense_spikes_per_tick
-                t += n
-                tick = first_tick + t - 1
-                if (tick + 1) % step_ticks == 0 or (evaluate_at_end and t == T):
-                    for i in range(g0, g1):
-                        _evaluate_word(i, tick, n_pixels, spk, fired, fg_bits, word_due, anchor, span1, n1,
-                                       win_span, win_n, mixed, bg, censored, fg, flag_since, prev, due, k_lo, k_hi,
-                                       k_prime, k_left, background_ticks, hold_ticks)
-                        out[step, i] = fg_bits[i]
-                    step += 1
+        # (a prange index may be unsigned: int64 keeps _front_chunk to one signature, one compile)
+        _front_chunk(np.int64(ch), bits, dense, count, words, first_tick, step_ticks, evaluate_at_end, chunk_lo,
+                     chunk_hi, group_words, dense_run_ticks, dense_spikes_per_tick, n_pixels,
+                     spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
+                     fg, flag_since, prev, due, out, k_lo, k_hi, k_prime, k_left, background_ticks,
+                     hold_ticks)
 
 
 @njit(cache=True, inline="always")
