@@ -437,7 +437,6 @@ def test_tracks_are_the_recorded_ones(sensor):
         assert (len(rows), hashlib.sha256(rows.tobytes()).hexdigest()) == GOLDEN_TRACKS[sensor, every], every
 
 
-
 def test_the_grouping_kernel_is_given_contiguous_pixel_lists():
     """The start-up check and the detections call the pixel-grouping kernel with the same types: a strided
     view (np.nonzero's columns) would compile it a second time, seconds of a first run."""
@@ -451,6 +450,7 @@ def test_the_grouping_kernel_is_given_contiguous_pixel_lists():
     assert front.components_of_pixels.signatures
     for signature in front.components_of_pixels.signatures:
         assert all(getattr(a, "layout", "C") == "C" for a in signature), signature
+
 
 def test_foreground_does_not_depend_on_how_the_words_are_grouped(stream):
     # pixels are independent: running 1, 5 or all words through a block's ticks together gives the same masks

@@ -862,7 +862,8 @@ def _settle_all(charge, target, counter, q, index, bins, keys, pending_ticks, pe
             _settle(np.int64(p), charge, target, counter, q, index, bins, keys, pending_ticks, pending_rate)
 
 
-@njit(cache=True)
+# error_model="numpy", as numba compiles a parallel loop's body: a division by zero gives inf/nan, no check
+@njit(cache=True, error_model="numpy")
 def _run_tile(tile, words, rates, seg_end, first_tick, charge, target, counter, q, index, bins, scaled, accept, keys,
               noise, reset_readout, dead_ticks, mode, lazy_bound, pending_ticks, pending_rate, sparse_firing,
               vector_min):

@@ -287,7 +287,8 @@ def _evaluate(s, tick, spk, anchor, span1, n1, win_span, win_n, mixed, bg, censo
 # Without numba's reference counting (``_nrt=False``: it allocates nothing; the caller gives its scratch):
 # each inlined helper's array arguments would otherwise be counted in and out atomically at every spike
 # (4× slower), which the parallel loop's own body does not do.
-@njit(cache=True, nogil=True, _nrt=False)
+# error_model="numpy", as numba compiles a parallel loop's body: a division by zero gives inf/nan, no check
+@njit(cache=True, nogil=True, _nrt=False, error_model="numpy")
 def _front_chunk(ch, bits, dense, count, words, first_tick, step_ticks, evaluate_at_end, chunk_lo, chunk_hi,
                  group_words, dense_run_ticks, dense_spikes_per_tick, n_pixels,
                  spk, total, fired, fg_bits, word_due, anchor, span1, n1, win_span, win_n, mixed, bg, censored,
